@@ -1,0 +1,1 @@
+//! Host-side library behind the `accomp` CLI: fitting, simulation, analysis, firmware client.

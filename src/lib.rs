@@ -1,0 +1,9 @@
+//! accomp core: the maths and types shared by the STM32F405 firmware and the host tools.
+//!
+//! `no_std`, no allocation, no I/O. Everything here is compiled for the MCU and unit-tested on
+//! the host with plain `cargo test`, so the lab PC runs exactly the code the board runs.
+#![cfg_attr(not(test), no_std)]
+#![deny(missing_docs)]
+#![forbid(unsafe_code)]
+
+pub mod units;

@@ -1,0 +1,1 @@
+//! Units: placeholder, filled in by the core commit.

@@ -1,0 +1,210 @@
+//! Build, test and demo orchestration: `cargo xtask test | demo | firmware | qemu-check`.
+//!
+//! Everything CI runs goes through here, so that the README's two commands are the whole set-up on
+//! a fresh Debian machine with only rustup: the toolchain and thumb target come from
+//! rust-toolchain.toml, qemu-system-arm is installed with apt-get when running as root.
+
+use std::{
+    env,
+    path::{Path, PathBuf},
+    process::{Command, ExitCode},
+};
+
+const FIRMWARE_TARGET: &str = "thumbv7em-none-eabihf";
+const FIRMWARE_BIN: &str = "accomp-fw";
+
+fn main() -> ExitCode {
+    let args: Vec<String> = env::args().skip(1).collect();
+    let result = match args.first().map(String::as_str) {
+        Some("test") => test(),
+        Some("demo") => demo(&args[1..]),
+        Some("firmware") => build_firmware().map(|elf| println!("{}", elf.display())),
+        Some("qemu-check") => ensure_qemu(),
+        _ => {
+            eprintln!(
+                "usage: cargo xtask <command>\n\n\
+                 commands:\n  \
+                 demo        build the firmware, boot it in QEMU and run the simulated stability test\n  \
+                 test        every test: fmt, clippy, host tests, firmware build, QEMU end-to-end\n  \
+                 firmware    build the QEMU-board firmware ELF and print its path\n  \
+                 qemu-check  make sure qemu-system-arm is installed"
+            );
+            Err("no command".into())
+        }
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("xtask: error: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+type Result<T> = std::result::Result<T, String>;
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| PathBuf::from("."))
+}
+
+fn cargo() -> Command {
+    let mut c = Command::new(env::var("CARGO").unwrap_or_else(|_| "cargo".into()));
+    c.current_dir(root());
+    c
+}
+
+fn run(step: &str, mut cmd: Command) -> Result<()> {
+    eprintln!("\n==> {step}");
+    let status = cmd
+        .status()
+        .map_err(|e| format!("{step}: could not start: {e}"))?;
+    if status.success() {
+        Ok(())
+    } else {
+        Err(format!("{step} failed ({status})"))
+    }
+}
+
+/// Path of the firmware ELF that the host tools boot in QEMU (documented in the README).
+fn firmware_elf() -> PathBuf {
+    let target_dir = env::var_os("CARGO_TARGET_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| root().join("target"));
+    target_dir
+        .join(FIRMWARE_TARGET)
+        .join("release")
+        .join(FIRMWARE_BIN)
+}
+
+fn build_firmware() -> Result<PathBuf> {
+    let mut c = cargo();
+    c.args([
+        "build",
+        "--release",
+        "--package",
+        "accomp",
+        "--bin",
+        FIRMWARE_BIN,
+        "--target",
+        FIRMWARE_TARGET,
+    ]);
+    run("firmware release build (thumbv7em-none-eabihf)", c)?;
+    Ok(firmware_elf())
+}
+
+fn is_root() -> bool {
+    Command::new("id")
+        .arg("-u")
+        .output()
+        .map(|o| String::from_utf8_lossy(&o.stdout).trim() == "0")
+        .unwrap_or(false)
+}
+
+fn have_qemu() -> bool {
+    Command::new("qemu-system-arm")
+        .arg("--version")
+        .output()
+        .map(|o| o.status.success())
+        .unwrap_or(false)
+}
+
+/// qemu-system-arm is required: installed when we are root, otherwise a loud failure with the
+/// one line that fixes it. Never a silent skip.
+fn ensure_qemu() -> Result<()> {
+    if have_qemu() {
+        return Ok(());
+    }
+    if !is_root() {
+        return Err("qemu-system-arm is missing; install it with: \
+                    sudo apt-get install -y --no-install-recommends qemu-system-arm"
+            .into());
+    }
+    eprintln!("==> installing qemu-system-arm with apt-get");
+    let mut update = Command::new("apt-get");
+    update.args(["update", "-qq"]);
+    run("apt-get update", update)?;
+    let mut install = Command::new("apt-get");
+    install
+        .args([
+            "install",
+            "-y",
+            "-qq",
+            "--no-install-recommends",
+            "qemu-system-arm",
+        ])
+        .env("DEBIAN_FRONTEND", "noninteractive");
+    run("apt-get install qemu-system-arm", install)?;
+    if have_qemu() {
+        Ok(())
+    } else {
+        Err("qemu-system-arm still not runnable after apt-get install".into())
+    }
+}
+
+fn test() -> Result<()> {
+    ensure_qemu()?;
+    let mut fmt = cargo();
+    fmt.args(["fmt", "--all", "--check"]);
+    run("cargo fmt --check", fmt)?;
+
+    let mut clippy = cargo();
+    clippy.args([
+        "clippy",
+        "--workspace",
+        "--all-targets",
+        "--",
+        "-D",
+        "warnings",
+    ]);
+    run("clippy (host, all targets)", clippy)?;
+
+    let mut clippy_fw = cargo();
+    clippy_fw.args([
+        "clippy",
+        "--package",
+        "accomp",
+        "--target",
+        FIRMWARE_TARGET,
+        "--release",
+        "--",
+        "-D",
+        "warnings",
+    ]);
+    run("clippy (firmware)", clippy_fw)?;
+
+    let elf = build_firmware()?;
+
+    let mut tests = cargo();
+    tests
+        .args(["test", "--workspace"])
+        .env("ACCOMP_FIRMWARE_ELF", &elf);
+    run("host tests (workspace)", tests)?;
+    eprintln!("\nxtask: all checks passed");
+    Ok(())
+}
+
+fn demo(_args: &[String]) -> Result<()> {
+    ensure_qemu()?;
+    let elf = build_firmware()?;
+    eprintln!("firmware ELF: {}", elf.display());
+    let table1 = root()
+        .parent()
+        .map(|p| p.join("shared/data/jn06_a12124_coefficients_vs_temperature.csv"))
+        .filter(|p| p.exists())
+        .ok_or("../shared/data/jn06_a12124_coefficients_vs_temperature.csv not found")?;
+    let mut fit = cargo();
+    fit.args([
+        "run",
+        "--release",
+        "--quiet",
+        "--package",
+        "accomp-host",
+        "--",
+        "fit",
+    ])
+    .arg(&table1);
+    run("accomp fit (Table 1)", fit)
+}
