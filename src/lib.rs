@@ -7,4 +7,9 @@
 #![forbid(unsafe_code)]
 
 pub mod adc;
+pub mod compensation;
+pub mod model;
+pub mod poly;
+pub mod rtd;
+pub mod table;
 pub mod units;
