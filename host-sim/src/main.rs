@@ -1,5 +1,7 @@
 //! `accomp`: the lab-PC command line.
+use accomp_host::table_cli;
 use clap::{Parser, Subcommand};
+use std::path::PathBuf;
 
 #[derive(Parser)]
 #[command(
@@ -13,9 +15,74 @@ struct Cli {
 }
 
 #[derive(Subcommand)]
-enum Command {}
+enum Command {
+    /// Inspect or check a calibration table file.
+    Table {
+        #[command(subcommand)]
+        action: TableAction,
+    },
+}
+
+#[derive(Subcommand)]
+enum TableAction {
+    /// Print what a table holds.
+    Show {
+        /// Calibration table file (as written by `accomp fit -o`).
+        path: PathBuf,
+        /// One JSON object instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Check a table as the firmware would; exits non-zero with the named error if refused.
+    Verify {
+        /// Calibration table file.
+        path: PathBuf,
+        /// One JSON object instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+}
 
 fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
-    match cli.command {}
+    match cli.command {
+        Command::Table { action } => match action {
+            TableAction::Show { path, json } => {
+                let t = table_cli::read_table(&path)?;
+                if json {
+                    println!(
+                        "{}",
+                        serde_json::to_string_pretty(&table_cli::table_json(&t))?
+                    );
+                } else {
+                    print!("{}", table_cli::table_text(&t));
+                }
+            }
+            TableAction::Verify { path, json } => {
+                let bytes = std::fs::read(&path)?;
+                match table_cli::decode_named(&bytes) {
+                    Ok(t) => {
+                        if json {
+                            println!(
+                                "{}",
+                                serde_json::json!({"valid": true, "id": format!("{:08x}", t.id())})
+                            );
+                        } else {
+                            println!("{}: valid, id {:08x}", path.display(), t.id());
+                        }
+                    }
+                    Err(e) => {
+                        if json {
+                            println!(
+                                "{}",
+                                serde_json::json!({"valid": false, "error": e.to_string()})
+                            );
+                        }
+                        anyhow::bail!("{}: refused: {e}", path.display());
+                    }
+                }
+            }
+        },
+    }
+    Ok(())
 }
