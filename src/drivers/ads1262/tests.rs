@@ -25,10 +25,10 @@ const REFMUX: u8 = 0x0F;
 
 // Board default register values, worked out by hand from the register tables:
 // POWER: INTREF=1, RESET=0 → 0x01. INTERFACE: STATUS=1, CRC=01 (checksum) → 0x05.
-// MODE0: CHOP=01 (input chop) at [5:4] → 0x10. MODE1: FILTER=011 (sinc4) at [7:5] → 0x60.
+// MODE0: CHOP=00, DELAY=0000 → 0x00. MODE1: FILTER=011 (sinc4) at [7:5] → 0x60.
 // MODE2: BYPASS=0, GAIN=000 (1), DR=0010 (10 SPS) → 0x02. INPMUX: AIN0(0000)/AIN1(0001) → 0x01.
 // REFMUX: internal/internal → 0x00.
-const BOARD_BLOCK: [u8; 6] = [0x01, 0x05, 0x10, 0x60, 0x02, 0x01];
+const BOARD_BLOCK: [u8; 6] = [0x01, 0x05, 0x00, 0x60, 0x02, 0x01];
 const ID_ADS1262_REV3: u8 = 0b000_00011;
 const POWER_AFTER_RESET: u8 = 0x11;
 
@@ -137,6 +137,38 @@ fn init_resets_identifies_writes_verifies_and_starts() {
             revision: 3
         }
     );
+    finish(d);
+}
+
+#[test]
+fn chop_delay_fir_and_external_reference_are_encoded_as_the_datasheet_says() {
+    let cfg = Ads1262Config {
+        chop: Chop::Input,
+        delay_code: 3,
+        filter: Filter::Fir,
+        data_rate: DataRate::Sps20,
+        ref_positive: RefPositive::Ain4,
+        ref_negative: RefNegative::Ain5,
+        internal_reference: false,
+        integrity: Integrity::Crc,
+        ..Ads1262Config::board_default()
+    };
+    // POWER 0x00 (INTREF off); INTERFACE STATUS | CRC=10 → 0x06; MODE0 CHOP=01, DELAY=0011 →
+    // 0x13; MODE1 FILTER=100 → 0x80; MODE2 gain 1, DR=0100 (20 SPS) → 0x04; INPMUX 0x01.
+    // REFMUX RMUXP=011 (AIN4) at [5:3], RMUXN=011 (AIN5) → 0x1B.
+    let block = [0x00, 0x06, 0x13, 0x80, 0x04, 0x01];
+    let spi = [
+        command(RESET),
+        rreg(ID, &[ID_ADS1262_REV3, POWER_AFTER_RESET]),
+        wreg(POWER, &block),
+        rreg(POWER, &block),
+        wreg(REFMUX, &[0x1B]),
+        rreg(REFMUX, &[0x1B]),
+        command(START1),
+    ]
+    .concat();
+    let mut d = driver(&spi, &[], cfg);
+    assert!(d.init().is_ok());
     finish(d);
 }
 
