@@ -21,8 +21,9 @@ use embedded_hal::delay::DelayNs;
 use embedded_hal::digital::InputPin;
 use embedded_hal::spi::SpiDevice;
 
-use crate::adc::Ad7124Code;
+use crate::adc::{Ad7124Code, AdcScale, Coding};
 use crate::drivers::{Error, CRC8_ATM};
+use crate::units::Volts;
 use registers::{adc_control, config, err, status, Reg};
 pub use registers::{AnalogInput, Excitation, FilterType, Gain, IoutPin, PowerMode, Reference};
 
@@ -180,6 +181,24 @@ impl Ad7124Config {
     /// Output data rate in hertz for this power mode and filter word (sinc3/sinc4, no post filter).
     pub fn output_data_rate_hz(&self) -> f64 {
         f64::from(self.power_mode.clock_hz()) / (32.0 * f64::from(self.filter_fs.max(1)))
+    }
+
+    /// How [`crate::adc::AdcScale`] must read this configuration's codes: 24 bits, unipolar or
+    /// offset binary, the PGA gain. `vref` is the reference voltage for volt conversions; the
+    /// ratiometric RTD path ([`crate::adc::AdcScale::ratiometric_ohms`]) does not depend on it.
+    pub fn scale(&self, vref: Volts) -> AdcScale {
+        AdcScale {
+            bits: 24,
+            coding: if self.bipolar {
+                Coding::OffsetBinary
+            } else {
+                Coding::Unipolar
+            },
+            pga_gain: self.gain.factor(),
+            vref,
+            gain_correction: 1.0,
+            offset: Volts(0.0),
+        }
     }
 
     fn validate(&self) -> bool {
@@ -451,7 +470,8 @@ where
         let payload = be
             .get(be.len().saturating_sub(reg.len)..)
             .ok_or(Error::InvalidConfig)?;
-        if value >> (8 * reg.len) != 0 {
+        let width_bits = u32::try_from(8 * reg.len).map_err(|_| Error::InvalidConfig)?;
+        if value.checked_shr(width_bits).unwrap_or(0) != 0 {
             return Err(Error::InvalidConfig);
         }
         let buf = frame.get_mut(..total).ok_or(Error::InvalidConfig)?;

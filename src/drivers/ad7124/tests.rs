@@ -413,3 +413,21 @@ fn bus_failure_is_reported_as_spi_error() {
     let (_, mut pin, _) = d.release();
     pin.done();
 }
+
+#[test]
+fn scale_reads_the_board_code_for_100_ohm_back_as_100_ohm() {
+    let scale = Ad7124Config::board_default().scale(crate::units::Volts(1.2775));
+    // 2^24 · 100 Ω · 16 / 5110 Ω = 5 253 140.04 → code 5 253 140; 1 LSB = 19.0 µΩ.
+    let r = scale
+        .ratiometric_ohms(Ad7124Code(5_253_140).raw(), crate::units::Ohms(5110.0))
+        .unwrap();
+    assert!((r.0 - 100.0).abs() < 2e-5, "{}", r.0);
+    let bipolar = Ad7124Config {
+        bipolar: true,
+        ..Ad7124Config::board_default()
+    };
+    assert_eq!(
+        bipolar.scale(crate::units::Volts(1.0)).coding,
+        crate::adc::Coding::OffsetBinary
+    );
+}

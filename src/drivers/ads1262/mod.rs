@@ -15,8 +15,9 @@ use embedded_hal::delay::DelayNs;
 use embedded_hal::digital::InputPin;
 use embedded_hal::spi::SpiDevice;
 
-use crate::adc::Ads1262Code;
+use crate::adc::{AdcScale, Ads1262Code, Coding};
 use crate::drivers::{Error, CRC8_ATM};
+use crate::units::Volts;
 use registers::{cmd, reg, status};
 pub use registers::{
     Chop, DataRate, Filter, Gain, Input, Integrity, Pga, RefNegative, RefPositive,
@@ -142,6 +143,23 @@ impl Ads1262Config {
             },
             drdy_poll_limit: 20_000,
             drdy_poll_interval_us: 50,
+        }
+    }
+
+    /// How [`crate::adc::AdcScale`] must read a channel's codes: 32-bit two's complement, the
+    /// channel's PGA gain (1 when bypassed) and `vref` (2.5 V for the internal reference).
+    pub fn scale(&self, channel: Channel, vref: Volts) -> AdcScale {
+        let pga_gain = match self.channels.get(channel).pga {
+            Pga::Enabled(g) => g.factor(),
+            Pga::Bypassed => 1.0,
+        };
+        AdcScale {
+            bits: 32,
+            coding: Coding::TwosComplement,
+            pga_gain,
+            vref,
+            gain_correction: 1.0,
+            offset: Volts(0.0),
         }
     }
 

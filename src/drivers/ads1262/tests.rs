@@ -500,3 +500,15 @@ fn bus_failure_is_reported_as_spi_error() {
     let (_, mut pin, _) = d.release();
     pin.done();
 }
+
+#[test]
+fn scale_uses_the_channel_gain_and_reads_one_g_as_1_33_volts() {
+    let mut cfg = Ads1262Config::board_default();
+    cfg.channels.tiltmeter.pga = Pga::Enabled(Gain::G8);
+    let acc = cfg.scale(Channel::Accelerometer, crate::units::Volts(2.5));
+    let tilt = cfg.scale(Channel::Tiltmeter, crate::units::Volts(2.5));
+    assert_eq!((acc.bits, acc.pga_gain, tilt.pga_gain), (32, 1.0, 8.0));
+    // 1.33 V at gain 1, Vref 2.5 V: code = 1.33 / 2.5 · 2^31 = 1 142 461 300.7 → 1 142 461 301.
+    let v = acc.volts(Ads1262Code(1_142_461_301).raw()).unwrap().0;
+    assert!((v - 1.33).abs() < 2e-9, "{v}");
+}
