@@ -8,6 +8,7 @@
 
 pub mod adc;
 pub mod compensation;
+pub mod drivers;
 pub mod model;
 pub mod poly;
 pub mod rtd;
