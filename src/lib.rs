@@ -7,4 +7,5 @@
 #![forbid(unsafe_code)]
 
 pub mod adc;
+pub mod tide;
 pub mod units;
