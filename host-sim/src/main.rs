@@ -13,9 +13,15 @@ struct Cli {
 }
 
 #[derive(Subcommand)]
-enum Command {}
+enum Command {
+    /// Fit temperature models of the calibration coefficients (orders 0–4), compare them with
+    /// the paper's printed models, optionally write a calibration table.
+    Fit(accomp_host::fit::FitArgs),
+}
 
 fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
-    match cli.command {}
+    match cli.command {
+        Command::Fit(args) => accomp_host::fit::run(&args),
+    }
 }
