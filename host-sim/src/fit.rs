@@ -125,40 +125,40 @@ pub enum CsvError {
 #[derive(Debug, Error)]
 pub enum FitError {
     /// Reading a file failed.
-    #[error("cannot read {path}: {source}")]
+    #[error("cannot read {path}: {error}")]
     Io {
         /// The file.
         path: PathBuf,
         /// The OS error.
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// The coefficient table is malformed.
-    #[error("{path}: {source}")]
+    #[error("{path}: {error}")]
     Csv {
         /// The file.
         path: PathBuf,
         /// What is wrong.
-        source: CsvError,
+        error: CsvError,
     },
     /// The least-squares problem is degenerate.
-    #[error("column `{column}`, order {order}: {source}")]
+    #[error("column `{column}`, order {order}: {error}")]
     Linalg {
         /// Column.
         column: String,
         /// Polynomial order.
         order: usize,
         /// Why.
-        source: LinalgError,
+        error: LinalgError,
     },
     /// A p value could not be computed.
-    #[error("column `{column}`, order {order}: {source}")]
+    #[error("column `{column}`, order {order}: {error}")]
     Special {
         /// Column.
         column: String,
         /// Polynomial order.
         order: usize,
         /// Why.
-        source: SpecialError,
+        error: SpecialError,
     },
     /// No order has a defined AICc (too few rows).
     #[error("column `{0}`: no model order has a defined AICc")]
@@ -177,6 +177,16 @@ pub enum BuildError {
     /// The temperature scale is unusable.
     #[error("temperature range unusable: {0:?}")]
     Scale(accomp::poly::ScaleError),
+    /// T0 outside the calibrated range (the core would clamp every compensation to the edge).
+    #[error("--reference {t0_c} °C lies outside the calibrated range {min_c}–{max_c} °C")]
+    ReferenceOutsideRange {
+        /// Requested T0.
+        t0_c: f64,
+        /// Lowest table temperature.
+        min_c: f64,
+        /// Highest table temperature.
+        max_c: f64,
+    },
     /// The assembled table fails the core's validation (the firmware would refuse it too).
     #[error("calibration table refused by the core validator: {0:?}")]
     Table(TableError),
@@ -516,10 +526,10 @@ pub fn fit_order(
             (0..=order).map(|j| x.powi(j as i32)).collect()
         })
         .collect();
-    let ls = least_squares(&design, y).map_err(|source| FitError::Linalg {
+    let ls = least_squares(&design, y).map_err(|error| FitError::Linalg {
         column: name.to_owned(),
         order,
-        source,
+        error,
     })?;
     let dof = n - order - 1;
     let s = (ls.rss / dof as f64).sqrt();
@@ -581,10 +591,10 @@ pub fn fit_column(
                 f64::INFINITY
             };
             m.f_test_p = Some(
-                f_upper_tail(f, 1.0, dof).map_err(|source| FitError::Special {
+                f_upper_tail(f, 1.0, dof).map_err(|error| FitError::Special {
                     column: name.to_owned(),
                     order,
-                    source,
+                    error,
                 })?,
             );
         }
@@ -643,9 +653,9 @@ pub fn fit_table(
     printed: &[PrintedModel],
     at: Celsius,
 ) -> Result<FitReport, FitError> {
-    let scale = table.scale().map_err(|source| FitError::Csv {
+    let scale = table.scale().map_err(|error| FitError::Csv {
         path: PathBuf::new(),
-        source,
+        error,
     })?;
     let mut coefficients = Vec::new();
     for col in &table.columns {
@@ -687,6 +697,13 @@ pub fn calibration_table(
     serial: &str,
     date: CalibrationDate,
 ) -> Result<CalibrationTable, BuildError> {
+    if !(scale.min.0..=scale.max.0).contains(&reference.0) {
+        return Err(BuildError::ReferenceOutsideRange {
+            t0_c: reference.0,
+            min_c: scale.min.0,
+            max_c: scale.max.0,
+        });
+    }
     let poly = |column: &str| -> Option<TempPoly> {
         report
             .coefficients
@@ -925,18 +942,18 @@ pub struct FitArgs {
 }
 
 fn read(path: &Path) -> Result<String, FitError> {
-    std::fs::read_to_string(path).map_err(|source| FitError::Io {
+    std::fs::read_to_string(path).map_err(|error| FitError::Io {
         path: path.to_owned(),
-        source,
+        error,
     })
 }
 
 /// `accomp fit`.
 pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     let at = Celsius(args.at);
-    let table = parse_coefficient_table(&read(&args.input)?).map_err(|source| FitError::Csv {
+    let table = parse_coefficient_table(&read(&args.input)?).map_err(|error| FitError::Csv {
         path: args.input.clone(),
-        source,
+        error,
     })?;
     let paper_path = match &args.paper {
         Some(p) => Some(p.clone()),
@@ -950,9 +967,9 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
         }
     };
     let printed = match &paper_path {
-        Some(p) => parse_printed_models(&read(p)?).map_err(|source| FitError::Csv {
+        Some(p) => parse_printed_models(&read(p)?).map_err(|error| FitError::Csv {
             path: p.clone(),
-            source,
+            error,
         })?,
         None => Vec::new(),
     };
@@ -967,9 +984,9 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
             Some(d) => parse_date(d)?,
             None => today_utc(),
         };
-        let scale = table.scale().map_err(|source| FitError::Csv {
+        let scale = table.scale().map_err(|error| FitError::Csv {
             path: args.input.clone(),
-            source,
+            error,
         })?;
         let cal = calibration_table(&report, scale, Celsius(args.reference), &args.serial, date)?;
         std::fs::write(out, cal.encode())
@@ -1267,7 +1284,20 @@ mod tests {
         let e = calibration_table(&r, tab.scale().unwrap(), Celsius(70.0), "", date);
         assert!(matches!(
             e,
-            Err(BuildError::Table(TableError::ReferenceOutsideRange))
+            Err(BuildError::ReferenceOutsideRange { t0_c: 70.0, .. })
+        ));
+        // What the core validator refuses is passed on by name: a negative K1.
+        let mut negative = r.clone();
+        for c in negative.coefficients.iter_mut() {
+            if c.name == SCALE_FACTOR_COLUMN {
+                let sel = c.selected_order;
+                c.models[sel].coeffs_x = vec![-1.3];
+            }
+        }
+        let e = calibration_table(&negative, tab.scale().unwrap(), Celsius(60.0), "", date);
+        assert!(matches!(
+            e,
+            Err(BuildError::Table(TableError::ScaleFactorImplausible))
         ));
         let mut no_k1 = r.clone();
         no_k1.coefficients.retain(|c| c.name != SCALE_FACTOR_COLUMN);

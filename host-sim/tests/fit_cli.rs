@@ -203,5 +203,8 @@ fn reference_outside_the_range_is_refused_with_a_named_error() {
     ]);
     assert!(!out.status.success());
     let err = String::from_utf8(out.stderr).unwrap();
-    assert!(err.contains("ReferenceOutsideRange"), "{err}");
+    assert!(
+        err.contains("--reference 80") && err.contains("outside the calibrated range 30–65"),
+        "{err}"
+    );
 }
