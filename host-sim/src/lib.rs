@@ -1,3 +1,4 @@
 //! Host-side library behind the `accomp` CLI: fitting, simulation, analysis, firmware client.
 
+pub mod fit;
 pub mod table_cli;

@@ -1,7 +1,6 @@
-//! `accomp`: the lab-PC command line.
-use accomp_host::table_cli;
+//! `accomp`: the lab-PC command line. Each subcommand lives in its own module; this file only
+//! dispatches.
 use clap::{Parser, Subcommand};
-use std::path::PathBuf;
 
 #[derive(Parser)]
 #[command(
@@ -16,73 +15,17 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Fit temperature models of the calibration coefficients (orders 0–4), compare them with
+    /// the paper's printed models, optionally write a calibration table.
+    Fit(accomp_host::fit::FitArgs),
     /// Inspect or check a calibration table file.
-    Table {
-        #[command(subcommand)]
-        action: TableAction,
-    },
-}
-
-#[derive(Subcommand)]
-enum TableAction {
-    /// Print what a table holds.
-    Show {
-        /// Calibration table file (as written by `accomp fit -o`).
-        path: PathBuf,
-        /// One JSON object instead of text.
-        #[arg(long)]
-        json: bool,
-    },
-    /// Check a table as the firmware would; exits non-zero with the named error if refused.
-    Verify {
-        /// Calibration table file.
-        path: PathBuf,
-        /// One JSON object instead of text.
-        #[arg(long)]
-        json: bool,
-    },
+    Table(accomp_host::table_cli::TableArgs),
 }
 
 fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
     match cli.command {
-        Command::Table { action } => match action {
-            TableAction::Show { path, json } => {
-                let t = table_cli::read_table(&path)?;
-                if json {
-                    println!(
-                        "{}",
-                        serde_json::to_string_pretty(&table_cli::table_json(&t))?
-                    );
-                } else {
-                    print!("{}", table_cli::table_text(&t));
-                }
-            }
-            TableAction::Verify { path, json } => {
-                let bytes = std::fs::read(&path)?;
-                match table_cli::decode_named(&bytes) {
-                    Ok(t) => {
-                        if json {
-                            println!(
-                                "{}",
-                                serde_json::json!({"valid": true, "id": format!("{:08x}", t.id())})
-                            );
-                        } else {
-                            println!("{}: valid, id {:08x}", path.display(), t.id());
-                        }
-                    }
-                    Err(e) => {
-                        if json {
-                            println!(
-                                "{}",
-                                serde_json::json!({"valid": false, "error": e.to_string()})
-                            );
-                        }
-                        anyhow::bail!("{}: refused: {e}", path.display());
-                    }
-                }
-            }
-        },
+        Command::Fit(args) => accomp_host::fit::run(&args),
+        Command::Table(args) => accomp_host::table_cli::run(&args),
     }
-    Ok(())
 }

@@ -6,7 +6,7 @@ use accomp::table::{CalibrationTable, TableError, ENCODED_LEN};
 use accomp::units::{Celsius, RAD_PER_ARCMIN};
 use anyhow::{Context, Result};
 use serde_json::{json, Value};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// Reads and decodes a table file; the error names the file and the validator's verdict.
 pub fn read_table(path: &Path) -> Result<CalibrationTable> {
@@ -129,4 +129,68 @@ pub fn table_text(t: &CalibrationTable) -> String {
         t.orientation.cross.a_o.0
     );
     out
+}
+
+/// `accomp table …` arguments.
+#[derive(clap::Args, Debug)]
+pub struct TableArgs {
+    #[command(subcommand)]
+    action: TableAction,
+}
+
+#[derive(clap::Subcommand, Debug)]
+enum TableAction {
+    /// Print what a table holds.
+    Show {
+        /// Calibration table file (as written by `accomp fit -o`).
+        path: PathBuf,
+        /// One JSON object instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Check a table as the firmware would; exits non-zero with the named error if refused.
+    Verify {
+        /// Calibration table file.
+        path: PathBuf,
+        /// One JSON object instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+/// Runs `accomp table …`.
+pub fn run(args: &TableArgs) -> Result<()> {
+    match &args.action {
+        TableAction::Show { path, json } => {
+            let t = read_table(path)?;
+            if *json {
+                println!("{}", serde_json::to_string_pretty(&table_json(&t))?);
+            } else {
+                print!("{}", table_text(&t));
+            }
+        }
+        TableAction::Verify { path, json } => {
+            let bytes =
+                std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+            match decode_named(&bytes) {
+                Ok(t) => {
+                    if *json {
+                        println!(
+                            "{}",
+                            json!({"valid": true, "id": format!("{:08x}", t.id())})
+                        );
+                    } else {
+                        println!("{}: valid, id {:08x}", path.display(), t.id());
+                    }
+                }
+                Err(e) => {
+                    if *json {
+                        println!("{}", json!({"valid": false, "error": e.to_string()}));
+                    }
+                    anyhow::bail!("{}: refused: {e}", path.display());
+                }
+            }
+        }
+    }
+    Ok(())
 }
