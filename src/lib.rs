@@ -11,5 +11,6 @@ pub mod compensation;
 pub mod model;
 pub mod poly;
 pub mod rtd;
+pub mod storage;
 pub mod table;
 pub mod units;
