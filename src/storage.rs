@@ -228,6 +228,10 @@ pub struct CalibrationStore<F> {
     layout: SlotLayout,
     geometry: Geometry,
     active: Option<SlotInfo>,
+    /// A slot whose erase *completed* in this power cycle and that nothing has written since
+    /// ([`CalibrationStore::prepare_commit`]). Kept in RAM only, so an erase cut short by a
+    /// power loss is never trusted.
+    erased: Option<Slot>,
 }
 
 impl<F: NorFlash> CalibrationStore<F> {
@@ -241,6 +245,7 @@ impl<F: NorFlash> CalibrationStore<F> {
             layout,
             geometry,
             active: None,
+            erased: None,
         };
         store.boot()?;
         Ok(store)
@@ -329,7 +334,7 @@ impl<F: NorFlash> CalibrationStore<F> {
     /// Stores a new table and makes it active.
     ///
     /// 1. Validate with [`CalibrationTable::decode`]; a refused table touches nothing.
-    /// 2. Erase the inactive slot.
+    /// 2. Erase the inactive slot (unless [`Self::prepare_commit`] just did).
     /// 3. Program header and table.
     /// 4. Read back and compare; check the marker area is still erased.
     /// 5. Program the commit marker — the single step that makes the new slot valid.
@@ -352,6 +357,28 @@ impl<F: NorFlash> CalibrationStore<F> {
             None => (Slot::A, FIRST_SEQUENCE),
         };
         self.write_slot(target, sequence, &bytes)
+    }
+
+    /// Erases the slot the next [`Self::commit`] will write, so the commit itself skips the
+    /// erase. On the STM32F405 a 128 KiB sector erase takes seconds (datasheet tERASE128KB)
+    /// while programming a table takes milliseconds: the firmware calls this when an upload
+    /// begins, and the erase overlaps the transfer. Power-fail safe: it touches only the
+    /// inactive slot (the same one commit would erase). It does discard the previous table
+    /// kept for rollback, exactly as the commit would.
+    pub fn prepare_commit(&mut self) -> Result<Slot, StorageError<F::Error>> {
+        let target = match self.boot()? {
+            Some(active) => active.slot.other(),
+            None => Slot::A,
+        };
+        // Cleared before the erase and set only after it completes: a failed or interrupted
+        // erase must be redone by the commit.
+        self.erased = None;
+        let base = self.layout.offset(target);
+        self.flash
+            .erase(base, base + self.layout.slot_len)
+            .map_err(StorageError::Flash)?;
+        self.erased = Some(target);
+        Ok(target)
     }
 
     /// Rolls back to the table in the older valid slot.
@@ -458,9 +485,13 @@ impl<F: NorFlash> CalibrationStore<F> {
         fill_image(&mut image_buf, sequence, table);
         let image = image_buf.get(..g.image_len).ok_or_else(layout_err)?;
 
-        self.flash
-            .erase(base, base + self.layout.slot_len)
-            .map_err(StorageError::Flash)?;
+        // Skip the erase only after a completed erase in this power cycle; the read-back below
+        // would catch any bit that is not erased anyway (programming can only clear bits).
+        if self.erased.take() != Some(slot) {
+            self.flash
+                .erase(base, base + self.layout.slot_len)
+                .map_err(StorageError::Flash)?;
+        }
         self.flash.write(base, image).map_err(StorageError::Flash)?;
 
         let mut back_buf = [0u8; IMAGE_BUF_LEN];

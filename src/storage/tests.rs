@@ -119,6 +119,16 @@ struct SimFlash<const ERASE: usize, const WRITE: usize, const READ: usize> {
     dead: bool,
     /// (offset, mask): bits that read 1 whatever is programmed (a worn cell).
     stuck_at_one: Vec<(usize, u8)>,
+    /// Every operation attempted, in order.
+    log: Vec<Access>,
+}
+
+/// One flash operation as seen by [`SimFlash`]: (offset, length in bytes).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Access {
+    Read(u32, usize),
+    Erase(u32, u32),
+    Write(u32, usize),
 }
 
 impl<const ERASE: usize, const WRITE: usize, const READ: usize> SimFlash<ERASE, WRITE, READ> {
@@ -131,6 +141,7 @@ impl<const ERASE: usize, const WRITE: usize, const READ: usize> SimFlash<ERASE, 
             rng: 1,
             dead: false,
             stuck_at_one: Vec::new(),
+            log: Vec::new(),
         }
     }
 
@@ -192,6 +203,7 @@ impl<const E: usize, const W: usize, const R: usize> ReadNorFlash for SimFlash<E
     const READ_SIZE: usize = R;
 
     fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), SimError> {
+        self.log.push(Access::Read(offset, bytes.len()));
         if self.dead {
             return Err(SimError::PowerCut);
         }
@@ -211,6 +223,7 @@ impl<const E: usize, const W: usize, const R: usize> NorFlash for SimFlash<E, W,
     const ERASE_SIZE: usize = E;
 
     fn erase(&mut self, from: u32, to: u32) -> Result<(), SimError> {
+        self.log.push(Access::Erase(from, to));
         if self.dead {
             return Err(SimError::PowerCut);
         }
@@ -234,6 +247,7 @@ impl<const E: usize, const W: usize, const R: usize> NorFlash for SimFlash<E, W,
     }
 
     fn write(&mut self, offset: u32, data: &[u8]) -> Result<(), SimError> {
+        self.log.push(Access::Write(offset, data.len()));
         if self.dead {
             return Err(SimError::PowerCut);
         }
@@ -318,6 +332,8 @@ fn active_after_reboot<const E: usize, const W: usize, const R: usize>(
 #[derive(Clone, Copy)]
 enum Op<'a> {
     Commit(&'a [u8; ENCODED_LEN]),
+    /// `prepare_commit` then `commit` on the same store (the firmware's upload path).
+    PreparedCommit(&'a [u8; ENCODED_LEN]),
     Rollback,
 }
 
@@ -329,6 +345,7 @@ fn run<const E: usize, const W: usize, const R: usize>(
     let mut s = store(flash, layout);
     let r = match op {
         Op::Commit(t) => s.commit(t),
+        Op::PreparedCommit(t) => s.prepare_commit().and_then(|_| s.commit(t)),
         Op::Rollback => s.activate_previous(),
     };
     (r, s.into_flash())
@@ -384,7 +401,7 @@ fn exhaustive_cuts<const E: usize, const W: usize, const R: usize>(
             );
             // A rollback may legitimately land on its target as soon as the newer slot's
             // erase begins; a commit may not show the new table before its marker.
-            if matches!(op, Op::Commit(_)) && k < first_marker_step {
+            if !matches!(op, Op::Rollback) && k < first_marker_step {
                 assert!(active == *old, "new table active before its marker ({k})");
             }
             // Recovery: the same operation, retried after the reboot, completes.
@@ -448,6 +465,52 @@ fn power_cut_at_every_step_of_a_commit_leaves_old_or_new_stm32f405_sectors() {
     let tried = exhaustive_cuts(&initial, layout, Op::Commit(&t3), &t2, &t3);
     eprintln!("STM32F405 geometry: {tried} cut points");
     assert!(tried > 4 * 110);
+}
+
+#[test]
+fn power_cut_at_every_step_of_a_prepared_commit_leaves_old_or_new() {
+    let (t1, t2, t3) = (table(1), table(2), table(3));
+    let initial = flash_with::<256, 1, 1>(1024, SMALL_LAYOUT, &[t1, t2]);
+    let tried = exhaustive_cuts(&initial, SMALL_LAYOUT, Op::PreparedCommit(&t3), &t2, &t3);
+    eprintln!("prepared commit: {tried} cut points");
+    assert!(tried > 0);
+}
+
+#[test]
+fn prepared_commit_does_not_erase_again() {
+    let flash = flash_with::<256, 1, 1>(1024, SMALL_LAYOUT, &[table(1)]);
+    let mut s = store(flash, SMALL_LAYOUT);
+    assert_eq!(s.prepare_commit(), Ok(Slot::B));
+    s.flash.log.clear();
+    s.commit(&table(2)).unwrap();
+    assert!(!s.flash.log.iter().any(|a| matches!(a, Access::Erase(..))));
+    // The next commit was not prepared: it erases.
+    s.flash.log.clear();
+    s.commit(&table(3)).unwrap();
+    assert!(s.flash.log.contains(&Access::Erase(0, 512)));
+    let (active, _) = active_after_reboot(s.into_flash(), SMALL_LAYOUT);
+    assert_eq!(active, Some(table(3)));
+}
+
+#[test]
+fn an_erase_that_failed_is_redone_by_the_next_commit() {
+    let flash = flash_with::<256, 1, 1>(1024, SMALL_LAYOUT, &[table(1), table(2)]);
+    // The erase fails in its second block (a transient driver error: same store, no reboot),
+    // after a stale "prepared" mark from an earlier successful prepare.
+    let mut s = store(flash, SMALL_LAYOUT);
+    assert_eq!(s.prepare_commit(), Ok(Slot::A));
+    s.flash.budget = Some(1);
+    assert_eq!(
+        s.prepare_commit(),
+        Err(StorageError::Flash(SimError::PowerCut))
+    );
+    s.flash.dead = false;
+    s.flash.budget = None;
+    s.flash.log.clear();
+    s.commit(&table(3)).unwrap();
+    assert!(s.flash.log.contains(&Access::Erase(0, 512)));
+    let (active, _) = active_after_reboot(s.into_flash(), SMALL_LAYOUT);
+    assert_eq!(active, Some(table(3)));
 }
 
 #[test]
@@ -618,6 +681,41 @@ fn commits_alternate_slots_with_increasing_sequence_in_the_documented_layout() {
         );
     }
     assert_eq!(doc_marker_offset(4), 444);
+}
+
+#[test]
+fn commit_erases_the_inactive_slot_and_programs_the_marker_last_after_read_back() {
+    let flash = flash_with::<256, 1, 1>(1024, SMALL_LAYOUT, &[table(1)]); // A active
+    let mut s = store(flash, SMALL_LAYOUT);
+    s.flash.log.clear();
+    s.commit(&table(2)).unwrap();
+    let changes: Vec<Access> = s
+        .flash
+        .log
+        .iter()
+        .copied()
+        .filter(|a| !matches!(a, Access::Read(..)))
+        .collect();
+    let marker = 512 + doc_marker_offset(4) as u32;
+    assert_eq!(
+        changes,
+        [
+            Access::Erase(512, 1024),
+            Access::Write(512, 444),
+            Access::Write(marker, 4),
+        ]
+    );
+    // Between the image write and the marker write, the whole image is read back.
+    let log = &s.flash.log;
+    let image_at = log
+        .iter()
+        .position(|a| *a == Access::Write(512, 444))
+        .unwrap();
+    let marker_at = log
+        .iter()
+        .position(|a| *a == Access::Write(marker, 4))
+        .unwrap();
+    assert!(log[image_at..marker_at].contains(&Access::Read(512, 444)));
 }
 
 #[test]
