@@ -1624,9 +1624,9 @@ mod tests {
         assert_eq!(r.tests.len(), 2);
         assert_eq!(r.tests[1].first_line, 7);
         // A gap alone: 0, 90 | gap | 180, 270, … must split even though no angle repeats.
-        let log = parse_log(&format!(
-            "# rotation_axis: pendulum\ntime_s,angle_deg,output_v\n0,0,1\n10,90,1\n9000,180,1\n9010,270,1\n"
-        ))
+        let log = parse_log(
+            "# rotation_axis: pendulum\ntime_s,angle_deg,output_v\n0,0,1\n10,90,1\n9000,180,1\n9010,270,1\n",
+        )
         .unwrap();
         let tests = split_tests(&log.rows, DEFAULT_TEST_GAP_S);
         assert_eq!(tests.len(), 2);
