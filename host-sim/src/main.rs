@@ -19,6 +19,9 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Fit temperature models of the calibration coefficients (orders 0–4), compare them with
+    /// the paper's printed models, optionally write a calibration table.
+    Fit(accomp_host::fit::FitArgs),
     /// Solve dividing-head tumble logs for K0, K1, K2, δ (and K3) per test (docs/tumble.md).
     Tumble {
         /// Tumble log(s); several logs are combined into one table (e.g. δp and δo mountings).
@@ -97,6 +100,7 @@ fn parse_axis(s: &str) -> Result<RotationAxis, String> {
 fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
     match cli.command {
+        Command::Fit(args) => accomp_host::fit::run(&args)?,
         Command::Tumble {
             logs,
             json,
