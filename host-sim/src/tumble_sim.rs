@@ -239,3 +239,69 @@ pub fn simulate_tumble(cfg: &TumbleSimConfig) -> Result<(String, Vec<TrueTest>),
     }
     Ok((out, truth))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::tumble::{parse_log, solve_log, TumbleOptions};
+
+    #[test]
+    fn normal_deviates_have_zero_mean_and_unit_variance() {
+        let mut r = Rng::new(42);
+        let n = 100_000;
+        let v: Vec<f64> = (0..n).map(|_| r.normal()).collect();
+        let m = v.iter().sum::<f64>() / n as f64;
+        let var = v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / (n as f64 - 1.0);
+        // SE of the mean 0.003, of the variance 0.0045.
+        assert!(m.abs() < 0.015, "{m}");
+        assert!((var - 1.0).abs() < 0.025, "{var}");
+    }
+
+    #[test]
+    fn the_log_has_one_row_per_reading_and_states_axis_and_gravity() {
+        let cfg = TumbleSimConfig::table1_default(1).unwrap();
+        let (text, truth) = simulate_tumble(&cfg).unwrap();
+        let log = parse_log(&text).unwrap();
+        assert_eq!(log.rows.len(), 8 * 4 * 10);
+        assert_eq!(truth.len(), 8);
+        assert_eq!(log.meta("rotation_axis"), Some("pendulum"));
+        assert_eq!(log.meta("local_gravity_m_s2"), Some("9.80665"));
+    }
+
+    #[test]
+    fn without_the_test_column_the_tests_are_found_from_time_gaps_and_restarts() {
+        let mut cfg = TumbleSimConfig::table1_default(2).unwrap();
+        cfg.test_column = false;
+        let (text, _) = simulate_tumble(&cfg).unwrap();
+        assert!(!text.contains(",test,"));
+        let r = solve_log(&parse_log(&text).unwrap(), &TumbleOptions::default()).unwrap();
+        assert_eq!(r.tests.len(), 8);
+        let temps: Vec<f64> = r.tests.iter().map(|t| t.temperature_c.unwrap()).collect();
+        for (t, want) in temps
+            .iter()
+            .zip([30.0, 35.0, 40.0, 45.0, 50.0, 55.0, 60.0, 65.0])
+        {
+            assert!((t - want).abs() < 0.01, "{t} vs {want}");
+        }
+    }
+
+    #[test]
+    fn noise_free_simulation_is_recovered_exactly_including_delta_o() {
+        let mut cfg = TumbleSimConfig::table1_default(3).unwrap();
+        cfg.output_noise_v = 0.0;
+        cfg.index_error_arcsec = 0.0;
+        cfg.temperature_noise_c = 0.0;
+        cfg.rotation_axis = RotationAxis::Output;
+        cfg.temperatures_c = vec![30.0];
+        let (text, truth) = simulate_tumble(&cfg).unwrap();
+        let r = solve_log(&parse_log(&text).unwrap(), &TumbleOptions::default()).unwrap();
+        let t = &r.tests[0];
+        let k = truth[0].coefficients;
+        // Printed δo model: 1.1 − 0.01·30 = 0.8 arcmin.
+        assert!((t.misalignment_arcmin.value - 0.8).abs() < 1e-7);
+        assert!((k.misalignment_o.0 / RAD_PER_ARCMIN - 0.8).abs() < 1e-12);
+        // The log keeps 1e-10 V: K0 to ~1e-10 g.
+        assert!((t.k0_g.value - k.bias_g).abs() < 2e-10);
+        assert!((t.k1_v_per_g.value - k.scale_factor_v_per_g).abs() < 2e-10);
+    }
+}
