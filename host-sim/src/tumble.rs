@@ -151,8 +151,9 @@ pub enum TumbleError {
         /// Test id.
         test: String,
     },
-    /// The fitted scale factor is zero or not finite, so the ratios are meaningless.
-    #[error("test {test}: fitted K1 is {k1} V/g")]
+    /// The fitted scale factor is not positive or not finite: the ratios are meaningless, and a
+    /// negative K1 means the angle sense (θ increasing towards input axis up) is reversed.
+    #[error("test {test}: fitted K1 is {k1} V/g (negative: is the head angle sense reversed? see docs/tumble.md)")]
     BadScaleFactor {
         /// Test id.
         test: String,
@@ -771,7 +772,7 @@ fn solve_test(id: &str, rows: &[&Row], p: &Params) -> Result<TestSolution, Tumbl
         .iter()
         .map(|ai| ai.iter().zip(&y).map(|(u, v)| u * v).sum())
         .collect();
-    if !(c[1].is_finite() && c[1].abs() > 1e-12) {
+    if !(c[1].is_finite() && c[1] > 1e-12) {
         return Err(TumbleError::BadScaleFactor {
             test: id.into(),
             k1: c[1],
@@ -1688,6 +1689,27 @@ mod tests {
         assert!((row[1] - K0).abs() < 1e-12 && (row[2] - K1).abs() < 1e-12);
         assert!((row[4] - 2.0).abs() < 1e-6 && (row[5] - 2.0).abs() < 1e-6);
         assert!(data.next().is_none());
+    }
+
+    #[test]
+    fn a_reversed_angle_sense_is_refused_as_a_negative_scale_factor() {
+        // θ → −θ: the 90° and 270° readings swap.
+        let text = hand_log(
+            "pendulum",
+            &[0.0, 90.0, 180.0, 270.0],
+            1.0,
+            0.0,
+            0.0,
+            &[0.0],
+            "",
+        )
+        .replace("\n90,", "\nX,")
+        .replace("\n270,", "\n90,")
+        .replace("\nX,", "\n270,");
+        assert!(matches!(
+            solve(&text),
+            Err(TumbleError::BadScaleFactor { k1, .. }) if (k1 + K1).abs() < 1e-12
+        ));
     }
 
     #[test]
