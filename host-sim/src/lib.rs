@@ -2,3 +2,6 @@
 
 pub mod fit;
 pub mod table_cli;
+pub mod tumble;
+pub mod tumble_cli;
+pub mod tumble_sim;

@@ -1,5 +1,6 @@
 //! `accomp`: the lab-PC command line. Each subcommand lives in its own module; this file only
 //! dispatches.
+
 use clap::{Parser, Subcommand};
 
 #[derive(Parser)]
@@ -20,6 +21,10 @@ enum Command {
     Fit(accomp_host::fit::FitArgs),
     /// Inspect or check a calibration table file.
     Table(accomp_host::table_cli::TableArgs),
+    /// Solve dividing-head tumble logs for K0, K1, K2, δ (and K3) per test (docs/tumble.md).
+    Tumble(accomp_host::tumble_cli::TumbleArgs),
+    /// Generate a tumble log from true temperature models (the paper's printed order-2 models).
+    SimulateTumble(accomp_host::tumble_cli::SimulateTumbleArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -27,5 +32,7 @@ fn main() -> anyhow::Result<()> {
     match cli.command {
         Command::Fit(args) => accomp_host::fit::run(&args),
         Command::Table(args) => accomp_host::table_cli::run(&args),
+        Command::Tumble(args) => accomp_host::tumble_cli::run(args),
+        Command::SimulateTumble(args) => accomp_host::tumble_cli::run_simulate(args),
     }
 }
