@@ -271,7 +271,7 @@ mod tests {
         let lsb = 2.5 / 2_147_483_648.0;
         assert_eq!(s.code_for_volts(Volts(0.6 * lsb)), Ok(1));
         assert_eq!(s.code_for_volts(Volts(0.4 * lsb)), Ok(0));
-        assert_eq!(s.code_for_volts(Volts(-1.0 * lsb)), Ok(0xFFFF_FFFF));
+        assert_eq!(s.code_for_volts(Volts(-lsb)), Ok(0xFFFF_FFFF));
         // Gain 32 divides the full scale by 32.
         assert_eq!(
             ads1262(32.0).code_for_volts(Volts(1.25 / 32.0)),
