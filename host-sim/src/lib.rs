@@ -1,1 +1,5 @@
 //! Host-side library behind the `accomp` CLI: fitting, simulation, analysis, firmware client.
+
+pub mod allan;
+pub mod log;
+pub mod stability;

@@ -13,9 +13,15 @@ struct Cli {
 }
 
 #[derive(Subcommand)]
-enum Command {}
+enum Command {
+    /// Stability (std, drift), OADEV and MDEV of a log's output columns.
+    Stability(accomp_host::stability::StabilityArgs),
+}
 
 fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
-    match cli.command {}
+    match cli.command {
+        Command::Stability(args) => accomp_host::stability::run(&args)?,
+    }
+    Ok(())
 }
