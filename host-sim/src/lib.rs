@@ -2,4 +2,5 @@
 
 pub mod allan;
 pub mod log;
+pub mod sim;
 pub mod stability;
