@@ -452,3 +452,185 @@ impl Sample {
         Gs(self.truth_input_g)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::accelerometer::{paper_order2_models, HeadPosition};
+    use super::scenario::Scenario;
+    use super::*;
+    use crate::log::Log;
+    use accomp::model::CrossAxis;
+    use accomp::units::Celsius;
+
+    fn run(s: &Scenario, seed: u64, codes: bool) -> Vec<u8> {
+        simulate(s, seed, &Options { codes }, Vec::new(), &mut |_, _| {})
+            .unwrap()
+            .1
+    }
+
+    fn short_0g() -> Scenario {
+        let mut s = Scenario::preset("paper-0g").unwrap();
+        s.run.duration_s = 6.0 * 3600.0;
+        s
+    }
+
+    fn std(v: &[f64]) -> f64 {
+        let n = v.len() as f64;
+        let m = v.iter().sum::<f64>() / n;
+        (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / n).sqrt()
+    }
+
+    fn peak_to_peak(v: &[f64]) -> f64 {
+        v.iter().cloned().fold(f64::MIN, f64::max) - v.iter().cloned().fold(f64::MAX, f64::min)
+    }
+
+    #[test]
+    fn the_same_seed_gives_a_byte_identical_log_and_another_seed_a_different_one() {
+        let s = short_0g();
+        let a = run(&s, 42, true);
+        assert_eq!(a, run(&s, 42, true));
+        assert_ne!(a, run(&s, 43, true));
+    }
+
+    #[test]
+    fn the_log_carries_the_metadata_and_the_measured_codes_read_back_to_the_measured_values() {
+        let s = short_0g();
+        let log = Log::read(&run(&s, 5, true)[..]).unwrap();
+        for key in [
+            "start_utc",
+            "latitude_deg",
+            "longitude_deg",
+            "height_m",
+            "input_g",
+            "instrument",
+            "scale_factor_v_per_g",
+            "seed",
+        ] {
+            assert!(log.meta(key).is_some(), "{key}");
+        }
+        assert_eq!(log.meta("seed"), Some("5"));
+        assert_eq!(log.len(), 360);
+        // output_v is code × LSB (2.5 V / 2^31 at gain 1), printed to 1e-10 V.
+        let lsb = 2.5 / 2_147_483_648.0;
+        let out = log.column("output_v").unwrap();
+        let code = log.column("accel_code").unwrap();
+        for (v, c) in out.iter().zip(code) {
+            assert!((v - c * lsb).abs() < 0.6e-10, "{v} vs {c}");
+        }
+    }
+
+    #[test]
+    fn the_rtd_offset_is_one_fixed_value_for_the_whole_run() {
+        let mut s = Scenario::preset("paper-1g").unwrap();
+        s.run.duration_s = 4.0 * 86_400.0;
+        let mut sim = Simulator::new(&s, 9).unwrap();
+        let offset = sim.rtd_offset_c();
+        assert!(offset.abs() <= 0.1);
+        let (mut first, mut second) = (Vec::new(), Vec::new());
+        let n = sim.samples();
+        for i in 0..n {
+            let x = sim.step().unwrap();
+            let err = x.temperature_c - x.truth_mount_temperature_c;
+            if i < n / 2 { &mut first } else { &mut second }.push(err);
+        }
+        let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+        // Self-heating (250 µA in 123 Ω at 0.05 °C/mW) adds 0.0004 °C; noise averages out.
+        for half in [&first, &second] {
+            assert!(
+                (mean(half) - offset - 0.0004).abs() < 3e-4,
+                "{}",
+                mean(half)
+            );
+            assert!(std(half) < 2e-3);
+        }
+    }
+
+    #[test]
+    fn the_1g_preset_gives_the_papers_magnitudes_before_and_after_compensation() {
+        let s = Scenario::preset("paper-1g").unwrap();
+        let log = Log::read(&run(&s, 1, false)[..]).unwrap();
+        let k1: f64 = log.meta_f64("scale_factor_v_per_g").unwrap().unwrap();
+        let out = log.column("output_v").unwrap();
+        let temp = log.column("temperature_c").unwrap();
+        let raw: Vec<f64> = out.iter().map(|v| v / k1).collect();
+        // Compensated with the paper's models at the RTD temperature (core exact compensation).
+        let models = paper_order2_models(60.0);
+        let comp: Vec<f64> = out
+            .iter()
+            .zip(temp)
+            .map(|(&e, &t)| {
+                models
+                    .exact(Volts(e), Celsius(t), CrossAxis::default())
+                    .unwrap()
+                    .input
+                    .0
+            })
+            .collect();
+        let (before, after) = (std(&raw), std(&comp));
+        // Paper: 1.43e-5 g → 6.6e-6 g over 41 days.
+        assert!(
+            (0.9e-5..2.2e-5).contains(&before),
+            "uncompensated {before:e}"
+        );
+        assert!((3e-6..1.2e-5).contains(&after), "compensated {after:e}");
+        assert!(after < 0.6 * before);
+    }
+
+    #[test]
+    fn the_0g_preset_tilts_about_0_45_arcsec_a_day_worth_about_2_micro_g() {
+        let s = Scenario::preset("paper-0g").unwrap();
+        let log = Log::read(&run(&s, 1, false)[..]).unwrap();
+        let tilt = log.column("truth_tilt_arcsec").unwrap();
+        let a_i = log.column("truth_input_g").unwrap();
+        let ptp = peak_to_peak(tilt);
+        assert!((0.35..0.6).contains(&ptp), "tilt p-p {ptp}\"");
+        // 1" = 4.85 µg at 0 g (paper): the input follows the tilt.
+        let effect = peak_to_peak(a_i);
+        assert!((1.7e-6..2.9e-6).contains(&effect), "a_i p-p {effect:e}");
+        // Tilt compensation with the measured tilt (eq. 5) reduces the 0 g scatter.
+        let k1: f64 = log.meta_f64("scale_factor_v_per_g").unwrap().unwrap();
+        let out = log.column("output_v").unwrap();
+        let meas = log.column("tilt_arcsec").unwrap();
+        let comp: Vec<f64> = out
+            .iter()
+            .zip(meas)
+            .map(|(&e, &t)| {
+                accomp::compensation::tilt_compensated(
+                    Volts(e),
+                    k1,
+                    accomp::units::TiltArcsec(t),
+                    accomp::units::TiltArcsec(meas[0]),
+                )
+                .0 / k1
+            })
+            .collect();
+        let raw: Vec<f64> = out.iter().map(|v| v / k1).collect();
+        assert!(
+            std(&comp) < std(&raw),
+            "{:e} vs {:e}",
+            std(&comp),
+            std(&raw)
+        );
+    }
+
+    #[test]
+    fn a_tumble_programme_moves_the_input_through_the_head_positions() {
+        let mut s = short_0g();
+        s.accelerometer.orientation.positions = [90.0, 180.0, 270.0, 0.0]
+            .iter()
+            .map(|&angle_deg| HeadPosition {
+                angle_deg,
+                dwell_s: 3600.0,
+            })
+            .collect();
+        let mut sim = Simulator::new(&s, 3).unwrap();
+        let mut seen = Vec::new();
+        for _ in 0..sim.samples() {
+            let x = sim.step().unwrap();
+            if x.time_s % 3600.0 == 1800.0 {
+                seen.push((x.truth_input_g * 1e4).round() / 1e4);
+            }
+        }
+        assert_eq!(seen, vec![1.0, 0.0, -1.0, 0.0, 1.0, 0.0]);
+    }
+}

@@ -262,7 +262,7 @@ fn paper_1g() -> Scenario {
         },
         thermostat: ThermostatParams {
             setpoint_c: 60.0,
-            controller_std_c: 0.15,
+            controller_std_c: 0.165,
             controller_tau_s: 900.0,
             setpoint_walk_c_per_sqrt_day: 0.005,
             room_coupling: 0.03,
@@ -274,8 +274,8 @@ fn paper_1g() -> Scenario {
             calibration: CalibrationSource::PaperPrintedOrder2,
             noise_g: AllanParams {
                 white_adev_1s: 2e-6,
-                flicker_floor: 0.5e-6,
-                random_walk_per_sqrt_s: 5e-9,
+                flicker_floor: 1e-6,
+                random_walk_per_sqrt_s: 7e-9,
             },
             orientation: static_head(90.0),
         },
