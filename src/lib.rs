@@ -8,9 +8,11 @@
 
 pub mod adc;
 pub mod compensation;
+pub mod drivers;
 pub mod model;
 pub mod poly;
 pub mod rtd;
+pub mod storage;
 pub mod table;
 pub mod tide;
 pub mod units;

@@ -225,6 +225,85 @@ impl TemperatureModel<'_> {
     }
 }
 
+/// Binomial coefficient C(n, k) for n ≤ 4, exact in f64.
+const fn binomial(n: usize, k: usize) -> f64 {
+    const TABLE: [[f64; N_COEFFS]; N_COEFFS] = [
+        [1.0, 0.0, 0.0, 0.0, 0.0],
+        [1.0, 1.0, 0.0, 0.0, 0.0],
+        [1.0, 2.0, 1.0, 0.0, 0.0],
+        [1.0, 3.0, 3.0, 1.0, 0.0],
+        [1.0, 4.0, 6.0, 4.0, 1.0],
+    ];
+    if n < N_COEFFS && k < N_COEFFS {
+        TABLE[n][k]
+    } else {
+        0.0
+    }
+}
+
+fn powi(base: f64, n: usize) -> f64 {
+    let mut r = 1.0;
+    for _ in 0..n {
+        r *= base;
+    }
+    r
+}
+
+impl TempPoly {
+    /// The same polynomial as monomial coefficients in raw °C, K(T) = Σ m_j·T^j, for comparison
+    /// with printed models. Exact algebra, but the result is ill-conditioned to *use*: it is for
+    /// display, never for evaluation.
+    pub fn to_monomial_celsius(&self, scale: &TemperatureScale) -> [f64; N_COEFFS] {
+        // x = (T − Tc)/Ts = a·T + b with a = 1/Ts, b = −Tc/Ts; expand c_k·(a·T + b)^k.
+        let a = 1.0 / scale.half_span_c;
+        let b = -scale.center.0 / scale.half_span_c;
+        let mut m = [0.0; N_COEFFS];
+        for (k, ck) in self.coeffs.iter().enumerate() {
+            for (j, mj) in m.iter_mut().enumerate().take(k + 1) {
+                *mj += ck * binomial(k, j) * powi(a, j) * powi(b, k - j);
+            }
+        }
+        m
+    }
+
+    /// A polynomial in x from monomial coefficients in raw °C (ascending powers, ≤ 5 terms).
+    pub fn from_monomial_celsius(m: &[f64], scale: &TemperatureScale) -> Option<Self> {
+        if m.len() > N_COEFFS {
+            return None;
+        }
+        // T = Tc + Ts·x; expand m_k·(Tc + Ts·x)^k.
+        let mut c = [0.0; N_COEFFS];
+        for (k, mk) in m.iter().enumerate() {
+            for (j, cj) in c.iter_mut().enumerate().take(k + 1) {
+                *cj +=
+                    mk * binomial(k, j) * powi(scale.half_span_c, j) * powi(scale.center.0, k - j);
+            }
+        }
+        Some(TempPoly { coeffs: c })
+    }
+}
+
+#[cfg(test)]
+mod basis_tests {
+    use super::*;
+
+    #[test]
+    fn monomial_round_trip_preserves_the_function() {
+        let s = TemperatureScale::for_range(Celsius(30.0), Celsius(65.0)).unwrap();
+        // The paper's printed order-2 bias model (Table 2): 0.003554 + 2.97e-5·T + 2.46e-7·T².
+        let printed = [0.003554, 2.97e-5, 2.46e-7];
+        let p = TempPoly::from_monomial_celsius(&printed, &s).unwrap();
+        for t in [30.0, 41.3, 65.0] {
+            let direct = 0.003554 + 2.97e-5 * t + 2.46e-7 * t * t;
+            assert!((p.eval(s.x_unclamped(Celsius(t))) - direct).abs() < 1e-17);
+        }
+        let back = p.to_monomial_celsius(&s);
+        for (a, b) in back.iter().zip([0.003554, 2.97e-5, 2.46e-7, 0.0, 0.0]) {
+            assert!((a - b).abs() <= 1e-15 * b.abs().max(1e-12), "{a} vs {b}");
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -306,84 +385,5 @@ mod tests {
         assert_eq!(TempPoly::from_coeffs(&[1.0, 0.0, 2.0]).unwrap().order(), 2);
         assert_eq!(TempPoly::constant(0.0).order(), 0);
         assert!(TempPoly::from_coeffs(&[0.0; 6]).is_none());
-    }
-}
-
-/// Binomial coefficient C(n, k) for n ≤ 4, exact in f64.
-const fn binomial(n: usize, k: usize) -> f64 {
-    const TABLE: [[f64; N_COEFFS]; N_COEFFS] = [
-        [1.0, 0.0, 0.0, 0.0, 0.0],
-        [1.0, 1.0, 0.0, 0.0, 0.0],
-        [1.0, 2.0, 1.0, 0.0, 0.0],
-        [1.0, 3.0, 3.0, 1.0, 0.0],
-        [1.0, 4.0, 6.0, 4.0, 1.0],
-    ];
-    if n < N_COEFFS && k < N_COEFFS {
-        TABLE[n][k]
-    } else {
-        0.0
-    }
-}
-
-fn powi(base: f64, n: usize) -> f64 {
-    let mut r = 1.0;
-    for _ in 0..n {
-        r *= base;
-    }
-    r
-}
-
-impl TempPoly {
-    /// The same polynomial as monomial coefficients in raw °C, K(T) = Σ m_j·T^j, for comparison
-    /// with printed models. Exact algebra, but the result is ill-conditioned to *use*: it is for
-    /// display, never for evaluation.
-    pub fn to_monomial_celsius(&self, scale: &TemperatureScale) -> [f64; N_COEFFS] {
-        // x = (T − Tc)/Ts = a·T + b with a = 1/Ts, b = −Tc/Ts; expand c_k·(a·T + b)^k.
-        let a = 1.0 / scale.half_span_c;
-        let b = -scale.center.0 / scale.half_span_c;
-        let mut m = [0.0; N_COEFFS];
-        for (k, ck) in self.coeffs.iter().enumerate() {
-            for (j, mj) in m.iter_mut().enumerate().take(k + 1) {
-                *mj += ck * binomial(k, j) * powi(a, j) * powi(b, k - j);
-            }
-        }
-        m
-    }
-
-    /// A polynomial in x from monomial coefficients in raw °C (ascending powers, ≤ 5 terms).
-    pub fn from_monomial_celsius(m: &[f64], scale: &TemperatureScale) -> Option<Self> {
-        if m.len() > N_COEFFS {
-            return None;
-        }
-        // T = Tc + Ts·x; expand m_k·(Tc + Ts·x)^k.
-        let mut c = [0.0; N_COEFFS];
-        for (k, mk) in m.iter().enumerate() {
-            for (j, cj) in c.iter_mut().enumerate().take(k + 1) {
-                *cj +=
-                    mk * binomial(k, j) * powi(scale.half_span_c, j) * powi(scale.center.0, k - j);
-            }
-        }
-        Some(TempPoly { coeffs: c })
-    }
-}
-
-#[cfg(test)]
-mod basis_tests {
-    use super::*;
-
-    #[test]
-    fn monomial_round_trip_preserves_the_function() {
-        let s = TemperatureScale::for_range(Celsius(30.0), Celsius(65.0)).unwrap();
-        // The paper's printed order-2 bias model (Table 2): 0.003554 + 2.97e-5·T + 2.46e-7·T².
-        let printed = [0.003554, 2.97e-5, 2.46e-7];
-        let p = TempPoly::from_monomial_celsius(&printed, &s).unwrap();
-        for t in [30.0, 41.3, 65.0] {
-            let direct = 0.003554 + 2.97e-5 * t + 2.46e-7 * t * t;
-            assert!((p.eval(s.x_unclamped(Celsius(t))) - direct).abs() < 1e-17);
-        }
-        let back = p.to_monomial_celsius(&s);
-        for (a, b) in back.iter().zip([0.003554, 2.97e-5, 2.46e-7, 0.0, 0.0]) {
-            assert!((a - b).abs() <= 1e-15 * b.abs().max(1e-12), "{a} vs {b}");
-        }
     }
 }

@@ -582,6 +582,52 @@ pub fn table_id(encoded: &[u8; ENCODED_LEN]) -> u32 {
     u32::from_le_bytes(b)
 }
 
+impl core::fmt::Display for Coefficient {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(match self {
+            Coefficient::Bias => "K0 (bias)",
+            Coefficient::ScaleFactor => "K1 (scale factor)",
+            Coefficient::Nonlinearity => "K2 (nonlinearity)",
+            Coefficient::MisalignmentP => "δp (misalignment about the pendulum axis)",
+            Coefficient::MisalignmentO => "δo (misalignment about the output axis)",
+        })
+    }
+}
+
+impl core::fmt::Display for TableError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            TableError::BadMagic => f.write_str("bad magic: not an accomp calibration table"),
+            TableError::UnsupportedVersion(v) => write!(f, "unsupported format version {v}"),
+            TableError::BadLength { expected, found } => {
+                write!(f, "bad length: expected {expected} bytes, found {found}")
+            }
+            TableError::BadCrc { stored, computed } => {
+                write!(
+                    f,
+                    "bad CRC: stored {stored:#010x}, computed {computed:#010x}"
+                )
+            }
+            TableError::NonFinite(field) => write!(f, "non-finite number in {field:?}"),
+            TableError::OrderTooHigh(c) => write!(f, "polynomial order above 4 in {c}"),
+            TableError::EmptyRange => f.write_str("empty or inverted calibrated temperature range"),
+            TableError::ReferenceOutsideRange => {
+                f.write_str("reference temperature T0 outside the calibrated range")
+            }
+            TableError::ScaleFactorImplausible => {
+                f.write_str("scale factor K1 not within 0.01–100 V/g over the calibrated range")
+            }
+            TableError::RtdConstants => f.write_str("RTD constants out of range for platinum"),
+            TableError::AdcConstants => {
+                f.write_str("ADC corrections or resistor values out of range")
+            }
+            TableError::Serial => f.write_str("serial number is not UTF-8"),
+            TableError::Date => f.write_str("calibration date is not a calendar date"),
+            TableError::TiltAxis => f.write_str("unknown tilt axis code"),
+        }
+    }
+}
+
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;

@@ -18,7 +18,7 @@
 //! arguments (centuries × 481 267 °), and f32 would lose the Moon's position there.
 
 use crate::units::{Gs, Radians, TiltArcsec, RAD_PER_ARCSEC};
-use libm::{atan2, cos, floor, sin, sqrt};
+use libm::{atan2, cos, fabs, floor, sin, sqrt};
 
 // ---------------------------------------------------------------------------------------------
 // Constants
@@ -465,7 +465,7 @@ pub struct Bodies {
     pub moon_m: [f64; 3],
     /// Sun position, metres.
     pub sun_m: [f64; 3],
-    /// Orbit-averaged Σ GM·⟨x z / d⁵⟩ and Σ GM·⟨y z / d⁵⟩ of Moon and Sun, m⁻²·m³/s² = 1/s²/m².
+    /// Orbit-averaged Σ GM·⟨x z / d⁵⟩ and Σ GM·⟨y z / d⁵⟩ of Moon and Sun, 1/s².
     ///
     /// Why: the K1 line is the part of the diurnal tide at exactly sidereal frequency, i.e. the
     /// orbit average of the diurnal moment; it gets the FCN-resonant Love numbers.
@@ -680,7 +680,7 @@ impl Station {
         let factors = ElasticFactors {
             // Reported value at this latitude; where P20 ≈ 0 the ratio is meaningless and the
             // plain DDW value is shown instead (the computation uses delta20_p20).
-            delta_20: if fabs_gt(p20, 1e-3) {
+            delta_20: if fabs(p20) > 1e-3 {
                 delta20_p20 / p20
             } else {
                 DELTA_2[0]
@@ -858,10 +858,6 @@ impl Station {
             nodes: None,
         })
     }
-}
-
-fn fabs_gt(x: f64, limit: f64) -> bool {
-    x > limit || x < -limit
 }
 
 /// Degree-2 gradients (up, north, east) for the three species, before any Love numbers.

@@ -1,6 +1,11 @@
 //! Host-side library behind the `accomp` CLI: fitting, simulation, analysis, firmware client.
 
 pub mod allan;
+pub mod fit;
 pub mod log;
 pub mod sim;
 pub mod stability;
+pub mod table_cli;
+pub mod tumble;
+pub mod tumble_cli;
+pub mod tumble_sim;

@@ -1,0 +1,196 @@
+//! `accomp table show|verify <cal>`: what a calibration table file holds, and whether the
+//! firmware would accept it (the same `CalibrationTable::decode` the board runs).
+
+use accomp::poly::TempPoly;
+use accomp::table::{CalibrationTable, TableError, ENCODED_LEN};
+use accomp::units::{Celsius, RAD_PER_ARCMIN};
+use anyhow::{Context, Result};
+use serde_json::{json, Value};
+use std::path::{Path, PathBuf};
+
+/// Reads and decodes a table file; the error names the file and the validator's verdict.
+pub fn read_table(path: &Path) -> Result<CalibrationTable> {
+    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+    decode_named(&bytes).with_context(|| format!("{} is refused", path.display()))
+}
+
+/// `CalibrationTable::decode` with its error turned into an `anyhow` error carrying the name.
+pub fn decode_named(bytes: &[u8]) -> Result<CalibrationTable> {
+    CalibrationTable::decode(bytes).map_err(|e: TableError| anyhow::anyhow!("{e} ({e:?})"))
+}
+
+fn poly_json(p: &TempPoly, t: &CalibrationTable, unit_scale: f64) -> Value {
+    let s = &t.thermal.scale;
+    let scaled = p.scaled(unit_scale);
+    json!({
+        "order": p.order(),
+        "coeffs_x": scaled.coeffs[..=p.order()].to_vec(),
+        "monomial_celsius": scaled.to_monomial_celsius(s)[..=p.order()].to_vec(),
+        "at_reference": scaled.eval(s.x_unclamped(t.thermal.reference)),
+        "slope_per_c_at_reference":
+            scaled.derivative_x(s.x_unclamped(t.thermal.reference)) / s.half_span_c,
+    })
+}
+
+/// The table as one JSON object (misalignments in arcmin, as the lab prints them).
+pub fn table_json(t: &CalibrationTable) -> Value {
+    let m = &t.thermal.models;
+    let s = &t.thermal.scale;
+    json!({
+        "id": format!("{:08x}", t.id()),
+        "serial": t.serial_str().unwrap_or("<invalid>"),
+        "date": format!("{:04}-{:02}-{:02}", t.date.year, t.date.month, t.date.day),
+        "range_c": [s.min.0, s.max.0],
+        "normalization": {"center_c": s.center.0, "half_span_c": s.half_span_c},
+        "reference_c": t.thermal.reference.0,
+        "k0_g": poly_json(&m.bias_g, t, 1.0),
+        "k1_v_per_g": poly_json(&m.scale_factor_v_per_g, t, 1.0),
+        "k2_g_per_g2": poly_json(&m.nonlinearity_g_per_g2, t, 1.0),
+        "delta_p_arcmin": poly_json(&m.misalignment_p_rad, t, 1.0 / RAD_PER_ARCMIN),
+        "delta_o_arcmin": poly_json(&m.misalignment_o_rad, t, 1.0 / RAD_PER_ARCMIN),
+        "tilt": {
+            "reference_arcsec": t.tilt.reference.0,
+            "scale_arcsec_per_v": t.tilt.scale_arcsec_per_v,
+            "axis": format!("{:?}", t.tilt.axis),
+            "adc_gain_correction": t.tilt.adc_gain_correction,
+            "adc_offset_v": t.tilt.adc_offset.0,
+        },
+        "rtd": {
+            "r0_ohm": t.rtd.cvd.r0, "a": t.rtd.cvd.a, "b": t.rtd.cvd.b, "c": t.rtd.cvd.c,
+            "reference_resistor_ohm": t.rtd.reference_resistor.0,
+            "adc_gain_correction": t.rtd.adc_gain_correction,
+            "pga_gain": t.rtd.pga_gain,
+        },
+        "accelerometer_channel": {
+            "adc_gain_correction": t.accel.adc_gain_correction,
+            "adc_offset_v": t.accel.adc_offset.0,
+            "sense_resistor_ohm": t.accel.sense_resistor.0,
+        },
+        "orientation": {
+            "a_p_g": t.orientation.cross.a_p.0,
+            "a_o_g": t.orientation.cross.a_o.0,
+            "nominal_input_g": t.orientation.nominal_input.0,
+        },
+        "encoded_len": ENCODED_LEN,
+    })
+}
+
+/// Human-readable description.
+pub fn table_text(t: &CalibrationTable) -> String {
+    let s = &t.thermal.scale;
+    let mut out = String::new();
+    let serial = t.serial_str().unwrap_or("<invalid>");
+    out += &format!(
+        "calibration table {:08x}  serial {serial}  date {:04}-{:02}-{:02}\n",
+        t.id(),
+        t.date.year,
+        t.date.month,
+        t.date.day
+    );
+    out += &format!(
+        "range {:.2} … {:.2} °C, x = (T − {:.3})/{:.3}, T0 = {:.2} °C\n",
+        s.min.0, s.max.0, s.center.0, s.half_span_c, t.thermal.reference.0
+    );
+    let m = &t.thermal.models;
+    for (name, p, k) in [
+        ("K0 [g]", &m.bias_g, 1.0),
+        ("K1 [V/g]", &m.scale_factor_v_per_g, 1.0),
+        ("K2 [g/g²]", &m.nonlinearity_g_per_g2, 1.0),
+        ("δp [arcmin]", &m.misalignment_p_rad, 1.0 / RAD_PER_ARCMIN),
+        ("δo [arcmin]", &m.misalignment_o_rad, 1.0 / RAD_PER_ARCMIN),
+    ] {
+        let q = p.scaled(k);
+        let x0 = s.x_unclamped(Celsius(t.thermal.reference.0));
+        out += &format!(
+            "  {name:<12} order {}  at T0 {:+.9e}  dK/dT {:+.4e}/°C  coeffs(x) {:?}\n",
+            p.order(),
+            q.eval(x0),
+            q.derivative_x(x0) / s.half_span_c,
+            &q.coeffs[..=p.order()]
+        );
+    }
+    out += &format!(
+        "RTD R0 {} Ω, A {:e}, B {:e}, C {:e}, Rref {} Ω, PGA {}\n",
+        t.rtd.cvd.r0,
+        t.rtd.cvd.a,
+        t.rtd.cvd.b,
+        t.rtd.cvd.c,
+        t.rtd.reference_resistor.0,
+        t.rtd.pga_gain
+    );
+    out += &format!(
+        "tilt φ0 {}\", {} \"/V, axis {:?}; sense resistor {} Ω; orientation a_i {} g, a_p {} g, a_o {} g\n",
+        t.tilt.reference.0,
+        t.tilt.scale_arcsec_per_v,
+        t.tilt.axis,
+        t.accel.sense_resistor.0,
+        t.orientation.nominal_input.0,
+        t.orientation.cross.a_p.0,
+        t.orientation.cross.a_o.0
+    );
+    out
+}
+
+/// `accomp table …` arguments.
+#[derive(clap::Args, Debug)]
+pub struct TableArgs {
+    #[command(subcommand)]
+    action: TableAction,
+}
+
+#[derive(clap::Subcommand, Debug)]
+enum TableAction {
+    /// Print what a table holds.
+    Show {
+        /// Calibration table file (as written by `accomp fit -o`).
+        path: PathBuf,
+        /// One JSON object instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Check a table as the firmware would; exits non-zero with the named error if refused.
+    Verify {
+        /// Calibration table file.
+        path: PathBuf,
+        /// One JSON object instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+/// Runs `accomp table …`.
+pub fn run(args: &TableArgs) -> Result<()> {
+    match &args.action {
+        TableAction::Show { path, json } => {
+            let t = read_table(path)?;
+            if *json {
+                println!("{}", serde_json::to_string_pretty(&table_json(&t))?);
+            } else {
+                print!("{}", table_text(&t));
+            }
+        }
+        TableAction::Verify { path, json } => {
+            let bytes =
+                std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+            match decode_named(&bytes) {
+                Ok(t) => {
+                    if *json {
+                        println!(
+                            "{}",
+                            json!({"valid": true, "id": format!("{:08x}", t.id())})
+                        );
+                    } else {
+                        println!("{}: valid, id {:08x}", path.display(), t.id());
+                    }
+                }
+                Err(e) => {
+                    if *json {
+                        println!("{}", json!({"valid": false, "error": e.to_string()}));
+                    }
+                    anyhow::bail!("{}: refused: {e}", path.display());
+                }
+            }
+        }
+    }
+    Ok(())
+}

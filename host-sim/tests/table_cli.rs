@@ -1,0 +1,110 @@
+//! `accomp table show|verify` on files written by the core encoder, good and corrupted.
+
+use accomp::compensation::{CoefficientModels, ThermalCompensator};
+use accomp::model::CrossAxis;
+use accomp::poly::{TempPoly, TemperatureScale};
+use accomp::rtd::CallendarVanDusen;
+use accomp::table::*;
+use accomp::units::*;
+use std::path::PathBuf;
+use std::process::Command;
+
+fn table() -> CalibrationTable {
+    let scale = TemperatureScale::for_range(Celsius(30.0), Celsius(65.0)).unwrap();
+    CalibrationTable {
+        serial: CalibrationTable::serial_from_str("SNJ-103"),
+        date: CalibrationDate {
+            year: 2026,
+            month: 11,
+            day: 21,
+        },
+        thermal: ThermalCompensator {
+            scale,
+            reference: Celsius(60.0),
+            models: CoefficientModels {
+                bias_g: TempPoly::from_coeffs(&[0.0056, 0.0009]).unwrap(),
+                scale_factor_v_per_g: TempPoly::from_coeffs(&[1.3267, 4e-4, -1e-5]).unwrap(),
+                nonlinearity_g_per_g2: TempPoly::constant(1e-6),
+                misalignment_p_rad: TempPoly::constant(2.0 * RAD_PER_ARCMIN),
+                misalignment_o_rad: TempPoly::constant(0.0),
+            },
+        },
+        tilt: TiltConfig {
+            reference: TiltArcsec(0.0),
+            scale_arcsec_per_v: 10.0,
+            axis: TiltAxis::Input,
+            adc_gain_correction: 1.0,
+            adc_offset: Volts(0.0),
+        },
+        rtd: RtdConfig {
+            cvd: CallendarVanDusen::IEC_60751_PT100,
+            reference_resistor: Ohms(5110.0),
+            adc_gain_correction: 1.0,
+            pga_gain: 16.0,
+        },
+        accel: AccelChannel {
+            adc_gain_correction: 1.0,
+            adc_offset: Volts(0.0),
+            sense_resistor: Ohms(1000.0),
+        },
+        orientation: Orientation {
+            cross: CrossAxis::default(),
+            nominal_input: Gs(1.0),
+        },
+    }
+}
+
+fn write(name: &str, bytes: &[u8]) -> PathBuf {
+    let p = std::env::temp_dir().join(format!("accomp-table-cli-{}-{name}", std::process::id()));
+    std::fs::write(&p, bytes).unwrap();
+    p
+}
+
+fn accomp(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_accomp"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+#[test]
+fn show_json_reports_the_tables_fields_in_lab_units() {
+    let t = table();
+    let p = write("good.acal", &t.encode());
+    let out = accomp(&["table", "show", "--json", p.to_str().unwrap()]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["serial"], "SNJ-103");
+    assert_eq!(v["id"], format!("{:08x}", t.id()));
+    assert_eq!(v["k1_v_per_g"]["order"], 2);
+    // δp stored in rad, shown in arcmin: 2.0 arcmin.
+    let dp = v["delta_p_arcmin"]["at_reference"].as_f64().unwrap();
+    assert!((dp - 2.0).abs() < 1e-12);
+    // K0 at T0 = 60 °C: x = (60 − 47.5)/17.5, 0.0056 + 0.0009·x.
+    let k0 = v["k0_g"]["at_reference"].as_f64().unwrap();
+    assert!((k0 - (0.0056 + 0.0009 * 12.5 / 17.5)).abs() < 1e-15);
+}
+
+#[test]
+fn verify_refuses_a_corrupted_file_with_the_named_error() {
+    let mut b = table().encode();
+    b[100] ^= 0x01;
+    let p = write("flipped.acal", &b);
+    let out = accomp(&["table", "verify", p.to_str().unwrap()]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("bad CRC"), "{err}");
+
+    let p = write("truncated.acal", &table().encode()[..200]);
+    let out = accomp(&["table", "verify", p.to_str().unwrap()]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("bad length"));
+
+    let p = write("good2.acal", &table().encode());
+    let out = accomp(&["table", "verify", p.to_str().unwrap()]);
+    assert!(out.status.success());
+}
