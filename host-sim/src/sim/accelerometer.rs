@@ -403,4 +403,59 @@ mod tests {
         assert!(a0 != 0.0 && a1 != 0.0 && a2 != a0);
         assert!(a0.abs() < 1.0 * RAD_PER_ARCSEC);
     }
+
+    #[test]
+    fn a_table_file_written_by_fit_is_loaded_as_the_true_models() {
+        use accomp::rtd::CallendarVanDusen;
+        use accomp::table::*;
+        use accomp::units::{Ohms, TiltArcsec};
+        let thermal = paper_order2_models(55.0);
+        let table = CalibrationTable {
+            serial: CalibrationTable::serial_from_str("SIM-TEST"),
+            date: CalibrationDate {
+                year: 2026,
+                month: 1,
+                day: 2,
+            },
+            thermal,
+            tilt: TiltConfig {
+                reference: TiltArcsec(0.0),
+                scale_arcsec_per_v: 10.0,
+                axis: TiltAxis::Input,
+                adc_gain_correction: 1.0,
+                adc_offset: Volts(0.0),
+            },
+            rtd: RtdConfig {
+                cvd: CallendarVanDusen::IEC_60751_PT100,
+                reference_resistor: Ohms(5110.0),
+                adc_gain_correction: 1.0,
+                pga_gain: 16.0,
+            },
+            accel: AccelChannel {
+                adc_gain_correction: 1.0,
+                adc_offset: Volts(0.0),
+                sense_resistor: Ohms(1000.0),
+            },
+            orientation: accomp::table::Orientation {
+                cross: CrossAxis::default(),
+                nominal_input: Gs(1.0),
+            },
+        };
+        let path =
+            std::env::temp_dir().join(format!("accomp-sim-table-{}.bin", std::process::id()));
+        std::fs::write(&path, table.encode()).unwrap();
+        let toml_text = format!(
+            "source = \"table-file\"\npath = {:?}\n",
+            path.display().to_string()
+        );
+        let source: CalibrationSource = toml::from_str(&toml_text).unwrap();
+        let loaded = source.load(60.0).unwrap();
+        let _ = std::fs::remove_file(&path);
+        // The table's own T0 (55 °C) is kept, not the scenario's set point.
+        assert_eq!(loaded, thermal);
+        let bad = CalibrationSource::TableFile {
+            path: "/nonexistent/table.bin".into(),
+        };
+        assert!(matches!(bad.load(60.0), Err(AccelError::Read { .. })));
+    }
 }
