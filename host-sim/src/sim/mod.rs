@@ -26,7 +26,7 @@ pub mod writer;
 
 use std::io::Write;
 
-use accomp::units::{Gs, Volts, RAD_PER_ARCSEC};
+use accomp::units::{Volts, RAD_PER_ARCSEC};
 
 use accelerometer::{axes, AccelError, Accelerometer, DividingHead};
 use noise::{stream, AllanNoise, SimRng};
@@ -443,14 +443,6 @@ pub fn simulate<W: Write>(
         scale_factor_v_per_g: sim.scale_factor_at_setpoint(),
     };
     Ok((summary, w.finish()?))
-}
-
-/// Convenience: the true a_i as [`Gs`] of a sample.
-impl Sample {
-    /// a_i as a unit type.
-    pub fn input(&self) -> Gs {
-        Gs(self.truth_input_g)
-    }
 }
 
 #[cfg(test)]
