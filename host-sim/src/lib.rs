@@ -3,6 +3,7 @@
 pub mod allan;
 pub mod fit;
 pub mod log;
+pub mod sim;
 pub mod stability;
 pub mod table_cli;
 pub mod tumble;

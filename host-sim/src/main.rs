@@ -25,6 +25,8 @@ enum Command {
     Tumble(accomp_host::tumble_cli::TumbleArgs),
     /// Generate a tumble log from true temperature models (the paper's printed order-2 models).
     SimulateTumble(accomp_host::tumble_cli::SimulateTumbleArgs),
+    /// Simulate the test station (scenario file or preset) and write a log.
+    Simulate(accomp_host::sim::cli::SimulateArgs),
     /// Stability (std, drift), OADEV and MDEV of a log's output columns.
     Stability(accomp_host::stability::StabilityArgs),
 }
@@ -36,6 +38,7 @@ fn main() -> anyhow::Result<()> {
         Command::Table(args) => accomp_host::table_cli::run(&args),
         Command::Tumble(args) => accomp_host::tumble_cli::run(args),
         Command::SimulateTumble(args) => accomp_host::tumble_cli::run_simulate(args),
+        Command::Simulate(args) => accomp_host::sim::cli::run(&args),
         Command::Stability(args) => Ok(accomp_host::stability::run(&args)?),
     }
 }
