@@ -9,7 +9,10 @@
 pub mod adc;
 pub mod compensation;
 pub mod model;
+pub mod pipeline;
 pub mod poly;
+pub mod protocol;
 pub mod rtd;
+pub mod service;
 pub mod table;
 pub mod units;
