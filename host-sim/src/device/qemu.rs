@@ -110,7 +110,7 @@ impl Qemu {
             "none",
         ])
         .arg("-serial")
-        .arg(format!("tcp:127.0.0.1:{port},server=on,wait=on"))
+        .arg(format!("tcp:127.0.0.1:{port},server=on,wait=on,nodelay=on"))
         .args(["-semihosting-config", "enable=on,target=native"]);
         if let Some(shift) = opts.icount_shift {
             cmd.arg("-icount").arg(format!("shift={shift}"));
