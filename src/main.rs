@@ -125,12 +125,13 @@ mod app {
             for _ in 0..QUEUE_DROPS.swap(0, Ordering::Relaxed) {
                 service.count_dropped();
             }
-            let now = now_us();
             let reply = match item {
                 Inbound::Frame(frame) => {
-                    service.handle_frame(frame.as_deref().map_err(|e| *e), now)
+                    service.handle_frame(frame.as_deref().map_err(|e| *e), &now_us)
                 }
-                Inbound::Sample(raw) => service.streaming().then(|| service.sample(0, &raw, now)),
+                Inbound::Sample(raw) => service
+                    .streaming()
+                    .then(|| service.sample(0, &raw, now_us())),
             };
             if let Some(msg) = reply {
                 send(cx.local.tx, &msg);

@@ -95,7 +95,18 @@ pub enum Request {
         /// The raw codes and driver flags.
         raw: RawSample,
     },
+    /// Run the pipeline `count` times on `raw` with the active table and report the firmware
+    /// time it took (benchmark; under `qemu -icount shift=0` 1 µs = 1000 instructions).
+    Bench {
+        /// The sample to process.
+        raw: RawSample,
+        /// How many times, 1..=MAX_BENCH_COUNT.
+        count: u32,
+    },
 }
+
+/// Largest Bench count (keeps the device answering within a few seconds on the board).
+pub const MAX_BENCH_COUNT: u32 = 100_000;
 
 /// Highest acquisition rate accepted by SetRate (the ADS1262 at 7200 SPS with two channels).
 pub const MAX_RATE_HZ: u32 = 3600;
@@ -146,6 +157,15 @@ pub enum Response {
     Committed {
         /// Id of the now active table.
         table_id: u32,
+    },
+    /// Result of Bench.
+    Bench {
+        /// Samples processed.
+        count: u32,
+        /// Firmware time for all of them, in µs.
+        elapsed_us: u64,
+        /// Sum of the a_i results (keeps the work observable; NaN if any sample was invalid).
+        a_i_sum_g: f64,
     },
     /// Part of the active table.
     TableChunk {
@@ -256,11 +276,13 @@ pub enum ErrorCode {
     NotSupported = 51,
     /// SetRate outside 1..=MAX_RATE_HZ. Detail: MAX_RATE_HZ.
     InvalidRate = 52,
+    /// Bench count outside 1..=MAX_BENCH_COUNT. Detail: MAX_BENCH_COUNT.
+    InvalidCount = 53,
 }
 
 impl ErrorCode {
     /// Every code, for documentation and exhaustive tests.
-    pub const ALL: [ErrorCode; 30] = [
+    pub const ALL: [ErrorCode; 31] = [
         ErrorCode::Malformed,
         ErrorCode::FrameCrc,
         ErrorCode::FrameTooLong,
@@ -291,6 +313,7 @@ impl ErrorCode {
         ErrorCode::Busy,
         ErrorCode::NotSupported,
         ErrorCode::InvalidRate,
+        ErrorCode::InvalidCount,
     ];
 
     /// The code for a number from the wire.

@@ -7,7 +7,8 @@
 use crate::pipeline::{self, RawSample};
 use crate::protocol::{
     decode_message, peek_request_id, Board, DeviceInfo, DeviceMessage, ErrorCode, ErrorReply,
-    FrameError, HostFrame, Request, Response, CHUNK_LEN, MAX_RATE_HZ, PROTOCOL_VERSION,
+    FrameError, HostFrame, Request, Response, CHUNK_LEN, MAX_BENCH_COUNT, MAX_RATE_HZ,
+    PROTOCOL_VERSION,
 };
 use crate::table::{CalibrationTable, CRC32, ENCODED_LEN};
 
@@ -92,7 +93,7 @@ impl Service {
     pub fn handle_frame(
         &mut self,
         frame: Result<&[u8], FrameError>,
-        now_us: u64,
+        clock: &dyn Fn() -> u64,
     ) -> Option<DeviceMessage> {
         let body = match frame {
             Ok(body) => body,
@@ -102,7 +103,7 @@ impl Service {
             }
         };
         match decode_message::<HostFrame>(body) {
-            Ok(f) => Some(self.handle(f, now_us)),
+            Ok(f) => Some(self.handle(f, clock)),
             Err(e) => Some(DeviceMessage::Error {
                 id: peek_request_id(body).unwrap_or(0),
                 error: e.reply(),
@@ -110,9 +111,16 @@ impl Service {
         }
     }
 
-    /// Handles one decoded request.
-    pub fn handle(&mut self, frame: HostFrame, now_us: u64) -> DeviceMessage {
+    /// Handles one decoded request; `clock` gives the firmware time in µs.
+    pub fn handle(&mut self, frame: HostFrame, clock: &dyn Fn() -> u64) -> DeviceMessage {
         let id = frame.id;
+        let now_us = clock();
+        if let Request::Bench { raw, count } = &frame.request {
+            return match self.bench(raw, *count, clock) {
+                Ok(body) => DeviceMessage::Response { id, body },
+                Err(error) => DeviceMessage::Error { id, error },
+            };
+        }
         if let Request::InjectSample { raw } = &frame.request {
             if self.board == Board::Qemu {
                 return self.sample(id, raw, now_us);
@@ -213,7 +221,33 @@ impl Service {
                 Ok(Response::Ok)
             }
             Request::InjectSample { .. } => Err(ErrorCode::NotSupported.reply(0)),
+            Request::Bench { .. } => Err(ErrorCode::Malformed.reply(0)),
         }
+    }
+
+    fn bench(
+        &self,
+        raw: &RawSample,
+        count: u32,
+        clock: &dyn Fn() -> u64,
+    ) -> Result<Response, ErrorReply> {
+        if count == 0 || count > MAX_BENCH_COUNT {
+            return Err(ErrorCode::InvalidCount.reply(MAX_BENCH_COUNT));
+        }
+        let table = self.active.as_ref();
+        let start = clock();
+        let mut sum = 0.0;
+        for i in 0..count {
+            // black_box: the same sample each time must still be computed each time.
+            let r = core::hint::black_box(raw);
+            sum += pipeline::process(i, start, r, table).a_i_exact_g;
+        }
+        let elapsed_us = clock().saturating_sub(start);
+        Ok(Response::Bench {
+            count,
+            elapsed_us,
+            a_i_sum_g: sum,
+        })
     }
 
     fn commit(&mut self) -> Result<Response, ErrorReply> {
@@ -269,7 +303,7 @@ mod tests {
     use crate::units::{Celsius, TiltArcsec, Volts};
 
     fn req(s: &mut Service, request: Request) -> DeviceMessage {
-        s.handle(HostFrame { id: 9, request }, 1_000)
+        s.handle(HostFrame { id: 9, request }, &|| 1_000)
     }
 
     fn upload(s: &mut Service, bytes: &[u8]) -> DeviceMessage {
@@ -487,6 +521,52 @@ mod tests {
     }
 
     #[test]
+    fn bench_runs_the_pipeline_count_times_and_reports_the_clock() {
+        let mut s = Service::new(Board::Qemu);
+        let t = paper_table();
+        upload(&mut s, &t.encode());
+        let raw = raw_from_physical(&t, Volts(1.3), Celsius(50.0), TiltArcsec(0.0)).unwrap();
+        let ticks = core::cell::Cell::new(0u64);
+        let clock = || {
+            ticks.set(ticks.get() + 250);
+            ticks.get()
+        };
+        let m = s.handle(
+            HostFrame {
+                id: 1,
+                request: Request::Bench { raw, count: 3 },
+            },
+            &clock,
+        );
+        let one = pipeline::process(0, 0, &raw, Some(&t)).a_i_exact_g;
+        match m {
+            DeviceMessage::Response {
+                body:
+                    Response::Bench {
+                        count,
+                        elapsed_us,
+                        a_i_sum_g,
+                    },
+                ..
+            } => {
+                assert_eq!((count, elapsed_us), (3, 250));
+                assert_eq!(a_i_sum_g, one + one + one);
+            }
+            other => panic!("{other:?}"),
+        }
+        let m = s.handle(
+            HostFrame {
+                id: 1,
+                request: Request::Bench { raw, count: 0 },
+            },
+            &clock,
+        );
+        assert!(
+            matches!(m, DeviceMessage::Error { error, .. } if error.code == ErrorCode::InvalidCount as u16)
+        );
+    }
+
+    #[test]
     fn the_frontend_refuses_injection_and_bad_rates() {
         let mut s = Service::new(Board::Frontend);
         let raw =
@@ -515,7 +595,7 @@ mod tests {
         let mut out = None;
         for &b in &wire[..n] {
             if let Some(f) = d.push(b) {
-                out = s.handle_frame(f, 0);
+                out = s.handle_frame(f, &|| 0);
             }
         }
         assert_eq!(
