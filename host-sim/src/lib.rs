@@ -1,6 +1,8 @@
 //! Host-side library behind the `accomp` CLI: fitting, simulation, analysis, firmware client.
 
 pub mod allan;
+pub mod device;
+pub mod device_cli;
 pub mod fit;
 pub mod log;
 pub mod sim;

@@ -27,6 +27,11 @@ enum Command {
     SimulateTumble(accomp_host::tumble_cli::SimulateTumbleArgs),
     /// Simulate the test station (scenario file or preset) and write a log.
     Simulate(accomp_host::sim::cli::SimulateArgs),
+    /// Stream samples through the firmware (or the same core on the host) and write what it
+    /// returns.
+    Compensate(accomp_host::device_cli::CompensateArgs),
+    /// Upload a calibration table to the device, verify by read-back, activate it.
+    Load(accomp_host::device_cli::LoadArgs),
     /// Stability (std, drift), OADEV and MDEV of a log's output columns.
     Stability(accomp_host::stability::StabilityArgs),
 }
@@ -39,6 +44,8 @@ fn main() -> anyhow::Result<()> {
         Command::Tumble(args) => accomp_host::tumble_cli::run(args),
         Command::SimulateTumble(args) => accomp_host::tumble_cli::run_simulate(args),
         Command::Simulate(args) => accomp_host::sim::cli::run(&args),
+        Command::Compensate(args) => accomp_host::device_cli::run_compensate(&args),
+        Command::Load(args) => accomp_host::device_cli::run_load(&args),
         Command::Stability(args) => Ok(accomp_host::stability::run(&args)?),
     }
 }

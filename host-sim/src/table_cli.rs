@@ -148,6 +148,8 @@ enum TableAction {
         #[arg(long)]
         json: bool,
     },
+    /// Read the device's active table into a file.
+    Get(crate::device_cli::TableGetArgs),
     /// Check a table as the firmware would; exits non-zero with the named error if refused.
     Verify {
         /// Calibration table file.
@@ -169,6 +171,7 @@ pub fn run(args: &TableArgs) -> Result<()> {
                 print!("{}", table_text(&t));
             }
         }
+        TableAction::Get(get) => crate::device_cli::run_table_get(get)?,
         TableAction::Verify { path, json } => {
             let bytes =
                 std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;

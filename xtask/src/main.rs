@@ -79,7 +79,48 @@ fn firmware_elf() -> PathBuf {
         .join(FIRMWARE_BIN)
 }
 
+/// flip-link is the firmware's linker (.cargo/config.toml); installed with cargo when missing.
+fn ensure_flip_link() -> Result<()> {
+    let have = Command::new("flip-link")
+        .arg("--version")
+        .output()
+        .map(|o| o.status.success())
+        .unwrap_or(false);
+    if have {
+        return Ok(());
+    }
+    let mut c = Command::new(env::var("CARGO").unwrap_or_else(|_| "cargo".into()));
+    c.args(["install", "flip-link", "--locked"]);
+    run("cargo install flip-link (firmware linker)", c)
+}
+
+/// Builds the front-end board firmware (it cannot run here, but it must build) and keeps its ELF
+/// next to the QEMU one as `accomp-fw-frontend`.
+fn build_frontend_firmware() -> Result<PathBuf> {
+    ensure_flip_link()?;
+    let mut c = cargo();
+    c.args([
+        "build",
+        "--release",
+        "--package",
+        "accomp",
+        "--bin",
+        FIRMWARE_BIN,
+        "--target",
+        FIRMWARE_TARGET,
+        "--no-default-features",
+        "--features",
+        "board-frontend",
+    ]);
+    run("firmware release build, board-frontend", c)?;
+    let elf = firmware_elf();
+    let kept = elf.with_file_name(format!("{FIRMWARE_BIN}-frontend"));
+    std::fs::copy(&elf, &kept).map_err(|e| format!("keeping the frontend ELF: {e}"))?;
+    Ok(kept)
+}
+
 fn build_firmware() -> Result<PathBuf> {
+    ensure_flip_link()?;
     let mut c = cargo();
     c.args([
         "build",
@@ -91,7 +132,10 @@ fn build_firmware() -> Result<PathBuf> {
         "--target",
         FIRMWARE_TARGET,
     ]);
-    run("firmware release build (thumbv7em-none-eabihf)", c)?;
+    run(
+        "firmware release build, board-qemu (thumbv7em-none-eabihf)",
+        c,
+    )?;
     Ok(firmware_elf())
 }
 
@@ -175,6 +219,8 @@ fn test() -> Result<()> {
     ]);
     run("clippy (firmware)", clippy_fw)?;
 
+    // Frontend first: both builds write the same ELF path, and the QEMU one must be left there.
+    build_frontend_firmware()?;
     let elf = build_firmware()?;
 
     let mut tests = cargo();

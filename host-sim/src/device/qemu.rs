@@ -1,0 +1,234 @@
+//! Boots the firmware ELF in `qemu-system-arm -machine netduinoplus2` and connects to its UART.
+//!
+//! QEMU's stderr and the firmware's semihosting output (defmt frames, binary) go to files in a
+//! log directory; any failure to boot is reported with both, and with QEMU's exit status (the
+//! firmware exits with 101 on panic, 102 on HardFault, 103/104 on start-up failures).
+
+use std::fs::{self, File};
+use std::net::{TcpListener, TcpStream};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use super::client::Client;
+use super::transport::TcpTransport;
+
+/// How QEMU is started.
+#[derive(Debug, Clone)]
+pub struct QemuOptions {
+    /// Time allowed from spawn to READY.
+    pub ready_timeout: Duration,
+    /// `-icount shift=N` for deterministic virtual time (benchmarks), None for real time.
+    pub icount_shift: Option<u32>,
+    /// Directory for `qemu-stderr.txt` and `semihosting.bin`; a fresh temp dir when None.
+    pub log_dir: Option<PathBuf>,
+}
+
+impl Default for QemuOptions {
+    fn default() -> Self {
+        QemuOptions {
+            ready_timeout: Duration::from_secs(20),
+            icount_shift: None,
+            log_dir: None,
+        }
+    }
+}
+
+/// Why QEMU could not be used; the message carries QEMU's stderr and the firmware log.
+#[derive(Debug, thiserror::Error)]
+pub enum QemuError {
+    /// The ELF is not there.
+    #[error("firmware ELF {0} not found: build it with `cargo xtask firmware` (or set ACCOMP_FIRMWARE_ELF / --firmware)")]
+    NoFirmware(PathBuf),
+    /// qemu-system-arm could not be started.
+    #[error(
+        "cannot start qemu-system-arm ({0}); install it with: apt-get install qemu-system-arm"
+    )]
+    Spawn(std::io::Error),
+    /// Something failed after QEMU started.
+    #[error("{0}")]
+    Failed(Box<QemuFailure>),
+}
+
+/// The report of a QEMU run that went wrong.
+#[derive(Debug, thiserror::Error)]
+#[error("{what}\n--- qemu exit: {exit}\n--- qemu stderr ({stderr_path}):\n{stderr}\n--- firmware log ({log_path}): {log}")]
+pub struct QemuFailure {
+    /// What went wrong.
+    what: String,
+    /// QEMU's exit status, or "still running".
+    exit: String,
+    /// QEMU's stderr.
+    stderr: String,
+    /// Where it is kept.
+    stderr_path: String,
+    /// The firmware's semihosting output, decoded when defmt-print is available.
+    log: String,
+    /// Where it is kept.
+    log_path: String,
+}
+
+/// A running QEMU; killed and reaped on drop.
+pub struct Qemu {
+    child: Child,
+    /// Directory with QEMU's stderr and the firmware's semihosting output.
+    pub log_dir: PathBuf,
+    elf: PathBuf,
+}
+
+fn free_port() -> std::io::Result<u16> {
+    // The OS picks a free port; QEMU binds it right after we release it.
+    Ok(TcpListener::bind("127.0.0.1:0")?.local_addr()?.port())
+}
+
+impl Qemu {
+    /// Boots `elf`, connects to its UART and waits for READY.
+    pub fn launch(elf: &Path, opts: &QemuOptions) -> Result<(Qemu, Client), QemuError> {
+        if !elf.is_file() {
+            return Err(QemuError::NoFirmware(elf.to_path_buf()));
+        }
+        let log_dir = match &opts.log_dir {
+            Some(d) => d.clone(),
+            None => std::env::temp_dir().join(format!(
+                "accomp-qemu-{}-{:016x}",
+                std::process::id(),
+                rand_suffix()
+            )),
+        };
+        let io_err = |e: std::io::Error| QemuError::Spawn(e);
+        fs::create_dir_all(&log_dir).map_err(io_err)?;
+        let stdout = File::create(log_dir.join("semihosting.bin")).map_err(io_err)?;
+        let stderr = File::create(log_dir.join("qemu-stderr.txt")).map_err(io_err)?;
+        let port = free_port().map_err(io_err)?;
+        let mut cmd = Command::new("qemu-system-arm");
+        cmd.args([
+            "-machine",
+            "netduinoplus2",
+            "-display",
+            "none",
+            "-monitor",
+            "none",
+        ])
+        .arg("-serial")
+        .arg(format!("tcp:127.0.0.1:{port},server=on,wait=on,nodelay=on"))
+        .args(["-semihosting-config", "enable=on,target=native"]);
+        if let Some(shift) = opts.icount_shift {
+            cmd.arg("-icount").arg(format!("shift={shift}"));
+        }
+        cmd.arg("-kernel")
+            .arg(elf)
+            .stdin(Stdio::null())
+            .stdout(stdout)
+            .stderr(stderr);
+        let child = cmd.spawn().map_err(QemuError::Spawn)?;
+        let mut qemu = Qemu {
+            child,
+            log_dir,
+            elf: elf.to_path_buf(),
+        };
+        let deadline = Instant::now() + opts.ready_timeout;
+        let stream = loop {
+            match TcpStream::connect(("127.0.0.1", port)) {
+                Ok(s) => break s,
+                Err(e) => {
+                    if qemu.exited().is_some() || Instant::now() >= deadline {
+                        return Err(qemu.failure(format!("cannot connect to QEMU's UART: {e}")));
+                    }
+                    std::thread::sleep(Duration::from_millis(20));
+                }
+            }
+        };
+        let transport = match TcpTransport::new(stream) {
+            Ok(t) => t,
+            Err(e) => return Err(qemu.failure(format!("socket set-up: {e}"))),
+        };
+        let mut client = Client::new(Box::new(transport));
+        let left = deadline.saturating_duration_since(Instant::now());
+        if let Err(e) = client.wait_ready(left) {
+            return Err(qemu.failure(format!("no READY from the firmware: {e}")));
+        }
+        Ok((qemu, client))
+    }
+
+    fn exited(&mut self) -> Option<std::process::ExitStatus> {
+        self.child.try_wait().ok().flatten()
+    }
+
+    /// QEMU's exit status if it has stopped (the firmware's semihosting exit code).
+    pub fn exit_status(&mut self) -> Option<i32> {
+        self.exited().and_then(|s| s.code())
+    }
+
+    /// Builds the error report: what failed, exit status, stderr, firmware log.
+    pub fn failure(&mut self, what: String) -> QemuError {
+        // Give a dying QEMU a moment so its exit status and last words are in.
+        std::thread::sleep(Duration::from_millis(100));
+        let exit = match self.exited() {
+            Some(s) => s.to_string(),
+            None => "still running".into(),
+        };
+        let stderr_path = self.log_dir.join("qemu-stderr.txt");
+        let log_path = self.log_dir.join("semihosting.bin");
+        QemuError::Failed(Box::new(QemuFailure {
+            what,
+            exit,
+            stderr: fs::read_to_string(&stderr_path).unwrap_or_default(),
+            stderr_path: stderr_path.display().to_string(),
+            log: self.firmware_log(),
+            log_path: log_path.display().to_string(),
+        }))
+    }
+
+    /// The firmware's defmt log: decoded with `defmt-print` when it is installed, otherwise
+    /// its size and how to decode it.
+    pub fn firmware_log(&self) -> String {
+        let path = self.log_dir.join("semihosting.bin");
+        let raw = fs::read(&path).unwrap_or_default();
+        if raw.is_empty() {
+            return "(empty)".into();
+        }
+        let decoded = Command::new("defmt-print")
+            .arg("-e")
+            .arg(&self.elf)
+            .arg("file")
+            .arg(&path)
+            .output();
+        match decoded {
+            Ok(o) if o.status.success() => String::from_utf8_lossy(&o.stdout).into_owned(),
+            _ => format!(
+                "{} bytes of defmt frames; decode with `defmt-print -e {} file {}`",
+                raw.len(),
+                self.elf.display(),
+                path.display()
+            ),
+        }
+    }
+
+    /// Stops QEMU and reaps it.
+    pub fn shutdown(mut self) -> Option<i32> {
+        self.stop()
+    }
+
+    fn stop(&mut self) -> Option<i32> {
+        if let Some(s) = self.exited() {
+            return s.code();
+        }
+        // The guest has nothing to flush: killing the emulator is a clean stop.
+        let _ = self.child.kill();
+        self.child.wait().ok().and_then(|s| s.code())
+    }
+}
+
+/// A per-launch random number (std's randomly keyed hasher), so parallel tests do not share logs.
+fn rand_suffix() -> u64 {
+    use std::hash::{BuildHasher, Hasher};
+    let mut h = std::collections::hash_map::RandomState::new().build_hasher();
+    h.write_u32(std::process::id());
+    h.finish()
+}
+
+impl Drop for Qemu {
+    fn drop(&mut self) {
+        self.stop();
+    }
+}

@@ -1,0 +1,87 @@
+//! Byte transports to the device.
+
+use std::io::{self, Read, Write};
+use std::net::TcpStream;
+use std::time::Duration;
+
+/// A bidirectional byte stream with a read timeout.
+pub trait Transport: Send {
+    /// Sends all bytes.
+    fn send(&mut self, bytes: &[u8]) -> io::Result<()>;
+    /// Reads what is available, waiting at most the transport's poll interval; Ok(0) when
+    /// nothing came in that time.
+    fn recv(&mut self, buf: &mut [u8]) -> io::Result<usize>;
+}
+
+/// Poll interval of reads: short, so that deadlines are checked often.
+const POLL: Duration = Duration::from_millis(20);
+
+/// QEMU's `-serial tcp:…` chardev.
+pub struct TcpTransport {
+    stream: TcpStream,
+}
+
+impl TcpTransport {
+    /// Wraps a connected stream.
+    pub fn new(stream: TcpStream) -> io::Result<Self> {
+        stream.set_read_timeout(Some(POLL))?;
+        stream.set_nodelay(true)?;
+        Ok(TcpTransport { stream })
+    }
+}
+
+fn timeout_is_empty(r: io::Result<usize>) -> io::Result<usize> {
+    match r {
+        Err(e)
+            if matches!(
+                e.kind(),
+                io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut
+            ) =>
+        {
+            Ok(0)
+        }
+        Ok(0) => Err(io::Error::new(
+            io::ErrorKind::UnexpectedEof,
+            "device closed the connection",
+        )),
+        other => other,
+    }
+}
+
+impl Transport for TcpTransport {
+    fn send(&mut self, bytes: &[u8]) -> io::Result<()> {
+        self.stream.write_all(bytes)
+    }
+    fn recv(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        timeout_is_empty(self.stream.read(buf))
+    }
+}
+
+/// A real board on a serial port (8N1).
+pub struct SerialTransport {
+    port: Box<dyn serialport::SerialPort>,
+}
+
+impl SerialTransport {
+    /// Opens `path` at `baud`.
+    pub fn open(path: &str, baud: u32) -> io::Result<Self> {
+        let port = serialport::new(path, baud)
+            .timeout(POLL)
+            .open()
+            .map_err(io::Error::other)?;
+        Ok(SerialTransport { port })
+    }
+}
+
+impl Transport for SerialTransport {
+    fn send(&mut self, bytes: &[u8]) -> io::Result<()> {
+        self.port.write_all(bytes)
+    }
+    fn recv(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        match self.port.read(buf) {
+            // A serial port has no end of stream: zero bytes only means the timeout passed.
+            Ok(0) => Ok(0),
+            other => timeout_is_empty(other),
+        }
+    }
+}

@@ -1,0 +1,115 @@
+//! CLI glue of the device commands: `accomp compensate`, `accomp load`, `accomp table get`.
+
+use std::path::PathBuf;
+
+use crate::device::{compensate, samples_csv, Connection, Target};
+use anyhow::Context as _;
+
+/// Stream samples through the firmware (or the same core on the host) and write what it returns.
+#[derive(clap::Args, Debug)]
+pub struct CompensateArgs {
+    /// host, qemu or serial:<port>
+    #[arg(long)]
+    pub target: Target,
+    /// Calibration table (binary, as written by `accomp fit -o`).
+    #[arg(long)]
+    pub calibration: PathBuf,
+    /// Samples CSV: time_s, output_v, temperature_c[, tilt_arcsec].
+    #[arg(long)]
+    pub input: PathBuf,
+    /// Output CSV.
+    #[arg(long)]
+    pub output: PathBuf,
+    /// Firmware ELF for --target qemu (default: $ACCOMP_FIRMWARE_ELF, then
+    /// target/thumbv7em-none-eabihf/release/accomp-fw).
+    #[arg(long)]
+    pub firmware: Option<PathBuf>,
+}
+
+/// Upload a calibration table to the device, verify by read-back, activate it.
+#[derive(clap::Args, Debug)]
+pub struct LoadArgs {
+    /// qemu or serial:<port>
+    #[arg(long)]
+    pub target: Target,
+    /// Calibration table file.
+    pub calibration: PathBuf,
+    /// Send the file even if it does not validate here (tests the device's validation).
+    #[arg(long)]
+    pub no_local_check: bool,
+    /// Firmware ELF for --target qemu.
+    #[arg(long)]
+    pub firmware: Option<PathBuf>,
+}
+
+/// Read the device's active table into a file.
+#[derive(clap::Args, Debug)]
+pub struct TableGetArgs {
+    /// qemu or serial:<port>
+    #[arg(long)]
+    pub target: Target,
+    /// Where to write the table.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Firmware ELF for --target qemu.
+    #[arg(long)]
+    pub firmware: Option<PathBuf>,
+}
+
+/// Runs `accomp compensate`.
+pub fn run_compensate(args: &CompensateArgs) -> anyhow::Result<()> {
+    let table = std::fs::read(&args.calibration)
+        .with_context(|| format!("reading {}", args.calibration.display()))?;
+    let text = std::fs::read_to_string(&args.input)
+        .with_context(|| format!("reading {}", args.input.display()))?;
+    let file = samples_csv::parse(&text)?;
+    let started = std::time::Instant::now();
+    let rows = compensate::compensate(
+        &args.target,
+        args.firmware.as_deref(),
+        &table,
+        &file.rows,
+        |what, done, total| {
+            if done == total || done % 1000 == 0 {
+                eprint!("\r{what}: {done}/{total}   ");
+            }
+        },
+    )?;
+    eprintln!(
+        "\n{} samples through {:?} in {:.2} s",
+        rows.len(),
+        args.target,
+        started.elapsed().as_secs_f64()
+    );
+    std::fs::write(
+        &args.output,
+        samples_csv::write_output(&file.metadata, &rows),
+    )
+    .with_context(|| format!("writing {}", args.output.display()))?;
+    Ok(())
+}
+
+/// Runs `accomp load`.
+pub fn run_load(args: &LoadArgs) -> anyhow::Result<()> {
+    let bytes = std::fs::read(&args.calibration)
+        .with_context(|| format!("reading {}", args.calibration.display()))?;
+    if !args.no_local_check {
+        crate::table_cli::decode_named(&bytes).context("table refused locally")?;
+    }
+    let mut conn = Connection::open(&args.target, args.firmware.as_deref())?;
+    let id = conn.client.load(&bytes, |sent, total| {
+        eprint!("\rupload {sent}/{total} bytes");
+    })?;
+    eprintln!("\nactive table {id:#010x} (read back and verified)");
+    Ok(())
+}
+
+/// Runs `accomp table get`.
+pub fn run_table_get(args: &TableGetArgs) -> anyhow::Result<()> {
+    let mut conn = Connection::open(&args.target, args.firmware.as_deref())?;
+    let bytes = conn.client.read_table()?;
+    std::fs::write(&args.output, &bytes)
+        .with_context(|| format!("writing {}", args.output.display()))?;
+    eprintln!("{} bytes written to {}", bytes.len(), args.output.display());
+    Ok(())
+}

@@ -1,0 +1,58 @@
+//! Board support: everything that differs between QEMU's netduinoplus2 and the real front-end.
+//!
+//! Each board provides: `BOARD`, `SYSTICK_HZ`, `UartRx`/`UartTx`, `init` (clocks, UART with
+//! the RX interrupt enabled, acquisition), `fatal` (no way back), and the logger/panic plumbing.
+//! The shared UART helpers are here because both boards use the HAL's USART1.
+
+use stm32f4xx_hal::prelude::*;
+
+#[cfg(feature = "board-frontend")]
+mod frontend;
+#[cfg(feature = "board-frontend")]
+pub use frontend::*;
+
+#[cfg(feature = "board-qemu")]
+mod qemu;
+#[cfg(feature = "board-qemu")]
+pub use qemu::*;
+
+/// UART receive half (USART1 on both boards).
+pub type UartRx = stm32f4xx_hal::serial::Rx<stm32f4xx_hal::pac::USART1>;
+/// UART transmit half.
+pub type UartTx = stm32f4xx_hal::serial::Tx<stm32f4xx_hal::pac::USART1>;
+
+/// What a board hands to the application after `init`.
+pub struct Parts {
+    pub rx: UartRx,
+    pub tx: UartTx,
+    pub acquisition: Acquisition,
+}
+
+/// Unrecoverable start-up failures, each with its own exit code under QEMU.
+#[derive(Debug, Clone, Copy, defmt::Format)]
+pub enum Fatal {
+    /// The UART could not be configured.
+    Uart = 3,
+    /// The worker task could not be spawned.
+    Spawn = 4,
+}
+
+/// Next received byte, or None when the receive register is empty. Line errors (overrun,
+/// framing, noise) lose bytes; the frame CRC catches that, so they are skipped here.
+pub fn read_byte(rx: &mut UartRx) -> Option<u8> {
+    loop {
+        match rx.read() {
+            Ok(b) => return Some(b),
+            Err(stm32f4xx_hal::nb::Error::WouldBlock) => return None,
+            Err(stm32f4xx_hal::nb::Error::Other(_)) => continue,
+        }
+    }
+}
+
+/// Sends bytes, blocking on the transmit register (115200 Bd: ~87 µs per byte).
+pub fn write_all(tx: &mut UartTx, bytes: &[u8]) {
+    for &b in bytes {
+        // The HAL's only write error is impossible for u8 words; retrying is the safe answer.
+        while tx.write(b).is_err() {}
+    }
+}

@@ -1,0 +1,86 @@
+//! QEMU `netduinoplus2` board: HSI clock, USART1 on the first `-serial`, samples injected as
+//! frames, defmt over semihosting, and every fatal path ends QEMU with a distinct exit code.
+
+use cortex_m_rt::{exception, ExceptionFrame};
+use defmt_semihosting as _;
+use stm32f4xx_hal::{
+    pac,
+    prelude::*,
+    rcc::Config,
+    serial::{self, Serial},
+};
+
+use super::{Fatal, Parts};
+use accomp::protocol::Board;
+
+/// Board reported in READY and Info.
+pub const BOARD: Board = Board::Qemu;
+
+/// QEMU clocks SysTick at 168 MHz whatever RCC says (qemu-notes.md), so that is the figure the
+/// monotonic needs to count milliseconds.
+pub const SYSTICK_HZ: u32 = 168_000_000;
+
+/// Exit codes seen by the host launcher (QEMU's own exit status).
+pub mod exit_code {
+    /// A Rust panic.
+    pub const PANIC: i32 = 101;
+    /// A HardFault exception.
+    pub const HARD_FAULT: i32 = 102;
+    /// Base of [`super::Fatal`] start-up failures (code = 100 + variant).
+    pub const FATAL_BASE: i32 = 100;
+}
+
+/// HSI clock (QEMU hangs on any HSE/PLL set-up), USART1 at 115200 8N1 with the RX interrupt on.
+pub fn init(dp: pac::Peripherals) -> Parts {
+    let mut rcc = dp.RCC.freeze(Config::hsi());
+    let gpioa = dp.GPIOA.split(&mut rcc);
+    let serial = match Serial::new(
+        dp.USART1,
+        (gpioa.pa9, gpioa.pa10),
+        serial::Config::default().baudrate(115_200.bps()),
+        &mut rcc,
+    ) {
+        Ok(s) => s,
+        Err(_) => fatal(Fatal::Uart),
+    };
+    let (tx, mut rx) = serial.split();
+    rx.listen();
+    Parts {
+        rx,
+        tx,
+        acquisition: Acquisition,
+    }
+}
+
+/// No ADCs in QEMU: samples arrive as InjectSample frames, and EXTI4 is never enabled.
+pub struct Acquisition;
+
+impl Acquisition {
+    /// Never called on this board (its interrupt is not enabled).
+    pub fn on_drdy(&mut self) -> Option<accomp::pipeline::RawSample> {
+        None
+    }
+}
+
+/// Ends the QEMU run with the failure's code.
+pub fn fatal(reason: Fatal) -> ! {
+    defmt::error!("fatal: {}", reason);
+    semihosting::process::exit(exit_code::FATAL_BASE + reason as i32)
+}
+
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    cortex_m::interrupt::disable();
+    if let Some(loc) = info.location() {
+        defmt::error!("panic at {}:{}", loc.file(), loc.line());
+    } else {
+        defmt::error!("panic");
+    }
+    semihosting::process::exit(exit_code::PANIC)
+}
+
+#[exception]
+unsafe fn HardFault(frame: &ExceptionFrame) -> ! {
+    defmt::error!("HardFault at pc={=u32:#x}", frame.pc());
+    semihosting::process::exit(exit_code::HARD_FAULT)
+}

@@ -1,0 +1,596 @@
+//! Per-sample processing: raw ADC codes + the active calibration → one output frame.
+//!
+//! This is the whole per-sample computation of the firmware, and the host runs the very same
+//! function (`accomp compensate --target host`, the QEMU end-to-end comparison), so a result
+//! computed on the PC and one computed on the board differ only if the arithmetic differs.
+//!
+//! Sensor faults never produce a silent number: any value that cannot be trusted is NaN in the
+//! frame *and* the reason is set in [`Status`]. Values that depend on a NaN are NaN as well.
+//!
+//! The inverse conversions (physical value → raw code) live here too, next to the forward ones,
+//! so that the host can inject samples that the firmware converts back to the same physics.
+
+use serde::{Deserialize, Serialize};
+
+use crate::adc::{Ad7124Code, AdcError, AdcScale, Ads1262Code, Coding};
+use crate::compensation::{tilt_output_change, CompensationError};
+use crate::rtd::RtdError;
+use crate::table::{CalibrationTable, TiltAxis};
+use crate::units::{Celsius, Ohms, RtdOhms, TiltArcsec, Volts};
+
+/// ADS1262 reference voltage on the board (internal 2.5 V reference).
+pub const ADS1262_VREF: Volts = Volts(2.5);
+/// ADS1262 PGA gain of the accelerometer channel: E ≈ 1.33 V/g · 1.5 g stays inside ±2.5 V at
+/// gain 1, so the PGA is bypassed (board constant, not in the table).
+pub const ACCEL_PGA_GAIN: f64 = 1.0;
+/// ADS1262 PGA gain of the tiltmeter channel (its analog output is also volts-level).
+pub const TILT_PGA_GAIN: f64 = 1.0;
+/// Full-scale magnitude of a 32-bit two's-complement code (2^31).
+const ADS1262_HALF_SCALE: f64 = 2_147_483_648.0;
+/// Full scale of the 24-bit unipolar AD7124 code (2^24).
+const AD7124_FULL_SCALE: f64 = 16_777_216.0;
+
+/// Per-channel fault bits reported by the drivers together with a conversion.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct ChannelFlags(pub u8);
+
+impl ChannelFlags {
+    /// The conversion's checksum/CRC did not match: the code is garbage.
+    pub const CHECKSUM: u8 = 1 << 0;
+    /// DRDY did not come in time: the code is stale or absent.
+    pub const DRDY_TIMEOUT: u8 = 1 << 1;
+    /// The ADC itself reported an over-range (ADS1262 status byte, AD7124 error register).
+    pub const SATURATION: u8 = 1 << 2;
+
+    /// True when any bit in `mask` is set.
+    #[inline]
+    pub const fn has(self, mask: u8) -> bool {
+        self.0 & mask != 0
+    }
+}
+
+/// One raw acquisition as the drivers deliver it (or as the host injects it in QEMU).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct RawSample {
+    /// ADS1262 code of the sense-resistor voltage (accelerometer output E).
+    pub accel: i32,
+    /// AD7124 ratiometric code of the Pt100 against the reference resistor.
+    pub rtd: u32,
+    /// ADS1262 code of the tiltmeter output.
+    pub tilt: i32,
+    /// Driver fault bits of the accelerometer conversion.
+    pub accel_flags: ChannelFlags,
+    /// Driver fault bits of the RTD conversion.
+    pub rtd_flags: ChannelFlags,
+    /// Driver fault bits of the tilt conversion.
+    pub tilt_flags: ChannelFlags,
+}
+
+impl RawSample {
+    /// The accelerometer code as its typed newtype.
+    pub const fn accel_code(&self) -> Ads1262Code {
+        Ads1262Code(self.accel)
+    }
+    /// The RTD code as its typed newtype.
+    pub const fn rtd_code(&self) -> Ad7124Code {
+        Ad7124Code(self.rtd)
+    }
+    /// The tilt code as its typed newtype.
+    pub const fn tilt_code(&self) -> Ads1262Code {
+        Ads1262Code(self.tilt)
+    }
+}
+
+/// Status bits of an output frame. Zero means every value in the frame is valid and inside the
+/// calibrated range.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct Status(pub u16);
+
+impl Status {
+    /// RTD resistance above the plausible maximum (open wire) or AD7124 code at full scale.
+    pub const RTD_OPEN: u16 = 1 << 0;
+    /// RTD resistance below the plausible minimum (shorted sensor).
+    pub const RTD_SHORT: u16 = 1 << 1;
+    /// A code at a rail, or an over-range reported by an ADC.
+    pub const ADC_SATURATED: u16 = 1 << 2;
+    /// A driver reported a checksum/CRC error on some conversion.
+    pub const ADC_CHECKSUM: u16 = 1 << 3;
+    /// A driver reported a DRDY timeout on some conversion.
+    pub const DRDY_TIMEOUT: u16 = 1 << 4;
+    /// Temperature outside the calibrated range: models evaluated at the clamped edge.
+    pub const TEMP_OUT_OF_RANGE: u16 = 1 << 5;
+    /// No active calibration table: only output_v is computed (ideal ADC scale).
+    pub const NO_CALIBRATION: u16 = 1 << 6;
+    /// The compensation itself failed (no real root, non-finite intermediate).
+    pub const COMPENSATION_FAILED: u16 = 1 << 7;
+    /// The tilt value is invalid (tilt channel fault); compensations needing it are NaN.
+    pub const TILT_INVALID: u16 = 1 << 8;
+    /// The accelerometer output value is invalid (its channel faulted).
+    pub const OUTPUT_INVALID: u16 = 1 << 9;
+    /// The RTD conversion failed for another reason (non-finite, invalid constants).
+    pub const RTD_INVALID: u16 = 1 << 10;
+
+    /// Names of the bits, in bit order, for logs and CSV output.
+    pub const NAMES: [(u16, &'static str); 11] = [
+        (Self::RTD_OPEN, "RTD_OPEN"),
+        (Self::RTD_SHORT, "RTD_SHORT"),
+        (Self::ADC_SATURATED, "ADC_SATURATED"),
+        (Self::ADC_CHECKSUM, "ADC_CHECKSUM"),
+        (Self::DRDY_TIMEOUT, "DRDY_TIMEOUT"),
+        (Self::TEMP_OUT_OF_RANGE, "TEMP_OUT_OF_RANGE"),
+        (Self::NO_CALIBRATION, "NO_CALIBRATION"),
+        (Self::COMPENSATION_FAILED, "COMPENSATION_FAILED"),
+        (Self::TILT_INVALID, "TILT_INVALID"),
+        (Self::OUTPUT_INVALID, "OUTPUT_INVALID"),
+        (Self::RTD_INVALID, "RTD_INVALID"),
+    ];
+
+    /// True when any bit in `mask` is set.
+    #[inline]
+    pub const fn has(self, mask: u16) -> bool {
+        self.0 & mask != 0
+    }
+
+    #[inline]
+    fn set(&mut self, mask: u16) {
+        self.0 |= mask;
+    }
+}
+
+/// The output of one sample: what the board streams and the host records.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Frame {
+    /// Sequence number of processed samples since boot (gaps = lost frames).
+    pub seq: u32,
+    /// Firmware time of processing in µs since boot.
+    pub time_us: u64,
+    /// Accelerometer output E in volts, after the ADC gain/offset correction.
+    pub output_v: f64,
+    /// RTD temperature in °C (ITS-90, Callendar–Van Dusen).
+    pub temperature_c: f64,
+    /// RTD resistance in ohms.
+    pub rtd_ohms: f64,
+    /// Tilt in arcseconds.
+    pub tilt_arcsec: f64,
+    /// Input acceleration from the exact model inverse at the measured temperature, in g.
+    pub a_i_exact_g: f64,
+    /// The paper's linearized compensated output (eq. 3/4), in volts.
+    pub output_linearized_v: f64,
+    /// [`Status`] bits.
+    pub status: Status,
+}
+
+/// ADC scale of the accelerometer channel, with the table's correction when there is one.
+pub fn accel_scale(table: Option<&CalibrationTable>) -> AdcScale {
+    let (gain_correction, offset) = match table {
+        Some(t) => (t.accel.adc_gain_correction, t.accel.adc_offset),
+        None => (1.0, Volts(0.0)),
+    };
+    ads1262_scale(ACCEL_PGA_GAIN, gain_correction, offset)
+}
+
+/// ADC scale of the tiltmeter channel.
+pub fn tilt_scale(table: &CalibrationTable) -> AdcScale {
+    ads1262_scale(
+        TILT_PGA_GAIN,
+        table.tilt.adc_gain_correction,
+        table.tilt.adc_offset,
+    )
+}
+
+fn ads1262_scale(pga_gain: f64, gain_correction: f64, offset: Volts) -> AdcScale {
+    AdcScale {
+        bits: 32,
+        coding: Coding::TwosComplement,
+        pga_gain,
+        vref: ADS1262_VREF,
+        gain_correction,
+        offset,
+    }
+}
+
+/// Flags a channel's driver faults; returns true when the code must not be used.
+fn driver_faults(flags: ChannelFlags, status: &mut Status) -> bool {
+    if flags.has(ChannelFlags::CHECKSUM) {
+        status.set(Status::ADC_CHECKSUM);
+    }
+    if flags.has(ChannelFlags::DRDY_TIMEOUT) {
+        status.set(Status::DRDY_TIMEOUT);
+    }
+    if flags.has(ChannelFlags::SATURATION) {
+        status.set(Status::ADC_SATURATED);
+    }
+    flags.0 != 0
+}
+
+fn adc_fault(e: AdcError, status: &mut Status) {
+    match e {
+        AdcError::Saturated | AdcError::OutOfRange => status.set(Status::ADC_SATURATED),
+        AdcError::InvalidScale => status.set(Status::NO_CALIBRATION),
+        // Only the physical → code direction (host-side injection) produces this; a code read
+        // from a chip is always finite. Flag it as a conversion failure rather than guess.
+        AdcError::NonFiniteInput => status.set(Status::ADC_SATURATED),
+    }
+}
+
+/// Processes one raw sample with the active table (if any) into an output frame.
+///
+/// Pure function of its arguments: the firmware and the host get the same bits.
+pub fn process(seq: u32, time_us: u64, raw: &RawSample, table: Option<&CalibrationTable>) -> Frame {
+    let mut status = Status::default();
+    let mut frame = Frame {
+        seq,
+        time_us,
+        output_v: f64::NAN,
+        temperature_c: f64::NAN,
+        rtd_ohms: f64::NAN,
+        tilt_arcsec: f64::NAN,
+        a_i_exact_g: f64::NAN,
+        output_linearized_v: f64::NAN,
+        status,
+    };
+
+    // Accelerometer output E.
+    if driver_faults(raw.accel_flags, &mut status) {
+        status.set(Status::OUTPUT_INVALID);
+    } else {
+        match accel_scale(table).volts(raw.accel_code().raw()) {
+            Ok(v) => frame.output_v = v.0,
+            Err(e) => {
+                adc_fault(e, &mut status);
+                status.set(Status::OUTPUT_INVALID);
+            }
+        }
+    }
+
+    let Some(table) = table else {
+        status.set(Status::NO_CALIBRATION);
+        frame.status = status;
+        return frame;
+    };
+
+    // RTD: ratiometric ohms → °C.
+    if driver_faults(raw.rtd_flags, &mut status) {
+        status.set(Status::RTD_INVALID);
+    } else {
+        match table
+            .rtd_adc_scale()
+            .ratiometric_ohms(raw.rtd_code().raw(), table.rtd.reference_resistor)
+        {
+            // A unipolar code at full scale means the excitation found no path: open sensor.
+            Err(AdcError::Saturated) => status.set(Status::RTD_OPEN | Status::ADC_SATURATED),
+            Err(e) => {
+                adc_fault(e, &mut status);
+                status.set(Status::RTD_INVALID);
+            }
+            Ok(r) => {
+                frame.rtd_ohms = r.0;
+                match table.rtd.cvd.temperature(r) {
+                    Ok(t) => frame.temperature_c = t.0,
+                    Err(RtdError::Open) => status.set(Status::RTD_OPEN),
+                    Err(RtdError::Short) => status.set(Status::RTD_SHORT),
+                    Err(_) => status.set(Status::RTD_INVALID),
+                }
+            }
+        }
+    }
+
+    // Tiltmeter: volts → arcsec.
+    if driver_faults(raw.tilt_flags, &mut status) {
+        status.set(Status::TILT_INVALID);
+    } else {
+        match tilt_scale(table).volts(raw.tilt_code().raw()) {
+            Ok(v) => frame.tilt_arcsec = v.0 * table.tilt.scale_arcsec_per_v,
+            Err(e) => {
+                adc_fault(e, &mut status);
+                status.set(Status::TILT_INVALID);
+            }
+        }
+    }
+
+    let (e, t) = (frame.output_v, frame.temperature_c);
+    if e.is_nan() || t.is_nan() {
+        // Already flagged above; the compensated values stay NaN.
+        frame.status = status;
+        return frame;
+    }
+    match compensate(table, Volts(e), Celsius(t), TiltArcsec(frame.tilt_arcsec)) {
+        Ok((a_i, lin, clamped)) => {
+            frame.a_i_exact_g = a_i;
+            frame.output_linearized_v = lin;
+            if clamped {
+                status.set(Status::TEMP_OUT_OF_RANGE);
+            }
+        }
+        Err(CompensateError::TiltNeeded) => status.set(Status::TILT_INVALID),
+        Err(CompensateError::Failed) => status.set(Status::COMPENSATION_FAILED),
+    }
+    frame.status = status;
+    frame
+}
+
+enum CompensateError {
+    /// The table asks for tilt correction but the tilt is NaN.
+    TiltNeeded,
+    /// The model could not be inverted or produced a non-finite value.
+    Failed,
+}
+
+impl From<CompensationError> for CompensateError {
+    fn from(_: CompensationError) -> Self {
+        CompensateError::Failed
+    }
+}
+
+/// Tilt correction (eq. 5) then both compensations; returns (a_i, linearized E, clamped).
+fn compensate(
+    table: &CalibrationTable,
+    e: Volts,
+    t: Celsius,
+    tilt: TiltArcsec,
+) -> Result<(f64, f64, bool), CompensateError> {
+    let thermal = &table.thermal;
+    let cross = table.orientation.cross;
+    let sign = match table.tilt.axis {
+        TiltAxis::Input => 1.0,
+        TiltAxis::InputReversed => -1.0,
+        TiltAxis::None => 0.0,
+    };
+    let e_corrected = if sign == 0.0 {
+        e
+    } else {
+        if tilt.0.is_nan() {
+            return Err(CompensateError::TiltNeeded);
+        }
+        // The tilt changes the projected input by sin(φ − φ0); its output change is K1 at the
+        // measured temperature times that (eq. 5).
+        let (k, _) = thermal.coefficients_at(t)?;
+        let d = tilt_output_change(k.scale_factor_v_per_g, tilt, table.tilt.reference);
+        Volts(e.0 - sign * d.0)
+    };
+    let exact = thermal.exact(e_corrected, t, cross)?;
+    let lin = thermal.linearized(e_corrected, t, cross)?;
+    if !(exact.input.0.is_finite() && lin.output.0.is_finite()) {
+        return Err(CompensateError::Failed);
+    }
+    Ok((exact.input.0, lin.output.0, exact.range.is_clamped()))
+}
+
+/// Why a physical value cannot be turned into a code.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum InverseConversionError {
+    /// The value is NaN or infinite.
+    NonFinite,
+    /// The value is outside the converter's range (would saturate).
+    OutOfRange,
+}
+
+/// Volts at the ADS1262 input → code, the inverse of [`AdcScale::volts`] for two's complement.
+pub fn volts_to_ads1262(scale: &AdcScale, v: Volts) -> Result<Ads1262Code, InverseConversionError> {
+    if !v.0.is_finite() {
+        return Err(InverseConversionError::NonFinite);
+    }
+    let fraction = (v.0 + scale.offset.0) / scale.gain_correction * scale.pga_gain / scale.vref.0;
+    let code = libm::round(fraction * ADS1262_HALF_SCALE);
+    // The rails themselves read as saturated, so the last usable codes are one inside.
+    if !(code > -ADS1262_HALF_SCALE && code < ADS1262_HALF_SCALE - 1.0) {
+        return Err(InverseConversionError::OutOfRange);
+    }
+    Ok(Ads1262Code(code as i32))
+}
+
+/// RTD ohms → AD7124 ratiometric code (unipolar, the reference resistor sets full scale).
+pub fn ohms_to_ad7124(
+    scale: &AdcScale,
+    r: RtdOhms,
+    reference: Ohms,
+) -> Result<Ad7124Code, InverseConversionError> {
+    if !(r.0.is_finite() && reference.0.is_finite()) {
+        return Err(InverseConversionError::NonFinite);
+    }
+    let fraction = r.0 / reference.0 * scale.pga_gain / scale.gain_correction;
+    let code = libm::round(fraction * AD7124_FULL_SCALE);
+    if !(0.0..AD7124_FULL_SCALE - 1.0).contains(&code) {
+        return Err(InverseConversionError::OutOfRange);
+    }
+    Ok(Ad7124Code(code as u32))
+}
+
+/// Temperature → RTD ohms → AD7124 code with the table's RTD constants.
+pub fn celsius_to_ad7124(
+    table: &CalibrationTable,
+    t: Celsius,
+) -> Result<Ad7124Code, InverseConversionError> {
+    if !t.0.is_finite() {
+        return Err(InverseConversionError::NonFinite);
+    }
+    let r = table.rtd.cvd.resistance(t);
+    ohms_to_ad7124(&table.rtd_adc_scale(), r, table.rtd.reference_resistor)
+}
+
+/// Tilt → tiltmeter volts → ADS1262 code with the table's tilt scale.
+pub fn arcsec_to_ads1262(
+    table: &CalibrationTable,
+    tilt: TiltArcsec,
+) -> Result<Ads1262Code, InverseConversionError> {
+    if !tilt.0.is_finite() {
+        return Err(InverseConversionError::NonFinite);
+    }
+    let v = Volts(tilt.0 / table.tilt.scale_arcsec_per_v);
+    volts_to_ads1262(&tilt_scale(table), v)
+}
+
+/// Builds the raw sample the board would acquire for these physical values (host injection).
+pub fn raw_from_physical(
+    table: &CalibrationTable,
+    output: Volts,
+    t: Celsius,
+    tilt: TiltArcsec,
+) -> Result<RawSample, InverseConversionError> {
+    Ok(RawSample {
+        accel: volts_to_ads1262(&accel_scale(Some(table)), output)?.0,
+        rtd: celsius_to_ad7124(table, t)?.0,
+        tilt: arcsec_to_ads1262(table, tilt)?.0,
+        accel_flags: ChannelFlags::default(),
+        rtd_flags: ChannelFlags::default(),
+        tilt_flags: ChannelFlags::default(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::table::tests::paper_table;
+    use crate::units::Gs;
+
+    fn raw(table: &CalibrationTable, e: f64, t: f64, tilt: f64) -> RawSample {
+        raw_from_physical(table, Volts(e), Celsius(t), TiltArcsec(tilt)).unwrap()
+    }
+
+    #[test]
+    fn volts_round_trip_through_an_ads1262_code_within_half_an_lsb() {
+        let s = accel_scale(None);
+        let lsb = 2.5 / 2f64.powi(31);
+        for v in [-2.4, -1.0, 0.0, 1e-9, 1.3267, 2.4] {
+            let code = volts_to_ads1262(&s, Volts(v)).unwrap();
+            let back = s.volts(code.raw()).unwrap().0;
+            assert!((back - v).abs() <= 0.5 * lsb, "{v} → {back}");
+        }
+        assert_eq!(
+            volts_to_ads1262(&s, Volts(2.6)),
+            Err(InverseConversionError::OutOfRange)
+        );
+        assert_eq!(
+            volts_to_ads1262(&s, Volts(f64::NAN)),
+            Err(InverseConversionError::NonFinite)
+        );
+    }
+
+    #[test]
+    fn temperature_round_trips_through_the_rtd_code_to_a_tenth_of_a_millikelvin() {
+        let t = paper_table();
+        for c in [20.0, 30.5, 47.5, 64.5] {
+            let code = celsius_to_ad7124(&t, Celsius(c)).unwrap();
+            // Hand figure: 1 LSB = 5110 Ω / 16 / 2^24 = 1.9e-5 Ω ≈ 5e-5 °C for a Pt100.
+            let f = process(0, 0, &raw(&t, 1.0, c, 0.0), Some(&t));
+            let expected = if c < 30.0 {
+                Status::TEMP_OUT_OF_RANGE
+            } else {
+                0
+            };
+            assert_eq!(f.status, Status(expected), "{c}");
+            assert!(
+                (f.temperature_c - c).abs() < 1e-4,
+                "{c}: {}",
+                f.temperature_c
+            );
+            assert_eq!(code.0, raw(&t, 1.0, c, 0.0).rtd);
+        }
+    }
+
+    #[test]
+    fn a_clean_sample_recovers_the_input_acceleration() {
+        let t = paper_table();
+        let (k, _) = t.thermal.coefficients_at(Celsius(50.0)).unwrap();
+        let e = k.output(Gs(0.7), t.orientation.cross);
+        let f = process(7, 123, &raw(&t, e.0, 50.0, 0.0), Some(&t));
+        assert_eq!(f.status, Status(0));
+        assert_eq!((f.seq, f.time_us), (7, 123));
+        // Quantization: E to 1.2e-9 V (≈ 1e-9 g), T to 5e-5 °C (≈ 3e-9 g via dK0/dT).
+        assert!((f.a_i_exact_g - 0.7).abs() < 2e-8, "{}", f.a_i_exact_g);
+        assert!(f.output_linearized_v.is_finite());
+    }
+
+    #[test]
+    fn tilt_is_removed_from_the_output_before_compensation() {
+        let t = paper_table();
+        let (k, _) = t.thermal.coefficients_at(Celsius(50.0)).unwrap();
+        let e0 = k.output(Gs(0.0), t.orientation.cross).0;
+        // 5 arcsec of tilt along the input axis adds K1·sin(5") to E.
+        let d = k.scale_factor_v_per_g * libm::sin(5.0 * crate::units::RAD_PER_ARCSEC);
+        let f = process(0, 0, &raw(&t, e0 + d, 50.0, 5.0), Some(&t));
+        assert!((f.tilt_arcsec - 5.0).abs() < 1e-6);
+        assert!(f.a_i_exact_g.abs() < 1e-8, "{}", f.a_i_exact_g);
+        let no_tilt_correction = process(0, 0, &raw(&t, e0 + d, 50.0, 0.0), Some(&t));
+        assert!((no_tilt_correction.a_i_exact_g - 24.2e-6).abs() < 0.1e-6);
+    }
+
+    #[test]
+    fn open_and_shorted_rtd_are_flagged_and_nan() {
+        let t = paper_table();
+        let mut r = raw(&t, 1.0, 50.0, 0.0);
+        r.rtd = 0x00FF_FFFF; // full scale: no excitation path
+        let f = process(0, 0, &r, Some(&t));
+        assert!(f.status.has(Status::RTD_OPEN));
+        assert!(f.temperature_c.is_nan() && f.a_i_exact_g.is_nan());
+        assert!(f.output_linearized_v.is_nan());
+        assert!((f.output_v - 1.0).abs() < 1e-8, "E itself is still valid");
+
+        r.rtd = 100; // ≈ 0.002 Ω
+        let f = process(0, 0, &r, Some(&t));
+        assert!(f.status.has(Status::RTD_SHORT));
+        assert!(f.temperature_c.is_nan() && f.a_i_exact_g.is_nan());
+        assert!(!f.status.has(Status::RTD_OPEN));
+    }
+
+    #[test]
+    fn driver_faults_make_their_channel_nan_and_set_their_bit() {
+        let t = paper_table();
+        let mut r = raw(&t, 1.0, 50.0, 0.0);
+        r.accel_flags = ChannelFlags(ChannelFlags::CHECKSUM);
+        let f = process(0, 0, &r, Some(&t));
+        assert!(f.status.has(Status::ADC_CHECKSUM) && f.status.has(Status::OUTPUT_INVALID));
+        assert!(f.output_v.is_nan() && f.a_i_exact_g.is_nan());
+        assert!(f.temperature_c.is_finite());
+
+        let mut r = raw(&t, 1.0, 50.0, 0.0);
+        r.rtd_flags = ChannelFlags(ChannelFlags::DRDY_TIMEOUT);
+        let f = process(0, 0, &r, Some(&t));
+        assert!(f.status.has(Status::DRDY_TIMEOUT) && f.status.has(Status::RTD_INVALID));
+        assert!(f.temperature_c.is_nan() && f.a_i_exact_g.is_nan());
+
+        let mut r = raw(&t, 1.0, 50.0, 0.0);
+        r.tilt_flags = ChannelFlags(ChannelFlags::SATURATION);
+        let f = process(0, 0, &r, Some(&t));
+        assert!(f.status.has(Status::ADC_SATURATED) && f.status.has(Status::TILT_INVALID));
+        assert!(f.tilt_arcsec.is_nan() && f.a_i_exact_g.is_nan());
+    }
+
+    #[test]
+    fn accelerometer_code_at_the_rail_is_saturated_not_a_number() {
+        let t = paper_table();
+        let mut r = raw(&t, 1.0, 50.0, 0.0);
+        r.accel = i32::MAX;
+        let f = process(0, 0, &r, Some(&t));
+        assert!(f.status.has(Status::ADC_SATURATED) && f.status.has(Status::OUTPUT_INVALID));
+        assert!(f.output_v.is_nan() && f.a_i_exact_g.is_nan());
+    }
+
+    #[test]
+    fn temperature_outside_the_calibrated_range_is_flagged_but_computed_at_the_edge() {
+        let t = paper_table();
+        let f = process(0, 0, &raw(&t, 1.0, 80.0, 0.0), Some(&t));
+        assert!(f.status.has(Status::TEMP_OUT_OF_RANGE));
+        assert!((f.temperature_c - 80.0).abs() < 1e-3);
+        assert!(f.a_i_exact_g.is_finite());
+    }
+
+    #[test]
+    fn without_a_table_only_the_output_voltage_is_given() {
+        let t = paper_table();
+        let f = process(0, 0, &raw(&t, 1.25, 50.0, 0.0), None);
+        assert_eq!(f.status, Status(Status::NO_CALIBRATION));
+        assert!((f.output_v - 1.25).abs() < 1e-9);
+        assert!(f.temperature_c.is_nan() && f.a_i_exact_g.is_nan() && f.tilt_arcsec.is_nan());
+    }
+
+    #[test]
+    fn every_status_bit_has_a_distinct_name() {
+        let mut all = 0u16;
+        for (bit, _) in Status::NAMES {
+            assert_eq!(bit.count_ones(), 1);
+            assert_eq!(all & bit, 0);
+            all |= bit;
+        }
+    }
+}

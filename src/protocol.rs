@@ -1,0 +1,815 @@
+//! The UART protocol between the lab PC and the board: messages, framing, error codes.
+//!
+//! Wire format of every frame, in both directions (docs/protocol.md has the table of messages):
+//!
+//! ```text
+//! COBS( postcard(message) ‖ CRC-16/IBM-SDLC(postcard bytes), little-endian ) ‖ 0x00
+//! ```
+//!
+//! COBS removes every 0x00 from the frame so that 0x00 is an unambiguous delimiter: a receiver
+//! that starts in the middle of a frame, or sees garbage, resynchronises at the next 0x00. The
+//! CRC sits inside the COBS frame so that a corrupted byte is caught before postcard sees it.
+
+use heapless::Vec;
+use serde::{Deserialize, Serialize};
+
+use crate::pipeline::{Frame, RawSample};
+use crate::table::{Coefficient, Field, TableError};
+
+/// Protocol version reported by Info; bumped on any incompatible message change.
+pub const PROTOCOL_VERSION: u16 = 1;
+/// Largest data chunk of an upload or read-back.
+pub const CHUNK_LEN: usize = 64;
+/// Largest postcard message body (before CRC and COBS).
+pub const MAX_MESSAGE_LEN: usize = 120;
+/// Largest frame on the wire: body + CRC + COBS overhead (1 per 254) + delimiter.
+pub const MAX_FRAME_LEN: usize = MAX_MESSAGE_LEN + 2 + 2 + 1;
+
+/// CRC of the frame body: CRC-16/IBM-SDLC (X.25), Hamming distance 4 for frames this short.
+pub const CRC16: crc::Crc<u16> = crc::Crc::<u16>::new(&crc::CRC_16_IBM_SDLC);
+
+/// Which board the firmware was built for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Board {
+    /// QEMU netduinoplus2: samples are injected over the UART.
+    Qemu,
+    /// The real front-end board with its ADCs.
+    Frontend,
+}
+
+/// Host → device: a request with the id the response will carry.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct HostFrame {
+    /// Chosen by the host; echoed in the response (0 is reserved for unsolicited messages).
+    pub id: u32,
+    /// What to do.
+    pub request: Request,
+}
+
+/// Host → device requests.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum Request {
+    /// Liveness check; answered with Pong.
+    Ping,
+    /// Firmware version, board, tables, uptime, counters.
+    Info,
+    /// Start an upload of `total_len` bytes whose CRC-32 (ISO-HDLC, as the table's) is `crc32`.
+    UploadBegin {
+        /// Bytes that will follow in chunks.
+        total_len: u32,
+        /// CRC-32 of the whole upload, checked before decoding.
+        crc32: u32,
+    },
+    /// The next chunk of the upload; `offset` must equal the bytes received so far.
+    UploadChunk {
+        /// Byte offset of `data` in the upload.
+        offset: u32,
+        /// At most [`CHUNK_LEN`] bytes.
+        data: Vec<u8, CHUNK_LEN>,
+    },
+    /// Validate the complete upload and make it the active table (the old one becomes previous).
+    UploadCommit,
+    /// Read the active table's encoding from `offset` (answered with a TableChunk).
+    ReadTable {
+        /// Byte offset into the encoded table.
+        offset: u32,
+    },
+    /// Make the table with this id active (must be the active or the previous one).
+    Activate {
+        /// CRC-32 table id.
+        table_id: u32,
+    },
+    /// Swap the active and the previous table.
+    Rollback,
+    /// Start streaming acquired samples (front-end board).
+    StreamStart,
+    /// Stop streaming acquired samples.
+    StreamStop,
+    /// Set the acquisition rate in samples per second.
+    SetRate {
+        /// Samples per second, 1..=MAX_RATE_HZ.
+        hz: u32,
+    },
+    /// Process this raw sample as if acquired now (QEMU board); answered with a Sample.
+    InjectSample {
+        /// The raw codes and driver flags.
+        raw: RawSample,
+    },
+    /// Run the pipeline `count` times on `raw` with the active table and report the firmware
+    /// time it took (benchmark; under `qemu -icount shift=0` 1 µs = 1000 instructions).
+    Bench {
+        /// The sample to process.
+        raw: RawSample,
+        /// How many times, 1..=MAX_BENCH_COUNT.
+        count: u32,
+    },
+}
+
+/// Largest Bench count (keeps the device answering within a few seconds on the board).
+pub const MAX_BENCH_COUNT: u32 = 100_000;
+
+/// Highest acquisition rate accepted by SetRate (the ADS1262 at 7200 SPS with two channels).
+pub const MAX_RATE_HZ: u32 = 3600;
+
+/// Device → host messages.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum DeviceMessage {
+    /// Sent once after boot when the UART receiver is live.
+    Ready {
+        /// Board the firmware was built for.
+        board: Board,
+        /// Protocol version.
+        protocol: u16,
+    },
+    /// Successful answer to request `id`.
+    Response {
+        /// Id of the request.
+        id: u32,
+        /// The answer.
+        body: Response,
+    },
+    /// A processed sample; `id` is the InjectSample's request id, 0 for acquired samples.
+    Sample {
+        /// Request id or 0.
+        id: u32,
+        /// The output frame.
+        frame: Frame,
+    },
+    /// Failure of request `id` (0 when the id could not be read).
+    Error {
+        /// Id of the request, or 0.
+        id: u32,
+        /// What failed.
+        error: ErrorReply,
+    },
+}
+
+/// Successful answers.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum Response {
+    /// Answer to Ping.
+    Pong,
+    /// Answer to Info.
+    Info(DeviceInfo),
+    /// The request was carried out (UploadBegin, UploadChunk, Activate, Rollback, Stream*).
+    Ok,
+    /// The upload was validated and activated.
+    Committed {
+        /// Id of the now active table.
+        table_id: u32,
+    },
+    /// Result of Bench.
+    Bench {
+        /// Samples processed.
+        count: u32,
+        /// Firmware time for all of them, in µs.
+        elapsed_us: u64,
+        /// Sum of the a_i results (keeps the work observable; NaN if any sample was invalid).
+        a_i_sum_g: f64,
+    },
+    /// Part of the active table.
+    TableChunk {
+        /// Offset of `data`.
+        offset: u32,
+        /// Length of the whole encoded table.
+        total_len: u32,
+        /// Up to [`CHUNK_LEN`] bytes.
+        data: Vec<u8, CHUNK_LEN>,
+    },
+}
+
+/// What Info reports.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DeviceInfo {
+    /// Firmware version (Cargo package version).
+    pub firmware: heapless::String<16>,
+    /// Board.
+    pub board: Board,
+    /// Protocol version.
+    pub protocol: u16,
+    /// Id of the active table.
+    pub active_table: Option<u32>,
+    /// Id of the previous table (rollback target).
+    pub previous_table: Option<u32>,
+    /// Milliseconds since boot.
+    pub uptime_ms: u64,
+    /// Frames dropped by the receiver (bad CRC, overflow, queue full) since boot.
+    pub frames_dropped: u32,
+    /// Samples processed since boot.
+    pub samples: u32,
+    /// Streaming of acquired samples on.
+    pub streaming: bool,
+    /// Acquisition rate in samples per second.
+    pub rate_hz: u32,
+}
+
+/// A failure: a stable numeric code plus one number of detail (documented per code).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ErrorReply {
+    /// [`ErrorCode`] as a number.
+    pub code: u16,
+    /// Code-specific detail (expected offset, computed CRC, field, …), 0 when none.
+    pub detail: u32,
+}
+
+/// Every failure reachable from the UART, with its number on the wire.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u16)]
+pub enum ErrorCode {
+    /// The frame decoded (CRC good) but is not a known request. Detail: 0.
+    Malformed = 1,
+    /// Frame CRC mismatch (counted; not answered since the id is untrusted). Detail: computed CRC.
+    FrameCrc = 2,
+    /// Frame longer than the receive buffer (counted; not answered). Detail: buffer size.
+    FrameTooLong = 3,
+    /// COBS structure broken (counted; not answered). Detail: 0.
+    FrameCobs = 4,
+    /// Chunk or commit without an UploadBegin. Detail: 0.
+    NoUpload = 10,
+    /// Chunk offset is not the next expected one. Detail: expected offset.
+    ChunkOutOfOrder = 11,
+    /// Upload longer than a table can be. Detail: maximum length.
+    UploadTooLong = 12,
+    /// Commit before all announced bytes arrived. Detail: bytes received.
+    UploadIncomplete = 13,
+    /// Bytes received do not match UploadBegin's CRC-32. Detail: computed CRC.
+    UploadCrcMismatch = 14,
+    /// Table: wrong magic. Detail: 0.
+    TableBadMagic = 20,
+    /// Table: unsupported format version. Detail: version found.
+    TableUnsupportedVersion = 21,
+    /// Table: wrong length. Detail: length found.
+    TableBadLength = 22,
+    /// Table: stored CRC wrong. Detail: computed CRC.
+    TableBadCrc = 23,
+    /// Table: NaN or infinite number. Detail: field code (see docs/protocol.md).
+    TableNonFinite = 24,
+    /// Table: polynomial order above 4. Detail: coefficient code.
+    TableOrderTooHigh = 25,
+    /// Table: empty or inverted temperature range. Detail: 0.
+    TableEmptyRange = 26,
+    /// Table: T0 outside the calibrated range. Detail: 0.
+    TableReferenceOutsideRange = 27,
+    /// Table: K1 implausible. Detail: 0.
+    TableScaleFactorImplausible = 28,
+    /// Table: RTD constants out of range. Detail: 0.
+    TableRtdConstants = 29,
+    /// Table: ADC constants out of range. Detail: 0.
+    TableAdcConstants = 30,
+    /// Table: serial not UTF-8. Detail: 0.
+    TableSerial = 31,
+    /// Table: date invalid. Detail: 0.
+    TableDate = 32,
+    /// Table: tilt axis code invalid. Detail: 0.
+    TableTiltAxis = 33,
+    /// ReadTable with no active table. Detail: 0.
+    NoTable = 40,
+    /// ReadTable offset beyond the table. Detail: table length.
+    OffsetOutOfRange = 41,
+    /// Rollback with no previous table. Detail: 0.
+    NoPreviousTable = 42,
+    /// Activate with an id that is neither active nor previous. Detail: 0.
+    TableNotFound = 43,
+    /// The device could not queue the answer or the sample. Detail: 0.
+    Busy = 50,
+    /// The request does not exist on this board (InjectSample on the front-end). Detail: 0.
+    NotSupported = 51,
+    /// SetRate outside 1..=MAX_RATE_HZ. Detail: MAX_RATE_HZ.
+    InvalidRate = 52,
+    /// Bench count outside 1..=MAX_BENCH_COUNT. Detail: MAX_BENCH_COUNT.
+    InvalidCount = 53,
+}
+
+impl ErrorCode {
+    /// Every code, for documentation and exhaustive tests.
+    pub const ALL: [ErrorCode; 31] = [
+        ErrorCode::Malformed,
+        ErrorCode::FrameCrc,
+        ErrorCode::FrameTooLong,
+        ErrorCode::FrameCobs,
+        ErrorCode::NoUpload,
+        ErrorCode::ChunkOutOfOrder,
+        ErrorCode::UploadTooLong,
+        ErrorCode::UploadIncomplete,
+        ErrorCode::UploadCrcMismatch,
+        ErrorCode::TableBadMagic,
+        ErrorCode::TableUnsupportedVersion,
+        ErrorCode::TableBadLength,
+        ErrorCode::TableBadCrc,
+        ErrorCode::TableNonFinite,
+        ErrorCode::TableOrderTooHigh,
+        ErrorCode::TableEmptyRange,
+        ErrorCode::TableReferenceOutsideRange,
+        ErrorCode::TableScaleFactorImplausible,
+        ErrorCode::TableRtdConstants,
+        ErrorCode::TableAdcConstants,
+        ErrorCode::TableSerial,
+        ErrorCode::TableDate,
+        ErrorCode::TableTiltAxis,
+        ErrorCode::NoTable,
+        ErrorCode::OffsetOutOfRange,
+        ErrorCode::NoPreviousTable,
+        ErrorCode::TableNotFound,
+        ErrorCode::Busy,
+        ErrorCode::NotSupported,
+        ErrorCode::InvalidRate,
+        ErrorCode::InvalidCount,
+    ];
+
+    /// The code for a number from the wire.
+    pub fn from_u16(n: u16) -> Option<ErrorCode> {
+        ErrorCode::ALL.iter().copied().find(|c| *c as u16 == n)
+    }
+
+    /// A reply with this code and detail.
+    pub const fn reply(self, detail: u32) -> ErrorReply {
+        ErrorReply {
+            code: self as u16,
+            detail,
+        }
+    }
+}
+
+const fn coefficient_code(c: Coefficient) -> u32 {
+    match c {
+        Coefficient::Bias => 0,
+        Coefficient::ScaleFactor => 1,
+        Coefficient::Nonlinearity => 2,
+        Coefficient::MisalignmentP => 3,
+        Coefficient::MisalignmentO => 4,
+    }
+}
+
+/// Field codes of TableNonFinite's detail.
+pub const fn field_code(f: Field) -> u32 {
+    match f {
+        Field::TemperatureScale => 0,
+        Field::ReferenceTemperature => 1,
+        Field::Polynomial(c) => 10 + coefficient_code(c),
+        Field::Tilt => 2,
+        Field::Rtd => 3,
+        Field::Adc => 4,
+        Field::Orientation => 5,
+        Field::Serial => 6,
+        Field::Date => 7,
+    }
+}
+
+impl From<TableError> for ErrorReply {
+    fn from(e: TableError) -> Self {
+        use ErrorCode as C;
+        match e {
+            TableError::BadMagic => C::TableBadMagic.reply(0),
+            TableError::UnsupportedVersion(v) => C::TableUnsupportedVersion.reply(u32::from(v)),
+            TableError::BadLength { found, .. } => C::TableBadLength.reply(found),
+            TableError::BadCrc { computed, .. } => C::TableBadCrc.reply(computed),
+            TableError::NonFinite(f) => C::TableNonFinite.reply(field_code(f)),
+            TableError::OrderTooHigh(c) => C::TableOrderTooHigh.reply(coefficient_code(c)),
+            TableError::EmptyRange => C::TableEmptyRange.reply(0),
+            TableError::ReferenceOutsideRange => C::TableReferenceOutsideRange.reply(0),
+            TableError::ScaleFactorImplausible => C::TableScaleFactorImplausible.reply(0),
+            TableError::RtdConstants => C::TableRtdConstants.reply(0),
+            TableError::AdcConstants => C::TableAdcConstants.reply(0),
+            TableError::Serial => C::TableSerial.reply(0),
+            TableError::Date => C::TableDate.reply(0),
+            TableError::TiltAxis => C::TableTiltAxis.reply(0),
+        }
+    }
+}
+
+/// Why a frame could not be built or read.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FrameError {
+    /// The output buffer is too small for the encoded frame.
+    BufferTooSmall,
+    /// The message does not serialize into [`MAX_MESSAGE_LEN`] bytes.
+    MessageTooLong,
+    /// Received frame exceeded the receive buffer; discarded up to the next delimiter.
+    TooLong,
+    /// Received frame is not valid COBS.
+    Cobs,
+    /// Received frame is shorter than its CRC.
+    TooShort,
+    /// CRC mismatch.
+    Crc {
+        /// CRC computed over the received body.
+        computed: u16,
+    },
+    /// CRC fine but postcard could not decode the message.
+    Decode,
+}
+
+impl FrameError {
+    /// The protocol error code of a receive-side failure.
+    pub const fn reply(self) -> ErrorReply {
+        match self {
+            FrameError::TooLong => ErrorCode::FrameTooLong.reply(MAX_FRAME_LEN as u32),
+            FrameError::Cobs | FrameError::TooShort => ErrorCode::FrameCobs.reply(0),
+            FrameError::Crc { computed } => ErrorCode::FrameCrc.reply(computed as u32),
+            FrameError::Decode | FrameError::BufferTooSmall | FrameError::MessageTooLong => {
+                ErrorCode::Malformed.reply(0)
+            }
+        }
+    }
+}
+
+/// COBS-encodes `src` into `dst` (no delimiter); returns the encoded length.
+pub fn cobs_encode(src: &[u8], dst: &mut [u8]) -> Result<usize, FrameError> {
+    let mut code_at = 0usize;
+    let mut out = 1usize;
+    let mut run: u8 = 1;
+    for &b in src {
+        if b == 0 {
+            *dst.get_mut(code_at).ok_or(FrameError::BufferTooSmall)? = run;
+            code_at = out;
+            out += 1;
+            run = 1;
+        } else {
+            *dst.get_mut(out).ok_or(FrameError::BufferTooSmall)? = b;
+            out += 1;
+            run += 1;
+            if run == 0xFF {
+                *dst.get_mut(code_at).ok_or(FrameError::BufferTooSmall)? = run;
+                code_at = out;
+                out += 1;
+                run = 1;
+            }
+        }
+    }
+    *dst.get_mut(code_at).ok_or(FrameError::BufferTooSmall)? = run;
+    Ok(out)
+}
+
+/// COBS-decodes `buf` in place (no delimiter inside); returns the decoded length.
+pub fn cobs_decode_in_place(buf: &mut [u8]) -> Result<usize, FrameError> {
+    let len = buf.len();
+    let mut read = 0usize;
+    let mut write = 0usize;
+    while read < len {
+        let code = *buf.get(read).ok_or(FrameError::Cobs)?;
+        if code == 0 {
+            return Err(FrameError::Cobs);
+        }
+        read += 1;
+        let n = usize::from(code) - 1;
+        if read + n > len {
+            return Err(FrameError::Cobs);
+        }
+        for _ in 0..n {
+            let b = *buf.get(read).ok_or(FrameError::Cobs)?;
+            if b == 0 {
+                return Err(FrameError::Cobs);
+            }
+            *buf.get_mut(write).ok_or(FrameError::Cobs)? = b;
+            write += 1;
+            read += 1;
+        }
+        // A code below 0xFF stands for a zero, except at the very end of the frame.
+        if code != 0xFF && read < len {
+            *buf.get_mut(write).ok_or(FrameError::Cobs)? = 0;
+            write += 1;
+        }
+    }
+    Ok(write)
+}
+
+/// Serializes `msg`, appends the CRC, COBS-encodes and appends the 0x00 delimiter into `out`.
+/// Returns the number of bytes to send.
+pub fn encode_frame<T: Serialize>(msg: &T, out: &mut [u8]) -> Result<usize, FrameError> {
+    let mut body = [0u8; MAX_MESSAGE_LEN + 2];
+    let n = postcard::to_slice(msg, body.get_mut(..MAX_MESSAGE_LEN).unwrap_or(&mut []))
+        .map_err(|_| FrameError::MessageTooLong)?
+        .len();
+    let crc = CRC16.checksum(body.get(..n).unwrap_or(&[]));
+    body.get_mut(n..n + 2)
+        .ok_or(FrameError::MessageTooLong)?
+        .copy_from_slice(&crc.to_le_bytes());
+    let m = cobs_encode(body.get(..n + 2).unwrap_or(&[]), out)?;
+    *out.get_mut(m).ok_or(FrameError::BufferTooSmall)? = 0;
+    Ok(m + 1)
+}
+
+/// Checks the CRC of a COBS-decoded frame and returns its message body.
+pub fn check_crc(decoded: &[u8]) -> Result<&[u8], FrameError> {
+    if decoded.len() < 3 {
+        return Err(FrameError::TooShort);
+    }
+    let (body, crc) = decoded.split_at(decoded.len() - 2);
+    let stored = u16::from_le_bytes([
+        crc.first().copied().unwrap_or(0),
+        crc.get(1).copied().unwrap_or(0),
+    ]);
+    let computed = CRC16.checksum(body);
+    if stored != computed {
+        return Err(FrameError::Crc { computed });
+    }
+    Ok(body)
+}
+
+/// Decodes a message body (after [`check_crc`]).
+pub fn decode_message<'a, T: Deserialize<'a>>(body: &'a [u8]) -> Result<T, FrameError> {
+    postcard::from_bytes(body).map_err(|_| FrameError::Decode)
+}
+
+/// Reads only the request id of a host frame whose request could not be decoded, so that the
+/// error can still be addressed to it (postcard puts the id first, as a varint).
+pub fn peek_request_id(body: &[u8]) -> Option<u32> {
+    postcard::take_from_bytes::<u32>(body)
+        .ok()
+        .map(|(id, _)| id)
+}
+
+/// Accumulates received bytes into frames, in a fixed buffer of `N` bytes.
+///
+/// Survives anything: bytes of an over-long frame are dropped up to the next 0x00, empty frames
+/// (two delimiters in a row) are ignored, and every 0x00 starts afresh.
+pub struct FrameDecoder<const N: usize> {
+    buf: Vec<u8, N>,
+    overflow: bool,
+    /// The previous call handed out a frame from `buf`: clear it before the next byte.
+    handed_out: bool,
+}
+
+impl<const N: usize> Default for FrameDecoder<N> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<const N: usize> FrameDecoder<N> {
+    /// An empty decoder.
+    pub const fn new() -> Self {
+        FrameDecoder {
+            buf: Vec::new(),
+            overflow: false,
+            handed_out: false,
+        }
+    }
+
+    /// Feeds one byte. At a delimiter returns the checked message body of the frame (or why it
+    /// was refused); otherwise None.
+    pub fn push(&mut self, byte: u8) -> Option<Result<&[u8], FrameError>> {
+        if self.handed_out {
+            self.handed_out = false;
+            self.buf.clear();
+        }
+        if byte != 0 {
+            if !self.overflow && self.buf.push(byte).is_err() {
+                self.overflow = true;
+            }
+            return None;
+        }
+        if self.overflow {
+            self.overflow = false;
+            self.buf.clear();
+            return Some(Err(FrameError::TooLong));
+        }
+        if self.buf.is_empty() {
+            return None;
+        }
+        let result = match cobs_decode_in_place(&mut self.buf) {
+            Ok(n) => {
+                let decoded = self.buf.get(..n).unwrap_or(&[]);
+                check_crc(decoded).map(|body| body.len())
+            }
+            Err(e) => Err(e),
+        };
+        // The buffer is reset on the next byte; the body is borrowed from it until then.
+        self.handed_out = true;
+        Some(result.map(|n| self.buf.get(..n).unwrap_or(&[])))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pipeline::{ChannelFlags, Status};
+    use proptest::prelude::*;
+
+    type Decoder = FrameDecoder<MAX_FRAME_LEN>;
+
+    fn wire<T: Serialize>(msg: &T) -> std::vec::Vec<u8> {
+        let mut out = [0u8; MAX_FRAME_LEN];
+        let n = encode_frame(msg, &mut out).unwrap();
+        out[..n].to_vec()
+    }
+
+    /// Feeds bytes and collects every host frame that decodes, and the count of refused frames.
+    fn feed(d: &mut Decoder, bytes: &[u8]) -> (std::vec::Vec<HostFrame>, usize) {
+        let mut good = std::vec::Vec::new();
+        let mut bad = 0;
+        for &b in bytes {
+            match d.push(b) {
+                Some(Ok(body)) => match decode_message::<HostFrame>(body) {
+                    Ok(f) => good.push(f),
+                    Err(_) => bad += 1,
+                },
+                Some(Err(_)) => bad += 1,
+                None => {}
+            }
+        }
+        (good, bad)
+    }
+
+    fn sample_request(id: u32) -> HostFrame {
+        HostFrame {
+            id,
+            request: Request::InjectSample {
+                raw: RawSample {
+                    accel: -123_456_789,
+                    rtd: 0x00AB_CDEF,
+                    tilt: 0,
+                    accel_flags: ChannelFlags(0),
+                    rtd_flags: ChannelFlags(ChannelFlags::CHECKSUM),
+                    tilt_flags: ChannelFlags(0),
+                },
+            },
+        }
+    }
+
+    #[test]
+    fn cobs_matches_the_published_examples() {
+        // Examples from Cheshire & Baker, "Consistent Overhead Byte Stuffing" (1999).
+        let cases: [(&[u8], &[u8]); 4] = [
+            (&[0x00], &[0x01, 0x01]),
+            (&[0x00, 0x00], &[0x01, 0x01, 0x01]),
+            (&[0x11, 0x22, 0x00, 0x33], &[0x03, 0x11, 0x22, 0x02, 0x33]),
+            (&[0x11, 0x00, 0x00, 0x00], &[0x02, 0x11, 0x01, 0x01, 0x01]),
+        ];
+        for (raw, encoded) in cases {
+            let mut out = [0u8; 16];
+            let n = cobs_encode(raw, &mut out).unwrap();
+            assert_eq!(&out[..n], encoded);
+            let mut back = encoded.to_vec();
+            let m = cobs_decode_in_place(&mut back).unwrap();
+            assert_eq!(&back[..m], raw);
+        }
+        // 254 non-zero bytes take one 0xFF block and no trailing code.
+        let long = [0x42u8; 254];
+        let mut out = [0u8; 260];
+        let n = cobs_encode(&long, &mut out).unwrap();
+        assert_eq!(out[0], 0xFF);
+        let mut back = out[..n].to_vec();
+        let m = cobs_decode_in_place(&mut back).unwrap();
+        assert_eq!(&back[..m], &long[..]);
+    }
+
+    #[test]
+    fn every_message_kind_round_trips_through_the_wire() {
+        let mut d = Decoder::new();
+        let reqs = [
+            HostFrame {
+                id: 1,
+                request: Request::Ping,
+            },
+            HostFrame {
+                id: u32::MAX,
+                request: Request::UploadChunk {
+                    offset: 384,
+                    data: Vec::from_slice(&[0u8; CHUNK_LEN]).unwrap(),
+                },
+            },
+            sample_request(3),
+        ];
+        for r in &reqs {
+            let bytes = wire(r);
+            assert!(bytes.len() <= MAX_FRAME_LEN);
+            assert_eq!(bytes.iter().filter(|b| **b == 0).count(), 1);
+            assert_eq!(feed(&mut d, &bytes), (vec![r.clone()], 0));
+        }
+        let sample = DeviceMessage::Sample {
+            id: 5,
+            frame: Frame {
+                seq: 1,
+                time_us: u64::MAX,
+                output_v: 1.25,
+                temperature_c: f64::NAN,
+                rtd_ohms: -0.0,
+                tilt_arcsec: 1e-300,
+                a_i_exact_g: 0.1,
+                output_linearized_v: f64::INFINITY,
+                status: Status(0xFFFF),
+            },
+        };
+        let bytes = wire(&sample);
+        let mut dev = Decoder::new();
+        let mut got = None;
+        for &b in &bytes {
+            if let Some(f) = dev.push(b) {
+                got = Some(decode_message::<DeviceMessage>(f.unwrap()).unwrap());
+            }
+        }
+        // NaN != NaN: compare the bit patterns of the frame's floats.
+        let Some(DeviceMessage::Sample { frame, .. }) = got else {
+            panic!()
+        };
+        assert!(frame.temperature_c.is_nan());
+        assert_eq!(frame.rtd_ohms.to_bits(), (-0.0f64).to_bits());
+        assert_eq!(frame.tilt_arcsec, 1e-300);
+        assert_eq!(frame.time_us, u64::MAX);
+    }
+
+    #[test]
+    fn the_largest_messages_fit_the_frame_buffer() {
+        let chunk = DeviceMessage::Response {
+            id: u32::MAX,
+            body: Response::TableChunk {
+                offset: u32::MAX,
+                total_len: u32::MAX,
+                data: Vec::from_slice(&[0xFF; CHUNK_LEN]).unwrap(),
+            },
+        };
+        let mut out = [0u8; MAX_FRAME_LEN];
+        assert!(encode_frame(&chunk, &mut out).is_ok());
+        let info = DeviceMessage::Response {
+            id: u32::MAX,
+            body: Response::Info(DeviceInfo {
+                firmware: heapless::String::try_from("0123456789abcdef").unwrap(),
+                board: Board::Frontend,
+                protocol: u16::MAX,
+                active_table: Some(u32::MAX),
+                previous_table: Some(u32::MAX),
+                uptime_ms: u64::MAX,
+                frames_dropped: u32::MAX,
+                samples: u32::MAX,
+                streaming: true,
+                rate_hz: u32::MAX,
+            }),
+        };
+        assert!(encode_frame(&info, &mut out).is_ok());
+    }
+
+    #[test]
+    fn garbage_before_between_and_after_frames_does_not_hide_them() {
+        let mut d = Decoder::new();
+        let mut line = vec![0x13, 0x37, 0xFF, 0x00, 0x00, 0x42, 0x00];
+        line.extend(wire(&sample_request(1)));
+        line.extend([0x55; 300]); // longer than the buffer: overflow, then resync
+        line.push(0);
+        line.extend(wire(&sample_request(2)));
+        let (good, bad) = feed(&mut d, &line);
+        assert_eq!(good, vec![sample_request(1), sample_request(2)]);
+        assert!(bad >= 2, "garbage frames must be reported, got {bad}");
+    }
+
+    #[test]
+    fn a_truncated_frame_is_refused_and_the_next_one_is_served() {
+        let mut d = Decoder::new();
+        let full = wire(&sample_request(1));
+        let mut line = full[..full.len() / 2].to_vec();
+        line.push(0); // cut short by a delimiter
+        line.extend(wire(&sample_request(2)));
+        let (good, bad) = feed(&mut d, &line);
+        assert_eq!(good, vec![sample_request(2)]);
+        assert_eq!(bad, 1);
+    }
+
+    #[test]
+    fn every_single_bit_flip_of_a_frame_is_detected() {
+        let bytes = wire(&sample_request(7));
+        for i in 0..bytes.len() - 1 {
+            for bit in 0..8 {
+                let mut c = bytes.clone();
+                c[i] ^= 1 << bit;
+                let mut d = Decoder::new();
+                let (good, _) = feed(&mut d, &c);
+                // A flip that creates a 0x00 splits the frame; neither half may decode.
+                assert!(good.is_empty(), "flip at {i}:{bit} decoded as {good:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn table_errors_map_to_distinct_documented_codes() {
+        let mut seen = std::collections::BTreeSet::new();
+        for c in ErrorCode::ALL {
+            assert!(seen.insert(c as u16), "duplicate {c:?}");
+            assert_eq!(ErrorCode::from_u16(c as u16), Some(c));
+        }
+        assert_eq!(ErrorCode::from_u16(999), None);
+        let e: ErrorReply = TableError::UnsupportedVersion(2).into();
+        assert_eq!((e.code, e.detail), (21, 2));
+        let e: ErrorReply = TableError::NonFinite(Field::Polynomial(Coefficient::Bias)).into();
+        assert_eq!((e.code, e.detail), (24, 10));
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 100_000, failure_persistence: None, ..ProptestConfig::default() })]
+
+        #[test]
+        fn random_bytes_never_panic_and_embedded_frames_are_still_found(
+            before in proptest::collection::vec(any::<u8>(), 0..200),
+            after in proptest::collection::vec(any::<u8>(), 0..64),
+            id in any::<u32>(),
+        ) {
+            let mut d = Decoder::new();
+            let mut line = before;
+            // The frame is found if the garbage before it is terminated by a delimiter.
+            line.push(0);
+            line.extend(wire(&sample_request(id)));
+            line.extend(after);
+            let (good, _) = feed(&mut d, &line);
+            prop_assert!(good.contains(&sample_request(id)));
+        }
+    }
+}
