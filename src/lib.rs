@@ -13,4 +13,5 @@ pub mod model;
 pub mod poly;
 pub mod rtd;
 pub mod table;
+pub mod tide;
 pub mod units;

@@ -1,3 +1,6 @@
 //! Host-side library behind the `accomp` CLI: fitting, simulation, analysis, firmware client.
 
+pub mod allan;
+pub mod log;
+pub mod stability;
 pub mod table_cli;

@@ -21,6 +21,8 @@ enum Command {
         #[command(subcommand)]
         action: TableAction,
     },
+    /// Stability (std, drift), OADEV and MDEV of a log's output columns.
+    Stability(accomp_host::stability::StabilityArgs),
 }
 
 #[derive(Subcommand)]
@@ -83,6 +85,7 @@ fn main() -> anyhow::Result<()> {
                 }
             }
         },
+        Command::Stability(args) => accomp_host::stability::run(&args)?,
     }
     Ok(())
 }
