@@ -23,6 +23,9 @@ enum Command {
     },
     /// Stability (std, drift), OADEV and MDEV of a log's output columns.
     Stability(accomp_host::stability::StabilityArgs),
+    /// Fit temperature models of the calibration coefficients (orders 0–4), compare them with
+    /// the paper's printed models, optionally write a calibration table.
+    Fit(accomp_host::fit::FitArgs),
 }
 
 #[derive(Subcommand)]
@@ -86,6 +89,7 @@ fn main() -> anyhow::Result<()> {
             }
         },
         Command::Stability(args) => accomp_host::stability::run(&args)?,
+        Command::Fit(args) => accomp_host::fit::run(&args)?,
     }
     Ok(())
 }

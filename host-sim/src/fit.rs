@@ -1,0 +1,985 @@
+//! `accomp fit`: temperature models of the calibration coefficients (the paper's equation (2)),
+//! fitted at every order 0–4 in the conditioned variable x = (T − Tc)/Ts ∈ [−1, 1], compared by
+//! residual standard deviation, AICc, leave-one-out RMS and the F test, set beside the paper's
+//! printed models, and turned into a calibration table. Method and findings: docs/fitting.md.
+
+pub mod linalg;
+pub mod stats;
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use accomp::compensation::{CoefficientModels, ThermalCompensator};
+use accomp::model::CrossAxis;
+use accomp::poly::{TempPoly, TemperatureScale, MAX_ORDER};
+use accomp::rtd::CallendarVanDusen;
+use accomp::table::{
+    AccelChannel, CalibrationDate, CalibrationTable, Orientation, RtdConfig, TableError, TiltAxis,
+    TiltConfig,
+};
+use accomp::units::{Celsius, Gs, Ohms, TiltArcsec, Volts, RAD_PER_ARCMIN};
+use serde::Serialize;
+use thiserror::Error;
+
+use linalg::{least_squares, LinalgError};
+use stats::{f_upper_tail, SpecialError};
+
+/// Name of the temperature column of the input table.
+pub const TEMPERATURE_COLUMN: &str = "temperature_c";
+/// Column names that map onto the coefficients of equation (1).
+pub const BIAS_COLUMN: &str = "k0_g";
+/// K1 column (V/g).
+pub const SCALE_FACTOR_COLUMN: &str = "k1_v_per_g";
+/// K2 column (g/g²).
+pub const NONLINEARITY_COLUMN: &str = "k2_g_per_g2";
+/// δp column (arcmin).
+pub const MISALIGNMENT_P_COLUMN: &str = "delta_p_arcmin";
+/// δo column (arcmin).
+pub const MISALIGNMENT_O_COLUMN: &str = "delta_o_arcmin";
+/// File name of the paper's printed models, looked up beside the input table.
+pub const PAPER_MODELS_FILE: &str = "paper_printed_temperature_models.csv";
+
+/// Why a row of a CSV table is refused.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum RowError {
+    /// The row has more or fewer fields than the header.
+    #[error("expected {expected} comma-separated fields, found {found}")]
+    FieldCount {
+        /// Fields in the header.
+        expected: usize,
+        /// Fields in this row.
+        found: usize,
+    },
+    /// A field is empty where a number is required.
+    #[error("column `{column}` is empty")]
+    Empty {
+        /// Column name.
+        column: String,
+    },
+    /// A field does not parse as a number.
+    #[error("column `{column}`: `{text}` is not a number")]
+    NotANumber {
+        /// Column name.
+        column: String,
+        /// The offending text.
+        text: String,
+    },
+    /// A field parses to NaN or infinity.
+    #[error("column `{column}`: `{text}` is not a finite number")]
+    NonFinite {
+        /// Column name.
+        column: String,
+        /// The offending text.
+        text: String,
+    },
+    /// A model order outside 0–4 (printed-models table).
+    #[error("order `{text}` is not an integer from 0 to 4")]
+    BadOrder {
+        /// The offending text.
+        text: String,
+    },
+}
+
+/// Why a CSV table is refused. Line numbers count every physical line from 1, comments included.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum CsvError {
+    /// A data row is malformed.
+    #[error("line {line}: {reason}")]
+    Row {
+        /// 1-based line number in the file.
+        line: usize,
+        /// What is wrong with it.
+        reason: RowError,
+    },
+    /// Only comments and blank lines.
+    #[error("no header line (the file holds only comments and blank lines)")]
+    NoHeader,
+    /// A required column is missing from the header.
+    #[error("line {line}: header has no `{column}` column")]
+    MissingColumn {
+        /// Header line number.
+        line: usize,
+        /// The missing column.
+        column: &'static str,
+    },
+    /// A column name appears twice, or is empty.
+    #[error("line {line}: column name `{name}` is empty or repeated")]
+    BadColumnName {
+        /// Header line number.
+        line: usize,
+        /// The name.
+        name: String,
+    },
+    /// Too few data rows to fit and compare even a constant (AICc needs n ≥ 3).
+    #[error("{rows} data rows: at least 3 are needed")]
+    TooFewRows {
+        /// Data rows found.
+        rows: usize,
+    },
+    /// All temperatures are equal: no range to normalize over.
+    #[error("all temperatures are equal ({0} °C): no range to fit over")]
+    EmptyRange(f64),
+}
+
+/// Why a fit or a report fails.
+#[derive(Debug, Error)]
+pub enum FitError {
+    /// Reading a file failed.
+    #[error("cannot read {path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The OS error.
+        source: std::io::Error,
+    },
+    /// The coefficient table is malformed.
+    #[error("{path}: {source}")]
+    Csv {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        source: CsvError,
+    },
+    /// The least-squares problem is degenerate.
+    #[error("column `{column}`, order {order}: {source}")]
+    Linalg {
+        /// Column.
+        column: String,
+        /// Polynomial order.
+        order: usize,
+        /// Why.
+        source: LinalgError,
+    },
+    /// A p value could not be computed.
+    #[error("column `{column}`, order {order}: {source}")]
+    Special {
+        /// Column.
+        column: String,
+        /// Polynomial order.
+        order: usize,
+        /// Why.
+        source: SpecialError,
+    },
+    /// No order has a defined AICc (too few rows).
+    #[error("column `{0}`: no model order has a defined AICc")]
+    NoSelectableOrder(String),
+    /// `--at` is NaN or infinite.
+    #[error("--at must be a finite temperature")]
+    BadAt,
+}
+
+/// Why a calibration table cannot be built from the fits.
+#[derive(Debug, Error)]
+pub enum BuildError {
+    /// A coefficient the table cannot do without is not in the input.
+    #[error("the input has no `{0}` column, which the calibration table requires")]
+    MissingColumn(&'static str),
+    /// The temperature scale is unusable.
+    #[error("temperature range unusable: {0:?}")]
+    Scale(accomp::poly::ScaleError),
+    /// The assembled table fails the core's validation (the firmware would refuse it too).
+    #[error("calibration table refused by the core validator: {0:?}")]
+    Table(TableError),
+    /// `--date` is not YYYY-MM-DD.
+    #[error("--date `{0}` is not a date of the form YYYY-MM-DD")]
+    Date(String),
+}
+
+/// One column of the coefficient table.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Column {
+    /// Header name (e.g. `k0_g`).
+    pub name: String,
+    /// One value per row.
+    pub values: Vec<f64>,
+}
+
+/// The coefficient-vs-temperature table (Table 1 of the paper, or any table with that layout).
+#[derive(Debug, Clone, PartialEq)]
+pub struct CoefficientTable {
+    /// The temperature of each row, °C.
+    pub temperatures_c: Vec<f64>,
+    /// Every other column, in header order.
+    pub columns: Vec<Column>,
+}
+
+impl CoefficientTable {
+    /// The calibrated range min..max of the table temperatures, normalized to x ∈ [−1, 1].
+    pub fn scale(&self) -> Result<TemperatureScale, CsvError> {
+        let min = self
+            .temperatures_c
+            .iter()
+            .copied()
+            .fold(f64::INFINITY, f64::min);
+        let max = self
+            .temperatures_c
+            .iter()
+            .copied()
+            .fold(f64::NEG_INFINITY, f64::max);
+        TemperatureScale::for_range(Celsius(min), Celsius(max))
+            .map_err(|_| CsvError::EmptyRange(min))
+    }
+}
+
+/// Non-comment, non-blank lines with their 1-based line numbers.
+fn data_lines(text: &str) -> impl Iterator<Item = (usize, &str)> {
+    text.lines()
+        .enumerate()
+        .map(|(i, l)| (i + 1, l.trim()))
+        .filter(|(_, l)| !l.is_empty() && !l.starts_with('#'))
+}
+
+fn split_fields(line: &str) -> Vec<&str> {
+    line.split(',').map(str::trim).collect()
+}
+
+fn parse_number(column: &str, text: &str) -> Result<f64, RowError> {
+    if text.is_empty() {
+        return Err(RowError::Empty {
+            column: column.to_owned(),
+        });
+    }
+    let v: f64 = text.parse().map_err(|_| RowError::NotANumber {
+        column: column.to_owned(),
+        text: text.to_owned(),
+    })?;
+    if v.is_finite() {
+        Ok(v)
+    } else {
+        Err(RowError::NonFinite {
+            column: column.to_owned(),
+            text: text.to_owned(),
+        })
+    }
+}
+
+fn header(text: &str) -> Result<(usize, Vec<String>), CsvError> {
+    let (line, h) = data_lines(text).next().ok_or(CsvError::NoHeader)?;
+    let names: Vec<String> = split_fields(h).into_iter().map(str::to_owned).collect();
+    for (i, n) in names.iter().enumerate() {
+        if n.is_empty() || names[..i].contains(n) {
+            return Err(CsvError::BadColumnName {
+                line,
+                name: n.clone(),
+            });
+        }
+    }
+    Ok((line, names))
+}
+
+/// Parses a coefficient table: `#` comments, a header with `temperature_c` and any number of
+/// coefficient columns (mapped to coefficients by name later), then one row per temperature.
+pub fn parse_coefficient_table(text: &str) -> Result<CoefficientTable, CsvError> {
+    let (header_line, names) = header(text)?;
+    let t_index =
+        names
+            .iter()
+            .position(|n| n == TEMPERATURE_COLUMN)
+            .ok_or(CsvError::MissingColumn {
+                line: header_line,
+                column: TEMPERATURE_COLUMN,
+            })?;
+    let mut temperatures_c = Vec::new();
+    let mut columns: Vec<Column> = names
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| *i != t_index)
+        .map(|(_, n)| Column {
+            name: n.clone(),
+            values: Vec::new(),
+        })
+        .collect();
+    for (line, row) in data_lines(text).skip(1) {
+        let fields = split_fields(row);
+        if fields.len() != names.len() {
+            return Err(CsvError::Row {
+                line,
+                reason: RowError::FieldCount {
+                    expected: names.len(),
+                    found: fields.len(),
+                },
+            });
+        }
+        let mut col = columns.iter_mut();
+        for (i, (name, text)) in names.iter().zip(&fields).enumerate() {
+            let v = parse_number(name, text).map_err(|reason| CsvError::Row { line, reason })?;
+            if i == t_index {
+                temperatures_c.push(v);
+            } else if let Some(c) = col.next() {
+                c.values.push(v);
+            }
+        }
+    }
+    if temperatures_c.len() < 3 {
+        return Err(CsvError::TooFewRows {
+            rows: temperatures_c.len(),
+        });
+    }
+    let table = CoefficientTable {
+        temperatures_c,
+        columns,
+    };
+    table.scale()?;
+    Ok(table)
+}
+
+/// One printed model: K(T) = Σ c_j·T^j in raw °C, as published.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PrintedModel {
+    /// The coefficient column it models.
+    pub coefficient: String,
+    /// Polynomial order.
+    pub order: usize,
+    /// c0..c4 (empty cells read as 0: the term is absent).
+    pub coeffs_celsius: [f64; MAX_ORDER + 1],
+    /// The paper's reported standard deviation, if printed.
+    pub reported_std: Option<f64>,
+}
+
+/// Parses the printed-models table (`coefficient,order,c0..c4,reported_std`).
+pub fn parse_printed_models(text: &str) -> Result<Vec<PrintedModel>, CsvError> {
+    let (header_line, names) = header(text)?;
+    let find = |column: &'static str| {
+        names
+            .iter()
+            .position(|n| n == column)
+            .ok_or(CsvError::MissingColumn {
+                line: header_line,
+                column,
+            })
+    };
+    let i_name = find("coefficient")?;
+    let i_order = find("order")?;
+    let i_c = [
+        find("c0")?,
+        find("c1")?,
+        find("c2")?,
+        find("c3")?,
+        find("c4")?,
+    ];
+    let i_std = find("reported_std")?;
+    let mut out = Vec::new();
+    for (line, row) in data_lines(text).skip(1) {
+        let f = split_fields(row);
+        if f.len() != names.len() {
+            return Err(CsvError::Row {
+                line,
+                reason: RowError::FieldCount {
+                    expected: names.len(),
+                    found: f.len(),
+                },
+            });
+        }
+        let row_err = |reason| CsvError::Row { line, reason };
+        let order: usize = f[i_order]
+            .parse()
+            .ok()
+            .filter(|o| *o <= MAX_ORDER)
+            .ok_or_else(|| {
+                row_err(RowError::BadOrder {
+                    text: f[i_order].to_owned(),
+                })
+            })?;
+        let mut coeffs_celsius = [0.0; MAX_ORDER + 1];
+        for (j, (c, idx)) in coeffs_celsius.iter_mut().zip(i_c).enumerate() {
+            let text = f[idx];
+            // Empty means "term absent" — but only above the stated order.
+            if text.is_empty() && j > order {
+                continue;
+            }
+            *c = parse_number(&names[idx], text).map_err(row_err)?;
+        }
+        let reported_std = if f[i_std].is_empty() {
+            None
+        } else {
+            Some(parse_number("reported_std", f[i_std]).map_err(row_err)?)
+        };
+        out.push(PrintedModel {
+            coefficient: f[i_name].to_owned(),
+            order,
+            coeffs_celsius,
+            reported_std,
+        });
+    }
+    Ok(out)
+}
+
+/// One polynomial order fitted to one coefficient column.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct OrderFit {
+    /// Polynomial order.
+    pub order: usize,
+    /// s = √(RSS/(n − order − 1)), in the column's unit.
+    pub residual_std: f64,
+    /// √(RSS/n), comparable with the printed models' residual RMS.
+    pub residual_rms: f64,
+    /// AICc with k = order + 1 (null when n − k − 1 ≤ 0: never selected then).
+    pub aicc: Option<f64>,
+    /// Leave-one-out RMS prediction error, exact from the hat diagonal: e_i/(1 − h_ii).
+    pub loo_rms: f64,
+    /// F test of this order against the next lower one; null for order 0.
+    pub f_test_p: Option<f64>,
+    /// Coefficients in x = (T − Tc)/Ts, ascending.
+    pub coeffs_x: Vec<f64>,
+    /// Their standard errors, √(diag((RᵀR)⁻¹))·s.
+    pub std_errors_x: Vec<f64>,
+    /// The same polynomial as monomials in raw °C (for comparison with the paper only).
+    pub monomial_celsius: Vec<f64>,
+    /// dK/dT at `--at`, column unit per °C.
+    pub sensitivity_per_c: f64,
+    /// K at `--at`, column unit (to form relative sensitivities such as (dK1/dT)/K1).
+    pub value_at: f64,
+}
+
+/// A printed model evaluated at the table temperatures.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct PrintedFit {
+    /// Polynomial order.
+    pub order: usize,
+    /// √(mean residual²) against the table.
+    pub residual_rms: f64,
+    /// max |residual|.
+    pub residual_max: f64,
+    /// The paper's reported standard deviation.
+    pub reported_std: Option<f64>,
+    /// dK/dT of the printed model at `--at`, per °C.
+    pub sensitivity_per_c: f64,
+}
+
+/// All orders of one column, the selected order and the printed models.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ColumnFit {
+    /// CSV column name.
+    pub name: String,
+    /// Lowest-AICc order (ties → lower order).
+    pub selected_order: usize,
+    /// Orders 0.. with n − order − 1 ≥ 1.
+    pub models: Vec<OrderFit>,
+    /// The paper's printed models of this column (empty when none are available).
+    pub paper_printed: Vec<PrintedFit>,
+}
+
+impl ColumnFit {
+    /// The selected model.
+    pub fn selected(&self) -> Option<&OrderFit> {
+        self.models.iter().find(|m| m.order == self.selected_order)
+    }
+}
+
+/// The `--json` document.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct FitReport {
+    /// One entry per coefficient column, in input order.
+    pub coefficients: Vec<ColumnFit>,
+}
+
+/// AICc = n·ln(RSS/n) + 2k + 2k(k+1)/(n − k − 1) with k = order + 1: the polynomial
+/// coefficients only, not the noise variance (counting it, k = order + 2, would change the
+/// small-sample correction and, with n = 8, rule out order 4). None when n − k − 1 ≤ 0: the
+/// correction is undefined there and such an order is never selected.
+pub fn aicc(n: usize, rss: f64, k: usize) -> Option<f64> {
+    if n <= k + 1 {
+        return None;
+    }
+    let (nf, kf) = (n as f64, k as f64);
+    Some(nf * (rss / nf).ln() + 2.0 * kf + 2.0 * kf * (kf + 1.0) / (nf - kf - 1.0))
+}
+
+/// Fits one polynomial order to (T, y) in the normalized variable of `scale`.
+pub fn fit_order(
+    name: &str,
+    scale: &TemperatureScale,
+    temperatures_c: &[f64],
+    y: &[f64],
+    order: usize,
+    at: Celsius,
+) -> Result<(OrderFit, f64), FitError> {
+    let n = y.len();
+    let design: Vec<Vec<f64>> = temperatures_c
+        .iter()
+        .map(|t| {
+            let x = scale.x_unclamped(Celsius(*t));
+            (0..=order).map(|j| x.powi(j as i32)).collect()
+        })
+        .collect();
+    let ls = least_squares(&design, y).map_err(|source| FitError::Linalg {
+        column: name.to_owned(),
+        order,
+        source,
+    })?;
+    let dof = n - order - 1;
+    let s = (ls.rss / dof as f64).sqrt();
+    let loo_sq: f64 = ls
+        .residuals
+        .iter()
+        .zip(&ls.leverage)
+        .map(|(e, h)| (e / (1.0 - h)).powi(2))
+        .sum();
+    let std_errors_x = ls
+        .unscaled_variances()
+        .iter()
+        .map(|v| v.sqrt() * s)
+        .collect();
+    let poly = TempPoly::from_coeffs(&ls.coeffs).unwrap_or_default();
+    let x_at = scale.x_unclamped(at);
+    let monomial_celsius = poly.to_monomial_celsius(scale)[..=order].to_vec();
+    Ok((
+        OrderFit {
+            order,
+            residual_std: s,
+            residual_rms: (ls.rss / n as f64).sqrt(),
+            aicc: aicc(n, ls.rss, order + 1),
+            loo_rms: (loo_sq / n as f64).sqrt(),
+            f_test_p: None,
+            coeffs_x: ls.coeffs,
+            std_errors_x,
+            monomial_celsius,
+            sensitivity_per_c: poly.derivative_x(x_at) / scale.half_span_c,
+            value_at: poly.eval(x_at),
+        },
+        ls.rss,
+    ))
+}
+
+/// Fits every order 0–4 that leaves at least one degree of freedom, runs the F tests and selects
+/// the lowest-AICc order.
+pub fn fit_column(
+    name: &str,
+    scale: &TemperatureScale,
+    temperatures_c: &[f64],
+    y: &[f64],
+    at: Celsius,
+) -> Result<ColumnFit, FitError> {
+    if !at.0.is_finite() {
+        return Err(FitError::BadAt);
+    }
+    let n = y.len();
+    let mut models: Vec<OrderFit> = Vec::new();
+    let mut prev_rss: Option<f64> = None;
+    for order in (0..=MAX_ORDER).take_while(|o| n >= o + 2) {
+        let (mut m, rss) = fit_order(name, scale, temperatures_c, y, order, at)?;
+        if let Some(prev) = prev_rss {
+            let dof = (n - order - 1) as f64;
+            // F = (RSS_{p−1} − RSS_p)/(RSS_p/(n − p − 1)); an exact fit gives F = ∞, p = 0.
+            let f = if rss > 0.0 {
+                (prev - rss) / (rss / dof)
+            } else {
+                f64::INFINITY
+            };
+            m.f_test_p = Some(
+                f_upper_tail(f, 1.0, dof).map_err(|source| FitError::Special {
+                    column: name.to_owned(),
+                    order,
+                    source,
+                })?,
+            );
+        }
+        prev_rss = Some(rss);
+        models.push(m);
+    }
+    let mut best: Option<(usize, f64)> = None;
+    for m in &models {
+        if let Some(a) = m.aicc {
+            // Strictly lower wins, so ties go to the lower order.
+            if best.is_none_or(|(_, b)| a < b) {
+                best = Some((m.order, a));
+            }
+        }
+    }
+    let (selected_order, _) = best.ok_or_else(|| FitError::NoSelectableOrder(name.to_owned()))?;
+    Ok(ColumnFit {
+        name: name.to_owned(),
+        selected_order,
+        models,
+        paper_printed: Vec::new(),
+    })
+}
+
+/// Evaluates a printed raw-°C model against the table (straight powers of T, as printed).
+pub fn evaluate_printed(
+    model: &PrintedModel,
+    temperatures_c: &[f64],
+    y: &[f64],
+    at: Celsius,
+) -> PrintedFit {
+    let eval = |t: f64| {
+        model
+            .coeffs_celsius
+            .iter()
+            .rev()
+            .fold(0.0, |acc, c| acc * t + c)
+    };
+    let residuals: Vec<f64> = temperatures_c
+        .iter()
+        .zip(y)
+        .map(|(t, v)| v - eval(*t))
+        .collect();
+    let n = residuals.len().max(1) as f64;
+    let slope = model
+        .coeffs_celsius
+        .iter()
+        .enumerate()
+        .skip(1)
+        .rev()
+        .fold(0.0, |acc, (j, c)| acc * at.0 + j as f64 * c);
+    PrintedFit {
+        order: model.order,
+        residual_rms: (residuals.iter().map(|r| r * r).sum::<f64>() / n).sqrt(),
+        residual_max: residuals.iter().fold(0.0, |m, r| f64::max(m, r.abs())),
+        reported_std: model.reported_std,
+        sensitivity_per_c: slope,
+    }
+}
+
+/// Fits every column of the table and attaches the printed models of the same name.
+pub fn fit_table(
+    table: &CoefficientTable,
+    printed: &[PrintedModel],
+    at: Celsius,
+) -> Result<FitReport, FitError> {
+    let scale = table.scale().map_err(|source| FitError::Csv {
+        path: PathBuf::new(),
+        source,
+    })?;
+    let mut coefficients = Vec::new();
+    for col in &table.columns {
+        let mut fit = fit_column(&col.name, &scale, &table.temperatures_c, &col.values, at)?;
+        fit.paper_printed = printed
+            .iter()
+            .filter(|p| p.coefficient == col.name)
+            .map(|p| evaluate_printed(p, &table.temperatures_c, &col.values, at))
+            .collect();
+        coefficients.push(fit);
+    }
+    Ok(FitReport { coefficients })
+}
+
+/// Defaults of the non-thermal table fields, which the fit cannot know. They describe the
+/// reference board (docs/fitting.md): IEC 60751 Pt100, 5.11 kΩ RTD reference resistor, AD7124
+/// PGA 16, 1 kΩ sense resistor (K1 ≈ 1.33 V/g), tiltmeter 10 "/V with φ0 = 0 on the input axis,
+/// unit ADC gain corrections and zero offsets, orientation a_i = 1 g with no cross-axis input
+/// (the paper's 1 g stability test).
+pub mod defaults {
+    /// Reference resistor of the ratiometric RTD measurement, Ω.
+    pub const RTD_REFERENCE_OHMS: f64 = 5110.0;
+    /// AD7124 PGA gain of the RTD channel.
+    pub const RTD_PGA_GAIN: f64 = 16.0;
+    /// Sense resistor of the torquer current, Ω.
+    pub const SENSE_RESISTOR_OHMS: f64 = 1000.0;
+    /// Tiltmeter sensitivity, arcsec per volt.
+    pub const TILT_SCALE_ARCSEC_PER_V: f64 = 10.0;
+    /// Nominal input of the test, g.
+    pub const NOMINAL_INPUT_G: f64 = 1.0;
+}
+
+/// A calibration table from the selected order of every known column. δ columns in arcmin are
+/// converted to radians here, once. K0 and K1 are required; K2, δp, δo default to zero.
+pub fn calibration_table(
+    report: &FitReport,
+    scale: TemperatureScale,
+    reference: Celsius,
+    serial: &str,
+    date: CalibrationDate,
+) -> Result<CalibrationTable, BuildError> {
+    let poly = |column: &str| -> Option<TempPoly> {
+        report
+            .coefficients
+            .iter()
+            .find(|c| c.name == column)
+            .and_then(ColumnFit::selected)
+            .and_then(|m| TempPoly::from_coeffs(&m.coeffs_x))
+    };
+    let required = |column: &'static str| poly(column).ok_or(BuildError::MissingColumn(column));
+    let models = CoefficientModels {
+        bias_g: required(BIAS_COLUMN)?,
+        scale_factor_v_per_g: required(SCALE_FACTOR_COLUMN)?,
+        nonlinearity_g_per_g2: poly(NONLINEARITY_COLUMN).unwrap_or_default(),
+        misalignment_p_rad: poly(MISALIGNMENT_P_COLUMN)
+            .unwrap_or_default()
+            .scaled(RAD_PER_ARCMIN),
+        misalignment_o_rad: poly(MISALIGNMENT_O_COLUMN)
+            .unwrap_or_default()
+            .scaled(RAD_PER_ARCMIN),
+    };
+    let table = CalibrationTable {
+        serial: CalibrationTable::serial_from_str(serial),
+        date,
+        thermal: ThermalCompensator {
+            scale,
+            reference,
+            models,
+        },
+        tilt: TiltConfig {
+            reference: TiltArcsec(0.0),
+            scale_arcsec_per_v: defaults::TILT_SCALE_ARCSEC_PER_V,
+            axis: TiltAxis::Input,
+            adc_gain_correction: 1.0,
+            adc_offset: Volts(0.0),
+        },
+        rtd: RtdConfig {
+            cvd: CallendarVanDusen::IEC_60751_PT100,
+            reference_resistor: Ohms(defaults::RTD_REFERENCE_OHMS),
+            adc_gain_correction: 1.0,
+            pga_gain: defaults::RTD_PGA_GAIN,
+        },
+        accel: AccelChannel {
+            adc_gain_correction: 1.0,
+            adc_offset: Volts(0.0),
+            sense_resistor: Ohms(defaults::SENSE_RESISTOR_OHMS),
+        },
+        orientation: Orientation {
+            cross: CrossAxis::default(),
+            nominal_input: Gs(defaults::NOMINAL_INPUT_G),
+        },
+    };
+    table.validate().map_err(BuildError::Table)?;
+    Ok(table)
+}
+
+/// Parses `YYYY-MM-DD`.
+pub fn parse_date(text: &str) -> Result<CalibrationDate, BuildError> {
+    let err = || BuildError::Date(text.to_owned());
+    let mut parts = text.split('-');
+    let (Some(y), Some(m), Some(d), None) =
+        (parts.next(), parts.next(), parts.next(), parts.next())
+    else {
+        return Err(err());
+    };
+    Ok(CalibrationDate {
+        year: y.parse().map_err(|_| err())?,
+        month: m.parse().map_err(|_| err())?,
+        day: d.parse().map_err(|_| err())?,
+    })
+}
+
+/// Today's UTC date from the system clock (days since 1970 → civil date, proleptic Gregorian).
+pub fn today_utc() -> CalibrationDate {
+    let secs = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    civil_from_days((secs / 86_400) as i64)
+}
+
+/// Days since 1970-01-01 → (year, month, day), via 400-year eras of 146 097 days starting on
+/// 0000-03-01 (so that the leap day is the last day of the era's year).
+fn civil_from_days(days: i64) -> CalibrationDate {
+    let z = days + 719_468; // days from 0000-03-01 to 1970-01-01
+    let era = z.div_euclid(146_097);
+    let doe = z.rem_euclid(146_097); // day of era, 0..146096
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365; // year of era
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100); // day of (March-based) year
+    let mp = (5 * doy + 2) / 153; // March = 0
+    let day = doy - (153 * mp + 2) / 5 + 1;
+    let month = if mp < 10 { mp + 3 } else { mp - 9 };
+    let year = yoe + era * 400 + i64::from(month <= 2);
+    CalibrationDate {
+        year: u16::try_from(year).unwrap_or(0),
+        month: month as u8,
+        day: day as u8,
+    }
+}
+
+fn unit_of(column: &str) -> &str {
+    match column {
+        BIAS_COLUMN => "g",
+        SCALE_FACTOR_COLUMN => "V/g",
+        NONLINEARITY_COLUMN => "g/g²",
+        MISALIGNMENT_P_COLUMN | MISALIGNMENT_O_COLUMN => "arcmin",
+        _ => "column unit",
+    }
+}
+
+fn opt(v: Option<f64>, width: usize, prec: usize, sci: bool) -> String {
+    match v {
+        Some(x) if x.is_finite() && sci => format!("{x:>width$.prec$e}"),
+        Some(x) if x.is_finite() => format!("{x:>width$.prec$}"),
+        Some(_) => format!("{:>width$}", "inf"),
+        None => format!("{:>width$}", "—"),
+    }
+}
+
+/// The human-readable report: one table per coefficient.
+pub fn render_text(report: &FitReport, at: Celsius, paper_source: Option<&Path>) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "Fits in x = (T − Tc)/Ts over the table range; sensitivities at {} °C.",
+        at.0
+    );
+    match paper_source {
+        Some(p) => {
+            let _ = writeln!(s, "Paper's printed models: {}", p.display());
+        }
+        None => {
+            let _ = writeln!(
+                s,
+                "Paper's printed models: not available (no {PAPER_MODELS_FILE} beside the input; use --paper)."
+            );
+        }
+    }
+    for c in &report.coefficients {
+        let unit = unit_of(&c.name);
+        let _ = writeln!(
+            s,
+            "\n{} [{}]  selected order {} (lowest AICc)",
+            c.name, unit, c.selected_order
+        );
+        let _ = writeln!(
+            s,
+            "  {:>5} {:>11} {:>11} {:>9} {:>11} {:>9} {:>13}  monomial °C c0..cn",
+            "order", "s", "rms", "AICc", "LOO rms", "F p", "dK/dT /°C"
+        );
+        for m in &c.models {
+            let mono: Vec<String> = m
+                .monomial_celsius
+                .iter()
+                .map(|v| format!("{v:.4e}"))
+                .collect();
+            let _ = writeln!(
+                s,
+                "  {:>5} {:>11.3e} {:>11.3e} {} {:>11.3e} {} {:>13.4e}  [{}]{}",
+                m.order,
+                m.residual_std,
+                m.residual_rms,
+                opt(m.aicc, 9, 2, false),
+                m.loo_rms,
+                opt(m.f_test_p, 9, 2, true),
+                m.sensitivity_per_c,
+                mono.join(", "),
+                if m.order == c.selected_order {
+                    "  ←"
+                } else {
+                    ""
+                }
+            );
+        }
+        if let Some(m) = c.selected() {
+            if c.name == SCALE_FACTOR_COLUMN && m.value_at != 0.0 {
+                let _ = writeln!(
+                    s,
+                    "  selected: relative sensitivity (dK1/dT)/K1 = {:.4e} /°C",
+                    m.sensitivity_per_c / m.value_at
+                );
+            }
+            if unit == "arcmin" {
+                let _ = writeln!(
+                    s,
+                    "  selected: sensitivity {:.4} \"/°C",
+                    m.sensitivity_per_c * 60.0
+                );
+            }
+        }
+        if c.paper_printed.is_empty() {
+            let _ = writeln!(s, "  paper printed: none for this column");
+        }
+        for p in &c.paper_printed {
+            let refit = c.models.iter().find(|m| m.order == p.order);
+            let _ = writeln!(
+                s,
+                "  paper order {}: residual rms {:.3e}, max {:.3e}, reported std {}; refit rms {}; dK/dT {:.4e}",
+                p.order,
+                p.residual_rms,
+                p.residual_max,
+                p.reported_std.map_or("—".to_owned(), |v| format!("{v:.2e}")),
+                refit.map_or("—".to_owned(), |m| format!("{:.3e}", m.residual_rms)),
+                p.sensitivity_per_c
+            );
+        }
+    }
+    s
+}
+
+/// Arguments of `accomp fit`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct FitArgs {
+    /// Coefficients-vs-temperature CSV (`temperature_c` plus coefficient columns).
+    pub input: PathBuf,
+    /// Print one JSON object instead of the text report.
+    #[arg(long)]
+    pub json: bool,
+    /// Temperature at which sensitivities dK/dT are reported, °C.
+    #[arg(long, default_value_t = 50.0)]
+    pub at: f64,
+    /// Write a calibration table (binary, docs/calibration-format.md) from the selected orders.
+    #[arg(short = 'o', long = "output")]
+    pub output: Option<PathBuf>,
+    /// Reference temperature T0 of the linearized compensation, °C (the paper tested at 60 °C).
+    #[arg(long, default_value_t = 60.0)]
+    pub reference: f64,
+    /// The paper's printed models (default: `paper_printed_temperature_models.csv` beside the
+    /// input; skipped when absent there, an error when given here and absent).
+    #[arg(long)]
+    pub paper: Option<PathBuf>,
+    /// Serial number stored in the table.
+    #[arg(long, default_value = "")]
+    pub serial: String,
+    /// Calibration date stored in the table, YYYY-MM-DD (default: today, UTC).
+    #[arg(long)]
+    pub date: Option<String>,
+}
+
+fn read(path: &Path) -> Result<String, FitError> {
+    std::fs::read_to_string(path).map_err(|source| FitError::Io {
+        path: path.to_owned(),
+        source,
+    })
+}
+
+/// `accomp fit`.
+pub fn run(args: &FitArgs) -> anyhow::Result<()> {
+    let at = Celsius(args.at);
+    let table = parse_coefficient_table(&read(&args.input)?).map_err(|source| FitError::Csv {
+        path: args.input.clone(),
+        source,
+    })?;
+    let paper_path = match &args.paper {
+        Some(p) => Some(p.clone()),
+        None => {
+            let beside = args
+                .input
+                .parent()
+                .unwrap_or_else(|| Path::new("."))
+                .join(PAPER_MODELS_FILE);
+            beside.is_file().then_some(beside)
+        }
+    };
+    let printed = match &paper_path {
+        Some(p) => parse_printed_models(&read(p)?).map_err(|source| FitError::Csv {
+            path: p.clone(),
+            source,
+        })?,
+        None => Vec::new(),
+    };
+    let report = fit_table(&table, &printed, at)?;
+    if args.json {
+        println!("{}", serde_json::to_string(&report)?);
+    } else {
+        print!("{}", render_text(&report, at, paper_path.as_deref()));
+    }
+    if let Some(out) = &args.output {
+        let date = match &args.date {
+            Some(d) => parse_date(d)?,
+            None => today_utc(),
+        };
+        let scale = table.scale().map_err(|source| FitError::Csv {
+            path: args.input.clone(),
+            source,
+        })?;
+        let cal = calibration_table(&report, scale, Celsius(args.reference), &args.serial, date)?;
+        std::fs::write(out, cal.encode())
+            .map_err(|e| anyhow::anyhow!("cannot write {}: {e}", out.display()))?;
+        // stderr, so that `--json` output stays a single JSON document on stdout.
+        eprintln!(
+            "wrote calibration table {} (id {:08x}, orders K0 {} K1 {} K2 {} δp {} δo {}, T0 {} °C)",
+            out.display(),
+            cal.id(),
+            cal.thermal.models.bias_g.order(),
+            cal.thermal.models.scale_factor_v_per_g.order(),
+            cal.thermal.models.nonlinearity_g_per_g2.order(),
+            cal.thermal.models.misalignment_p_rad.order(),
+            cal.thermal.models.misalignment_o_rad.order(),
+            args.reference
+        );
+    }
+    Ok(())
+}
