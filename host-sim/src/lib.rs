@@ -1,6 +1,7 @@
 //! Host-side library behind the `accomp` CLI: fitting, simulation, analysis, firmware client.
 
 pub mod allan;
+pub mod discover;
 pub mod fit;
 pub mod log;
 pub mod stability;

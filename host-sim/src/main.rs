@@ -23,6 +23,8 @@ enum Command {
     },
     /// Stability (std, drift), OADEV and MDEV of a log's output columns.
     Stability(accomp_host::stability::StabilityArgs),
+    /// Find what the model gets wrong on a record, name the effect, measure the gain.
+    Discover(accomp_host::discover::DiscoverArgs),
     /// Fit temperature models of the calibration coefficients (orders 0–4), compare them with
     /// the paper's printed models, optionally write a calibration table.
     Fit(accomp_host::fit::FitArgs),
@@ -89,6 +91,7 @@ fn main() -> anyhow::Result<()> {
             }
         },
         Command::Stability(args) => accomp_host::stability::run(&args)?,
+        Command::Discover(args) => accomp_host::discover::run(&args)?,
         Command::Fit(args) => accomp_host::fit::run(&args)?,
     }
     Ok(())
