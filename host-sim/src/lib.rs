@@ -4,5 +4,6 @@ pub mod allan;
 pub mod discover;
 pub mod fit;
 pub mod log;
+pub mod sim;
 pub mod stability;
 pub mod table_cli;

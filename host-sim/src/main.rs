@@ -28,6 +28,8 @@ enum Command {
     /// Fit temperature models of the calibration coefficients (orders 0–4), compare them with
     /// the paper's printed models, optionally write a calibration table.
     Fit(accomp_host::fit::FitArgs),
+    /// Simulate the test station (scenario file or preset) and write a log.
+    Simulate(accomp_host::sim::cli::SimulateArgs),
 }
 
 #[derive(Subcommand)]
@@ -93,6 +95,7 @@ fn main() -> anyhow::Result<()> {
         Command::Stability(args) => accomp_host::stability::run(&args)?,
         Command::Discover(args) => accomp_host::discover::run(&args)?,
         Command::Fit(args) => accomp_host::fit::run(&args)?,
+        Command::Simulate(args) => accomp_host::sim::cli::run(&args)?,
     }
     Ok(())
 }

@@ -40,7 +40,7 @@ impl Default for Config {
         Self {
             folds: 5,
             blocks_per_fold: 4,
-            bic_margin: 10.0,
+            bic_margin: 0.0,
             min_gain: 0.0,
             max_effects: 8,
         }
@@ -380,15 +380,13 @@ fn score_all(
     ctx: &Context,
     done: &[Effect],
     tides: bool,
+    rho_raw: f64,
 ) -> Vec<Scored> {
     let n = cur.r_w.len() as f64;
-    let rho = {
-        let mut seg = vec![false; cur.r_w.len()];
-        if let Some(s) = seg.first_mut() {
-            *s = true;
-        }
-        ar1(&cur.r_w, &seg).min(0.99)
-    };
+    // n_eff from the lag-1 correlation of the *raw* residual: conservative on purpose. AR(1)
+    // whitening does not whiten flicker + random-walk mixtures; with the whitened residual's
+    // correlation the null logs accepted steps and trends (docs/discovery.md).
+    let rho = rho_raw.min(0.999);
     let n_eff = (n * (1.0 - rho) / (1.0 + rho)).max(2.0);
     let mut out = Vec::new();
     for e in cands {
@@ -480,8 +478,9 @@ pub fn select(
     let mut last_round = Vec::new();
     let mut cur_std = baseline_std;
     while accepted.len() < cfg.max_effects {
-        let (cur, _, _) = fit_state(ds, &cols, target, None);
-        let scored = score_all(&cur, cands, ctx, &done, tides);
+        let (cur, raw_now, _) = fit_state(ds, &cols, target, None);
+        let rho_raw = ar1(&raw_now, &ds.segment_start);
+        let scored = score_all(&cur, cands, ctx, &done, tides, rho_raw);
         last_round = scored
             .iter()
             .map(|s| (s.effect.name().to_owned(), s.delta_bic))
