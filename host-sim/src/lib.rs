@@ -3,6 +3,7 @@
 pub mod allan;
 pub mod device;
 pub mod device_cli;
+pub mod discover;
 pub mod fit;
 pub mod log;
 pub mod sim;

@@ -32,6 +32,8 @@ enum Command {
     Compensate(accomp_host::device_cli::CompensateArgs),
     /// Upload a calibration table to the device, verify by read-back, activate it.
     Load(accomp_host::device_cli::LoadArgs),
+    /// Find what the static model gets wrong in a log, name the physical cause, measure the gain.
+    Discover(accomp_host::discover::DiscoverArgs),
     /// Stability (std, drift), OADEV and MDEV of a log's output columns.
     Stability(accomp_host::stability::StabilityArgs),
 }
@@ -46,6 +48,7 @@ fn main() -> anyhow::Result<()> {
         Command::Simulate(args) => accomp_host::sim::cli::run(&args),
         Command::Compensate(args) => accomp_host::device_cli::run_compensate(&args),
         Command::Load(args) => accomp_host::device_cli::run_load(&args),
+        Command::Discover(args) => accomp_host::discover::run(&args),
         Command::Stability(args) => Ok(accomp_host::stability::run(&args)?),
     }
 }

@@ -1,0 +1,474 @@
+//! The catalogue of named physical effects. Each is a parametric extension of the design matrix:
+//! linear parameters (amplitudes, coefficients, gains) are solved by least squares with the rest
+//! of the model, nonlinear ones (`tau_s`, `lag_s`, `period_s`, `time_s`) by a 1-D grid followed
+//! by a golden-section refinement. Physics and magnitudes: `docs/discovery.md`.
+
+use super::import::{ChannelKind, Dataset};
+use accomp::tide::Station;
+
+/// One effect of the catalogue, bound to a channel where it needs one.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Effect {
+    /// First-order lag between the RTD and the proof mass: column L_τ[T] − T.
+    ThermalLag,
+    /// Different bias on heating and cooling branches: column sign(dT/dt) (smoothed).
+    ThermalHysteresis,
+    /// Bias ∝ input² (power dissipated by the torquer current): column input².
+    SelfHeating,
+    /// Exponential transient after power-on: column exp(−t/τ).
+    Warmup,
+    /// Logarithmic aging trend: column ln(1 + t/τ) (beside the baseline's linear drift).
+    AgingDrift,
+    /// A bias jump: column H(t − time_s).
+    Step,
+    /// Solid-earth tide gravity (1 g records): column tide × unit_per_g × input.
+    TidalGravity,
+    /// Solid-earth tide tilt along the sensitive axis (0 g records): north and east columns.
+    TidalTilt,
+    /// Diurnal (solar-day) building tilt (0 g records): sin/cos of the solar day.
+    BuildingTilt,
+    /// Tiltmeter gain error: the nominal eq. (5) tilt term as a free column.
+    TiltCoupling,
+    /// Coupling to an auxiliary channel through a first-order lag: column L_lag[c].
+    AmbientCoupling(String),
+    /// Barometric admittance: column pressure (Pa).
+    PressureAdmittance,
+    /// A line at a period matching no known cause: sin/cos columns.
+    Periodic,
+}
+
+impl Effect {
+    /// Catalogue name.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Effect::ThermalLag => "thermal_lag",
+            Effect::ThermalHysteresis => "thermal_hysteresis",
+            Effect::SelfHeating => "self_heating",
+            Effect::Warmup => "warmup",
+            Effect::AgingDrift => "aging_drift",
+            Effect::Step => "step",
+            Effect::TidalGravity => "tidal_gravity",
+            Effect::TidalTilt => "tidal_tilt",
+            Effect::BuildingTilt => "building_tilt",
+            Effect::TiltCoupling => "tilt_coupling",
+            Effect::AmbientCoupling(_) => "ambient_coupling",
+            Effect::PressureAdmittance => "pressure_admittance",
+            Effect::Periodic => "periodic",
+        }
+    }
+
+    /// The channel it is bound to, if any.
+    pub fn channel(&self) -> Option<&str> {
+        match self {
+            Effect::AmbientCoupling(c) => Some(c),
+            _ => None,
+        }
+    }
+
+    /// Whether the effect can be accepted more than once (at other parameters).
+    pub fn repeatable(&self) -> bool {
+        matches!(self, Effect::Step | Effect::Periodic)
+    }
+}
+
+/// Precomputed series shared by the candidates.
+#[derive(Debug, Clone, Default)]
+pub struct Context {
+    /// Tide gravity in g at each point, if site and time are known.
+    pub tide_gravity_g: Option<Vec<f64>>,
+    /// Tide tilt north and east in rad, if site and time are known.
+    pub tide_tilt_rad: Option<(Vec<f64>, Vec<f64>)>,
+    /// Nominal eq. (5) tilt term in output units (if subtracted by the baseline).
+    pub tilt_term: Option<Vec<f64>>,
+}
+
+/// Tide series at the dataset's instants (evaluated at most every 60 s and interpolated
+/// linearly: the tide's fastest line, M3/M4 at ~6 h, changes by < 1e-5 of its range in 60 s).
+pub fn tide_series(ds: &Dataset) -> Option<(Vec<f64>, Vec<f64>, Vec<f64>)> {
+    let start = ds.start_unix_s?;
+    let (lat, lon, h) = ds.site?;
+    let st = Station::new(lat, lon, h).ok()?;
+    let step = 60.0_f64;
+    let t0 = *ds.t_s.first()?;
+    let t1 = *ds.t_s.last()?;
+    let n = ((t1 - t0) / step).ceil() as usize + 2;
+    let nodes: Vec<_> = (0..n)
+        .map(|k| st.tide_at_unix_seconds(start + t0 + k as f64 * step))
+        .collect();
+    let mut g = Vec::with_capacity(ds.len());
+    let mut tn = Vec::with_capacity(ds.len());
+    let mut te = Vec::with_capacity(ds.len());
+    let mas = accomp::tide::MAS_PER_RAD;
+    for &t in &ds.t_s {
+        let x = (t - t0) / step;
+        let k = (x.floor() as usize).min(n - 2);
+        let f = x - k as f64;
+        let (a, b) = (&nodes[k], &nodes[k + 1]);
+        let lerp = |u: f64, v: f64| u + (v - u) * f;
+        g.push(lerp(a.gravity_gs().0, b.gravity_gs().0));
+        tn.push(lerp(a.tilt_north_mas, b.tilt_north_mas) / mas);
+        te.push(lerp(a.tilt_east_mas, b.tilt_east_mas) / mas);
+    }
+    Some((g, tn, te))
+}
+
+/// First-order low-pass `τ dx/dt = u − x` (exact discretisation for the actual spacing),
+/// restarted at each segment with the current input.
+pub fn lag_filter(u: &[f64], t: &[f64], seg_start: &[bool], tau_s: f64) -> Vec<f64> {
+    let mut out = Vec::with_capacity(u.len());
+    let mut x = 0.0;
+    for i in 0..u.len() {
+        if seg_start[i] || tau_s <= 0.0 {
+            x = u[i];
+        } else {
+            let a = (-(t[i] - t[i - 1]) / tau_s).exp();
+            x = a * x + (1.0 - a) * u[i];
+        }
+        out.push(x);
+    }
+    out
+}
+
+fn centred(v: Vec<f64>) -> Vec<f64> {
+    let m = v.iter().sum::<f64>() / v.len().max(1) as f64;
+    v.into_iter().map(|x| x - m).collect()
+}
+
+/// Log-spaced grid.
+pub fn log_grid(lo: f64, hi: f64, n: usize) -> Vec<f64> {
+    if n < 2 || hi <= lo {
+        return vec![lo];
+    }
+    (0..n)
+        .map(|i| lo * (hi / lo).powf(i as f64 / (n - 1) as f64))
+        .collect()
+}
+
+/// Smoothed sign of dT/dt: centred difference over ±w seconds, zero inside a dead band of
+/// 1/4 of the rate's standard deviation (flat thermostat plateaus have no branch).
+fn rate_sign(temp: &[f64], t: &[f64], seg_start: &[bool], w_s: f64) -> Vec<f64> {
+    let n = temp.len();
+    let mut seg_id = vec![0usize; n];
+    for i in 1..n {
+        seg_id[i] = seg_id[i - 1] + usize::from(seg_start[i]);
+    }
+    let mut rate = vec![0.0; n];
+    let (mut lo, mut hi) = (0usize, 0usize);
+    for i in 0..n {
+        while t[i] - t[lo] > w_s || seg_id[lo] != seg_id[i] {
+            lo += 1;
+        }
+        if hi < i {
+            hi = i;
+        }
+        while hi + 1 < n && t[hi + 1] - t[i] <= w_s && seg_id[hi + 1] == seg_id[i] {
+            hi += 1;
+        }
+        if hi > lo {
+            rate[i] = (temp[hi] - temp[lo]) / (t[hi] - t[lo]);
+        }
+    }
+    let s = super::baseline::std(&rate);
+    rate.iter()
+        .map(|r| if r.abs() < 0.25 * s { 0.0 } else { r.signum() })
+        .collect()
+}
+
+/// The candidates applicable to a dataset, and the catalogue entries that are not, with why.
+pub fn candidates(
+    ds: &Dataset,
+    ctx: &Context,
+    tilt_subtracted: bool,
+) -> (Vec<Effect>, Vec<(String, String)>) {
+    let mut yes = Vec::new();
+    let mut no = Vec::new();
+    let mut say = |e: &str, why: &str| no.push((e.to_owned(), why.to_owned()));
+    let temp = ds.channel(ChannelKind::Temperature);
+    let temp_varies = temp.is_some_and(|c| super::baseline::std(&c.values) > 1e-6);
+    if temp_varies {
+        yes.push(Effect::ThermalLag);
+        yes.push(Effect::ThermalHysteresis);
+    } else {
+        say("thermal_lag", "no varying temperature channel");
+        say("thermal_hysteresis", "no varying temperature channel");
+    }
+    match ds.channel(ChannelKind::Input) {
+        Some(c) if super::baseline::std(&c.values) > 1e-3 => yes.push(Effect::SelfHeating),
+        _ => say("self_heating", "no changing input_g channel"),
+    }
+    yes.push(Effect::Warmup);
+    yes.push(Effect::AgingDrift);
+    yes.push(Effect::Step);
+    let one_g = ds.is_one_g();
+    match (&ctx.tide_gravity_g, ds.unit_per_g, one_g) {
+        (Some(_), Some(_), true) => yes.push(Effect::TidalGravity),
+        (None, _, _) => say(
+            "tidal_gravity",
+            "no start_utc or site (latitude_deg, longitude_deg)",
+        ),
+        (_, None, _) => say("tidal_gravity", "output unit per g unknown"),
+        _ => say("tidal_gravity", "not a 1 g record (input_g metadata)"),
+    }
+    if ds.input_g.is_some() && !one_g && ds.unit_per_g.is_some() {
+        if ctx.tide_tilt_rad.is_some() {
+            yes.push(Effect::TidalTilt);
+        } else {
+            say("tidal_tilt", "no start_utc or site");
+        }
+        yes.push(Effect::BuildingTilt);
+    } else {
+        say(
+            "tidal_tilt",
+            "a 0 g effect: needs input_g ≈ 0 and a known output unit per g",
+        );
+        say(
+            "building_tilt",
+            "a 0 g effect: needs input_g ≈ 0 and a known output unit per g",
+        );
+    }
+    if tilt_subtracted && ctx.tilt_term.is_some() {
+        yes.push(Effect::TiltCoupling);
+    } else {
+        say(
+            "tilt_coupling",
+            "no tilt channel, or the tilt gain is already fitted (unit per g unknown)",
+        );
+    }
+    let mut any_other = false;
+    for c in &ds.channels {
+        let is_main_temp = c.kind == ChannelKind::Temperature;
+        if c.kind == ChannelKind::Other && !is_main_temp && super::baseline::std(&c.values) > 0.0 {
+            yes.push(Effect::AmbientCoupling(c.name.clone()));
+            any_other = true;
+        }
+    }
+    if !any_other {
+        say(
+            "ambient_coupling",
+            "no auxiliary channel besides temperature, tilt, pressure, input",
+        );
+    }
+    match ds.channel(ChannelKind::Pressure) {
+        Some(_) => yes.push(Effect::PressureAdmittance),
+        None => say("pressure_admittance", "no pressure channel"),
+    }
+    yes.push(Effect::Periodic);
+    (yes, no)
+}
+
+/// The 1-D grid of the nonlinear parameter (empty for purely linear effects).
+pub fn grid(e: &Effect, ds: &Dataset) -> Vec<f64> {
+    let span = ds.span_s().max(10.0 * ds.dt_s);
+    let dt = ds.dt_s;
+    match e {
+        Effect::ThermalLag => log_grid(2.0 * dt, span / 5.0, 24),
+        Effect::ThermalHysteresis => log_grid(5.0 * dt, span / 20.0, 8),
+        Effect::Warmup => log_grid(3.0 * dt, span / 3.0, 24),
+        Effect::AgingDrift => log_grid(span / 1000.0, span * 3.0, 24),
+        Effect::AmbientCoupling(_) => {
+            let mut g = vec![0.0];
+            g.extend(log_grid(2.0 * dt, span / 10.0, 16));
+            g
+        }
+        _ => Vec::new(),
+    }
+}
+
+/// Design columns of an effect at nonlinear parameter `theta` (NaN when not applicable).
+pub fn columns(e: &Effect, ds: &Dataset, ctx: &Context, theta: f64) -> Vec<Vec<f64>> {
+    let t = &ds.t_s;
+    let t0 = t.first().copied().unwrap_or(0.0);
+    let seg = &ds.segment_start;
+    let temp = || {
+        ds.channel(ChannelKind::Temperature)
+            .map(|c| c.values.clone())
+    };
+    let u = ds.unit_per_g.unwrap_or(1.0);
+    match e {
+        Effect::ThermalLag => temp()
+            .map(|tc| {
+                let l = lag_filter(&tc, t, seg, theta);
+                vec![l.iter().zip(&tc).map(|(a, b)| a - b).collect()]
+            })
+            .unwrap_or_default(),
+        Effect::ThermalHysteresis => temp()
+            .map(|tc| vec![rate_sign(&tc, t, seg, theta)])
+            .unwrap_or_default(),
+        Effect::SelfHeating => ds
+            .channel(ChannelKind::Input)
+            .map(|c| vec![centred(c.values.iter().map(|a| a * a).collect())])
+            .unwrap_or_default(),
+        Effect::Warmup => vec![t.iter().map(|x| (-(x - t0) / theta).exp()).collect()],
+        Effect::AgingDrift => vec![t.iter().map(|x| (1.0 + (x - t0) / theta).ln()).collect()],
+        Effect::Step => vec![t
+            .iter()
+            .map(|x| if *x >= theta { 1.0 } else { 0.0 })
+            .collect()],
+        Effect::TidalGravity => ctx
+            .tide_gravity_g
+            .as_ref()
+            .map(|g| {
+                let s = u * ds.input_g.unwrap_or(1.0).signum();
+                vec![g.iter().map(|v| v * s).collect()]
+            })
+            .unwrap_or_default(),
+        Effect::TidalTilt => ctx
+            .tide_tilt_rad
+            .as_ref()
+            .map(|(n, ea)| {
+                vec![
+                    n.iter().map(|v| v * u).collect(),
+                    ea.iter().map(|v| v * u).collect(),
+                ]
+            })
+            .unwrap_or_default(),
+        Effect::BuildingTilt => {
+            let start = ds.start_unix_s.unwrap_or(0.0);
+            let w = 2.0 * std::f64::consts::PI / 86_400.0;
+            vec![
+                t.iter().map(|x| (w * (start + x)).sin()).collect(),
+                t.iter().map(|x| (w * (start + x)).cos()).collect(),
+            ]
+        }
+        Effect::TiltCoupling => ctx.tilt_term.clone().map(|v| vec![v]).unwrap_or_default(),
+        Effect::AmbientCoupling(name) => ds
+            .channels
+            .iter()
+            .find(|c| &c.name == name)
+            .map(|c| vec![centred(lag_filter(&c.values, t, seg, theta))])
+            .unwrap_or_default(),
+        Effect::PressureAdmittance => ds
+            .channel(ChannelKind::Pressure)
+            .map(|c| vec![centred(c.values.clone())])
+            .unwrap_or_default(),
+        Effect::Periodic => {
+            let w = 2.0 * std::f64::consts::PI / theta;
+            vec![
+                t.iter().map(|x| (w * x).sin()).collect(),
+                t.iter().map(|x| (w * x).cos()).collect(),
+            ]
+        }
+    }
+}
+
+/// A parameter value with its 1-σ uncertainty (NaN when not estimated).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Param {
+    /// Value.
+    pub value: f64,
+    /// 1-σ uncertainty.
+    pub sigma: f64,
+}
+
+/// Named parameters of a fitted effect, from its nonlinear parameter, its linear coefficients
+/// and their standard errors. Keys exactly as the catalogue in the issue.
+pub fn parameters(
+    e: &Effect,
+    ds: &Dataset,
+    theta: Param,
+    beta: &[f64],
+    se: &[f64],
+) -> Vec<(String, Param)> {
+    let p = |v: f64, s: f64| Param { value: v, sigma: s };
+    let b0 = beta.first().copied().unwrap_or(f64::NAN);
+    let s0 = se.first().copied().unwrap_or(f64::NAN);
+    let amp2 = || {
+        let (a, b) = (beta[0], beta[1]);
+        let r = a.hypot(b);
+        let sr = if r > 0.0 {
+            ((a * se[0]).powi(2) + (b * se[1]).powi(2)).sqrt() / r
+        } else {
+            f64::NAN
+        };
+        (r, sr, b.atan2(a), if r > 0.0 { sr / r } else { f64::NAN })
+    };
+    let mut out: Vec<(String, Param)> = match e {
+        Effect::ThermalLag => vec![("tau_s".into(), theta), ("coefficient".into(), p(b0, s0))],
+        Effect::ThermalHysteresis => vec![
+            ("half_width".into(), p(b0, s0)),
+            ("rate_window_s".into(), theta),
+        ],
+        Effect::SelfHeating => vec![("coefficient".into(), p(b0, s0))],
+        Effect::Warmup => vec![("tau_s".into(), theta), ("amplitude".into(), p(b0, s0))],
+        Effect::AgingDrift => vec![("tau_s".into(), theta), ("amplitude".into(), p(b0, s0))],
+        Effect::Step => vec![("time_s".into(), theta), ("size".into(), p(b0, s0))],
+        Effect::TidalGravity => vec![("amplitude_factor".into(), p(b0, s0))],
+        Effect::TidalTilt => {
+            let (r, sr, ph, sph) = amp2();
+            vec![
+                ("amplitude_factor".into(), p(r, sr)),
+                ("azimuth_deg".into(), p(ph.to_degrees(), sph.to_degrees())),
+            ]
+        }
+        Effect::BuildingTilt | Effect::Periodic => {
+            let (r, sr, ph, sph) = amp2();
+            let mut v = vec![
+                ("amplitude".into(), p(r, sr)),
+                ("phase_rad".into(), p(ph, sph)),
+            ];
+            if matches!(e, Effect::Periodic) {
+                v.insert(0, ("period_s".into(), theta));
+            }
+            v
+        }
+        Effect::TiltCoupling => vec![("gain".into(), p(b0, s0))],
+        Effect::AmbientCoupling(_) => {
+            vec![("coefficient".into(), p(b0, s0)), ("lag_s".into(), theta)]
+        }
+        Effect::PressureAdmittance => vec![("coefficient".into(), p(b0, s0))],
+    };
+    // Output-unit amplitudes also in g when the unit is known.
+    if let Some(u) = ds.unit_per_g {
+        let extra: Vec<(String, Param)> = out
+            .iter()
+            .filter(|(k, _)| {
+                matches!(
+                    k.as_str(),
+                    "amplitude" | "size" | "half_width" | "coefficient"
+                )
+            })
+            .filter(|_| !matches!(e, Effect::TiltCoupling | Effect::TidalGravity))
+            .map(|(k, v)| (format!("{k}_g"), p(v.value / u, v.sigma / u)))
+            .collect();
+        out.extend(extra);
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lag_filter_reaches_63_percent_after_one_time_constant() {
+        let t: Vec<f64> = (0..=100).map(f64::from).collect();
+        let mut u = vec![1.0; 101];
+        u[0] = 0.0;
+        let mut seg = vec![false; 101];
+        seg[0] = true;
+        let y = lag_filter(&u, &t, &seg, 10.0);
+        // 1 − e^{−1} = 0.632 at t = τ (input stepped at t = 0+).
+        assert!((y[10] - 0.632_12).abs() < 1e-4, "{}", y[10]);
+    }
+
+    #[test]
+    fn rate_sign_is_positive_heating_negative_cooling_and_zero_on_a_plateau() {
+        let t: Vec<f64> = (0..300).map(f64::from).collect();
+        let temp: Vec<f64> = t
+            .iter()
+            .map(|&x| {
+                if x < 100.0 {
+                    x
+                } else if x < 200.0 {
+                    100.0
+                } else {
+                    300.0 - x
+                }
+            })
+            .collect();
+        let mut seg = vec![false; 300];
+        seg[0] = true;
+        let s = rate_sign(&temp, &t, &seg, 3.0);
+        assert_eq!((s[50], s[150], s[250]), (1.0, 0.0, -1.0));
+    }
+}

@@ -1,0 +1,644 @@
+//! Loading a record for discovery: our log format, the gMetrology `.tsf` and the AQG CSV, and the
+//! reduction of any of them to a [`Dataset`] (output in its own unit, auxiliary channels, gaps as
+//! segment breaks, optional binning).
+//!
+//! Nothing is interpolated: a row with a NaN in the output or in a used auxiliary channel is
+//! dropped and counted, and a spacing larger than 2.5 × the median spacing starts a new segment
+//! (filters, differences and whitening restart there).
+
+use crate::log::{Log, LogError};
+use accomp::tide::{UtcTime, STANDARD_GRAVITY_M_S2};
+use std::path::Path;
+
+/// 1 mGal in m/s².
+pub const M_S2_PER_MGAL: f64 = 1.0e-5;
+
+/// Record formats `accomp discover` reads.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Format {
+    /// Guess from the extension and the header.
+    Auto,
+    /// Our stability-test log (design/architecture.md).
+    Log,
+    /// gMetrology relative gravimeter, whitespace columns, Beijing time.
+    GmetrologyTsf,
+    /// AQG quantum gravimeter CSV converted from MiniSEED (time_s from 2020-07-31T12:15:00.015Z).
+    AqgCsv,
+}
+
+/// Why a record could not be loaded.
+#[derive(Debug, thiserror::Error)]
+pub enum ImportError {
+    /// Reading the file failed.
+    #[error("cannot read {path}: {source}")]
+    Io {
+        /// File.
+        path: String,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// The log reader refused the file.
+    #[error(transparent)]
+    Log(#[from] LogError),
+    /// No usable output column or too few rows.
+    #[error("{0}")]
+    Shape(String),
+}
+
+/// A row the importer refused, with its 1-based line number.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BadRow {
+    /// 1-based line in the file.
+    pub line: usize,
+    /// Why.
+    pub reason: String,
+}
+
+/// Site of the gMetrology record (from the repository's own scripts).
+pub const GMETROLOGY_SITE: (f64, f64, f64) = (33.98, 116.79, 0.0);
+/// Site of the AQG record (station XML), latitude, longitude, height in metres.
+pub const AQG_SITE: (f64, f64, f64) = (37.76589, 15.016805, 2920.0);
+/// Epoch of the AQG `time_s` column.
+pub const AQG_START_UTC: &str = "2020-07-31T12:15:00.015Z";
+/// Beijing time − UTC, hours.
+pub const BEIJING_UTC_OFFSET_H: i64 = 8;
+
+/// Parses `YYYY-MM-DDTHH:MM:SS[.fff][Z]` (or with a space) to Unix seconds.
+pub fn parse_utc(text: &str) -> Option<f64> {
+    let s = text.trim().trim_end_matches('Z');
+    let (date, time) = s.split_once(['T', ' '])?;
+    let mut d = date.split('-');
+    let year: i32 = d.next()?.parse().ok()?;
+    let month: u8 = d.next()?.parse().ok()?;
+    let day: u8 = d.next()?.parse().ok()?;
+    let mut t = time.split(':');
+    let hour: u8 = t.next()?.parse().ok()?;
+    let minute: u8 = t.next()?.parse().ok()?;
+    let second: f64 = t.next().unwrap_or("0").parse().ok()?;
+    civil_unix_seconds(year, month, day, hour, minute, second)
+}
+
+/// Unix seconds of a checked calendar instant, in exact integer day arithmetic (the Julian-date
+/// route of `UtcTime::unix_seconds` loses ~10 µs to the f64 day count, which would jitter
+/// `time_s`).
+pub fn civil_unix_seconds(
+    year: i32,
+    month: u8,
+    day: u8,
+    hour: u8,
+    minute: u8,
+    second: f64,
+) -> Option<f64> {
+    UtcTime::new(year, month, day, hour, minute, second).ok()?;
+    let y = i64::from(year) - i64::from(month <= 2);
+    let era = y.div_euclid(400);
+    let yoe = y - era * 400;
+    let mp = (i64::from(month) + 9) % 12;
+    let doy = (153 * mp + 2) / 5 + i64::from(day) - 1;
+    let doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
+    let days = era * 146_097 + doe - 719_468;
+    Some((days * 86_400 + i64::from(hour) * 3600 + i64::from(minute) * 60) as f64 + second)
+}
+
+/// Formats Unix seconds as `YYYY-MM-DDTHH:MM:SS.sssZ` (civil-from-days, proleptic Gregorian).
+pub fn format_utc(unix_s: f64) -> String {
+    let days = (unix_s / 86_400.0).floor();
+    let sod = unix_s - days * 86_400.0;
+    let z = days as i64 + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let day = doy - (153 * mp + 2) / 5 + 1;
+    let month = if mp < 10 { mp + 3 } else { mp - 9 };
+    let year = yoe + era * 400 + i64::from(month <= 2);
+    let h = (sod / 3600.0).floor();
+    let m = ((sod - h * 3600.0) / 60.0).floor();
+    let s = sod - h * 3600.0 - m * 60.0;
+    format!("{year:04}-{month:02}-{day:02}T{h:02}:{m:02}:{s:06.3}Z")
+}
+
+fn read_text(path: &Path) -> Result<String, ImportError> {
+    std::fs::read_to_string(path).map_err(|source| ImportError::Io {
+        path: path.display().to_string(),
+        source,
+    })
+}
+
+/// Reads a gMetrology `.tsf` text: `year month day hour minute second gravity_mGal pressure_hPa`
+/// in Beijing time. Returns a log in our format (time_s from the first good row, start_utc in
+/// UTC, site metadata, `input_g: 1`) and the refused rows.
+pub fn gmetrology_from_str(text: &str) -> Result<(Log, Vec<BadRow>), ImportError> {
+    let mut bad = Vec::new();
+    let mut unix = Vec::new();
+    let mut g = Vec::new();
+    let mut p = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        let line_no = i + 1;
+        let trimmed = line.trim();
+        if trimmed.is_empty() || trimmed.starts_with(['#', '[']) {
+            continue;
+        }
+        let f: Vec<&str> = trimmed.split_whitespace().collect();
+        if f.len() != 8 {
+            bad.push(BadRow {
+                line: line_no,
+                reason: format!("{} fields, expected 8", f.len()),
+            });
+            continue;
+        }
+        let ints: Option<Vec<i64>> = f[..5].iter().map(|v| v.parse().ok()).collect();
+        let sec: Option<f64> = f[5].parse().ok();
+        let (gv, pv) = (f[6].parse::<f64>().ok(), f[7].parse::<f64>().ok());
+        let (Some(ints), Some(sec), Some(gv), Some(pv)) = (ints, sec, gv, pv) else {
+            bad.push(BadRow {
+                line: line_no,
+                reason: "unparsable number".into(),
+            });
+            continue;
+        };
+        let Some(local) = civil_unix_seconds(
+            ints[0] as i32,
+            ints[1] as u8,
+            ints[2] as u8,
+            ints[3] as u8,
+            ints[4] as u8,
+            sec,
+        ) else {
+            bad.push(BadRow {
+                line: line_no,
+                reason: "invalid date/time".into(),
+            });
+            continue;
+        };
+        // Beijing time is UTC+8: UTC = local − 8 h.
+        let u = local - (BEIJING_UTC_OFFSET_H * 3600) as f64;
+        if unix.last().is_some_and(|&last: &f64| u <= last) {
+            bad.push(BadRow {
+                line: line_no,
+                reason: "time not increasing".into(),
+            });
+            continue;
+        }
+        // 9999-style fill values are gaps, not readings.
+        let ok = |v: f64| v.is_finite() && v.abs() < 9.0e4;
+        unix.push(u);
+        g.push(if ok(gv) { gv } else { f64::NAN });
+        p.push(if ok(pv) && pv > 0.0 { pv } else { f64::NAN });
+    }
+    let Some(&t0) = unix.first() else {
+        return Err(ImportError::Shape("no readable rows".into()));
+    };
+    let mut log = Log::with_time(unix.iter().map(|u| u - t0).collect())?;
+    log.set_meta(
+        "instrument",
+        "gMetrology relative spring gravimeter (George-Gou/gMetrology, MIT)",
+    )?;
+    log.set_meta("start_utc", &format_utc(t0))?;
+    log.set_meta("latitude_deg", &GMETROLOGY_SITE.0.to_string())?;
+    log.set_meta("longitude_deg", &GMETROLOGY_SITE.1.to_string())?;
+    log.set_meta("height_m", &GMETROLOGY_SITE.2.to_string())?;
+    log.set_meta("input_g", "1")?;
+    log.push_column("gravity_mgal", g)?;
+    log.push_column("pressure_hpa", p)?;
+    Ok((log, bad))
+}
+
+/// Adds the AQG record's metadata (epoch, site, 1 g) to its CSV read as a log.
+pub fn aqg_from_log(mut log: Log) -> Result<Log, ImportError> {
+    if log.meta("start_utc").is_none() {
+        log.set_meta(
+            "instrument",
+            "Exail/Muquans AQG quantum gravimeter (NEWTON-g/AQG2MSEED)",
+        )?;
+        log.set_meta("start_utc", AQG_START_UTC)?;
+        log.set_meta("latitude_deg", &AQG_SITE.0.to_string())?;
+        log.set_meta("longitude_deg", &AQG_SITE.1.to_string())?;
+        log.set_meta("height_m", &AQG_SITE.2.to_string())?;
+        log.set_meta("input_g", "1")?;
+    }
+    Ok(log)
+}
+
+/// Loads a record in any supported format as a log in our format plus refused rows.
+pub fn load(path: &Path, format: Format) -> Result<(Log, Vec<BadRow>), ImportError> {
+    let format = match format {
+        Format::Auto => {
+            let name = path.to_string_lossy().to_ascii_lowercase();
+            if name.ends_with(".tsf") {
+                Format::GmetrologyTsf
+            } else {
+                let text = read_text(path)?;
+                let first = text.lines().find(|l| !l.trim().is_empty()).unwrap_or("");
+                if first.starts_with("time_s,gravity_nm_s2,tilt_1_urad") {
+                    Format::AqgCsv
+                } else {
+                    Format::Log
+                }
+            }
+        }
+        f => f,
+    };
+    match format {
+        Format::GmetrologyTsf => gmetrology_from_str(&read_text(path)?),
+        Format::AqgCsv => read_log_with_bad_rows(path).and_then(|(l, b)| Ok((aqg_from_log(l)?, b))),
+        _ => read_log_with_bad_rows(path),
+    }
+}
+
+/// Reads our log format. The log reader refuses a file with bad rows as a whole (naming the
+/// line); this is reported as an error, never skipped silently.
+fn read_log_with_bad_rows(path: &Path) -> Result<(Log, Vec<BadRow>), ImportError> {
+    Ok((Log::read_path(path)?, Vec::new()))
+}
+
+/// What a channel is to the discovery.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ChannelKind {
+    /// The accelerometer temperature (RTD); the baseline's temperature.
+    Temperature,
+    /// A tilt, stored in radians.
+    Tilt,
+    /// Pressure, stored in Pa.
+    Pressure,
+    /// The applied input acceleration, g.
+    Input,
+    /// Any other auxiliary channel (another temperature, humidity, supply …), own unit.
+    Other,
+}
+
+/// An auxiliary channel (all finite after row selection).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Channel {
+    /// Column name in the log.
+    pub name: String,
+    /// Role.
+    pub kind: ChannelKind,
+    /// Values (Pa for pressure, rad for tilt, own unit otherwise).
+    pub values: Vec<f64>,
+}
+
+/// The record as the discovery sees it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Dataset {
+    /// Seconds since `start_utc` (or since the log's zero).
+    pub t_s: Vec<f64>,
+    /// Output, in the log's output unit.
+    pub y: Vec<f64>,
+    /// True at the first sample of each contiguous segment.
+    pub segment_start: Vec<bool>,
+    /// Auxiliary channels.
+    pub channels: Vec<Channel>,
+    /// Output column name.
+    pub output_name: String,
+    /// Output unit (column suffix).
+    pub output_unit: String,
+    /// Output units per g, if known (unit suffix, `scale_factor_v_per_g`, or the calibration).
+    pub unit_per_g: Option<f64>,
+    /// Nominal input acceleration of the test, g (metadata `input_g` or the mean input channel).
+    pub input_g: Option<f64>,
+    /// Unix seconds of `time_s = 0`.
+    pub start_unix_s: Option<f64>,
+    /// Latitude, longitude (degrees), height (m).
+    pub site: Option<(f64, f64, f64)>,
+    /// Nominal sample spacing after binning, seconds.
+    pub dt_s: f64,
+    /// Rows read, rows dropped for NaN, bins used: what happened on the way.
+    pub notes: Vec<String>,
+}
+
+/// Output units per g for a column unit suffix, when the suffix says it.
+pub fn unit_per_g_for_suffix(unit: &str) -> Option<f64> {
+    match unit {
+        "g" => Some(1.0),
+        "mg" => Some(1.0e3),
+        "ug" => Some(1.0e6),
+        "m_s2" => Some(STANDARD_GRAVITY_M_S2),
+        "nm_s2" => Some(STANDARD_GRAVITY_M_S2 * 1.0e9),
+        "mgal" => Some(STANDARD_GRAVITY_M_S2 / M_S2_PER_MGAL),
+        "ugal" => Some(STANDARD_GRAVITY_M_S2 / M_S2_PER_MGAL * 1.0e3),
+        _ => None,
+    }
+}
+
+fn suffix_of(name: &str) -> String {
+    for s in ["nm_s2", "m_s2"] {
+        if name.ends_with(&format!("_{s}")) {
+            return s.into();
+        }
+    }
+    name.rsplit_once('_')
+        .map(|(_, s)| s.to_ascii_lowercase())
+        .unwrap_or_default()
+}
+
+/// Picks the output column: `requested`, else the first whose name starts with `output`,
+/// `gravity` or `a_i`.
+pub fn output_column(log: &Log, requested: Option<&str>) -> Option<String> {
+    if let Some(r) = requested {
+        return log.column(r).map(|_| r.to_owned());
+    }
+    log.column_names()
+        .iter()
+        .find(|n| {
+            let l = n.to_ascii_lowercase();
+            (l.starts_with("output") || l.starts_with("gravity") || l.starts_with("a_i"))
+                && log.column(n).is_some()
+        })
+        .cloned()
+}
+
+fn classify(name: &str) -> Option<(ChannelKind, f64)> {
+    let l = name.to_ascii_lowercase();
+    // Truth columns of simulated logs, raw ADC codes and resistances duplicate other channels
+    // or are not observables: never regressors.
+    if l.contains("true")
+        || l.contains("truth")
+        || l.ends_with("_code")
+        || l.ends_with("_ohm")
+        || l.ends_with("_ohms")
+        || l.starts_with("output")
+        || l.starts_with("a_i")
+        || l.starts_with("gravity")
+    {
+        return None;
+    }
+    if l == "input_g" {
+        return Some((ChannelKind::Input, 1.0));
+    }
+    if l.starts_with("tilt") {
+        let f = match suffix_of(&l).as_str() {
+            "arcsec" => accomp::units::RAD_PER_ARCSEC,
+            "mas" => accomp::units::RAD_PER_ARCSEC * 1.0e-3,
+            "urad" => 1.0e-6,
+            "mrad" => 1.0e-3,
+            "rad" => 1.0,
+            _ => return Some((ChannelKind::Other, 1.0)),
+        };
+        return Some((ChannelKind::Tilt, f));
+    }
+    match suffix_of(&l).as_str() {
+        "hpa" | "mbar" => Some((ChannelKind::Pressure, 100.0)),
+        "pa" => Some((ChannelKind::Pressure, 1.0)),
+        _ => Some((ChannelKind::Other, 1.0)),
+    }
+}
+
+/// Options of the reduction to a dataset.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DatasetOptions {
+    /// Output column (default: see [`output_column`]).
+    pub output: Option<String>,
+    /// Bin to at most this many points (block means, never across a gap).
+    pub max_points: usize,
+    /// Output units per g from a calibration (K1), used when the log does not say it.
+    pub unit_per_g_from_calibration: Option<f64>,
+}
+
+impl Default for DatasetOptions {
+    fn default() -> Self {
+        Self {
+            output: None,
+            max_points: 50_000,
+            unit_per_g_from_calibration: None,
+        }
+    }
+}
+
+/// Reduces a log to a dataset: picks the output and channels, drops rows with gaps (counted),
+/// bins to at most `max_points`, marks segments.
+pub fn dataset_from_log(log: &Log, opts: &DatasetOptions) -> Result<Dataset, ImportError> {
+    let out_name = output_column(log, opts.output.as_deref())
+        .ok_or_else(|| ImportError::Shape("no output column (output*, gravity*, a_i*)".into()))?;
+    let y_raw = log
+        .column(&out_name)
+        .ok_or_else(|| ImportError::Shape(format!("no column {out_name}")))?;
+    let unit = suffix_of(&out_name);
+    let meta = |k: &str| log.meta(k).and_then(|v| v.trim().parse::<f64>().ok());
+    let unit_per_g = unit_per_g_for_suffix(&unit)
+        .or_else(|| {
+            (unit == "v")
+                .then(|| meta("scale_factor_v_per_g"))
+                .flatten()
+        })
+        .or(opts.unit_per_g_from_calibration);
+    // Temperature: `temperature_c`, else the first `*_c` channel.
+    let names: Vec<String> = log.column_names().to_vec();
+    let temp_name = names
+        .iter()
+        .find(|n| n.as_str() == "temperature_c")
+        .or_else(|| {
+            names
+                .iter()
+                .find(|n| n.ends_with("_c") && classify(n).is_some())
+        })
+        .cloned();
+    let mut chans: Vec<(String, ChannelKind, f64, &[f64])> = Vec::new();
+    for n in &names {
+        if n == "time_s" || *n == out_name {
+            continue;
+        }
+        let Some(col) = log.column(n) else { continue };
+        let Some((mut kind, f)) = classify(n) else {
+            continue;
+        };
+        if Some(n) == temp_name.as_ref() {
+            kind = ChannelKind::Temperature;
+        }
+        let finite = col.iter().filter(|v| v.is_finite()).count();
+        // A channel mostly empty would cost most rows; it is left out and said so.
+        if finite * 10 < col.len() * 9 {
+            continue;
+        }
+        chans.push((n.clone(), kind, f, col));
+    }
+    let t = log.time_s();
+    let keep: Vec<usize> = (0..t.len())
+        .filter(|&i| y_raw[i].is_finite() && chans.iter().all(|c| c.3[i].is_finite()))
+        .collect();
+    let mut notes = vec![format!(
+        "{} rows read, {} dropped for a gap (NaN) in the output or a channel",
+        t.len(),
+        t.len() - keep.len()
+    )];
+    if keep.len() < 20 {
+        return Err(ImportError::Shape(format!(
+            "only {} usable rows",
+            keep.len()
+        )));
+    }
+    let mut dts: Vec<f64> = keep.windows(2).map(|w| t[w[1]] - t[w[0]]).collect();
+    dts.sort_by(f64::total_cmp);
+    let median_dt = dts[dts.len() / 2];
+    let span = t[keep[keep.len() - 1]] - t[keep[0]];
+    let bin = if keep.len() > opts.max_points {
+        (span / opts.max_points as f64).max(median_dt)
+    } else {
+        0.0
+    };
+    // Block means in bins of `bin` seconds (a bin never spans a gap: it simply has fewer
+    // samples, and an empty bin is a break).
+    let mut ts = Vec::new();
+    let mut ys = Vec::new();
+    let mut cs: Vec<Vec<f64>> = vec![Vec::new(); chans.len()];
+    let mut counts = Vec::new();
+    let t0 = t[keep[0]];
+    let mut cur: Option<i64> = None;
+    for &i in &keep {
+        let b = if bin > 0.0 {
+            ((t[i] - t0) / bin).floor() as i64
+        } else {
+            i as i64
+        };
+        if cur != Some(b) {
+            cur = Some(b);
+            ts.push(0.0);
+            ys.push(0.0);
+            for c in cs.iter_mut() {
+                c.push(0.0);
+            }
+            counts.push(0.0);
+        }
+        let k = ts.len() - 1;
+        ts[k] += t[i];
+        ys[k] += y_raw[i];
+        for (c, ch) in cs.iter_mut().zip(&chans) {
+            c[k] += ch.3[i] * ch.2;
+        }
+        counts[k] += 1.0;
+    }
+    for k in 0..ts.len() {
+        ts[k] /= counts[k];
+        ys[k] /= counts[k];
+        for c in cs.iter_mut() {
+            c[k] /= counts[k];
+        }
+    }
+    let dt = if bin > 0.0 { bin } else { median_dt };
+    let segment_start: Vec<bool> = (0..ts.len())
+        .map(|k| k == 0 || ts[k] - ts[k - 1] > 2.5 * dt)
+        .collect();
+    let n_seg = segment_start.iter().filter(|&&s| s).count();
+    notes.push(format!(
+        "{} points used (bin {:.3} s{}), {} contiguous segment(s)",
+        ts.len(),
+        dt,
+        if bin > 0.0 {
+            ", block means"
+        } else {
+            ", unbinned"
+        },
+        n_seg
+    ));
+    let channels: Vec<Channel> = chans
+        .iter()
+        .zip(cs)
+        .map(|(c, v)| Channel {
+            name: c.0.clone(),
+            kind: c.1,
+            values: v,
+        })
+        .collect();
+    let input_g = meta("input_g").or_else(|| {
+        channels
+            .iter()
+            .find(|c| c.kind == ChannelKind::Input)
+            .map(|c| c.values.iter().sum::<f64>() / c.values.len() as f64)
+    });
+    let site = match (meta("latitude_deg"), meta("longitude_deg")) {
+        (Some(la), Some(lo)) => Some((la, lo, meta("height_m").unwrap_or(0.0))),
+        _ => None,
+    };
+    Ok(Dataset {
+        t_s: ts,
+        y: ys,
+        segment_start,
+        channels,
+        output_name: out_name,
+        output_unit: unit,
+        unit_per_g,
+        input_g,
+        start_unix_s: log.meta("start_utc").and_then(parse_utc),
+        site,
+        dt_s: dt,
+        notes,
+    })
+}
+
+impl Dataset {
+    /// The first channel of a kind.
+    pub fn channel(&self, kind: ChannelKind) -> Option<&Channel> {
+        self.channels.iter().find(|c| c.kind == kind)
+    }
+    /// Number of points.
+    pub fn len(&self) -> usize {
+        self.y.len()
+    }
+    /// No points.
+    pub fn is_empty(&self) -> bool {
+        self.y.is_empty()
+    }
+    /// Duration covered, seconds.
+    pub fn span_s(&self) -> f64 {
+        match (self.t_s.first(), self.t_s.last()) {
+            (Some(a), Some(b)) => b - a,
+            _ => 0.0,
+        }
+    }
+    /// Whether this is a "1 g" record (|input| > 0.5 g); tilt enters as cos, tides as gravity.
+    pub fn is_one_g(&self) -> bool {
+        self.input_g.is_some_and(|g| g.abs() > 0.5)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn beijing_time_is_moved_to_utc_and_bad_rows_keep_their_line_numbers() {
+        let text = "2021 06 08 08 00 00  5882.3353 1002.2656\n\
+                    2021 06 08 08 01 00  5882.3373\n\
+                    2021 06 08 08 02 00  5882.3393 1002.2000\n\
+                    2021 06 08 08 02 00  5882.3393 1002.2000\n";
+        let (log, bad) = gmetrology_from_str(text).unwrap();
+        assert_eq!(log.meta("start_utc"), Some("2021-06-08T00:00:00.000Z"));
+        assert_eq!(log.time_s(), &[0.0, 120.0]);
+        assert_eq!(bad.iter().map(|b| b.line).collect::<Vec<_>>(), vec![2, 4]);
+    }
+
+    #[test]
+    fn utc_round_trips_through_text() {
+        let u = parse_utc("2020-07-31T12:15:00.015Z").unwrap();
+        assert_eq!(format_utc(u), "2020-07-31T12:15:00.015Z");
+        // 2020-07-31 is day 18474 after 1970-01-01.
+        assert!((u - (18_474.0 * 86_400.0 + 12.0 * 3600.0 + 900.015)).abs() < 1e-6);
+    }
+
+    #[test]
+    fn a_gap_splits_segments_and_nan_rows_are_dropped_not_filled() {
+        let mut log = Log::with_time(vec![0.0, 1.0, 2.0, 3.0, 10.0, 11.0, 12.0]).unwrap();
+        let mut y: Vec<f64> = (0..7).map(f64::from).collect();
+        y[2] = f64::NAN;
+        log.push_column("output_g", y).unwrap();
+        let mut ds_rows = vec![20.0; 7];
+        ds_rows[0] = 21.0;
+        log.push_column("temperature_c", ds_rows).unwrap();
+        let ds = dataset_from_log(&log, &DatasetOptions::default());
+        // Fewer than 20 rows is refused outright.
+        assert!(ds.is_err());
+        let t: Vec<f64> = (0..40)
+            .map(|i| if i < 20 { i as f64 } else { i as f64 + 50.0 })
+            .collect();
+        let mut log = Log::with_time(t).unwrap();
+        let mut y = vec![1.0; 40];
+        y[5] = f64::NAN;
+        log.push_column("output_g", y).unwrap();
+        let ds = dataset_from_log(&log, &DatasetOptions::default()).unwrap();
+        assert_eq!(ds.len(), 39);
+        assert_eq!(ds.segment_start.iter().filter(|&&s| s).count(), 2);
+        assert!(ds.segment_start[19]);
+        assert_eq!(ds.unit_per_g, Some(1.0));
+    }
+}

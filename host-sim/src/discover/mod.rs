@@ -1,0 +1,195 @@
+//! `accomp discover`: show what the model gets wrong on a measured record, name the physical
+//! cause from a catalogue, extend the model, and measure the gain out of sample.
+//!
+//! - [`import`]: our log, the gMetrology `.tsf`, the AQG CSV → [`import::Dataset`].
+//! - [`baseline`]: the calibration or static baseline and the (whitened) least squares.
+//! - [`residual`]: spectrum, correlations, trend/step, Allan deviation of the residual.
+//! - [`effects`]: the catalogue of named effects as design-matrix extensions.
+//! - [`select`]: greedy selection with BIC (effective sample size) and blocked cross-validation.
+//! - [`report`]: text, JSON and the Markdown report with figures.
+//!
+//! Method, catalogue, rates and measured-data findings: `docs/discovery.md`.
+
+pub mod baseline;
+pub mod effects;
+pub mod import;
+pub mod report;
+pub mod residual;
+pub mod select;
+
+use effects::{Context, Effect};
+use import::{Dataset, DatasetOptions, Format};
+use std::path::PathBuf;
+
+/// Arguments of `accomp discover`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct DiscoverArgs {
+    /// The record: a log (design/architecture.md), a gMetrology .tsf or the AQG CSV.
+    pub log: PathBuf,
+    /// Calibration table (`accomp fit -o`): the baseline becomes its prediction.
+    #[arg(long)]
+    pub calibration: Option<PathBuf>,
+    /// Print one JSON object.
+    #[arg(long)]
+    pub json: bool,
+    /// Write a Markdown report with figures into this directory.
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+    /// Record format.
+    #[arg(long, value_enum, default_value = "auto")]
+    pub format: Format,
+    /// Output column (default: first `output*`, `gravity*` or `a_i*` column).
+    #[arg(long)]
+    pub output: Option<String>,
+    /// Bin to at most this many points before fitting.
+    #[arg(long, default_value_t = 50_000)]
+    pub max_points: usize,
+}
+
+/// Everything a discovery run found.
+#[derive(Debug, Clone)]
+pub struct Discovery {
+    /// The dataset as fitted.
+    pub dataset: Dataset,
+    /// Baseline description and free-column names.
+    pub baseline_description: String,
+    /// Baseline column names.
+    pub baseline_names: Vec<String>,
+    /// Catalogue entries that were not candidates, with why.
+    pub not_candidates: Vec<(String, String)>,
+    /// Candidates considered.
+    pub candidates: Vec<Effect>,
+    /// The selection.
+    pub selection: select::Selection,
+    /// Residual analysis of the baseline.
+    pub spectrum_before: residual::Spectrum,
+    /// After.
+    pub spectrum_after: residual::Spectrum,
+    /// Correlations of the baseline residual.
+    pub correlations: Vec<residual::Correlation>,
+    /// Trend/step of the baseline residual.
+    pub trend: residual::Trend,
+    /// ADEV (tau, dev) of the baseline residual.
+    pub adev_before: Vec<(f64, f64)>,
+    /// ADEV of the final residual.
+    pub adev_after: Vec<(f64, f64)>,
+}
+
+/// The shared series of the candidates.
+pub fn context(ds: &Dataset, base: &baseline::Baseline) -> Context {
+    let tide = effects::tide_series(ds);
+    let tilt_term = if base.tilt_subtracted {
+        baseline::tilt_term_g(ds)
+            .map(|v| v.iter().map(|x| x * ds.unit_per_g.unwrap_or(1.0)).collect())
+    } else {
+        None
+    };
+    Context {
+        tide_gravity_g: tide.as_ref().map(|t| t.0.clone()),
+        tide_tilt_rad: tide.map(|t| (t.1, t.2)),
+        tilt_term,
+    }
+}
+
+/// Runs the whole discovery on a dataset.
+pub fn discover(
+    ds: Dataset,
+    table: Option<&accomp::table::CalibrationTable>,
+    cfg: &select::Config,
+) -> Result<Discovery, String> {
+    let base = match table {
+        Some(t) => baseline::calibrated_baseline(&ds, t)?,
+        None => baseline::static_baseline(&ds),
+    };
+    let ctx = context(&ds, &base);
+    let (cands, not_candidates) = effects::candidates(&ds, &ctx, base.tilt_subtracted);
+    let sel = select::select(&ds, &base.target, &base.columns, &cands, &ctx, cfg);
+    let spectrum_before = residual::periodogram(&ds.t_s, &sel.baseline_residual, 4096);
+    let spectrum_after = residual::periodogram(&ds.t_s, &sel.final_residual, 4096);
+    let correlations = residual::correlations(&ds, &sel.baseline_residual);
+    let trend = residual::trend(&ds, &sel.baseline_residual);
+    let adev_before = residual::adev(&ds, &sel.baseline_residual);
+    let adev_after = residual::adev(&ds, &sel.final_residual);
+    Ok(Discovery {
+        baseline_description: base.description.clone(),
+        baseline_names: base.names.clone(),
+        not_candidates,
+        candidates: cands,
+        selection: sel,
+        spectrum_before,
+        spectrum_after,
+        correlations,
+        trend,
+        adev_before,
+        adev_after,
+        dataset: ds,
+    })
+}
+
+/// Loads a record and runs the discovery (library entry point used by the CLI and the tests).
+pub fn discover_path(
+    path: &std::path::Path,
+    format: Format,
+    opts: &DatasetOptions,
+    table: Option<&accomp::table::CalibrationTable>,
+    cfg: &select::Config,
+) -> anyhow::Result<(Discovery, Vec<import::BadRow>)> {
+    let (log, bad) = import::load(path, format)?;
+    let mut opts = opts.clone();
+    if let Some(t) = table {
+        opts.unit_per_g_from_calibration = t
+            .thermal
+            .coefficients_at(t.thermal.reference)
+            .ok()
+            .map(|(k, _)| k.scale_factor_v_per_g);
+    }
+    let mut ds = import::dataset_from_log(&log, &opts)?;
+    if !bad.is_empty() {
+        ds.notes.push(format!(
+            "{} bad row(s) skipped: {}",
+            bad.len(),
+            bad.iter()
+                .take(10)
+                .map(|b| format!("line {}: {}", b.line, b.reason))
+                .collect::<Vec<_>>()
+                .join("; ")
+        ));
+    }
+    let d = discover(ds, table, cfg).map_err(anyhow::Error::msg)?;
+    Ok((d, bad))
+}
+
+/// `accomp discover`.
+pub fn run(args: &DiscoverArgs) -> anyhow::Result<()> {
+    let table = match &args.calibration {
+        Some(p) => {
+            let bytes = std::fs::read(p)?;
+            Some(
+                accomp::table::CalibrationTable::decode(&bytes)
+                    .map_err(|e| anyhow::anyhow!("{}: {e}", p.display()))?,
+            )
+        }
+        None => None,
+    };
+    let opts = DatasetOptions {
+        output: args.output.clone(),
+        max_points: args.max_points,
+        unit_per_g_from_calibration: None,
+    };
+    let (d, _bad) = discover_path(
+        &args.log,
+        args.format,
+        &opts,
+        table.as_ref(),
+        &select::Config::default(),
+    )?;
+    if let Some(dir) = &args.report {
+        report::write_report(&d, dir)?;
+    }
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report::json(&d))?);
+    } else {
+        print!("{}", report::text(&d));
+    }
+    Ok(())
+}
