@@ -200,23 +200,10 @@ pub fn tilt_compensated(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::units::RAD_PER_ARCMIN;
 
     /// The paper's printed order-2 models (Tables 2–5, raw °C), 30–65 °C, T0 = 60 °C.
     pub(crate) fn paper_order2(t0: f64) -> ThermalCompensator {
-        let scale = TemperatureScale::for_range(Celsius(30.0), Celsius(65.0)).unwrap();
-        let mono = |m: &[f64]| TempPoly::from_monomial_celsius(m, &scale).unwrap();
-        ThermalCompensator {
-            scale,
-            reference: Celsius(t0),
-            models: CoefficientModels {
-                bias_g: mono(&[0.003554, 2.97e-5, 2.46e-7]),
-                scale_factor_v_per_g: mono(&[1.324489, 5.99e-5, -3.07e-7]),
-                nonlinearity_g_per_g2: mono(&[-1.06e-5, 2.89e-7, -1.1e-9]),
-                misalignment_p_rad: mono(&[4.30, -0.0716, 5.16e-4]).scaled(RAD_PER_ARCMIN),
-                misalignment_o_rad: TempPoly::constant(0.0),
-            },
-        }
+        crate::reference::paper_order2_models(Celsius(t0))
     }
 
     #[test]

@@ -13,6 +13,7 @@ pub mod model;
 pub mod pipeline;
 pub mod poly;
 pub mod protocol;
+pub mod reference;
 pub mod rtd;
 pub mod service;
 pub mod storage;

@@ -631,53 +631,10 @@ impl core::fmt::Display for TableError {
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
-    use crate::units::RAD_PER_ARCMIN;
 
     /// A table with the paper's printed order-2 models, as a fixture for tests.
     pub(crate) fn paper_table() -> CalibrationTable {
-        let scale = TemperatureScale::for_range(Celsius(30.0), Celsius(65.0)).unwrap();
-        let mono = |m: &[f64]| TempPoly::from_monomial_celsius(m, &scale).unwrap();
-        CalibrationTable {
-            serial: CalibrationTable::serial_from_str("JN-06 A12124"),
-            date: CalibrationDate {
-                year: 2017,
-                month: 4,
-                day: 1,
-            },
-            thermal: ThermalCompensator {
-                scale,
-                reference: Celsius(60.0),
-                models: CoefficientModels {
-                    bias_g: mono(&[0.003554, 2.97e-5, 2.46e-7]),
-                    scale_factor_v_per_g: mono(&[1.324489, 5.99e-5, -3.07e-7]),
-                    nonlinearity_g_per_g2: mono(&[-1.06e-5, 2.89e-7, -1.1e-9]),
-                    misalignment_p_rad: mono(&[4.30, -0.0716, 5.16e-4]).scaled(RAD_PER_ARCMIN),
-                    misalignment_o_rad: TempPoly::constant(0.0),
-                },
-            },
-            tilt: TiltConfig {
-                reference: TiltArcsec(0.0),
-                scale_arcsec_per_v: 10.0,
-                axis: TiltAxis::Input,
-                adc_gain_correction: 1.0,
-                adc_offset: Volts(0.0),
-            },
-            rtd: RtdConfig {
-                cvd: CallendarVanDusen::IEC_60751_PT100,
-                reference_resistor: Ohms(5110.0),
-                adc_gain_correction: 1.0,
-                pga_gain: 16.0,
-            },
-            accel: AccelChannel {
-                adc_gain_correction: 1.0,
-                adc_offset: Volts(0.0),
-                sense_resistor: Ohms(1000.0),
-            },
-            orientation: Orientation {
-                cross: CrossAxis::default(),
-                nominal_input: Gs(1.0),
-            },
-        }
+        crate::reference::paper_order2_table()
     }
 
     fn reseal(b: &mut [u8; ENCODED_LEN]) {

@@ -10,14 +10,9 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use accomp::compensation::{CoefficientModels, ThermalCompensator};
-use accomp::model::CrossAxis;
 use accomp::poly::{TempPoly, TemperatureScale, MAX_ORDER};
-use accomp::rtd::CallendarVanDusen;
-use accomp::table::{
-    AccelChannel, CalibrationDate, CalibrationTable, Orientation, RtdConfig, TableError, TiltAxis,
-    TiltConfig,
-};
-use accomp::units::{Celsius, Gs, Ohms, TiltArcsec, Volts, RAD_PER_ARCMIN};
+use accomp::table::{CalibrationDate, CalibrationTable, TableError};
+use accomp::units::{Celsius, RAD_PER_ARCMIN};
 use serde::Serialize;
 use thiserror::Error;
 
@@ -676,14 +671,9 @@ pub fn fit_table(
 /// unit ADC gain corrections and zero offsets, orientation a_i = 1 g with no cross-axis input
 /// (the paper's 1 g stability test).
 pub mod defaults {
-    /// Reference resistor of the ratiometric RTD measurement, Ω.
-    pub const RTD_REFERENCE_OHMS: f64 = 5110.0;
-    /// AD7124 PGA gain of the RTD channel.
-    pub const RTD_PGA_GAIN: f64 = 16.0;
-    /// Sense resistor of the torquer current, Ω.
-    pub const SENSE_RESISTOR_OHMS: f64 = 1000.0;
-    /// Tiltmeter sensitivity, arcsec per volt.
-    pub const TILT_SCALE_ARCSEC_PER_V: f64 = 10.0;
+    pub use accomp::reference::board::{
+        RTD_PGA_GAIN, RTD_REFERENCE_OHMS, SENSE_RESISTOR_OHMS, TILT_SCALE_ARCSEC_PER_V,
+    };
     /// Nominal input of the test, g.
     pub const NOMINAL_INPUT_G: f64 = 1.0;
 }
@@ -724,37 +714,15 @@ pub fn calibration_table(
             .unwrap_or_default()
             .scaled(RAD_PER_ARCMIN),
     };
-    let table = CalibrationTable {
-        serial: CalibrationTable::serial_from_str(serial),
+    let table = CalibrationTable::with_board_defaults(
+        serial,
         date,
-        thermal: ThermalCompensator {
+        ThermalCompensator {
             scale,
             reference,
             models,
         },
-        tilt: TiltConfig {
-            reference: TiltArcsec(0.0),
-            scale_arcsec_per_v: defaults::TILT_SCALE_ARCSEC_PER_V,
-            axis: TiltAxis::Input,
-            adc_gain_correction: 1.0,
-            adc_offset: Volts(0.0),
-        },
-        rtd: RtdConfig {
-            cvd: CallendarVanDusen::IEC_60751_PT100,
-            reference_resistor: Ohms(defaults::RTD_REFERENCE_OHMS),
-            adc_gain_correction: 1.0,
-            pga_gain: defaults::RTD_PGA_GAIN,
-        },
-        accel: AccelChannel {
-            adc_gain_correction: 1.0,
-            adc_offset: Volts(0.0),
-            sense_resistor: Ohms(defaults::SENSE_RESISTOR_OHMS),
-        },
-        orientation: Orientation {
-            cross: CrossAxis::default(),
-            nominal_input: Gs(defaults::NOMINAL_INPUT_G),
-        },
-    };
+    );
     table.validate().map_err(BuildError::Table)?;
     Ok(table)
 }

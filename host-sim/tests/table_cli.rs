@@ -1,9 +1,7 @@
 //! `accomp table show|verify` on files written by the core encoder, good and corrupted.
 
 use accomp::compensation::{CoefficientModels, ThermalCompensator};
-use accomp::model::CrossAxis;
 use accomp::poly::{TempPoly, TemperatureScale};
-use accomp::rtd::CallendarVanDusen;
 use accomp::table::*;
 use accomp::units::*;
 use std::path::PathBuf;
@@ -11,14 +9,14 @@ use std::process::Command;
 
 fn table() -> CalibrationTable {
     let scale = TemperatureScale::for_range(Celsius(30.0), Celsius(65.0)).unwrap();
-    CalibrationTable {
-        serial: CalibrationTable::serial_from_str("SNJ-103"),
-        date: CalibrationDate {
+    CalibrationTable::with_board_defaults(
+        "SNJ-103",
+        CalibrationDate {
             year: 2026,
             month: 11,
             day: 21,
         },
-        thermal: ThermalCompensator {
+        ThermalCompensator {
             scale,
             reference: Celsius(60.0),
             models: CoefficientModels {
@@ -29,29 +27,7 @@ fn table() -> CalibrationTable {
                 misalignment_o_rad: TempPoly::constant(0.0),
             },
         },
-        tilt: TiltConfig {
-            reference: TiltArcsec(0.0),
-            scale_arcsec_per_v: 10.0,
-            axis: TiltAxis::Input,
-            adc_gain_correction: 1.0,
-            adc_offset: Volts(0.0),
-        },
-        rtd: RtdConfig {
-            cvd: CallendarVanDusen::IEC_60751_PT100,
-            reference_resistor: Ohms(5110.0),
-            adc_gain_correction: 1.0,
-            pga_gain: 16.0,
-        },
-        accel: AccelChannel {
-            adc_gain_correction: 1.0,
-            adc_offset: Volts(0.0),
-            sense_resistor: Ohms(1000.0),
-        },
-        orientation: Orientation {
-            cross: CrossAxis::default(),
-            nominal_input: Gs(1.0),
-        },
-    }
+    )
 }
 
 fn write(name: &str, bytes: &[u8]) -> PathBuf {

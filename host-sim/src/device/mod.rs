@@ -97,64 +97,18 @@ impl Connection {
     }
 }
 
-use accomp::compensation::{CoefficientModels, ThermalCompensator};
 use accomp::model::CrossAxis;
-use accomp::poly::{TempPoly, TemperatureScale};
-use accomp::rtd::CallendarVanDusen;
-use accomp::table::{
-    AccelChannel, CalibrationDate, CalibrationTable, Orientation, RtdConfig, TiltAxis, TiltConfig,
-};
-use accomp::units::{Celsius, Gs, Ohms, TiltArcsec, Volts, RAD_PER_ARCMIN};
+use accomp::table::CalibrationTable;
+use accomp::units::{Gs, TiltArcsec};
 
 /// The paper's JN-06 A12124 second-order models over 30–65 °C (Table 2 coefficients).
 pub fn paper_table() -> CalibrationTable {
-    let scale = TemperatureScale::for_range(Celsius(30.0), Celsius(65.0))
-        .expect("the paper's models are valid");
-    let mono = |m: &[f64]| {
-        TempPoly::from_monomial_celsius(m, &scale).expect("the paper's models are valid")
+    let mut t = accomp::reference::paper_order2_table();
+    // Non-zero tilt reference and cross-axis input so that those paths are exercised.
+    t.tilt.reference = TiltArcsec(0.5);
+    t.orientation.cross = CrossAxis {
+        a_p: Gs(0.0),
+        a_o: Gs(0.3),
     };
-    CalibrationTable {
-        serial: CalibrationTable::serial_from_str("JN-06 A12124"),
-        date: CalibrationDate {
-            year: 2017,
-            month: 4,
-            day: 1,
-        },
-        thermal: ThermalCompensator {
-            scale,
-            reference: Celsius(60.0),
-            models: CoefficientModels {
-                bias_g: mono(&[0.003554, 2.97e-5, 2.46e-7]),
-                scale_factor_v_per_g: mono(&[1.324489, 5.99e-5, -3.07e-7]),
-                nonlinearity_g_per_g2: mono(&[-1.06e-5, 2.89e-7, -1.1e-9]),
-                misalignment_p_rad: mono(&[4.30, -0.0716, 5.16e-4]).scaled(RAD_PER_ARCMIN),
-                misalignment_o_rad: TempPoly::constant(0.0),
-            },
-        },
-        tilt: TiltConfig {
-            reference: TiltArcsec(0.5),
-            scale_arcsec_per_v: 10.0,
-            axis: TiltAxis::Input,
-            adc_gain_correction: 1.0,
-            adc_offset: Volts(0.0),
-        },
-        rtd: RtdConfig {
-            cvd: CallendarVanDusen::IEC_60751_PT100,
-            reference_resistor: Ohms(5110.0),
-            adc_gain_correction: 1.0,
-            pga_gain: 16.0,
-        },
-        accel: AccelChannel {
-            adc_gain_correction: 1.0,
-            adc_offset: Volts(0.0),
-            sense_resistor: Ohms(1000.0),
-        },
-        orientation: Orientation {
-            cross: CrossAxis {
-                a_p: Gs(0.0),
-                a_o: Gs(0.3),
-            },
-            nominal_input: Gs(1.0),
-        },
-    }
+    t
 }

@@ -21,11 +21,10 @@
 
 use std::path::PathBuf;
 
-use accomp::compensation::{CoefficientModels, ThermalCompensator};
+use accomp::compensation::ThermalCompensator;
 use accomp::model::{CrossAxis, StaticCoefficients};
-use accomp::poly::{TempPoly, TemperatureScale};
 use accomp::table::CalibrationTable;
-use accomp::units::{Celsius, Gs, Radians, Volts, RAD_PER_ARCMIN, RAD_PER_ARCSEC};
+use accomp::units::{Celsius, Gs, Radians, Volts, RAD_PER_ARCSEC};
 use serde::{Deserialize, Serialize};
 
 use super::noise::{gauss, AllanNoise, AllanParams, SimRng};
@@ -118,25 +117,7 @@ pub enum AccelError {
 
 /// The paper's printed order-2 models of JN-06 A12124 (Tables 2–5), T0 = `reference_c`.
 pub fn paper_order2_models(reference_c: f64) -> ThermalCompensator {
-    // 30–65 °C is a valid, non-empty range: for_range cannot fail on it.
-    let scale = TemperatureScale {
-        min: Celsius(30.0),
-        max: Celsius(65.0),
-        center: Celsius(47.5),
-        half_span_c: 17.5,
-    };
-    let mono = |m: &[f64]| TempPoly::from_monomial_celsius(m, &scale).unwrap_or_default();
-    ThermalCompensator {
-        scale,
-        reference: Celsius(reference_c),
-        models: CoefficientModels {
-            bias_g: mono(&[0.003554, 2.97e-5, 2.46e-7]),
-            scale_factor_v_per_g: mono(&[1.324489, 5.99e-5, -3.07e-7]),
-            nonlinearity_g_per_g2: mono(&[-1.06e-5, 2.89e-7, -1.1e-9]),
-            misalignment_p_rad: mono(&[4.30, -0.0716, 5.16e-4]).scaled(RAD_PER_ARCMIN),
-            misalignment_o_rad: TempPoly::constant(0.0),
-        },
-    }
+    accomp::reference::paper_order2_models(Celsius(reference_c))
 }
 
 impl CalibrationSource {
@@ -406,41 +387,18 @@ mod tests {
 
     #[test]
     fn a_table_file_written_by_fit_is_loaded_as_the_true_models() {
-        use accomp::rtd::CallendarVanDusen;
         use accomp::table::*;
-        use accomp::units::{Ohms, TiltArcsec};
+
         let thermal = paper_order2_models(55.0);
-        let table = CalibrationTable {
-            serial: CalibrationTable::serial_from_str("SIM-TEST"),
-            date: CalibrationDate {
+        let table = CalibrationTable::with_board_defaults(
+            "SIM-TEST",
+            CalibrationDate {
                 year: 2026,
                 month: 1,
                 day: 2,
             },
             thermal,
-            tilt: TiltConfig {
-                reference: TiltArcsec(0.0),
-                scale_arcsec_per_v: 10.0,
-                axis: TiltAxis::Input,
-                adc_gain_correction: 1.0,
-                adc_offset: Volts(0.0),
-            },
-            rtd: RtdConfig {
-                cvd: CallendarVanDusen::IEC_60751_PT100,
-                reference_resistor: Ohms(5110.0),
-                adc_gain_correction: 1.0,
-                pga_gain: 16.0,
-            },
-            accel: AccelChannel {
-                adc_gain_correction: 1.0,
-                adc_offset: Volts(0.0),
-                sense_resistor: Ohms(1000.0),
-            },
-            orientation: accomp::table::Orientation {
-                cross: CrossAxis::default(),
-                nominal_input: Gs(1.0),
-            },
-        };
+        );
         let path =
             std::env::temp_dir().join(format!("accomp-sim-table-{}.bin", std::process::id()));
         std::fs::write(&path, table.encode()).unwrap();
