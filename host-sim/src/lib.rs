@@ -1,4 +1,7 @@
 //! Host-side library behind the `accomp` CLI: fitting, simulation, analysis, firmware client.
 
+pub mod allan;
 pub mod fit;
+pub mod log;
+pub mod stability;
 pub mod table_cli;

@@ -20,6 +20,8 @@ enum Command {
     Fit(accomp_host::fit::FitArgs),
     /// Inspect or check a calibration table file.
     Table(accomp_host::table_cli::TableArgs),
+    /// Stability (std, drift), OADEV and MDEV of a log's output columns.
+    Stability(accomp_host::stability::StabilityArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -27,5 +29,6 @@ fn main() -> anyhow::Result<()> {
     match cli.command {
         Command::Fit(args) => accomp_host::fit::run(&args),
         Command::Table(args) => accomp_host::table_cli::run(&args),
+        Command::Stability(args) => Ok(accomp_host::stability::run(&args)?),
     }
 }

@@ -1,0 +1,791 @@
+//! Stability-test logs: the CSV the board streams, the CLI records and every analysis reads.
+//!
+//! # Format (design/architecture.md, "Log format")
+//!
+//! ```text
+//! # instrument: JN-06 A12124
+//! # start_utc: 2024-03-01T00:00:00Z
+//! # input_g: 1
+//! # scale_factor_v_per_g: 1.3301
+//! time_s,output_v,temperature_c,tilt_arcsec,status
+//! 0,1.3301234,60.001,0.12,ok
+//! 1,1.3301236,60.002,,ok
+//! ```
+//!
+//! - Lines starting with `#` *before the header* are metadata. `# key: value` lines are kept as
+//!   (key, value) pairs in file order (the first `:` splits key from value; both are trimmed). A
+//!   `#` line without a `:` is a free comment and is ignored. `#` lines after the header are
+//!   rejected as bad rows: a comment in the middle of the samples usually means two logs were
+//!   concatenated, which must not pass silently.
+//! - Empty lines (also `\r\n` ones) are skipped wherever they are.
+//! - One header row of comma-separated column names. `time_s` (seconds since `start_utc`) is
+//!   required, and so is at least one other column. Names carry their unit as a suffix
+//!   (`temperature_c`, `tilt_arcsec`, `output_v`, `a_i_exact_g`, ...).
+//! - One row per sample, exactly as many fields as the header. Fields are trimmed of spaces.
+//! - `time_s` must be finite and strictly increasing: a repeated or backwards time stamp is a bad
+//!   row, because every later analysis (spacing, Allan deviation, regression against time)
+//!   silently breaks on it.
+//! - **Gaps**: in any numeric column other than `time_s`, an empty field or `NaN`/`nan` is an
+//!   explicit gap and is stored as `f64::NAN`. Analyses treat NaN as "no reading" (see
+//!   `stability` and `allan` for their policies); nothing is interpolated. Infinities are rejected.
+//! - **Text columns**: a column named `status` or ending in `_status` or `_flags` holds
+//!   free text (status words, hex flag masks). Its values are kept verbatim, interned (each
+//!   distinct string stored once), see [`TextColumn`].
+//!
+//! Writing ([`Log::write_to`]) produces the same format; numbers are printed with Rust's shortest
+//! round-trip representation, so `read(write(log)) == log` bit for bit, NaN gaps as empty fields.
+
+use std::collections::HashMap;
+use std::fmt;
+use std::fs::File;
+use std::io::{BufRead, BufReader, BufWriter, Read, Write};
+use std::path::Path;
+
+/// Name of the required time column (seconds since `start_utc`).
+pub const TIME_COLUMN: &str = "time_s";
+
+/// What went wrong while reading or writing a log.
+#[derive(Debug, thiserror::Error)]
+pub enum LogError {
+    /// The file could not be opened, read or written.
+    #[error("log I/O: {0}")]
+    Io(#[from] std::io::Error),
+    /// The file ended before a header row.
+    #[error("log has no header row")]
+    MissingHeader,
+    /// The header has no `time_s` column.
+    #[error("log header (line {line}) has no `time_s` column")]
+    MissingTime {
+        /// 1-based line number of the header.
+        line: usize,
+    },
+    /// The header has only `time_s`.
+    #[error("log header (line {line}) has no column besides `time_s`")]
+    NoOutputColumn {
+        /// 1-based line number of the header.
+        line: usize,
+    },
+    /// The header is malformed (empty or duplicate name).
+    #[error("log header (line {line}): {reason}")]
+    BadHeader {
+        /// 1-based line number of the header.
+        line: usize,
+        /// What is wrong with it.
+        reason: String,
+    },
+    /// A data row is malformed.
+    #[error("log line {line}: {reason}")]
+    BadRow {
+        /// 1-based line number in the file.
+        line: usize,
+        /// What is wrong with the row.
+        reason: String,
+    },
+    /// A metadata value could not be parsed as the type asked for.
+    #[error("log metadata `{key}`: cannot parse {value:?} as a number")]
+    BadMeta {
+        /// The metadata key.
+        key: String,
+        /// Its raw value.
+        value: String,
+    },
+    /// A log being built has columns of different lengths or a bad name.
+    #[error("log construction: {0}")]
+    Shape(String),
+}
+
+/// A text column (e.g. `status`): values interned, one index per row.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct TextColumn {
+    /// Distinct values in order of first appearance.
+    values: Vec<String>,
+    /// Per row, an index into `values`. u32: a log of more than 4 G distinct status words is
+    /// not a log.
+    rows: Vec<u32>,
+}
+
+impl TextColumn {
+    /// Builds a column from per-row strings.
+    pub fn from_strings<S: AsRef<str>>(rows: &[S]) -> Self {
+        let mut c = TextColumn::default();
+        let mut index: HashMap<String, u32> = HashMap::new();
+        for r in rows {
+            c.push(r.as_ref(), &mut index);
+        }
+        c
+    }
+
+    fn push(&mut self, s: &str, index: &mut HashMap<String, u32>) {
+        // Status words repeat on almost every row: look up the previous row's value first.
+        if let Some(&last) = self.rows.last() {
+            if self.values.get(last as usize).is_some_and(|v| v == s) {
+                self.rows.push(last);
+                return;
+            }
+        }
+        let id = match index.get(s) {
+            Some(&id) => id,
+            None => {
+                let id = self.values.len() as u32;
+                self.values.push(s.to_owned());
+                index.insert(s.to_owned(), id);
+                id
+            }
+        };
+        self.rows.push(id);
+    }
+
+    /// Number of rows.
+    pub fn len(&self) -> usize {
+        self.rows.len()
+    }
+
+    /// True if the column has no rows.
+    pub fn is_empty(&self) -> bool {
+        self.rows.is_empty()
+    }
+
+    /// The value of row `i`, or `None` past the end.
+    pub fn get(&self, i: usize) -> Option<&str> {
+        let id = *self.rows.get(i)?;
+        self.values.get(id as usize).map(String::as_str)
+    }
+
+    /// Distinct values, in order of first appearance.
+    pub fn distinct(&self) -> &[String] {
+        &self.values
+    }
+
+    /// Iterates over the rows' values.
+    pub fn iter(&self) -> impl Iterator<Item = &str> + '_ {
+        self.rows
+            .iter()
+            .map(move |&id| self.values.get(id as usize).map_or("", String::as_str))
+    }
+}
+
+/// One column's storage.
+#[derive(Debug, Clone, PartialEq)]
+enum ColumnData {
+    Numeric(Vec<f64>),
+    Text(TextColumn),
+}
+
+/// True if a column of this name holds text rather than numbers (see module docs).
+pub fn is_text_column_name(name: &str) -> bool {
+    name == "status" || name.ends_with("_status") || name.ends_with("_flags")
+}
+
+/// The unit suffix of a column name: the part after the last `_` (`"temperature_c"` → `"c"`).
+pub fn unit_suffix(name: &str) -> Option<&str> {
+    name.rsplit_once('_')
+        .map(|(_, u)| u)
+        .filter(|u| !u.is_empty())
+}
+
+/// A stability-test log in memory: metadata, column names, and columns.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Log {
+    meta: Vec<(String, String)>,
+    names: Vec<String>,
+    columns: Vec<ColumnData>,
+    rows: usize,
+}
+
+impl Log {
+    /// A log with the given `time_s` values and no other column yet (add them with
+    /// [`Log::push_column`] / [`Log::push_text_column`]); for writers such as the simulator.
+    pub fn with_time(time_s: Vec<f64>) -> Result<Self, LogError> {
+        for (i, w) in time_s.windows(2).enumerate() {
+            let (a, b) = (w[0], w[1]);
+            if b <= a || b.is_nan() || a.is_nan() || b.is_infinite() || a.is_infinite() {
+                return Err(LogError::Shape(format!(
+                    "time_s not finite and strictly increasing at sample {}",
+                    i + 1
+                )));
+            }
+        }
+        if time_s.len() == 1 && !time_s[0].is_finite() {
+            return Err(LogError::Shape("time_s not finite".into()));
+        }
+        Ok(Log {
+            meta: Vec::new(),
+            names: vec![TIME_COLUMN.to_owned()],
+            rows: time_s.len(),
+            columns: vec![ColumnData::Numeric(time_s)],
+        })
+    }
+
+    fn check_new_name(&self, name: &str, len: usize) -> Result<(), LogError> {
+        if name.is_empty() || name.contains([',', '\n', '\r', '#']) || name.trim() != name {
+            return Err(LogError::Shape(format!("bad column name {name:?}")));
+        }
+        if self.names.iter().any(|n| n == name) {
+            return Err(LogError::Shape(format!("duplicate column {name:?}")));
+        }
+        if len != self.rows {
+            return Err(LogError::Shape(format!(
+                "column {name:?} has {len} rows, log has {}",
+                self.rows
+            )));
+        }
+        Ok(())
+    }
+
+    /// Appends a numeric column (NaN = gap). Its length must match `time_s`.
+    pub fn push_column(&mut self, name: &str, values: Vec<f64>) -> Result<(), LogError> {
+        self.check_new_name(name, values.len())?;
+        if is_text_column_name(name) {
+            return Err(LogError::Shape(format!(
+                "{name:?} is a text column name; use push_text_column"
+            )));
+        }
+        if values.iter().any(|v| v.is_infinite()) {
+            return Err(LogError::Shape(format!("column {name:?} has an infinity")));
+        }
+        self.names.push(name.to_owned());
+        self.columns.push(ColumnData::Numeric(values));
+        Ok(())
+    }
+
+    /// Appends a text column (name must be `status`, `*_status` or `*_flags`). Values must not
+    /// contain commas or line breaks.
+    pub fn push_text_column(&mut self, name: &str, values: TextColumn) -> Result<(), LogError> {
+        self.check_new_name(name, values.len())?;
+        if !is_text_column_name(name) {
+            return Err(LogError::Shape(format!(
+                "{name:?} is not a text column name (status, *_status, *_flags)"
+            )));
+        }
+        if values
+            .distinct()
+            .iter()
+            .any(|v| v.contains([',', '\n', '\r']))
+        {
+            return Err(LogError::Shape(format!(
+                "text column {name:?} has a value with a comma or line break"
+            )));
+        }
+        self.names.push(name.to_owned());
+        self.columns.push(ColumnData::Text(values));
+        Ok(())
+    }
+
+    /// Sets (or replaces) a metadata entry. Keys must not contain `:` or line breaks.
+    pub fn set_meta(&mut self, key: &str, value: &str) -> Result<(), LogError> {
+        if key.is_empty() || key.contains([':', '\n', '\r']) || value.contains(['\n', '\r']) {
+            return Err(LogError::Shape(format!("bad metadata {key:?}: {value:?}")));
+        }
+        match self.meta.iter_mut().find(|(k, _)| k == key) {
+            Some((_, v)) => *v = value.to_owned(),
+            None => self.meta.push((key.to_owned(), value.to_owned())),
+        }
+        Ok(())
+    }
+
+    /// Number of sample rows.
+    pub fn len(&self) -> usize {
+        self.rows
+    }
+
+    /// True if the log has no sample rows.
+    pub fn is_empty(&self) -> bool {
+        self.rows == 0
+    }
+
+    /// Metadata value for `key` (`# key: value`), trimmed.
+    pub fn meta(&self, key: &str) -> Option<&str> {
+        self.meta
+            .iter()
+            .find(|(k, _)| k == key)
+            .map(|(_, v)| v.as_str())
+    }
+
+    /// Metadata value for `key` parsed as a number: `Ok(None)` if absent, an error if present but
+    /// not a finite number.
+    pub fn meta_f64(&self, key: &str) -> Result<Option<f64>, LogError> {
+        match self.meta(key) {
+            None => Ok(None),
+            Some(v) => match v.parse::<f64>() {
+                Ok(x) if x.is_finite() => Ok(Some(x)),
+                _ => Err(LogError::BadMeta {
+                    key: key.to_owned(),
+                    value: v.to_owned(),
+                }),
+            },
+        }
+    }
+
+    /// All metadata entries in file order.
+    pub fn metadata(&self) -> &[(String, String)] {
+        &self.meta
+    }
+
+    /// Column names in file order (`time_s` included).
+    pub fn column_names(&self) -> &[String] {
+        &self.names
+    }
+
+    /// The `time_s` column.
+    pub fn time_s(&self) -> &[f64] {
+        // The constructor and the reader guarantee a numeric time column; an empty slice is the
+        // only sane answer should that ever be broken.
+        self.column(TIME_COLUMN).unwrap_or(&[])
+    }
+
+    /// A numeric column by name (NaN = gap); `None` if absent or a text column.
+    pub fn column(&self, name: &str) -> Option<&[f64]> {
+        let i = self.names.iter().position(|n| n == name)?;
+        match self.columns.get(i)? {
+            ColumnData::Numeric(v) => Some(v),
+            ColumnData::Text(_) => None,
+        }
+    }
+
+    /// A text column by name; `None` if absent or numeric.
+    pub fn text_column(&self, name: &str) -> Option<&TextColumn> {
+        let i = self.names.iter().position(|n| n == name)?;
+        match self.columns.get(i)? {
+            ColumnData::Text(t) => Some(t),
+            ColumnData::Numeric(_) => None,
+        }
+    }
+
+    /// Reads a log from a file.
+    pub fn read_path(path: impl AsRef<Path>) -> Result<Self, LogError> {
+        let f = File::open(path)?;
+        Self::read(BufReader::with_capacity(1 << 20, f))
+    }
+
+    /// Parses a log held in a string.
+    pub fn parse_str(s: &str) -> Result<Self, LogError> {
+        Self::read(s.as_bytes())
+    }
+
+    /// Reads a log from any buffered reader. Streams line by line (one reused buffer), parsing
+    /// fields in place: no per-row allocation for numeric columns.
+    pub fn read<R: BufRead>(mut r: R) -> Result<Self, LogError> {
+        let mut buf: Vec<u8> = Vec::with_capacity(256);
+        let mut line_no = 0usize;
+        let mut meta: Vec<(String, String)> = Vec::new();
+
+        // Metadata and header.
+        let header = loop {
+            buf.clear();
+            if r.read_until(b'\n', &mut buf)? == 0 {
+                return Err(LogError::MissingHeader);
+            }
+            line_no += 1;
+            let line = trim_eol(&buf);
+            if line.iter().all(|b| b.is_ascii_whitespace()) {
+                continue;
+            }
+            let text = std::str::from_utf8(line).map_err(|_| LogError::BadRow {
+                line: line_no,
+                reason: "not UTF-8".into(),
+            })?;
+            if let Some(c) = text.strip_prefix('#') {
+                if let Some((k, v)) = c.split_once(':') {
+                    let k = k.trim();
+                    if !k.is_empty() {
+                        let v = v.trim().to_owned();
+                        match meta.iter_mut().find(|(mk, _)| mk == k) {
+                            Some((_, mv)) => *mv = v,
+                            None => meta.push((k.to_owned(), v)),
+                        }
+                    }
+                }
+                continue;
+            }
+            break text.to_owned();
+        };
+        let header_line = line_no;
+        let names: Vec<String> = header.split(',').map(|s| s.trim().to_owned()).collect();
+        for (i, n) in names.iter().enumerate() {
+            if n.is_empty() {
+                return Err(LogError::BadHeader {
+                    line: header_line,
+                    reason: format!("column {} has an empty name", i + 1),
+                });
+            }
+            if names[..i].contains(n) {
+                return Err(LogError::BadHeader {
+                    line: header_line,
+                    reason: format!("duplicate column {n:?}"),
+                });
+            }
+        }
+        let time_idx = names
+            .iter()
+            .position(|n| n == TIME_COLUMN)
+            .ok_or(LogError::MissingTime { line: header_line })?;
+        if names.len() < 2 {
+            return Err(LogError::NoOutputColumn { line: header_line });
+        }
+
+        let ncols = names.len();
+        let is_text: Vec<bool> = names.iter().map(|n| is_text_column_name(n)).collect();
+        let mut numeric: Vec<Vec<f64>> = vec![Vec::new(); ncols];
+        let mut text: Vec<TextColumn> = vec![TextColumn::default(); ncols];
+        let mut text_index: Vec<HashMap<String, u32>> = vec![HashMap::new(); ncols];
+        let mut rows = 0usize;
+        let mut last_t = f64::NEG_INFINITY;
+
+        loop {
+            buf.clear();
+            if r.read_until(b'\n', &mut buf)? == 0 {
+                break;
+            }
+            line_no += 1;
+            let line = trim_eol(&buf);
+            if line.is_empty() || line.iter().all(|b| b.is_ascii_whitespace()) {
+                continue;
+            }
+            let bad = |reason: String| LogError::BadRow {
+                line: line_no,
+                reason,
+            };
+            if line.first() == Some(&b'#') {
+                return Err(bad("comment line after the header".into()));
+            }
+            let mut fields = line.split(|&b| b == b',');
+            for col in 0..ncols {
+                let Some(field) = fields.next() else {
+                    return Err(bad(format!(
+                        "wrong column count: {col} fields, header has {ncols}"
+                    )));
+                };
+                let field = trim_spaces(field);
+                if is_text[col] {
+                    let s = std::str::from_utf8(field)
+                        .map_err(|_| bad(format!("column {:?}: not UTF-8", names[col])))?;
+                    text[col].push(s, &mut text_index[col]);
+                    continue;
+                }
+                let v = match parse_field(field) {
+                    Some(v) => v,
+                    None => {
+                        return Err(bad(format!(
+                            "column {:?}: non-numeric field {:?}",
+                            names[col],
+                            String::from_utf8_lossy(field)
+                        )))
+                    }
+                };
+                if col == time_idx {
+                    if !v.is_finite() {
+                        return Err(bad("time_s is empty or not a number".into()));
+                    }
+                    if v <= last_t {
+                        return Err(bad(format!(
+                            "non-monotonic time: time_s {v} after {last_t}"
+                        )));
+                    }
+                    last_t = v;
+                }
+                numeric[col].push(v);
+            }
+            if fields.next().is_some() {
+                let n = ncols + 1 + fields.count();
+                return Err(bad(format!(
+                    "wrong column count: {n} fields, header has {ncols}"
+                )));
+            }
+            rows += 1;
+        }
+
+        let columns = numeric
+            .into_iter()
+            .zip(text)
+            .zip(&is_text)
+            .map(|((n, t), &is_t)| {
+                if is_t {
+                    ColumnData::Text(t)
+                } else {
+                    ColumnData::Numeric(n)
+                }
+            })
+            .collect();
+        Ok(Log {
+            meta,
+            names,
+            columns,
+            rows,
+        })
+    }
+
+    /// Writes the log in the format described in the module docs.
+    pub fn write_to<W: Write>(&self, w: W) -> Result<(), LogError> {
+        let mut w = BufWriter::with_capacity(1 << 20, w);
+        for (k, v) in &self.meta {
+            writeln!(w, "# {k}: {v}")?;
+        }
+        writeln!(w, "{}", self.names.join(","))?;
+        let mut line = String::with_capacity(256);
+        for row in 0..self.rows {
+            line.clear();
+            for (i, c) in self.columns.iter().enumerate() {
+                if i > 0 {
+                    line.push(',');
+                }
+                match c {
+                    ColumnData::Numeric(v) => push_f64(&mut line, v.get(row).copied()),
+                    ColumnData::Text(t) => line.push_str(t.get(row).unwrap_or("")),
+                }
+            }
+            line.push('\n');
+            w.write_all(line.as_bytes())?;
+        }
+        w.flush()?;
+        Ok(())
+    }
+
+    /// Writes the log to a file (created or truncated).
+    pub fn write_path(&self, path: impl AsRef<Path>) -> Result<(), LogError> {
+        self.write_to(File::create(path)?)
+    }
+
+    /// Reads a log from any reader (unbuffered readers get a buffer).
+    pub fn read_unbuffered<R: Read>(r: R) -> Result<Self, LogError> {
+        Self::read(BufReader::with_capacity(1 << 20, r))
+    }
+}
+
+impl fmt::Display for Log {
+    /// A one-line summary, for messages.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "log: {} rows, columns [{}]",
+            self.rows,
+            self.names.join(", ")
+        )
+    }
+}
+
+fn trim_eol(b: &[u8]) -> &[u8] {
+    let b = b.strip_suffix(b"\n").unwrap_or(b);
+    b.strip_suffix(b"\r").unwrap_or(b)
+}
+
+fn trim_spaces(mut b: &[u8]) -> &[u8] {
+    while let [first, rest @ ..] = b {
+        if *first == b' ' || *first == b'\t' {
+            b = rest;
+        } else {
+            break;
+        }
+    }
+    while let [rest @ .., last] = b {
+        if *last == b' ' || *last == b'\t' {
+            b = rest;
+        } else {
+            break;
+        }
+    }
+    b
+}
+
+/// Parses one numeric field: empty or NaN → NaN (a gap); infinities and junk → `None`.
+///
+/// std's `f64::from_str` is an Eisel–Lemire implementation (correctly rounded, ~20 ns per field),
+/// which is why no float-parsing crate is pulled in; the bytes are ASCII-checked by it.
+fn parse_field(field: &[u8]) -> Option<f64> {
+    if field.is_empty() {
+        return Some(f64::NAN);
+    }
+    // Safe to view as str only if UTF-8; numbers are ASCII, anything else is junk anyway.
+    let s = std::str::from_utf8(field).ok()?;
+    match s.parse::<f64>() {
+        Ok(v) if v.is_nan() => Some(f64::NAN),
+        Ok(v) if v.is_infinite() => None,
+        Ok(v) => Some(v),
+        Err(_) => None,
+    }
+}
+
+/// Shortest round-trip text for a float; NaN → empty (a gap). Plain notation where it is short,
+/// exponent notation for very small or large magnitudes (Display would print 1e-20 with 20 zeros).
+fn push_f64(out: &mut String, v: Option<f64>) {
+    use std::fmt::Write as _;
+    match v {
+        None => {}
+        Some(v) if v.is_nan() => {}
+        Some(v) => {
+            let a = v.abs();
+            // Writing into a String cannot fail.
+            let _ = if a == 0.0 || (1e-5..1e16).contains(&a) {
+                write!(out, "{v}")
+            } else {
+                write!(out, "{v:e}")
+            };
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const GOOD: &str = "# instrument: JN-06 A12124\n\
+        # a free comment without colon\n\
+        # start_utc: 2024-03-01T00:00:00Z\n\
+        # input_g: 1\n\
+        time_s,output_v,temperature_c,status\n\
+        0,1.25,60.0,ok\n\
+        1.0, 1.5 ,60.5,clamped\r\n\
+        \n\
+        2,,61,ok\n";
+
+    #[test]
+    fn reads_metadata_columns_gaps_and_status() {
+        let log = Log::parse_str(GOOD).unwrap();
+        assert_eq!(log.meta("instrument"), Some("JN-06 A12124"));
+        assert_eq!(log.meta("start_utc"), Some("2024-03-01T00:00:00Z"));
+        assert_eq!(log.meta_f64("input_g").unwrap(), Some(1.0));
+        assert_eq!(log.meta("a free comment without colon"), None);
+        assert_eq!(log.len(), 3);
+        assert_eq!(log.time_s(), &[0.0, 1.0, 2.0]);
+        let out = log.column("output_v").unwrap();
+        assert_eq!(&out[..2], &[1.25, 1.5]);
+        assert!(out[2].is_nan(), "empty cell is a gap");
+        assert_eq!(log.column("temperature_c").unwrap(), &[60.0, 60.5, 61.0]);
+        let st = log.text_column("status").unwrap();
+        assert_eq!(st.iter().collect::<Vec<_>>(), vec!["ok", "clamped", "ok"]);
+        assert_eq!(st.distinct().len(), 2);
+        assert!(log.column("status").is_none(), "status is not numeric");
+        assert!(log.column("pressure_hpa").is_none());
+    }
+
+    fn bad_row(s: &str) -> (usize, String) {
+        match Log::parse_str(s) {
+            Err(LogError::BadRow { line, reason }) => (line, reason),
+            other => panic!("expected BadRow, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn wrong_column_count_is_reported_with_its_line() {
+        let (line, reason) = bad_row("# k: v\ntime_s,output_v\n0,1\n1,2,3\n");
+        assert_eq!(line, 4);
+        assert!(reason.contains("column count"), "{reason}");
+        let (line, reason) = bad_row("time_s,output_v,temperature_c\n0,1,2\n1,2\n");
+        assert_eq!(line, 3);
+        assert!(reason.contains("column count"), "{reason}");
+    }
+
+    #[test]
+    fn non_numeric_field_is_reported_with_its_line_and_column() {
+        let (line, reason) = bad_row("time_s,output_v\n0,1\n1,2\n2,1.2.3\n");
+        assert_eq!(line, 4);
+        assert!(
+            reason.contains("output_v") && reason.contains("1.2.3"),
+            "{reason}"
+        );
+        let (line, _) = bad_row("time_s,output_v\n0,inf\n");
+        assert_eq!(line, 2, "infinity is not a gap");
+    }
+
+    #[test]
+    fn non_monotonic_or_missing_time_is_a_bad_row() {
+        let (line, reason) = bad_row("time_s,output_v\n0,1\n1,2\n1,3\n");
+        assert_eq!(line, 4);
+        assert!(reason.contains("non-monotonic"), "{reason}");
+        let (line, reason) = bad_row("time_s,output_v\n0,1\n0.5,2\n0.25,3\n");
+        assert_eq!(line, 4);
+        assert!(reason.contains("non-monotonic"), "{reason}");
+        let (line, reason) = bad_row("time_s,output_v\n0,1\n,2\n");
+        assert_eq!(line, 3);
+        assert!(reason.contains("time_s"), "{reason}");
+    }
+
+    #[test]
+    fn comment_after_header_is_a_bad_row() {
+        let (line, _) = bad_row("time_s,output_v\n0,1\n# second log\n");
+        assert_eq!(line, 3);
+    }
+
+    #[test]
+    fn header_without_time_or_outputs_is_rejected() {
+        assert!(matches!(
+            Log::parse_str("# a: b\nt,output_v\n0,1\n"),
+            Err(LogError::MissingTime { line: 2 })
+        ));
+        assert!(matches!(
+            Log::parse_str("time_s\n0\n"),
+            Err(LogError::NoOutputColumn { line: 1 })
+        ));
+        assert!(matches!(
+            Log::parse_str("# only: meta\n"),
+            Err(LogError::MissingHeader)
+        ));
+        assert!(matches!(
+            Log::parse_str("time_s,a_v,a_v\n"),
+            Err(LogError::BadHeader { line: 1, .. })
+        ));
+    }
+
+    #[test]
+    fn bad_metadata_number_is_a_named_error() {
+        let log = Log::parse_str("# input_g: one\ntime_s,output_v\n0,1\n").unwrap();
+        assert!(matches!(
+            log.meta_f64("input_g"),
+            Err(LogError::BadMeta { .. })
+        ));
+    }
+
+    #[test]
+    fn write_then_read_round_trips_bit_for_bit() {
+        let t: Vec<f64> = (0..50).map(|i| f64::from(i) * 0.54 + 0.015).collect();
+        let mut log = Log::with_time(t).unwrap();
+        log.set_meta("instrument", "SNJ-103").unwrap();
+        log.set_meta("scale_factor_v_per_g", "1.3301").unwrap();
+        let y: Vec<f64> = (0..50)
+            .map(|i| match i {
+                7 => f64::NAN,
+                8 => 1e-300,
+                9 => -3.0e20,
+                _ => 1.33 + f64::from(i) * 1.234_567_890_123e-7,
+            })
+            .collect();
+        log.push_column("output_v", y).unwrap();
+        let st: Vec<&str> = (0..50)
+            .map(|i| if i % 7 == 0 { "0x0003" } else { "ok" })
+            .collect();
+        log.push_text_column("status", TextColumn::from_strings(&st))
+            .unwrap();
+        let mut out = Vec::new();
+        log.write_to(&mut out).unwrap();
+        let back = Log::read(out.as_slice()).unwrap();
+        assert_eq!(back.metadata(), log.metadata());
+        assert_eq!(back.column_names(), log.column_names());
+        let (a, b) = (
+            log.column("output_v").unwrap(),
+            back.column("output_v").unwrap(),
+        );
+        for (x, y) in a.iter().zip(b) {
+            assert!(
+                x.to_bits() == y.to_bits() || (x.is_nan() && y.is_nan()),
+                "{x} vs {y}"
+            );
+        }
+        assert_eq!(back.time_s(), log.time_s());
+        assert_eq!(back.text_column("status"), log.text_column("status"));
+    }
+
+    #[test]
+    fn builder_rejects_mismatched_lengths_and_bad_time() {
+        let mut log = Log::with_time(vec![0.0, 1.0]).unwrap();
+        assert!(log.push_column("output_v", vec![1.0]).is_err());
+        assert!(log.push_column("time_s", vec![1.0, 2.0]).is_err());
+        assert!(log.push_column("status", vec![1.0, 2.0]).is_err());
+        assert!(Log::with_time(vec![0.0, 0.0]).is_err());
+    }
+
+    #[test]
+    fn unit_suffix_is_the_part_after_the_last_underscore() {
+        assert_eq!(unit_suffix("temperature_c"), Some("c"));
+        assert_eq!(unit_suffix("a_i_exact_g"), Some("g"));
+        assert_eq!(unit_suffix("status"), None);
+    }
+}
