@@ -3,5 +3,6 @@
 pub mod allan;
 pub mod fit;
 pub mod log;
+pub mod plot;
 pub mod stability;
 pub mod table_cli;

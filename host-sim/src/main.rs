@@ -22,6 +22,8 @@ enum Command {
     Table(accomp_host::table_cli::TableArgs),
     /// Stability (std, drift), OADEV and MDEV of a log's output columns.
     Stability(accomp_host::stability::StabilityArgs),
+    /// Figures like the paper's Figs. 2–5 and an Allan deviation plot (PNG or SVG).
+    Plot(accomp_host::plot::PlotArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -30,5 +32,6 @@ fn main() -> anyhow::Result<()> {
         Command::Fit(args) => accomp_host::fit::run(&args),
         Command::Table(args) => accomp_host::table_cli::run(&args),
         Command::Stability(args) => Ok(accomp_host::stability::run(&args)?),
+        Command::Plot(args) => accomp_host::plot::run(&args),
     }
 }
