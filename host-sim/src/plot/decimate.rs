@@ -1,14 +1,15 @@
-//! Min/max envelope decimation of long series for plotting.
+//! Decimation of long series for plotting: mean and min/max envelope per pixel column.
 //!
 //! A 41-day log at 1 Hz has 3.5 M samples; a figure is about a thousand pixels wide. Drawing
 //! every sample is slow (and makes SVG files of hundreds of MB); taking every k-th sample hides
-//! spikes. Instead the x range is cut into `buckets` equal columns (one per pixel column) and each
-//! column keeps only its smallest and largest reading, in their original order and at their own
-//! x. A line through those points covers exactly the vertical extent the full series would paint
-//! in that column, so the picture is the same and every extreme survives.
+//! spikes. Instead the x range is cut into equal columns (one per pixel column) and each column
+//! keeps its mean, smallest and largest reading. The figures shade min..max (so every spike stays
+//! visible, exactly as tall as in the full series) and draw the mean as the line: with ~3000
+//! white-noise readings per column a min/max polyline alone would be a solid band that hides the
+//! drift and the temperature effect the figures are about.
 //!
-//! Gaps (NaN readings) are not interpolated: a column that holds a NaN ends the current polyline
-//! after its own points, so a gap shows as a break of at least one pixel column.
+//! Gaps (NaN readings) are not interpolated: a column that holds a NaN ends the current run after
+//! its own bucket, so a gap shows as a break of at least one pixel column.
 
 /// One unbroken polyline, as (x, y) points.
 pub type Segment = Vec<(f64, f64)>;
@@ -30,22 +31,80 @@ pub fn split_at_gaps(x: &[f64], y: &[f64]) -> Vec<Segment> {
     out
 }
 
-/// Extremes of one pixel column: indices and values of its minimum and maximum.
-#[derive(Clone, Copy)]
-struct Column {
-    min: (usize, f64),
-    max: (usize, f64),
+/// One pixel column of a decimated series.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Bucket {
+    /// Mean x of the column's finite readings.
+    pub x: f64,
+    /// Mean reading: the line drawn, which shows drift and slow effects through the noise.
+    pub mean: f64,
+    /// Smallest reading: lower edge of the shaded envelope.
+    pub min: f64,
+    /// Largest reading: upper edge of the shaded envelope.
+    pub max: f64,
 }
 
-/// Min/max envelope of `(x, y)` over `buckets` equal columns of the x range.
+/// An unbroken run of pixel columns (runs are separated by gaps).
+pub type Run = Vec<Bucket>;
+
+/// Running sums of one column.
+#[derive(Clone, Copy)]
+struct Acc {
+    n: usize,
+    sx: f64,
+    sy: f64,
+    min: f64,
+    max: f64,
+}
+
+impl Acc {
+    fn new(x: f64, y: f64) -> Self {
+        Acc {
+            n: 1,
+            sx: x,
+            sy: y,
+            min: y,
+            max: y,
+        }
+    }
+    fn add(&mut self, x: f64, y: f64) {
+        self.n += 1;
+        self.sx += x;
+        self.sy += y;
+        self.min = self.min.min(y);
+        self.max = self.max.max(y);
+    }
+    fn bucket(&self) -> Bucket {
+        let n = self.n as f64;
+        Bucket {
+            x: self.sx / n,
+            mean: self.sy / n,
+            min: self.min,
+            max: self.max,
+        }
+    }
+}
+
+/// Mean, min and max of `(x, y)` in each of `buckets` equal columns of the x range.
 ///
 /// `x` must be non-decreasing (a log's time axis is strictly increasing). Series with at most
-/// `2 * buckets` points are only split at gaps: decimation would not save anything.
-pub fn envelope(x: &[f64], y: &[f64], buckets: usize) -> Vec<Segment> {
+/// `2 * buckets` points are not decimated: each reading is its own bucket (min = max = mean), and
+/// only split at gaps.
+pub fn buckets(x: &[f64], y: &[f64], buckets: usize) -> Vec<Run> {
     let n = x.len().min(y.len());
     let (x, y) = (&x[..n], &y[..n]);
+    let single = |seg: Segment| -> Run {
+        seg.into_iter()
+            .map(|(x, y)| Bucket {
+                x,
+                mean: y,
+                min: y,
+                max: y,
+            })
+            .collect()
+    };
     if buckets == 0 || n <= 2 * buckets {
-        return split_at_gaps(x, y);
+        return split_at_gaps(x, y).into_iter().map(single).collect();
     }
     let (Some(&x0), Some(&x1)) = (
         x.iter().find(|v| v.is_finite()),
@@ -55,67 +114,44 @@ pub fn envelope(x: &[f64], y: &[f64], buckets: usize) -> Vec<Segment> {
     };
     let span = x1 - x0;
     if span <= 0.0 {
-        return split_at_gaps(x, y);
+        return split_at_gaps(x, y).into_iter().map(single).collect();
     }
     let scale = buckets as f64 / span;
     let mut out = Vec::new();
-    let mut cur: Segment = Vec::new();
-    let mut col: Option<Column> = None;
+    let mut cur: Run = Vec::new();
+    let mut acc: Option<Acc> = None;
     let mut col_has_gap = false;
     let mut col_index = 0usize;
-    // Emits the finished column's extremes in sample order, then breaks the line if the column
-    // held a gap.
-    let flush = |col: &mut Option<Column>, gap: bool, cur: &mut Segment, out: &mut Vec<Segment>| {
-        if let Some(c) = col.take() {
-            let (a, b) = if c.min.0 <= c.max.0 {
-                (c.min, c.max)
-            } else {
-                (c.max, c.min)
-            };
-            cur.push((x[a.0], a.1));
-            if b.0 != a.0 {
-                cur.push((x[b.0], b.1));
-            }
+    // Ends a column: its bucket joins the run, and a gap inside it ends the run.
+    let flush = |acc: &mut Option<Acc>, gap: bool, cur: &mut Run, out: &mut Vec<Run>| {
+        if let Some(a) = acc.take() {
+            cur.push(a.bucket());
         }
         if gap && !cur.is_empty() {
             out.push(std::mem::take(cur));
         }
     };
-    for i in 0..n {
-        let xi = x[i];
+    for (&xi, &yi) in x.iter().zip(y) {
         if !xi.is_finite() {
             col_has_gap = true;
             continue;
         }
         let k = (((xi - x0) * scale) as usize).min(buckets - 1);
         if k != col_index {
-            flush(&mut col, col_has_gap, &mut cur, &mut out);
+            flush(&mut acc, col_has_gap, &mut cur, &mut out);
             col_has_gap = false;
             col_index = k;
         }
-        let yi = y[i];
         if !yi.is_finite() {
             col_has_gap = true;
             continue;
         }
-        match &mut col {
-            None => {
-                col = Some(Column {
-                    min: (i, yi),
-                    max: (i, yi),
-                })
-            }
-            Some(c) => {
-                if yi < c.min.1 {
-                    c.min = (i, yi);
-                }
-                if yi > c.max.1 {
-                    c.max = (i, yi);
-                }
-            }
+        match &mut acc {
+            None => acc = Some(Acc::new(xi, yi)),
+            Some(a) => a.add(xi, yi),
         }
     }
-    flush(&mut col, col_has_gap, &mut cur, &mut out);
+    flush(&mut acc, col_has_gap, &mut cur, &mut out);
     if !cur.is_empty() {
         out.push(cur);
     }
@@ -126,8 +162,8 @@ pub fn envelope(x: &[f64], y: &[f64], buckets: usize) -> Vec<Segment> {
 mod tests {
     use super::*;
 
-    fn all_points(s: &[Segment]) -> Vec<(f64, f64)> {
-        s.iter().flatten().copied().collect()
+    fn all(r: &[Run]) -> Vec<Bucket> {
+        r.iter().flatten().copied().collect()
     }
 
     #[test]
@@ -138,19 +174,20 @@ mod tests {
         let mut y: Vec<f64> = (0..n).map(|i| ((i * 7919) % 1000) as f64 * 1e-3).collect();
         y[123_457] = 50.0;
         y[876_543] = -40.0;
-        let s = envelope(&x, &y, 1000);
-        let p = all_points(&s);
-        assert!(p.len() <= 2000, "{} points", p.len());
-        assert!(p.contains(&(123_457.0, 50.0)));
-        assert!(p.contains(&(876_543.0, -40.0)));
-        let ymax = p.iter().map(|q| q.1).fold(f64::MIN, f64::max);
-        let ymin = p.iter().map(|q| q.1).fold(f64::MAX, f64::min);
-        assert_eq!((ymin, ymax), (-40.0, 50.0));
+        let b = all(&buckets(&x, &y, 1000));
+        assert_eq!(b.len(), 1000);
+        let top = b.iter().map(|q| q.max).fold(f64::MIN, f64::max);
+        let bottom = b.iter().map(|q| q.min).fold(f64::MAX, f64::min);
+        assert_eq!((bottom, top), (-40.0, 50.0));
+        // ... in the pixel columns where they happened (1000 samples per column).
+        assert_eq!(b[123].max, 50.0);
+        assert_eq!(b[876].min, -40.0);
     }
 
     #[test]
-    fn every_pixel_column_keeps_its_own_min_and_max() {
-        // 10 columns of 100 samples; column c ramps from c to c + 0.99 going down then up.
+    fn every_pixel_column_keeps_its_own_min_max_and_mean() {
+        // 10 columns of 100 samples; column c is c + |j - 50| / 100 for j = 0..100, whose
+        // minimum is c, maximum c + 0.5 and mean c + 2500 / 10000 = c + 0.25.
         let x: Vec<f64> = (0..1000).map(|i| i as f64).collect();
         let y: Vec<f64> = (0..1000)
             .map(|i| {
@@ -159,40 +196,40 @@ mod tests {
                 c + (j - 50.0).abs() / 100.0
             })
             .collect();
-        let p = all_points(&envelope(&x, &y, 10));
-        assert_eq!(p.len(), 20);
-        for c in 0..10 {
-            let inside: Vec<f64> = p
-                .iter()
-                .filter(|q| (q.0 as usize) / 100 == c)
-                .map(|q| q.1)
-                .collect();
-            let lo = inside.iter().copied().fold(f64::MAX, f64::min);
-            let hi = inside.iter().copied().fold(f64::MIN, f64::max);
-            assert_eq!(lo, c as f64, "column {c}");
-            assert_eq!(hi, c as f64 + 0.5, "column {c}");
+        let b = all(&buckets(&x, &y, 10));
+        assert_eq!(b.len(), 10);
+        for (c, q) in b.iter().enumerate() {
+            let c = c as f64;
+            assert_eq!(q.min, c, "column {c}");
+            assert_eq!(q.max, c + 0.5, "column {c}");
+            assert!(
+                (q.mean - (c + 0.25)).abs() < 1e-12,
+                "column {c}: {}",
+                q.mean
+            );
+            assert!((q.x - (100.0 * c + 49.5)).abs() < 1e-9);
         }
     }
 
     #[test]
-    fn points_stay_in_time_order() {
+    fn buckets_stay_in_time_order() {
         let x: Vec<f64> = (0..10_000).map(|i| i as f64 * 0.5).collect();
         let y: Vec<f64> = (0..10_000).map(|i| ((i as f64) * 0.37).sin()).collect();
-        let p = all_points(&envelope(&x, &y, 100));
-        assert!(p.windows(2).all(|w| w[0].0 < w[1].0));
+        let b = all(&buckets(&x, &y, 100));
+        assert!(b.windows(2).all(|w| w[0].x < w[1].x));
     }
 
     #[test]
-    fn gaps_break_the_line_and_are_not_bridged() {
+    fn gaps_break_the_run_and_are_not_bridged() {
         let x: Vec<f64> = (0..10_000).map(|i| i as f64).collect();
         let mut y = vec![1.0; 10_000];
         for v in &mut y[4000..4500] {
             *v = f64::NAN;
         }
-        let s = envelope(&x, &y, 100);
-        assert_eq!(s.len(), 2);
-        let last_before = s[0].last().map(|p| p.0).unwrap_or(f64::NAN);
-        let first_after = s[1].first().map(|p| p.0).unwrap_or(f64::NAN);
+        let r = buckets(&x, &y, 100);
+        assert_eq!(r.len(), 2);
+        let last_before = r[0].last().map_or(f64::NAN, |b| b.x);
+        let first_after = r[1].first().map_or(f64::NAN, |b| b.x);
         assert!(last_before < 4000.0 && first_after >= 4500.0);
     }
 
@@ -200,10 +237,21 @@ mod tests {
     fn short_series_are_only_split_at_gaps() {
         let x = [0.0, 1.0, 2.0, 3.0, 4.0];
         let y = [1.0, f64::NAN, 3.0, 4.0, 5.0];
-        let s = envelope(&x, &y, 1000);
+        let s = split_at_gaps(&x, &y);
         assert_eq!(
             s,
             vec![vec![(0.0, 1.0)], vec![(2.0, 3.0), (3.0, 4.0), (4.0, 5.0)]]
+        );
+        let r = buckets(&x, &y, 1000);
+        assert_eq!(r.len(), 2);
+        assert_eq!(
+            r[1][0],
+            Bucket {
+                x: 2.0,
+                mean: 3.0,
+                min: 3.0,
+                max: 3.0
+            }
         );
     }
 }

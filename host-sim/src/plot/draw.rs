@@ -15,7 +15,7 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::{register_font, FontStyle};
 
-use super::decimate::Segment;
+use super::decimate::Run;
 use super::Format;
 
 /// A drawing failed: the backend's message, with the file it was writing.
@@ -34,8 +34,8 @@ impl<E: std::error::Error + Send + Sync> From<DrawingAreaErrorKind<E>> for DrawE
 pub struct Trace {
     /// Legend text.
     pub label: String,
-    /// Polylines (broken at gaps).
-    pub segments: Vec<Segment>,
+    /// Decimated runs (broken at gaps): line through the means, shading min..max.
+    pub runs: Vec<Run>,
     /// Line colour.
     pub color: RGBColor,
 }
@@ -100,6 +100,7 @@ pub const WIDTH_PX: u32 = 1100;
 const PANEL_HEIGHT_PX: u32 = 380;
 const TITLE_HEIGHT_PX: u32 = 40;
 const FONT: &str = "sans-serif";
+const GREY_BAND: RGBColor = RGBColor(200, 200, 200);
 
 impl Figure {
     /// Size in pixels (SVG user units).
@@ -152,9 +153,10 @@ fn y_extent<'a>(panels: impl IntoIterator<Item = &'a Panel>) -> Option<(f64, f64
     let mut ext: Option<(f64, f64)> = None;
     for p in panels {
         for tr in &p.traces {
-            for &(_, y) in tr.segments.iter().flatten() {
-                if y.is_finite() {
-                    ext = Some(ext.map_or((y, y), |(lo, hi)| (lo.min(y), hi.max(y))));
+            for b in tr.runs.iter().flatten() {
+                if b.min.is_finite() && b.max.is_finite() {
+                    ext =
+                        Some(ext.map_or((b.min, b.max), |(lo, hi)| (lo.min(b.min), hi.max(b.max))));
                 }
             }
         }
@@ -182,14 +184,35 @@ pub fn tick_decimals(span: f64) -> usize {
     (-step.log10().floor()).clamp(0.0, 9.0) as usize
 }
 
-/// Log-axis tick label: plain for 0.001 ≤ v < 100 000, `1e-6` style otherwise.
+/// Fixed-point tick label without a "-0.00" for values that round to zero.
+pub fn fixed(v: f64, decimals: usize) -> String {
+    let s = format!("{v:.decimals$}");
+    if s.starts_with('-') && s[1..].chars().all(|c| c == '0' || c == '.') {
+        s[1..].to_owned()
+    } else {
+        s
+    }
+}
+
+/// Log-axis tick label: plain for 0.001 ≤ v < 10 000, `1e-6` style otherwise.
 pub fn log_tick(v: f64) -> String {
-    if (1e-3..1e5).contains(&v.abs()) {
+    if (1e-3..1e4).contains(&v.abs()) {
         let s = format!("{v:.3}");
         s.trim_end_matches('0').trim_end_matches('.').to_string()
     } else {
         format!("{v:.0e}")
     }
+}
+
+/// True when `v` is 1, 2 or 5 times a power of ten (to a part in 1e6).
+pub fn is_125(v: f64) -> bool {
+    if !(v.is_finite() && v > 0.0) {
+        return false;
+    }
+    let mantissa = v / 10f64.powf(v.log10().floor());
+    [1.0, 2.0, 5.0, 10.0]
+        .iter()
+        .any(|m| (mantissa - m).abs() < 1e-6 * m)
 }
 
 fn draw_time<DB: DrawingBackend>(
@@ -208,29 +231,52 @@ where
     };
     let (x0, x1) = fig.x_range;
     let x_dec = tick_decimals(x1 - x0);
-    for (area, panel) in areas.iter().zip(&fig.panels) {
+    let last = fig.panels.len().saturating_sub(1);
+    for (i, (area, panel)) in areas.iter().zip(&fig.panels).enumerate() {
         let (y0, y1) = padded(shared.or_else(|| y_extent([panel])).unwrap_or((0.0, 1.0)));
         let y_dec = tick_decimals(y1 - y0);
         let mut chart = ChartBuilder::on(area)
             .margin(12)
-            .x_label_area_size(45)
+            .x_label_area_size(if i == last { 45 } else { 25 })
             .y_label_area_size(85)
             .build_cartesian_2d(x0..x1, y0..y1)?;
+        // The time axis is named once, under the bottom panel.
+        let x_desc = if i == last { fig.x_desc.as_str() } else { "" };
         chart
             .configure_mesh()
-            .x_desc(fig.x_desc.as_str())
+            .x_desc(x_desc)
             .y_desc(panel.y_desc.as_str())
             .label_style((FONT, 14))
             .axis_desc_style((FONT, 16))
-            .x_label_formatter(&|v| format!("{v:.x_dec$}"))
-            .y_label_formatter(&|v| format!("{v:.y_dec$}"))
+            .x_label_formatter(&|v| fixed(*v, x_dec))
+            .y_label_formatter(&|v| fixed(*v, y_dec))
             .light_line_style(WHITE.mix(0.0))
             .draw()?;
+        // Bands first, so no trace's shading covers another trace's line.
+        let mut any_band = false;
+        for tr in &panel.traces {
+            for run in &tr.runs {
+                if run.iter().all(|b| b.min == b.max) {
+                    continue;
+                }
+                any_band = true;
+                let band: Vec<(f64, f64)> = run
+                    .iter()
+                    .map(|b| (b.x, b.max))
+                    .chain(run.iter().rev().map(|b| (b.x, b.min)))
+                    .collect();
+                chart.draw_series(std::iter::once(Polygon::new(
+                    band,
+                    tr.color.mix(0.25).filled(),
+                )))?;
+            }
+        }
         for tr in &panel.traces {
             let style = tr.color.stroke_width(1);
             let mut first = true;
-            for seg in &tr.segments {
-                let series = chart.draw_series(LineSeries::new(seg.iter().copied(), style))?;
+            for run in &tr.runs {
+                let series =
+                    chart.draw_series(LineSeries::new(run.iter().map(|b| (b.x, b.mean)), style))?;
                 if first {
                     let c = tr.color;
                     series.label(tr.label.as_str()).legend(move |(x, y)| {
@@ -239,6 +285,12 @@ where
                     first = false;
                 }
             }
+        }
+        if any_band {
+            chart
+                .draw_series(std::iter::empty::<Rectangle<(f64, f64)>>())?
+                .label("line: mean per pixel column; shading: its min–max")
+                .legend(|(x, y)| Rectangle::new([(x, y - 5), (x + 24, y + 5)], GREY_BAND.filled()));
         }
         if panel.traces.iter().any(|t| !t.label.is_empty()) {
             chart
@@ -284,8 +336,18 @@ where
         .y_desc(fig.y_desc.as_str())
         .label_style((FONT, 14))
         .axis_desc_style((FONT, 16))
+        // Enough key points for 1..9 in every decade (grid lines), labels only on 1, 2, 5.
+        .y_labels(40)
+        .light_line_style(WHITE.mix(0.0))
+        .bold_line_style(BLACK.mix(0.12))
         .x_label_formatter(&|v| log_tick(*v))
-        .y_label_formatter(&|v| log_tick(*v))
+        .y_label_formatter(&|v| {
+            if is_125(*v) {
+                log_tick(*v)
+            } else {
+                String::new()
+            }
+        })
         .draw()?;
     for c in &fig.curves {
         // Band: upper bounds left to right, then lower bounds back.
@@ -338,10 +400,26 @@ mod tests {
     }
 
     #[test]
+    fn fixed_labels_never_show_negative_zero() {
+        assert_eq!(fixed(-0.001, 2), "0.00");
+        assert_eq!(fixed(-0.0, 0), "0");
+        assert_eq!(fixed(-0.1, 2), "-0.10");
+        assert_eq!(fixed(12.345, 1), "12.3");
+    }
+
+    #[test]
+    fn only_1_2_5_mantissas_get_log_labels() {
+        assert!(is_125(1e-7) && is_125(2e-7) && is_125(5e-6) && is_125(100.0));
+        assert!(!is_125(3e-7) && !is_125(9e-7) && !is_125(0.0) && !is_125(-1.0));
+    }
+
+    #[test]
     fn log_ticks_are_plain_in_the_middle_and_scientific_at_the_ends() {
         assert_eq!(log_tick(10.0), "10");
         assert_eq!(log_tick(0.5), "0.5");
         assert_eq!(log_tick(1e-6), "1e-6");
         assert_eq!(log_tick(1e6), "1e6");
+        assert_eq!(log_tick(1e4), "1e4");
+        assert_eq!(log_tick(2e-7), "2e-7");
     }
 }

@@ -254,7 +254,7 @@ fn output_panels_are_microg_deviations_with_the_sample_std_in_the_legend() {
         raw.label,
         "output_v / K1 (before temperature compensation): σ = 1.00e-5 g"
     );
-    let ys: Vec<f64> = raw.segments.iter().flatten().map(|p| p.1).collect();
+    let ys: Vec<f64> = raw.runs.iter().flatten().map(|b| b.mean).collect();
     assert_eq!(ys.len(), n);
     for (i, y) in ys.iter().enumerate() {
         let want = if i % 2 == 0 { 10.0 } else { -10.0 };
@@ -361,17 +361,44 @@ fn a_million_sample_log_makes_a_small_svg_that_keeps_its_spike() {
     log.push_column("output_v", y).unwrap();
     let o = opts(&dir, Format::Svg, Kind::Output);
     let fig = time_figure(build(&log, &o, Kind::Output).unwrap());
-    let pts: Vec<(f64, f64)> = fig.panels[0].traces[0]
-        .segments
+    let b: Vec<decimate::Bucket> = fig.panels[0].traces[0]
+        .runs
         .iter()
         .flatten()
         .copied()
         .collect();
-    assert!(pts.len() <= 2 * draw::WIDTH_PX as usize);
-    let top = pts.iter().map(|p| p.1).fold(f64::MIN, f64::max);
+    assert_eq!(b.len(), draw::WIDTH_PX as usize);
+    let top = b.iter().map(|q| q.max).fold(f64::MIN, f64::max);
     // The spike, in µV from the mean (no scale factor: volts).
     assert!((top - 1e3).abs() < 1.0, "{top}");
     let out = plot_log(&log, &o).unwrap();
     let size = std::fs::metadata(&out.written[0]).unwrap().len();
     assert!(size < 500_000, "{size} bytes");
+}
+
+#[test]
+fn tilt_peak_to_peak_is_taken_on_block_means_not_on_noisy_readings() {
+    // A 0.4″ step after 1 h plus ±0.1″ alternating noise: readings span 0.6″, 10-min means 0.4″.
+    let t: Vec<f64> = (0..7200).map(f64::from).collect();
+    let y: Vec<f64> = t
+        .iter()
+        .enumerate()
+        .map(|(i, &s)| {
+            let step = if s >= 3600.0 { 0.4 } else { 0.0 };
+            step + if i % 2 == 0 { 0.1 } else { -0.1 }
+        })
+        .collect();
+    let pp = block_mean_range(&t, &y, 600.0).unwrap();
+    assert!((pp - 0.4).abs() < 1e-12, "{pp}");
+    assert_eq!(block_mean_range(&t, &vec![f64::NAN; 7200], 600.0), None);
+    let mut log = Log::with_time(t).unwrap();
+    log.push_column("tilt_arcsec", y).unwrap();
+    let f = time_figure(build(&log, &PlotOptions::new("x", "t"), Kind::Tilt).unwrap());
+    assert!(
+        f.panels[0].traces[0]
+            .label
+            .starts_with("tilt_arcsec: peak-to-peak of 10-min means 0.400″"),
+        "{}",
+        f.panels[0].traces[0].label
+    );
 }
