@@ -521,7 +521,7 @@ impl Report {
         let _ = writeln!(
             s,
             "\nIntervals: 68.27 % chi-squared; alpha = noise exponent by lag-1 ACF (* = too few \
-             points, white FM assumed); MDEV intervals approximate (OADEV EDF)."
+             points, carried from the shorter tau); MDEV intervals approximate (OADEV EDF)."
         );
         s
     }
