@@ -51,6 +51,8 @@ pub enum AdcError {
     OutOfRange,
     /// The scale is not usable (zero/negative gain or reference, bits not in 8..=32).
     InvalidScale,
+    /// The input to an inverse conversion (volts or ohms → code) is NaN or infinite.
+    NonFiniteInput,
 }
 
 impl AdcScale {
@@ -123,6 +125,55 @@ impl AdcScale {
         Ok(RtdOhms(
             reference.0 * f / self.pga_gain * self.gain_correction,
         ))
+    }
+}
+
+impl AdcScale {
+    /// The inverse of [`AdcScale::fraction`]: the code a converter of this scale outputs for a
+    /// signed fraction of full scale, rounded to the nearest code. Like the chip, an input beyond
+    /// full scale gives the rail code (which the forward conversion then reports as saturated).
+    pub fn code_for_fraction(&self, fraction: f64) -> Result<u32, AdcError> {
+        self.check()?;
+        if !fraction.is_finite() {
+            return Err(AdcError::NonFiniteInput);
+        }
+        let bits = u32::from(self.bits);
+        let half = (1u64 << (bits - 1)) as f64;
+        let max = ((1u64 << bits) - 1) as f64;
+        let code = match self.coding {
+            Coding::TwosComplement => {
+                let signed = libm::round(fraction * half).clamp(-half, half - 1.0) as i64;
+                // Two's complement pattern truncated to `bits`.
+                (signed as u64 & ((1u64 << bits) - 1)) as u32
+            }
+            Coding::OffsetBinary => libm::round(fraction * half + half).clamp(0.0, max) as u32,
+            Coding::Unipolar => libm::round(fraction * (max + 1.0)).clamp(0.0, max) as u32,
+        };
+        Ok(code)
+    }
+
+    /// The inverse of [`AdcScale::volts`]: the code for an input voltage at the ADC pins.
+    pub fn code_for_volts(&self, v: Volts) -> Result<u32, AdcError> {
+        self.check()?;
+        if !v.0.is_finite() {
+            return Err(AdcError::NonFiniteInput);
+        }
+        self.code_for_fraction(
+            (v.0 + self.offset.0) * self.pga_gain / (self.vref.0 * self.gain_correction),
+        )
+    }
+
+    /// The inverse of [`AdcScale::ratiometric_ohms`]: the code for an RTD resistance measured
+    /// against `reference`.
+    pub fn code_for_ohms(&self, r: RtdOhms, reference: Ohms) -> Result<u32, AdcError> {
+        self.check()?;
+        if !(reference.0.is_finite() && reference.0 > 0.0) {
+            return Err(AdcError::InvalidScale);
+        }
+        if !r.0.is_finite() {
+            return Err(AdcError::NonFiniteInput);
+        }
+        self.code_for_fraction(r.0 * self.pga_gain / (reference.0 * self.gain_correction))
     }
 }
 
@@ -208,5 +259,85 @@ mod tests {
         };
         assert_eq!(s.volts(0x0100_0000), Err(AdcError::OutOfRange));
         assert_eq!(s.volts(0x80_0000).unwrap(), Volts(0.0));
+    }
+
+    #[test]
+    fn volts_to_code_follows_the_datasheet_lsb_and_rounds_to_nearest() {
+        let s = ads1262(1.0);
+        // +Vref/2 at gain 1 is 0x4000_0000; −Vref/2 is its two's complement 0xC000_0000.
+        assert_eq!(s.code_for_volts(Volts(1.25)), Ok(0x4000_0000));
+        assert_eq!(s.code_for_volts(Volts(-1.25)), Ok(0xC000_0000));
+        // 0.6 LSB rounds up to 1, 0.4 LSB down to 0 (1 LSB = 2.5 V / 2^31 at gain 1).
+        let lsb = 2.5 / 2_147_483_648.0;
+        assert_eq!(s.code_for_volts(Volts(0.6 * lsb)), Ok(1));
+        assert_eq!(s.code_for_volts(Volts(0.4 * lsb)), Ok(0));
+        assert_eq!(s.code_for_volts(Volts(-lsb)), Ok(0xFFFF_FFFF));
+        // Gain 32 divides the full scale by 32.
+        assert_eq!(
+            ads1262(32.0).code_for_volts(Volts(1.25 / 32.0)),
+            Ok(0x4000_0000)
+        );
+    }
+
+    #[test]
+    fn volts_to_code_inverts_code_to_volts_for_every_coding() {
+        let scales = [
+            ads1262(4.0),
+            AdcScale {
+                bits: 24,
+                coding: Coding::OffsetBinary,
+                pga_gain: 2.0,
+                vref: Volts(2.5),
+                gain_correction: 1.0003,
+                offset: Volts(1e-4),
+            },
+            AdcScale {
+                bits: 24,
+                coding: Coding::Unipolar,
+                pga_gain: 16.0,
+                vref: Volts(2.5),
+                gain_correction: 0.9998,
+                offset: Volts(0.0),
+            },
+        ];
+        for s in scales {
+            let max = ((1u64 << s.bits) - 1) as u32;
+            for raw in [1u32, 12_345, max / 3, max / 2 + 7, max - 2] {
+                let raw = raw & max;
+                let Ok(v) = s.volts(raw) else { continue };
+                assert_eq!(s.code_for_volts(v), Ok(raw), "{s:?} raw={raw:#x}");
+            }
+        }
+    }
+
+    #[test]
+    fn inputs_beyond_full_scale_give_the_rail_code_which_reads_back_as_saturated() {
+        let s = ads1262(1.0);
+        let hi = s.code_for_volts(Volts(3.0)).unwrap();
+        let lo = s.code_for_volts(Volts(-3.0)).unwrap();
+        assert_eq!((hi, lo), (0x7FFF_FFFF, 0x8000_0000));
+        assert_eq!(s.volts(hi), Err(AdcError::Saturated));
+        assert_eq!(
+            s.code_for_volts(Volts(f64::NAN)),
+            Err(AdcError::NonFiniteInput)
+        );
+    }
+
+    #[test]
+    fn ohms_to_code_matches_the_ratiometric_formula() {
+        // AD7124 unipolar, gain 16, Rref 5.11 kΩ: 100 Ω ↔ round(2^24·100·16/5110) = 5 253 140 (computed independently).
+        let s = AdcScale {
+            bits: 24,
+            coding: Coding::Unipolar,
+            pga_gain: 16.0,
+            vref: Volts(2.5),
+            gain_correction: 1.0,
+            offset: Volts(0.0),
+        };
+        assert_eq!(s.code_for_ohms(RtdOhms(100.0), Ohms(5110.0)), Ok(5_253_140));
+        assert_eq!(
+            s.code_for_ohms(RtdOhms(100.0), Ohms(0.0)),
+            Err(AdcError::InvalidScale)
+        );
     }
 }

@@ -12,6 +12,7 @@ pub mod drivers;
 pub mod model;
 pub mod poly;
 pub mod rtd;
+pub mod storage;
 pub mod table;
 pub mod tide;
 pub mod units;

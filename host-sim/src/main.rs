@@ -1,5 +1,6 @@
 //! `accomp`: the lab-PC command line. Each subcommand lives in its own module; this file only
 //! dispatches.
+
 use clap::{Parser, Subcommand};
 
 #[derive(Parser)]
@@ -15,13 +16,19 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Stability (std, drift), OADEV and MDEV of a log's output columns.
+    Stability(accomp_host::stability::StabilityArgs),
+    /// Simulate the test station (scenario file or preset) and write a log.
+    Simulate(accomp_host::sim::cli::SimulateArgs),
     /// Fit temperature models of the calibration coefficients (orders 0–4), compare them with
     /// the paper's printed models, optionally write a calibration table.
     Fit(accomp_host::fit::FitArgs),
     /// Inspect or check a calibration table file.
     Table(accomp_host::table_cli::TableArgs),
-    /// Stability (std, drift), OADEV and MDEV of a log's output columns.
-    Stability(accomp_host::stability::StabilityArgs),
+    /// Solve dividing-head tumble logs for K0, K1, K2, δ (and K3) per test (docs/tumble.md).
+    Tumble(accomp_host::tumble_cli::TumbleArgs),
+    /// Generate a tumble log from true temperature models (the paper's printed order-2 models).
+    SimulateTumble(accomp_host::tumble_cli::SimulateTumbleArgs),
     /// Figures like the paper's Figs. 2–5 and an Allan deviation plot (PNG or SVG).
     Plot(accomp_host::plot::PlotArgs),
 }
@@ -29,9 +36,12 @@ enum Command {
 fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
     match cli.command {
+        Command::Stability(args) => Ok(accomp_host::stability::run(&args)?),
+        Command::Simulate(args) => accomp_host::sim::cli::run(&args),
         Command::Fit(args) => accomp_host::fit::run(&args),
         Command::Table(args) => accomp_host::table_cli::run(&args),
-        Command::Stability(args) => Ok(accomp_host::stability::run(&args)?),
+        Command::Tumble(args) => accomp_host::tumble_cli::run(args),
+        Command::SimulateTumble(args) => accomp_host::tumble_cli::run_simulate(args),
         Command::Plot(args) => accomp_host::plot::run(&args),
     }
 }

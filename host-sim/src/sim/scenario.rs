@@ -1,0 +1,409 @@
+//! The scenario file (TOML): every parameter of a simulated run, and the built-in presets.
+//!
+//! Every table and field is required and unknown fields are refused, so a scenario file is the
+//! complete record of a run (with the seed) and a typo cannot silently fall back to a default.
+//! `accomp simulate --print-preset paper-1g` prints a complete file to start from.
+
+use serde::{Deserialize, Serialize};
+
+use super::accelerometer::{
+    AccelerometerParams, CalibrationSource, HeadPosition, OrientationParams, SpindleAxis,
+};
+use super::adc::{Ad7124Params, AdcParams, Ads1262Params};
+use super::noise::AllanParams;
+use super::rtd::RtdParams;
+use super::thermostat::{RoomParams, ThermostatParams};
+use super::tide::{Site, TideParams};
+use super::tilt::{FoundationParams, TiltmeterParams};
+
+/// Duration and sampling of the run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RunParams {
+    /// UTC start, ISO 8601 (`YYYY-MM-DDTHH:MM:SSZ`).
+    pub start_utc: String,
+    /// Length of the run, seconds.
+    pub duration_s: f64,
+    /// Sample interval, seconds.
+    pub interval_s: f64,
+}
+
+/// A complete scenario.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scenario {
+    /// Short name, written into the log metadata.
+    pub name: String,
+    /// What the scenario represents.
+    pub description: String,
+    /// Duration and sampling.
+    pub run: RunParams,
+    /// Where the station is.
+    pub site: Site,
+    /// The laboratory room.
+    pub room: RoomParams,
+    /// The thermostat.
+    pub thermostat: ThermostatParams,
+    /// The instrument on the dividing head.
+    pub accelerometer: AccelerometerParams,
+    /// The RTD.
+    pub rtd: RtdParams,
+    /// The foundation.
+    pub foundation: FoundationParams,
+    /// The solid-earth tide.
+    pub tide: TideParams,
+    /// The tiltmeter.
+    pub tiltmeter: TiltmeterParams,
+    /// The converters.
+    pub adc: AdcParams,
+}
+
+/// Why a scenario is refused.
+#[derive(Debug, thiserror::Error)]
+pub enum ScenarioError {
+    /// The TOML does not parse or does not match the scenario's fields.
+    #[error("scenario: {0}")]
+    Toml(#[from] toml::de::Error),
+    /// A value is out of its physical range.
+    #[error("scenario: {0}")]
+    Invalid(String),
+    /// Neither a file nor a preset of that name.
+    #[error("no scenario file or preset named {0:?} (presets: {presets})", presets = PRESETS.join(", "))]
+    Unknown(String),
+}
+
+/// Names of the built-in presets.
+pub const PRESETS: [&str; 2] = ["paper-1g", "paper-0g"];
+
+const DAY_S: f64 = 86_400.0;
+
+impl Scenario {
+    /// Parses a scenario from TOML text and checks it.
+    pub fn from_toml(text: &str) -> Result<Self, ScenarioError> {
+        let s: Scenario = toml::from_str(text)?;
+        s.validate()?;
+        Ok(s)
+    }
+
+    /// The scenario as TOML text (all fields).
+    pub fn to_toml(&self) -> String {
+        // Serializing plain structs of numbers, strings and vectors cannot fail.
+        toml::to_string(self).unwrap_or_default()
+    }
+
+    /// A built-in preset by name.
+    pub fn preset(name: &str) -> Option<Self> {
+        match name {
+            "paper-1g" => Some(paper_1g()),
+            "paper-0g" => Some(paper_0g()),
+            _ => None,
+        }
+    }
+
+    /// Number of samples of the run.
+    pub fn samples(&self) -> u64 {
+        (self.run.duration_s / self.run.interval_s).floor() as u64
+    }
+
+    /// Checks the ranges that would otherwise produce NaN or nonsense.
+    pub fn validate(&self) -> Result<(), ScenarioError> {
+        let bad = |m: &str| Err(ScenarioError::Invalid(m.to_string()));
+        let r = &self.run;
+        if !(r.interval_s.is_finite() && r.interval_s > 0.0) {
+            return bad("run.interval_s must be > 0");
+        }
+        if !(r.duration_s.is_finite() && r.duration_s >= r.interval_s) {
+            return bad("run.duration_s must be at least one interval");
+        }
+        if super::time::Utc::parse(&r.start_utc).is_err() {
+            return bad("run.start_utc must be YYYY-MM-DDTHH:MM:SSZ");
+        }
+        if !(-90.0..=90.0).contains(&self.site.latitude_deg) {
+            return bad("site.latitude_deg must be within ±90");
+        }
+        let n = &self.accelerometer.noise_g;
+        let stds = [
+            self.room.weather_std_c,
+            self.thermostat.controller_std_c,
+            self.thermostat.setpoint_walk_c_per_sqrt_day,
+            n.white_adev_1s,
+            n.flicker_floor,
+            n.random_walk_per_sqrt_s,
+            self.rtd.accuracy_c,
+            self.rtd.noise_uv_rms,
+            self.tiltmeter.noise_arcsec,
+            self.tiltmeter.resolution_arcsec,
+            self.adc.ads1262.noise_uv_rms,
+            self.foundation.creep_arcsec_per_sqrt_day,
+            self.room.door_rate_per_day,
+        ];
+        if stds.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
+            return bad("noise levels, rates and resolutions must be finite and ≥ 0");
+        }
+        let taus = [
+            self.room.weather_tau_h,
+            self.room.door_decay_min,
+            self.thermostat.controller_tau_s,
+            self.thermostat.room_lowpass_h,
+            self.thermostat.proof_mass_lag_s,
+            self.foundation.building_lag_h,
+            self.adc.board_lowpass_min,
+            self.tide.step_s,
+        ];
+        if taus.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
+            return bad("time constants must be finite and ≥ 0");
+        }
+        if !(self.tiltmeter.scale_arcsec_per_v.is_finite()
+            && self.tiltmeter.scale_arcsec_per_v != 0.0)
+        {
+            return bad("tiltmeter.scale_arcsec_per_v must be non-zero");
+        }
+        Ok(())
+    }
+}
+
+/// Resolves a command-line scenario argument: a preset name or a TOML file path.
+pub fn load(arg: &str) -> Result<Scenario, ScenarioError> {
+    if let Some(s) = Scenario::preset(arg) {
+        return Ok(s);
+    }
+    match std::fs::read_to_string(arg) {
+        Ok(text) => Scenario::from_toml(&text),
+        Err(_) => Err(ScenarioError::Unknown(arg.to_string())),
+    }
+}
+
+fn beijing() -> Site {
+    // Changcheng Institute of Metrology & Measurement, Beijing (approximate).
+    Site {
+        latitude_deg: 40.0,
+        longitude_deg: 116.25,
+        height_m: 60.0,
+    }
+}
+
+fn pt100() -> RtdParams {
+    RtdParams {
+        r0_ohm: 100.0,
+        cvd_a: 3.9083e-3,
+        cvd_b: -5.775e-7,
+        cvd_c: -4.183e-12,
+        accuracy_c: 0.1,
+        excitation_ua: 250.0,
+        self_heating_c_per_mw: 0.05,
+        noise_uv_rms: 0.1,
+    }
+}
+
+fn board() -> AdcParams {
+    AdcParams {
+        ads1262: Ads1262Params {
+            vref_v: 2.5,
+            vref_tempco_ppm_per_c: 0.5,
+            vref_calibrated_at_c: 20.0,
+            accel_pga_gain: 1.0,
+            tilt_pga_gain: 1.0,
+            noise_uv_rms: 0.3,
+            gain_error_ppm: 0.0,
+            offset_uv: 0.0,
+        },
+        ad7124: Ad7124Params {
+            pga_gain: 16.0,
+            reference_resistor_ohm: 5110.0,
+            reference_resistor_error_ppm: 0.0,
+            gain_error_ppm: 0.0,
+        },
+        board_lowpass_min: 30.0,
+    }
+}
+
+fn tiltmeter() -> TiltmeterParams {
+    TiltmeterParams {
+        noise_arcsec: 0.02,
+        resolution_arcsec: 0.1,
+        scale_arcsec_per_v: 10.0,
+    }
+}
+
+fn static_head(angle_deg: f64) -> OrientationParams {
+    OrientationParams {
+        spindle_axis: SpindleAxis::Output,
+        cross_sign: 1.0,
+        positions: vec![HeadPosition {
+            angle_deg,
+            dwell_s: 0.0,
+        }],
+        indexing_std_arcsec: 0.2,
+    }
+}
+
+/// The paper's 1 g test: JN-06 A12124 at 60 °C for 41 days (see docs/simulator.md for the
+/// choice of every magnitude).
+fn paper_1g() -> Scenario {
+    Scenario {
+        name: "paper-1g".into(),
+        description: "JN-06-like accelerometer, input axis up (1 g), thermostat at 60 °C, 41 days"
+            .into(),
+        run: RunParams {
+            start_utc: "2016-03-01T00:00:00Z".into(),
+            duration_s: 41.0 * DAY_S,
+            interval_s: 60.0,
+        },
+        site: beijing(),
+        room: RoomParams {
+            mean_c: 20.0,
+            diurnal_amplitude_c: 1.5,
+            diurnal_peak_solar_h: 15.0,
+            weather_std_c: 1.0,
+            weather_tau_h: 72.0,
+            door_rate_per_day: 2.0,
+            door_step_c: 0.8,
+            door_decay_min: 20.0,
+        },
+        thermostat: ThermostatParams {
+            setpoint_c: 60.0,
+            controller_std_c: 0.165,
+            controller_tau_s: 900.0,
+            setpoint_walk_c_per_sqrt_day: 0.005,
+            room_coupling: 0.03,
+            room_lowpass_h: 2.0,
+            proof_mass_lag_s: 60.0,
+        },
+        accelerometer: AccelerometerParams {
+            instrument: "JN-06 A12124 (simulated)".into(),
+            calibration: CalibrationSource::PaperPrintedOrder2,
+            noise_g: AllanParams {
+                white_adev_1s: 2e-6,
+                flicker_floor: 1e-6,
+                random_walk_per_sqrt_s: 7e-9,
+            },
+            orientation: static_head(90.0),
+        },
+        rtd: pt100(),
+        foundation: FoundationParams {
+            initial_arcsec: 0.0,
+            building_arcsec_per_c: 0.1,
+            building_lag_h: 4.0,
+            creep_arcsec_per_sqrt_day: 0.05,
+        },
+        tide: TideParams {
+            enabled: true,
+            tilt_azimuth_deg: 0.0,
+            step_s: 60.0,
+        },
+        tiltmeter: tiltmeter(),
+        adc: board(),
+    }
+}
+
+/// The paper's 0 g test: an SNJ-103-like accelerometer, input axis horizontal, at room
+/// temperature for one day with a daily foundation tilt of about 0.45".
+fn paper_0g() -> Scenario {
+    Scenario {
+        name: "paper-0g".into(),
+        description:
+            "SNJ-103-like accelerometer, input axis horizontal (0 g), room temperature, 1 day, \
+             about 0.45\" of daily foundation tilt"
+                .into(),
+        run: RunParams {
+            start_utc: "2016-05-10T00:00:00Z".into(),
+            duration_s: DAY_S,
+            interval_s: 60.0,
+        },
+        site: beijing(),
+        room: RoomParams {
+            mean_c: 22.0,
+            diurnal_amplitude_c: 1.5,
+            diurnal_peak_solar_h: 15.0,
+            weather_std_c: 0.3,
+            weather_tau_h: 72.0,
+            door_rate_per_day: 2.0,
+            door_step_c: 0.5,
+            door_decay_min: 20.0,
+        },
+        thermostat: ThermostatParams {
+            setpoint_c: 25.0,
+            controller_std_c: 0.01,
+            controller_tau_s: 600.0,
+            setpoint_walk_c_per_sqrt_day: 0.002,
+            room_coupling: 0.005,
+            room_lowpass_h: 3.0,
+            proof_mass_lag_s: 60.0,
+        },
+        accelerometer: AccelerometerParams {
+            instrument: "SNJ-103 (simulated, JN-06-like models)".into(),
+            calibration: CalibrationSource::PaperPrintedOrder2,
+            noise_g: AllanParams {
+                white_adev_1s: 1e-6,
+                flicker_floor: 0.5e-6,
+                random_walk_per_sqrt_s: 8e-9,
+            },
+            orientation: static_head(0.0),
+        },
+        rtd: pt100(),
+        foundation: FoundationParams {
+            initial_arcsec: 0.0,
+            building_arcsec_per_c: 0.21,
+            building_lag_h: 4.0,
+            creep_arcsec_per_sqrt_day: 0.02,
+        },
+        tide: TideParams {
+            enabled: true,
+            tilt_azimuth_deg: 0.0,
+            step_s: 60.0,
+        },
+        tiltmeter: tiltmeter(),
+        adc: board(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn presets_round_trip_through_toml() {
+        for name in PRESETS {
+            let s = Scenario::preset(name).unwrap();
+            let back = Scenario::from_toml(&s.to_toml()).unwrap();
+            assert_eq!(back, s, "{name}");
+        }
+    }
+
+    #[test]
+    fn unknown_and_missing_fields_are_refused() {
+        let text = Scenario::preset("paper-1g").unwrap().to_toml();
+        let typo = text.replace("setpoint_c", "set_point_c");
+        assert!(matches!(
+            Scenario::from_toml(&typo),
+            Err(ScenarioError::Toml(_))
+        ));
+        let missing = text.replace("proof_mass_lag_s = 60.0\n", "");
+        assert!(matches!(
+            Scenario::from_toml(&missing),
+            Err(ScenarioError::Toml(_))
+        ));
+    }
+
+    #[test]
+    fn impossible_values_are_refused_by_name() {
+        let mut s = Scenario::preset("paper-0g").unwrap();
+        s.run.interval_s = 0.0;
+        assert!(matches!(s.validate(), Err(ScenarioError::Invalid(m)) if m.contains("interval")));
+        let mut s = Scenario::preset("paper-0g").unwrap();
+        s.accelerometer.noise_g.white_adev_1s = -1.0;
+        assert!(s.validate().is_err());
+        assert!(matches!(
+            load("no-such-preset"),
+            Err(ScenarioError::Unknown(_))
+        ));
+    }
+
+    #[test]
+    fn the_1g_preset_lasts_41_days_and_sampling_is_configurable() {
+        let mut s = Scenario::preset("paper-1g").unwrap();
+        assert_eq!(s.samples(), 41 * 1440);
+        s.run.interval_s = 1.0;
+        assert_eq!(s.samples(), 41 * 86_400);
+    }
+}

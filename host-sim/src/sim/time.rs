@@ -1,0 +1,156 @@
+//! UTC instants as seconds since the Unix epoch, parsed from and printed as ISO 8601
+//! (`YYYY-MM-DDTHH:MM:SS[.fff]Z`). Leap seconds are ignored (POSIX time), which is far below what
+//! a daily tide or thermal cycle can notice.
+
+use std::fmt;
+
+/// A UTC instant, seconds since 1970-01-01T00:00:00Z (POSIX, no leap seconds).
+#[derive(Debug, Clone, Copy, PartialEq, PartialOrd)]
+pub struct Utc(pub f64);
+
+/// Why a UTC string is refused.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("not an ISO 8601 UTC time (YYYY-MM-DDTHH:MM:SSZ): {0:?}")]
+pub struct UtcParseError(pub String);
+
+/// Days since 1970-01-01 of a proleptic Gregorian date (H. Hinnant's days_from_civil).
+fn days_from_civil(y: i64, m: i64, d: i64) -> i64 {
+    let y = if m <= 2 { y - 1 } else { y };
+    let era = y.div_euclid(400);
+    let yoe = y - era * 400;
+    let mp = (m + 9) % 12;
+    let doy = (153 * mp + 2) / 5 + d - 1;
+    let doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
+    era * 146_097 + doe - 719_468
+}
+
+/// The date of a day count since 1970-01-01 (inverse of [`days_from_civil`]).
+fn civil_from_days(z: i64) -> (i64, i64, i64) {
+    let z = z + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = doy - (153 * mp + 2) / 5 + 1;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 };
+    (
+        if m <= 2 {
+            yoe + era * 400 + 1
+        } else {
+            yoe + era * 400
+        },
+        m,
+        d,
+    )
+}
+
+impl Utc {
+    /// Parses `YYYY-MM-DDTHH:MM:SS[.fraction]Z` (a space may replace the `T`).
+    pub fn parse(s: &str) -> Result<Utc, UtcParseError> {
+        let err = || UtcParseError(s.to_string());
+        let t = s.trim();
+        let t = t.strip_suffix('Z').ok_or_else(err)?;
+        let (date, time) = t.split_once(['T', ' ']).ok_or_else(err)?;
+        let mut dp = date.split('-');
+        let num = |p: Option<&str>| -> Result<i64, UtcParseError> {
+            p.ok_or_else(err)?.parse::<i64>().map_err(|_| err())
+        };
+        let (y, mo, d) = (num(dp.next())?, num(dp.next())?, num(dp.next())?);
+        let mut tp = time.split(':');
+        let (h, mi) = (num(tp.next())?, num(tp.next())?);
+        let sec: f64 = tp.next().ok_or_else(err)?.parse().map_err(|_| err())?;
+        let month_len = [31, 28, 31, 30, 31, 30, 31, 31, 30, 31, 30, 31];
+        let leap = (y % 4 == 0 && y % 100 != 0) || y % 400 == 0;
+        let max_day = match mo {
+            2 if leap => 29,
+            1..=12 => month_len[(mo - 1) as usize],
+            _ => return Err(err()),
+        };
+        if dp.next().is_some()
+            || tp.next().is_some()
+            || !(1..=max_day).contains(&d)
+            || !(0..24).contains(&h)
+            || !(0..60).contains(&mi)
+            || !(0.0..60.0).contains(&sec)
+        {
+            return Err(err());
+        }
+        let days = days_from_civil(y, mo, d);
+        Ok(Utc((days * 86_400 + h * 3600 + mi * 60) as f64 + sec))
+    }
+
+    /// The instant `dt_s` seconds later.
+    pub fn plus(self, dt_s: f64) -> Utc {
+        Utc(self.0 + dt_s)
+    }
+
+    /// Julian date (UT), for ephemerides.
+    pub fn julian_date(self) -> f64 {
+        self.0 / 86_400.0 + 2_440_587.5
+    }
+}
+
+impl fmt::Display for Utc {
+    /// `YYYY-MM-DDTHH:MM:SSZ`, with milliseconds only when the instant has a fraction.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let ms = (self.0 * 1000.0).round() as i64;
+        let days = ms.div_euclid(86_400_000);
+        let rem = ms.rem_euclid(86_400_000);
+        let (y, m, d) = civil_from_days(days);
+        let (h, mi, s, frac) = (
+            rem / 3_600_000,
+            rem / 60_000 % 60,
+            rem / 1000 % 60,
+            rem % 1000,
+        );
+        write!(f, "{y:04}-{m:02}-{d:02}T{h:02}:{mi:02}:{s:02}")?;
+        if frac != 0 {
+            write!(f, ".{frac:03}")?;
+        }
+        write!(f, "Z")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn known_instants_parse_to_their_posix_seconds() {
+        // `date -u -d 2000-01-01T12:00:00Z +%s` = 946728000 (J2000.0 in UT).
+        assert_eq!(Utc::parse("2000-01-01T12:00:00Z").unwrap().0, 946_728_000.0);
+        assert_eq!(Utc::parse("1970-01-01T00:00:00Z").unwrap().0, 0.0);
+        // `date -u -d 2024-02-29T23:59:30Z +%s` = 1709251170.
+        assert_eq!(
+            Utc::parse("2024-02-29 23:59:30.5Z").unwrap().0,
+            1_709_251_170.5
+        );
+        // J2000.0 is JD 2451545.0.
+        assert!((Utc(946_728_000.0).julian_date() - 2_451_545.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn printing_round_trips() {
+        for s in [
+            "1990-01-01T01:00:00Z",
+            "2017-03-01T08:30:15.250Z",
+            "2100-12-31T23:59:59Z",
+        ] {
+            assert_eq!(Utc::parse(s).unwrap().to_string(), s);
+        }
+    }
+
+    #[test]
+    fn malformed_or_impossible_dates_are_refused() {
+        for s in [
+            "2017-02-29T00:00:00Z",
+            "2017-13-01T00:00:00Z",
+            "2017-01-01T24:00:00Z",
+            "2017-01-01T00:00:00",
+            "yesterday",
+        ] {
+            assert!(Utc::parse(s).is_err(), "{s}");
+        }
+    }
+}

@@ -1,0 +1,166 @@
+//! CLI glue of `accomp tumble` and `accomp simulate-tumble` (the analysis is in `tumble`, the
+//! generator in `tumble_sim`).
+
+use std::path::PathBuf;
+
+use crate::tumble::{self, RotationAxis, TumbleOptions};
+use crate::tumble_sim::{self, TumbleSimConfig};
+use anyhow::Context;
+
+fn parse_axis(s: &str) -> Result<RotationAxis, String> {
+    RotationAxis::parse(s).ok_or_else(|| format!("expected output or pendulum, got {s:?}"))
+}
+
+/// Solve dividing-head tumble logs for K0, K1, K2, δ (and K3) per test (docs/tumble.md).
+#[derive(clap::Args, Debug)]
+pub struct TumbleArgs {
+    /// Tumble log(s); several logs are combined into one table (e.g. δp and δo mountings).
+    #[arg(required = true)]
+    pub logs: Vec<PathBuf>,
+    /// Print the full report as JSON.
+    #[arg(long)]
+    pub json: bool,
+    /// Write the coefficient table (Table 1 CSV format) here.
+    #[arg(short = 'o', long = "output")]
+    pub output: Option<PathBuf>,
+    /// Append standard-error columns to the coefficient table.
+    #[arg(long)]
+    pub with_se: bool,
+    /// Local gravity in standard g (overrides the `local_gravity_m_s2` metadata).
+    #[arg(long)]
+    pub gravity_g: Option<f64>,
+    /// Dividing-head index error, arcsec 1σ (default: metadata, else 0.2).
+    #[arg(long)]
+    pub index_error_arcsec: Option<f64>,
+    /// Axis along the head's rotation axis: output or pendulum (overrides the metadata).
+    #[arg(long, value_parser = parse_axis)]
+    pub rotation_axis: Option<RotationAxis>,
+    /// Gap in time_s that starts a new test when the log has no `test` column (s).
+    #[arg(long)]
+    pub gap_s: Option<f64>,
+}
+
+/// Generate a tumble log from true temperature models (the paper's printed order-2 models).
+#[derive(clap::Args, Debug)]
+pub struct SimulateTumbleArgs {
+    /// Noise seed.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Output file (stdout when absent).
+    #[arg(short = 'o', long = "output")]
+    pub output: Option<PathBuf>,
+    /// Equally spaced positions, starting at 0°.
+    #[arg(long, default_value_t = 4)]
+    pub positions: usize,
+    /// Readings per position.
+    #[arg(long, default_value_t = 10)]
+    pub readings: usize,
+    /// Temperatures (°C), comma-separated; default Table 1's 30..65 °C.
+    #[arg(long, value_delimiter = ',')]
+    pub temperatures: Vec<f64>,
+    /// Tests per temperature.
+    #[arg(long, default_value_t = 1)]
+    pub repeats: usize,
+    /// Axis along the head's rotation axis: output or pendulum.
+    #[arg(long, value_parser = parse_axis, default_value = "pendulum")]
+    pub rotation_axis: RotationAxis,
+    /// Reading noise (V, 1σ).
+    #[arg(long, default_value_t = 2e-6)]
+    pub noise_v: f64,
+    /// True index error (arcsec, 1σ).
+    #[arg(long, default_value_t = 0.2)]
+    pub index_error_arcsec: f64,
+    /// Constant foundation tilt (arcsec).
+    #[arg(long, default_value_t = 0.0)]
+    pub tilt_arcsec: f64,
+    /// True K3 (g/g³).
+    #[arg(long, default_value_t = 0.0)]
+    pub k3: f64,
+    /// Bias drift (g/day).
+    #[arg(long, default_value_t = 0.0)]
+    pub bias_drift_g_per_day: f64,
+    /// Omit the `test` column (tests then split by time gaps and angle restarts).
+    #[arg(long)]
+    pub no_test_column: bool,
+}
+
+/// Runs `accomp tumble`.
+pub fn run(args: TumbleArgs) -> anyhow::Result<()> {
+    let TumbleArgs {
+        logs,
+        json,
+        output,
+        with_se,
+        gravity_g,
+        index_error_arcsec,
+        rotation_axis,
+        gap_s,
+    } = args;
+    let mut parsed = Vec::new();
+    for path in &logs {
+        let text =
+            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        parsed.push(tumble::parse_log(&text).with_context(|| format!("{}", path.display()))?);
+    }
+    let opts = TumbleOptions {
+        gravity_g,
+        index_error_arcsec,
+        rotation_axis,
+        gap_s,
+    };
+    let refs: Vec<&tumble::TumbleLog> = parsed.iter().collect();
+    let report = tumble::analyse(&refs, &opts)?;
+    if json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        print!("{}", tumble::render_text(&report));
+    }
+    if let Some(path) = output {
+        std::fs::write(&path, tumble::table_csv(&report, with_se)?)
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+
+    Ok(())
+}
+
+/// Runs `accomp simulate-tumble`.
+pub fn run_simulate(args: SimulateTumbleArgs) -> anyhow::Result<()> {
+    let SimulateTumbleArgs {
+        seed,
+        output,
+        positions,
+        readings,
+        temperatures,
+        repeats,
+        rotation_axis,
+        noise_v,
+        index_error_arcsec,
+        tilt_arcsec,
+        k3,
+        bias_drift_g_per_day,
+        no_test_column,
+    } = args;
+    let mut cfg = TumbleSimConfig::table1_default(seed).map_err(anyhow::Error::msg)?;
+    cfg.positions = positions;
+    cfg.readings_per_position = readings;
+    if !temperatures.is_empty() {
+        cfg.temperatures_c = temperatures;
+    }
+    cfg.repeats = repeats;
+    cfg.rotation_axis = rotation_axis;
+    cfg.output_noise_v = noise_v;
+    cfg.index_error_arcsec = index_error_arcsec;
+    cfg.tilt_arcsec = tilt_arcsec;
+    cfg.k3_g_per_g3 = k3;
+    cfg.bias_drift_g_per_day = bias_drift_g_per_day;
+    cfg.test_column = !no_test_column;
+    let (log, _) = tumble_sim::simulate_tumble(&cfg).map_err(anyhow::Error::msg)?;
+    match output {
+        Some(path) => {
+            std::fs::write(&path, log).with_context(|| format!("writing {}", path.display()))?
+        }
+        None => print!("{log}"),
+    }
+
+    Ok(())
+}
