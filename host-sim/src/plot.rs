@@ -585,20 +585,16 @@ fn output_figure(log: &Log, opts: &PlotOptions, zero_g: bool) -> Result<Figure, 
             traces,
         });
     }
-    let base = if zero_g {
-        "0 g output before and after tilt compensation"
-    } else {
-        "1 g output before and after temperature compensation"
-    };
-    let title = if comp.is_empty() {
-        format!("{base} (no compensated column in the log)")
-    } else {
-        base.to_owned()
+    let title = match (zero_g, comp.is_empty()) {
+        (true, false) => "0 g output before/after tilt compensation",
+        (false, false) => "1 g output before/after temperature compensation",
+        (true, true) => "0 g output (the log has no compensated column)",
+        (false, true) => "1 g output (the log has no compensated column)",
     };
     // A shared y range only makes sense when every panel is in the same unit.
     let same_unit = units.windows(2).all(|w| w[0] == w[1]);
     Ok(Figure::Time(TimeFigure {
-        title: titled(log, &title),
+        title: titled(log, title),
         x_desc: axis.desc,
         x_range: axis.range,
         panels,

@@ -322,8 +322,13 @@ where
             "no positive Allan deviation point to draw".into(),
         ));
     }
-    let (tau_lo, tau_hi) = (tau_lo / 1.5, tau_hi * 1.5);
-    let (y_lo, y_hi) = (y_lo / 2.0, y_hi * 3.0);
+    // Lower ends on a power of ten: plotters' log axis puts key points (and so labels) only from
+    // the first power of ten inside the range, so a range starting at 3e-6 would get none below
+    // 1e-5 (and it finds that power with a rounded `ceil(ln / ln 10)`, hence the 0.99, so the
+    // decade itself is inside). The upper end leaves room for the legend.
+    let decade_below = |v: f64| 0.99 * 10f64.powf(v.log10().floor());
+    let (tau_lo, tau_hi) = (decade_below(tau_lo / 1.2), tau_hi * 1.5);
+    let (y_lo, y_hi) = (decade_below(y_lo / 1.2), y_hi * 3.0);
     let mut chart = ChartBuilder::on(root)
         .caption(&fig.title, (FONT, 20))
         .margin(15)
