@@ -561,7 +561,8 @@ pub fn edf_oadev_simple(n: f64, m: f64, alpha: i32) -> f64 {
         }
         -1 => {
             if m <= 1.0 {
-                2.0 * (n - 2.0) / (2.3 * n - 4.9)
+                // NIST SP 1065 Table 5: 2(N − 2)² / (2.3N − 4.9).
+                2.0 * (n - 2.0) * (n - 2.0) / (2.3 * n - 4.9)
             } else {
                 5.0 * n * n / (4.0 * m * (n + 3.0 * m))
             }
@@ -1109,5 +1110,12 @@ mod tests {
             Phase::from_readings(&[1.0, f64::INFINITY, 3.0, 4.0], 1.0).unwrap_err(),
             AllanError::Infinite(1)
         );
+    }
+
+    #[test]
+    fn flicker_fm_edf_at_m_1_is_the_sp1065_square_law() {
+        // NIST SP 1065 Table 5, flicker FM, m = 1: 2(N − 2)²/(2.3N − 4.9); N = 100 → 85.34.
+        let edf = edf_oadev_simple(100.0, 1.0, -1);
+        assert!((edf - 2.0 * 98.0 * 98.0 / 225.1).abs() < 1e-9, "edf {edf}");
     }
 }

@@ -34,6 +34,8 @@ enum Command {
     Load(accomp_host::device_cli::LoadArgs),
     /// Find what the static model gets wrong in a log, name the physical cause, measure the gain.
     Discover(accomp_host::discover::DiscoverArgs),
+    /// Figures like the paper's Figs. 2–5 and Allan deviation with confidence bands.
+    Plot(accomp_host::plot::PlotArgs),
     /// Stability (std, drift), OADEV and MDEV of a log's output columns.
     Stability(accomp_host::stability::StabilityArgs),
 }
@@ -49,6 +51,7 @@ fn main() -> anyhow::Result<()> {
         Command::Compensate(args) => accomp_host::device_cli::run_compensate(&args),
         Command::Load(args) => accomp_host::device_cli::run_load(&args),
         Command::Discover(args) => accomp_host::discover::run(&args),
+        Command::Plot(args) => accomp_host::plot::run(&args),
         Command::Stability(args) => Ok(accomp_host::stability::run(&args)?),
     }
 }

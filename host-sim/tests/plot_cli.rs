@@ -1,0 +1,101 @@
+//! `accomp plot` from the command line: on a simulated log, on a hand-written one, and the error
+//! for a missing column.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn accomp(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_accomp"))
+        .args(args)
+        .output()
+        .expect("run accomp")
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("accomp-plot-cli-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+#[test]
+fn plots_a_simulated_zero_g_log_as_fig2_fig5_fig4_and_adev() {
+    let dir = scratch("sim");
+    let log = dir.join("zero.csv");
+    let sim = accomp(&["simulate", "paper-0g", "--seed", "3", "-o", s(&log)]);
+    assert!(
+        sim.status.success(),
+        "{}",
+        String::from_utf8_lossy(&sim.stderr)
+    );
+    let figs = dir.join("figs");
+    let out = accomp(&["plot", s(&log), "--out-dir", s(&figs), "--format", "png"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let listed: Vec<String> = String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(str::to_owned)
+        .collect();
+    let want = [
+        "zero_fig2_temperature.png",
+        "zero_fig5_output_0g.png",
+        "zero_fig4_tilt.png",
+        "zero_adev.png",
+    ];
+    assert_eq!(listed.len(), want.len(), "{listed:?}");
+    for (line, name) in listed.iter().zip(want) {
+        let p = figs.join(name);
+        assert_eq!(line, s(&p));
+        let bytes = std::fs::read(&p).unwrap();
+        assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n", "{name}");
+    }
+}
+
+#[test]
+fn one_kind_as_svg_and_a_missing_column_named_on_stderr() {
+    let dir = scratch("hand");
+    let log = dir.join("small.csv");
+    let mut csv = String::from("# input_g: 1\n# scale_factor_v_per_g: 1.3\ntime_s,output_v\n");
+    for i in 0..200 {
+        let v = 1.3 + if i % 3 == 0 { 2e-6 } else { -1e-6 };
+        csv.push_str(&format!("{i},{v}\n"));
+    }
+    std::fs::write(&log, csv).unwrap();
+    let out = accomp(&[
+        "plot",
+        s(&log),
+        "--out-dir",
+        s(&dir),
+        "--format",
+        "svg",
+        "--kind",
+        "output",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let svg = std::fs::read_to_string(dir.join("small_fig3_output_1g.svg")).unwrap();
+    assert!(svg.contains("<svg") && svg.trim_end().ends_with("</svg>"));
+    assert!(svg.contains("1 g output (the log has no compensated column)"));
+
+    let bad = accomp(&[
+        "plot",
+        s(&log),
+        "--out-dir",
+        s(&dir),
+        "--kind",
+        "temperature",
+    ]);
+    assert!(!bad.status.success());
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(err.contains("`temperature_c`"), "{err}");
+}
