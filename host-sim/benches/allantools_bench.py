@@ -5,7 +5,7 @@
 
 Reads the log the Rust example wrote (load time not part of the comparison: numpy's loadtxt is
 slow, and the Rust reader is timed separately), converts output_v to g with the log's
-scale_factor_v_per_g, and times, best of 3, what `accomp stability` computes: the standard
+scale_factor_v_per_g, and times, best of 5, what `accomp stability` computes: the standard
 deviation, the drift regression (np.polyfit + residual std), allantools.oadev and allantools.mdev
 at octave taus on frequency data at 1 Hz. (allantools' oadev/mdev give only dev/sqrt(n) error
 bars: the Rust side additionally computes noise IDs and chi-squared intervals.)
@@ -15,6 +15,14 @@ import time
 
 import allantools
 import numpy as np
+
+
+RUNS = 5
+
+
+def loadavg():
+    with open("/proc/loadavg") as f:
+        return f.read().strip()
 
 
 def best_of(n, f):
@@ -52,21 +60,24 @@ def main():
         s = np.sqrt(np.sum(res * res) / (len(y) - 2))
         return std, b, s
 
-    stab_s, (std, slope, s) = best_of(3, stability)
+    print("load average before: %s" % loadavg())
+    stab_s, (std, slope, s) = best_of(RUNS, stability)
     oadev_s, (taus, ad, _, _) = best_of(
-        3, lambda: allantools.oadev(y, rate=1.0, data_type="freq", taus="octave"))
+        RUNS, lambda: allantools.oadev(y, rate=1.0, data_type="freq", taus="octave"))
     mdev_s, (mtaus, md, _, _) = best_of(
-        3, lambda: allantools.mdev(y, rate=1.0, data_type="freq", taus="octave"))
+        RUNS, lambda: allantools.mdev(y, rate=1.0, data_type="freq", taus="octave"))
     print("allantools %s, numpy %s" % (allantools.__version__, np.__version__))
     print("samples                  %d" % len(y))
     print("np.loadtxt               %.3f s" % load_s)
     print("stability (std + regr.)  %.4f s" % stab_s)
     print("oadev octave             %.4f s  (%d taus)" % (oadev_s, len(taus)))
     print("mdev octave              %.4f s  (%d taus)" % (mdev_s, len(mtaus)))
+    print("oadev + stability        %.4f s" % (oadev_s + stab_s))
     print("sum                      %.4f s" % (stab_s + oadev_s + mdev_s))
     print("std = %.6e g, slope = %.6e g/s, residual std = %.6e g" % (std, slope, s))
     for tau, d in list(zip(taus, ad))[::4]:
         print("  oadev tau %8d s  %.6e" % (tau, d))
+    print("load average after: %s" % loadavg())
 
 
 if __name__ == "__main__":

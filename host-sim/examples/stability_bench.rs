@@ -7,7 +7,9 @@
 //! ```
 //!
 //! The log is written to the given path (so allantools can time the same data); timings are the
-//! best of 3 runs. Results go into docs/benchmarks.md.
+//! best of 5 runs (the first, cold OADEV run is printed too: it pays the first touch of the phase
+//! buffer). The load average is printed before and after, the machine being shared. Results go
+//! into docs/benchmarks.md.
 
 use std::time::Instant;
 
@@ -33,19 +35,24 @@ impl Lcg {
     }
 }
 
-fn best_of<T>(runs: usize, mut f: impl FnMut() -> T) -> (f64, T) {
-    let mut best = f64::INFINITY;
-    let mut last = None;
-    for _ in 0..runs {
+const RUNS: usize = 5;
+
+/// Best time of `runs` calls, the first call's time, and the last result.
+fn best_of<T>(runs: usize, mut f: impl FnMut() -> T) -> (f64, f64, T) {
+    let t0 = Instant::now();
+    let mut last = f();
+    let first = t0.elapsed().as_secs_f64();
+    let mut best = first;
+    for _ in 1..runs {
         let t0 = Instant::now();
-        let v = f();
+        last = f();
         best = best.min(t0.elapsed().as_secs_f64());
-        last = Some(v);
     }
-    match last {
-        Some(v) => (best, v),
-        None => unreachable!("runs >= 1"),
-    }
+    (best, first, last)
+}
+
+fn loadavg() -> String {
+    std::fs::read_to_string("/proc/loadavg").unwrap_or_default()
 }
 
 fn main() -> anyhow::Result<()> {
@@ -75,11 +82,12 @@ fn main() -> anyhow::Result<()> {
     log.push_column("output_v", out_v)?;
     log.push_column("temperature_c", temp_c)?;
 
+    print!("load average before: {}", loadavg());
     let t0 = Instant::now();
     log.write_path(&path)?;
     let write_s = t0.elapsed().as_secs_f64();
     let size_mb = std::fs::metadata(&path)?.len() as f64 / 1e6;
-    let (read_s, back) = best_of(3, || Log::read_path(&path));
+    let (read_s, _, back) = best_of(3, || Log::read_path(&path));
     let back = back?;
     assert_eq!(back.len(), SAMPLES);
 
@@ -91,18 +99,18 @@ fn main() -> anyhow::Result<()> {
         .collect();
     let time = back.time_s();
 
-    let (stab_s, (ms, reg)) = best_of(3, || (mean_std(&y_g), regression(time, &y_g)));
-    let (oadev_s, ad) = best_of(3, || {
+    let (stab_s, _, (ms, reg)) = best_of(RUNS, || (mean_std(&y_g), regression(time, &y_g)));
+    let (oadev_s, oadev_cold_s, ad) = best_of(RUNS, || {
         Phase::from_readings(&y_g, 1.0).map(|p| p.deviation(Statistic::Oadev, TauSet::Octave))
     });
-    let (mdev_s, md) = best_of(3, || {
+    let (mdev_s, _, md) = best_of(RUNS, || {
         Phase::from_readings(&y_g, 1.0).map(|p| p.deviation(Statistic::Mdev, TauSet::Octave))
     });
     let opts = Options {
         columns: vec!["output_v".into()],
         ..Options::default()
     };
-    let (full_s, rep) = best_of(3, || analyse(&back, &opts));
+    let (full_s, _, rep) = best_of(RUNS, || analyse(&back, &opts));
     let (ad, md, rep) = (ad?, md?, rep?);
 
     println!("samples                  {SAMPLES}");
@@ -110,10 +118,12 @@ fn main() -> anyhow::Result<()> {
     println!("log read                 {read_s:.3} s");
     println!("stability (std + regr.)  {:.4} s", stab_s);
     println!(
-        "OADEV octave (+CI, ID)   {:.4} s  ({} taus)",
+        "OADEV octave (+CI, ID)   {:.4} s  ({} taus; first, cold run {:.4} s)",
         oadev_s,
-        ad.len()
+        ad.len(),
+        oadev_cold_s
     );
+    println!("OADEV + stability        {:.4} s", oadev_s + stab_s);
     println!(
         "MDEV octave (+CI, ID)    {:.4} s  ({} taus)",
         mdev_s,
@@ -130,5 +140,6 @@ fn main() -> anyhow::Result<()> {
         println!("  oadev tau {:>8} s  {:.6e}", p.tau_s, p.dev);
     }
     println!("columns analysed: {}", rep.columns.len());
+    print!("load average after: {}", loadavg());
     Ok(())
 }
