@@ -954,33 +954,8 @@ fn erfc(x: f64) -> f64 {
     }
 }
 
-/// ln Γ(a) for a > 0 (Lanczos, g = 7, n = 9; relative error ~1e-15).
-pub fn ln_gamma(a: f64) -> f64 {
-    const G: f64 = 7.0;
-    const COEF: [f64; 9] = [
-        0.999_999_999_999_809_9,
-        676.520_368_121_885_1,
-        -1_259.139_216_722_402_8,
-        771.323_428_777_653_1,
-        -176.615_029_162_140_6,
-        12.507_343_278_686_905,
-        -0.138_571_095_265_720_12,
-        9.984_369_578_019_572e-6,
-        1.505_632_735_149_311_6e-7,
-    ];
-    if a < 0.5 {
-        // Reflection keeps the series in its accurate range.
-        let pi = std::f64::consts::PI;
-        return (pi / (pi * a).sin()).ln() - ln_gamma(1.0 - a);
-    }
-    let a = a - 1.0;
-    let mut s = COEF[0];
-    for (i, c) in COEF.iter().enumerate().skip(1) {
-        s += c / (a + i as f64);
-    }
-    let t = a + G + 0.5;
-    0.5 * (2.0 * std::f64::consts::PI).ln() + (a + 0.5) * t.ln() - t + s.ln()
-}
+/// ln Γ, shared with the fitting statistics (one Lanczos implementation in the crate).
+pub use crate::fit::stats::ln_gamma;
 
 /// Regularized lower incomplete gamma P(a, x): series for x < a + 1, Lentz continued fraction
 /// for the complement otherwise.
