@@ -278,11 +278,20 @@ pub enum ErrorCode {
     InvalidRate = 52,
     /// Bench count outside 1..=MAX_BENCH_COUNT. Detail: MAX_BENCH_COUNT.
     InvalidCount = 53,
+    /// The flash driver failed to erase, program or read. Detail: 0 not aligned, 1 out of
+    /// bounds, 2 other (embedded-storage `NorFlashErrorKind`). The active table is unchanged.
+    FlashFailed = 60,
+    /// What was read back from the slot differs from what was written; the slot was left
+    /// uncommitted and the active table is unchanged. Detail: slot (0 = A, 1 = B).
+    FlashVerify = 61,
+    /// The calibration store could not be opened at boot (slot layout does not fit the flash),
+    /// so nothing can be committed. Detail: 0.
+    StorageUnavailable = 62,
 }
 
 impl ErrorCode {
     /// Every code, for documentation and exhaustive tests.
-    pub const ALL: [ErrorCode; 31] = [
+    pub const ALL: [ErrorCode; 34] = [
         ErrorCode::Malformed,
         ErrorCode::FrameCrc,
         ErrorCode::FrameTooLong,
@@ -314,6 +323,9 @@ impl ErrorCode {
         ErrorCode::NotSupported,
         ErrorCode::InvalidRate,
         ErrorCode::InvalidCount,
+        ErrorCode::FlashFailed,
+        ErrorCode::FlashVerify,
+        ErrorCode::StorageUnavailable,
     ];
 
     /// The code for a number from the wire.
