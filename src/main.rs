@@ -28,7 +28,7 @@ mod app {
     use accomp::protocol::{
         encode_frame, DeviceMessage, FrameDecoder, FrameError, MAX_FRAME_LEN, PROTOCOL_VERSION,
     };
-    use accomp::service::Service;
+    use accomp::service::{BootTable, Service};
     use heapless::Vec;
     use rtic_monotonics::Timebase as _;
     use rtic_sync::channel::{Receiver, Sender};
@@ -61,12 +61,27 @@ mod app {
         rx_to_worker: Sender<'static, Inbound, INBOUND_CAPACITY>,
         acquisition: board::Acquisition,
         acq_to_worker: Sender<'static, Inbound, INBOUND_CAPACITY>,
+        service: Service<board::Flash>,
     }
 
     #[init]
     fn init(cx: init::Context) -> (Shared, Local) {
         let parts = board::init(cx.device);
         Mono::start(cx.core.SYST, board::SYSTICK_HZ);
+        // Boot restores the newest valid calibration slot (none: samples flag NO_CALIBRATION).
+        let service = Service::new(board::BOARD, parts.flash, board::SLOT_LAYOUT);
+        match service.boot_table() {
+            BootTable::Restored {
+                sequence,
+                with_previous,
+            } => defmt::info!(
+                "calibration restored from slot sequence {} (rollback table: {})",
+                sequence,
+                with_previous
+            ),
+            BootTable::Empty => defmt::warn!("no valid calibration slot: NO_CALIBRATION"),
+            BootTable::StorageFault => defmt::error!("calibration store unreadable"),
+        }
         let (rx_to_worker, inbound) = make_channel!(Inbound, INBOUND_CAPACITY);
         if worker::spawn(inbound).is_err() {
             board::fatal(board::Fatal::Spawn);
@@ -81,6 +96,7 @@ mod app {
                 acquisition: parts.acquisition,
                 acq_to_worker: rx_to_worker.clone(),
                 rx_to_worker,
+                service,
             },
         )
     }
@@ -110,7 +126,7 @@ mod app {
     }
 
     /// Answers requests and runs samples through the pipeline, one at a time, in order.
-    #[task(priority = 1, local = [tx, service: Service = Service::new(board::BOARD)])]
+    #[task(priority = 1, local = [tx, service])]
     async fn worker(
         cx: worker::Context,
         mut inbound: Receiver<'static, Inbound, INBOUND_CAPACITY>,

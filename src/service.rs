@@ -3,6 +3,12 @@
 //! The firmware only moves bytes between the UART and this type, so every rule of the protocol
 //! (upload sequencing, validation before activation, rollback, error codes) is unit-tested on the
 //! host and is the same code that runs on the board.
+//!
+//! Tables persist in a [`CalibrationStore`] over the board's NOR flash (internal sectors 10–11
+//! on the front-end, a [`crate::storage::RamFlash`] on QEMU): a table becomes active in RAM only
+//! after the store has committed it, and boot restores the newest valid slot (and the older one
+//! as the rollback table). The RAM copies are what the pipeline uses; flash is touched only by
+//! upload, commit, activate and rollback.
 
 use crate::pipeline::{self, RawSample};
 use crate::protocol::{
@@ -10,7 +16,9 @@ use crate::protocol::{
     FrameError, HostFrame, Request, Response, CHUNK_LEN, MAX_BENCH_COUNT, MAX_RATE_HZ,
     PROTOCOL_VERSION,
 };
+use crate::storage::{CalibrationStore, Slot, SlotLayout, SlotState, StorageError, ValidSlots};
 use crate::table::{CalibrationTable, CRC32, ENCODED_LEN};
+use embedded_storage::nor_flash::{NorFlash, NorFlashError, NorFlashErrorKind};
 
 /// Default acquisition rate in samples per second.
 pub const DEFAULT_RATE_HZ: u32 = 10;
@@ -23,8 +31,26 @@ struct Upload {
     buf: [u8; ENCODED_LEN],
 }
 
-/// Protocol state of the device: tables, upload in progress, counters.
-pub struct Service {
+/// What the calibration store said at boot (kept for diagnostics; the firmware logs it).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BootTable {
+    /// The newest valid slot's table is active.
+    Restored {
+        /// Sequence number of the slot it came from.
+        sequence: u32,
+        /// Whether a different, older table was restored as the rollback table too.
+        with_previous: bool,
+    },
+    /// No valid slot (factory-empty flash or both slots corrupted): samples carry
+    /// NO_CALIBRATION until a table is uploaded.
+    Empty,
+    /// The store could not be read or opened; the device runs without a table and refuses
+    /// commits with StorageUnavailable (or FlashFailed).
+    StorageFault,
+}
+
+/// Protocol state of the device: tables, upload in progress, counters, and the flash store.
+pub struct Service<F> {
     board: Board,
     active: Option<CalibrationTable>,
     previous: Option<CalibrationTable>,
@@ -33,12 +59,38 @@ pub struct Service {
     frames_dropped: u32,
     streaming: bool,
     rate_hz: u32,
+    /// None when the store could not be opened at boot (layout does not fit the flash).
+    store: Option<CalibrationStore<F>>,
+    boot: BootTable,
 }
 
-impl Service {
-    /// A device with no table (until storage restores one).
-    pub const fn new(board: Board) -> Self {
-        Service {
+/// The protocol reply for a storage failure. Generic over the driver's error, which the wire
+/// carries only as its `NorFlashErrorKind` (the same three numbers for every board).
+pub fn storage_reply<E: NorFlashError>(e: StorageError<E>) -> ErrorReply {
+    match e {
+        StorageError::Flash(f) => ErrorCode::FlashFailed.reply(match f.kind() {
+            NorFlashErrorKind::NotAligned => 0,
+            NorFlashErrorKind::OutOfBounds => 1,
+            _ => 2,
+        }),
+        StorageError::Table(t) => t.into(),
+        StorageError::Verify(slot) => ErrorCode::FlashVerify.reply(match slot {
+            Slot::A => 0,
+            Slot::B => 1,
+        }),
+        StorageError::NoValidSlot | StorageError::NoPreviousSlot => {
+            ErrorCode::NoPreviousTable.reply(0)
+        }
+        StorageError::Layout(_) => ErrorCode::StorageUnavailable.reply(0),
+    }
+}
+
+impl<F: NorFlash> Service<F> {
+    /// Opens the calibration store on `flash` and restores the newest valid table (active) and
+    /// the other valid slot's table, when it differs (previous, for rollback). Never fails: a
+    /// device without a usable store still answers and streams (flagged NO_CALIBRATION).
+    pub fn new(board: Board, flash: F, layout: SlotLayout) -> Self {
+        let mut s = Service {
             board,
             active: None,
             previous: None,
@@ -53,17 +105,48 @@ impl Service {
             frames_dropped: 0,
             streaming: false,
             rate_hz: DEFAULT_RATE_HZ,
+            store: None,
+            boot: BootTable::StorageFault,
+        };
+        if let Ok(mut store) = CalibrationStore::new(flash, layout) {
+            s.boot = s.restore(&mut store).unwrap_or(BootTable::StorageFault);
+            s.store = Some(store);
         }
+        s
+    }
+
+    fn restore(
+        &mut self,
+        store: &mut CalibrationStore<F>,
+    ) -> Result<BootTable, StorageError<F::Error>> {
+        let ValidSlots { newest, older } = store.valid_slots()?;
+        let Some(newest) = newest else {
+            return Ok(BootTable::Empty);
+        };
+        self.active = Some(store.load_slot(newest.slot)?);
+        // After a rollback both slots hold the same table: nothing to roll back to then.
+        if let Some(older) = older.filter(|o| o.table_id != newest.table_id) {
+            self.previous = store.load_slot(older.slot).ok();
+        }
+        Ok(BootTable::Restored {
+            sequence: newest.sequence,
+            with_previous: self.previous.is_some(),
+        })
+    }
+
+    /// What the store gave at boot.
+    pub fn boot_table(&self) -> BootTable {
+        self.boot
+    }
+
+    /// The flash behind the store (tests reboot by building a new service on it).
+    pub fn into_flash(self) -> Option<F> {
+        self.store.map(CalibrationStore::into_flash)
     }
 
     /// The table used for samples, if any.
     pub fn active_table(&self) -> Option<&CalibrationTable> {
         self.active.as_ref()
-    }
-
-    /// Installs a table without the upload dance (restored from flash at boot).
-    pub fn install(&mut self, table: CalibrationTable) {
-        self.previous = self.active.replace(table);
     }
 
     /// True when acquired samples are to be streamed.
@@ -143,6 +226,7 @@ impl Service {
                 if total_len > ENCODED_LEN {
                     return Err(ErrorCode::UploadTooLong.reply(ENCODED_LEN as u32));
                 }
+                self.prepare_flash()?;
                 self.upload.in_progress = true;
                 self.upload.total_len = total_len;
                 self.upload.crc32 = crc32;
@@ -192,19 +276,12 @@ impl Service {
                 if self.active.as_ref().map(CalibrationTable::id) == Some(table_id) {
                     Ok(Response::Ok)
                 } else if self.previous.as_ref().map(CalibrationTable::id) == Some(table_id) {
-                    core::mem::swap(&mut self.active, &mut self.previous);
-                    Ok(Response::Ok)
+                    self.switch_to_previous()
                 } else {
                     Err(ErrorCode::TableNotFound.reply(0))
                 }
             }
-            Request::Rollback => {
-                if self.previous.is_none() {
-                    return Err(ErrorCode::NoPreviousTable.reply(0));
-                }
-                core::mem::swap(&mut self.active, &mut self.previous);
-                Ok(Response::Ok)
-            }
+            Request::Rollback => self.switch_to_previous(),
             Request::StreamStart => {
                 self.streaming = true;
                 Ok(Response::Ok)
@@ -250,6 +327,26 @@ impl Service {
         })
     }
 
+    /// Erases the slot the commit will write while the upload is under way, but only when the
+    /// erase loses nothing: that slot is blank, half-written, or holds the active table again
+    /// (after a rollback). When it holds the rollback table, the erase waits for the commit, so
+    /// an upload that is refused leaves both slots as they were.
+    fn prepare_flash(&mut self) -> Result<(), ErrorReply> {
+        let Some(store) = self.store.as_mut() else {
+            return Ok(());
+        };
+        let newest = store.valid_slots().map_err(storage_reply)?.newest;
+        let target = newest.map_or(Slot::A, |n| n.slot.other());
+        let keeps_something = match store.slot_state(target).map_err(storage_reply)? {
+            SlotState::Valid(info) => Some(info.table_id) != newest.map(|n| n.table_id),
+            SlotState::Blank | SlotState::Invalid(_) => false,
+        };
+        if !keeps_something {
+            store.prepare_commit().map_err(storage_reply)?;
+        }
+        Ok(())
+    }
+
     fn commit(&mut self) -> Result<Response, ErrorReply> {
         let u = &mut self.upload;
         if !u.in_progress {
@@ -265,10 +362,40 @@ impl Service {
         if computed != u.crc32 {
             return Err(ErrorCode::UploadCrcMismatch.reply(computed));
         }
+        // Validated before the store sees it: a refused table never reaches flash.
         let table = CalibrationTable::decode(bytes).map_err(ErrorReply::from)?;
-        let table_id = table.id();
-        self.install(table);
-        Ok(Response::Committed { table_id })
+        let store = self
+            .store
+            .as_mut()
+            .ok_or(ErrorCode::StorageUnavailable.reply(0))?;
+        // Only a table the store has committed (programmed, read back, marked) becomes active.
+        let slot = store.commit(bytes).map_err(storage_reply)?;
+        self.previous = self.active.replace(table);
+        Ok(Response::Committed {
+            table_id: slot.table_id,
+        })
+    }
+
+    /// Makes the previous table active, in flash first. When the older slot still holds it,
+    /// the store rolls back without touching that slot (its only copy survives any power cut);
+    /// otherwise (a prepared erase or a rollback consumed it) the RAM copy is committed anew.
+    fn switch_to_previous(&mut self) -> Result<Response, ErrorReply> {
+        let target = self
+            .previous
+            .as_ref()
+            .ok_or(ErrorCode::NoPreviousTable.reply(0))?;
+        let store = self
+            .store
+            .as_mut()
+            .ok_or(ErrorCode::StorageUnavailable.reply(0))?;
+        let older = store.valid_slots().map_err(storage_reply)?.older;
+        if older.map(|o| o.table_id) == Some(target.id()) {
+            store.activate_previous().map_err(storage_reply)?;
+        } else {
+            store.commit(&target.encode()).map_err(storage_reply)?;
+        }
+        core::mem::swap(&mut self.active, &mut self.previous);
+        Ok(Response::Ok)
     }
 
     fn info(&self, now_us: u64) -> DeviceInfo {
@@ -299,14 +426,29 @@ mod tests {
     use super::*;
     use crate::pipeline::{raw_from_physical, Status};
     use crate::protocol::{encode_frame, FrameDecoder, MAX_FRAME_LEN};
+    use crate::storage::RamFlash;
     use crate::table::tests::paper_table;
     use crate::units::{Celsius, TiltArcsec, Volts};
 
-    fn req(s: &mut Service, request: Request) -> DeviceMessage {
+    /// The QEMU board's flash: two 1 KiB slots.
+    type Flash = RamFlash<2048, 1024, 4>;
+    const LAYOUT: SlotLayout = SlotLayout::consecutive(1024);
+
+    fn qemu_service() -> Service<Flash> {
+        Service::new(Board::Qemu, Flash::new(), LAYOUT)
+    }
+
+    /// Power off and on: a new service on the same flash cells.
+    fn reboot<F: NorFlash>(s: Service<F>) -> Service<F> {
+        let board = s.board;
+        Service::new(board, s.into_flash().unwrap(), LAYOUT)
+    }
+
+    fn req<F: NorFlash>(s: &mut Service<F>, request: Request) -> DeviceMessage {
         s.handle(HostFrame { id: 9, request }, &|| 1_000)
     }
 
-    fn upload(s: &mut Service, bytes: &[u8]) -> DeviceMessage {
+    fn upload<F: NorFlash>(s: &mut Service<F>, bytes: &[u8]) -> DeviceMessage {
         let crc32 = CRC32.checksum(bytes);
         let begin = req(
             s,
@@ -344,7 +486,7 @@ mod tests {
         }
     }
 
-    fn active_id(s: &mut Service) -> Option<u32> {
+    fn active_id<F: NorFlash>(s: &mut Service<F>) -> Option<u32> {
         match req(s, Request::Info) {
             DeviceMessage::Response {
                 body: Response::Info(i),
@@ -356,7 +498,7 @@ mod tests {
 
     #[test]
     fn a_good_upload_is_committed_and_becomes_active() {
-        let mut s = Service::new(Board::Qemu);
+        let mut s = qemu_service();
         let t = paper_table();
         let r = upload(&mut s, &t.encode());
         assert_eq!(
@@ -371,7 +513,7 @@ mod tests {
 
     #[test]
     fn corrupted_uploads_are_refused_with_their_code_and_the_good_table_stays() {
-        let mut s = Service::new(Board::Qemu);
+        let mut s = qemu_service();
         let good = paper_table();
         upload(&mut s, &good.encode());
 
@@ -397,7 +539,7 @@ mod tests {
 
     #[test]
     fn chunks_out_of_order_name_the_expected_offset() {
-        let mut s = Service::new(Board::Qemu);
+        let mut s = qemu_service();
         let bytes = paper_table().encode();
         req(
             &mut s,
@@ -430,7 +572,7 @@ mod tests {
 
     #[test]
     fn upload_crc_mismatch_is_caught_before_decoding() {
-        let mut s = Service::new(Board::Qemu);
+        let mut s = qemu_service();
         let bytes = paper_table().encode();
         req(
             &mut s,
@@ -458,7 +600,7 @@ mod tests {
 
     #[test]
     fn read_back_returns_the_committed_bytes() {
-        let mut s = Service::new(Board::Qemu);
+        let mut s = qemu_service();
         let bytes = paper_table().encode();
         upload(&mut s, &bytes);
         let mut back = std::vec::Vec::new();
@@ -481,7 +623,7 @@ mod tests {
 
     #[test]
     fn rollback_and_activate_switch_between_the_two_tables() {
-        let mut s = Service::new(Board::Qemu);
+        let mut s = qemu_service();
         assert_eq!(
             error_code(&req(&mut s, Request::Rollback)).map(|e| e.0),
             Some(ErrorCode::NoPreviousTable as u16)
@@ -504,7 +646,7 @@ mod tests {
 
     #[test]
     fn injected_samples_use_the_active_table_and_count_up() {
-        let mut s = Service::new(Board::Qemu);
+        let mut s = qemu_service();
         let t = paper_table();
         let raw = raw_from_physical(&t, Volts(1.3), Celsius(50.0), TiltArcsec(0.0)).unwrap();
         let m = req(&mut s, Request::InjectSample { raw });
@@ -522,7 +664,7 @@ mod tests {
 
     #[test]
     fn bench_runs_the_pipeline_count_times_and_reports_the_clock() {
-        let mut s = Service::new(Board::Qemu);
+        let mut s = qemu_service();
         let t = paper_table();
         upload(&mut s, &t.encode());
         let raw = raw_from_physical(&t, Volts(1.3), Celsius(50.0), TiltArcsec(0.0)).unwrap();
@@ -568,7 +710,7 @@ mod tests {
 
     #[test]
     fn the_frontend_refuses_injection_and_bad_rates() {
-        let mut s = Service::new(Board::Frontend);
+        let mut s = Service::new(Board::Frontend, Flash::new(), LAYOUT);
         let raw =
             raw_from_physical(&paper_table(), Volts(1.0), Celsius(50.0), TiltArcsec(0.0)).unwrap();
         assert_eq!(
@@ -585,7 +727,7 @@ mod tests {
 
     #[test]
     fn a_frame_with_a_good_crc_but_unknown_request_is_answered_with_its_id() {
-        let mut s = Service::new(Board::Qemu);
+        let mut s = qemu_service();
         // id 77 then variant index 200: not a request.
         let mut wire = [0u8; MAX_FRAME_LEN];
         #[derive(serde::Serialize)]
@@ -606,5 +748,263 @@ mod tests {
             DeviceMessage::Error { id, .. } => assert_eq!(id, 77),
             other => panic!("{other:?}"),
         }
+    }
+
+    /// RamFlash that counts erases and can be told to fail every program (a worn cell, a
+    /// driver error), to see where the service erases and what a flash failure does.
+    struct Probe {
+        inner: Flash,
+        erases: std::rc::Rc<core::cell::Cell<u32>>,
+        fail_writes: bool,
+    }
+
+    impl embedded_storage::nor_flash::ErrorType for Probe {
+        type Error = crate::storage::RamFlashError;
+    }
+
+    impl embedded_storage::nor_flash::ReadNorFlash for Probe {
+        const READ_SIZE: usize = 1;
+        fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
+            self.inner.read(offset, bytes)
+        }
+        fn capacity(&self) -> usize {
+            self.inner.capacity()
+        }
+    }
+
+    impl NorFlash for Probe {
+        const WRITE_SIZE: usize = 4;
+        const ERASE_SIZE: usize = 1024;
+        fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+            self.erases.set(self.erases.get() + 1);
+            self.inner.erase(from, to)
+        }
+        fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
+            if self.fail_writes {
+                return Err(crate::storage::RamFlashError::OutOfBounds);
+            }
+            self.inner.write(offset, bytes)
+        }
+    }
+
+    fn probe_service() -> Service<Probe> {
+        let flash = Probe {
+            inner: Flash::new(),
+            erases: Default::default(),
+            fail_writes: false,
+        };
+        Service::new(Board::Qemu, flash, LAYOUT)
+    }
+
+    /// The erase counter of the service's flash (shared, so no reboot is needed to read it).
+    fn probe_counter(s: &mut Service<Probe>) -> std::rc::Rc<core::cell::Cell<u32>> {
+        let flash = s.store.take().unwrap().into_flash();
+        let counter = flash.erases.clone();
+        *s = Service::new(Board::Qemu, flash, LAYOUT);
+        counter
+    }
+
+    fn flash_bytes(s: Service<Probe>) -> (Service<Probe>, std::vec::Vec<u8>) {
+        let flash = s.into_flash().unwrap();
+        let bytes = flash.inner.as_bytes().to_vec();
+        (Service::new(Board::Qemu, flash, LAYOUT), bytes)
+    }
+
+    fn second_table() -> CalibrationTable {
+        let mut b = paper_table();
+        b.date.day = 2;
+        b
+    }
+
+    fn raw() -> RawSample {
+        raw_from_physical(&paper_table(), Volts(1.3), Celsius(50.0), TiltArcsec(0.0)).unwrap()
+    }
+
+    fn info<F: NorFlash>(s: &mut Service<F>) -> DeviceInfo {
+        match req(s, Request::Info) {
+            DeviceMessage::Response {
+                body: Response::Info(i),
+                ..
+            } => i,
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn factory_empty_flash_boots_without_a_table_and_flags_samples() {
+        let mut s = qemu_service();
+        assert_eq!(s.boot_table(), BootTable::Empty);
+        let DeviceMessage::Sample { frame, .. } = req(&mut s, Request::InjectSample { raw: raw() })
+        else {
+            panic!()
+        };
+        assert!(frame.status.has(Status::NO_CALIBRATION));
+        assert!(frame.a_i_exact_g.is_nan());
+    }
+
+    #[test]
+    fn a_committed_table_is_active_after_a_reboot_and_used_for_samples() {
+        let mut s = qemu_service();
+        let t = paper_table();
+        upload(&mut s, &t.encode());
+        let mut s = reboot(s);
+        assert_eq!(
+            s.boot_table(),
+            BootTable::Restored {
+                sequence: 1,
+                with_previous: false
+            }
+        );
+        assert_eq!(active_id(&mut s), Some(t.id()));
+        let DeviceMessage::Sample { frame, .. } = req(&mut s, Request::InjectSample { raw: raw() })
+        else {
+            panic!()
+        };
+        assert_eq!(frame, pipeline::process(0, 1_000, &raw(), Some(&t)));
+    }
+
+    #[test]
+    fn two_commits_survive_a_reboot_as_active_and_previous() {
+        let mut s = qemu_service();
+        let (a, b) = (paper_table(), second_table());
+        upload(&mut s, &a.encode());
+        upload(&mut s, &b.encode());
+        let mut s = reboot(s);
+        let i = info(&mut s);
+        assert_eq!(
+            (i.active_table, i.previous_table),
+            (Some(b.id()), Some(a.id()))
+        );
+        // And the rollback table restored from flash can be rolled back to.
+        req(&mut s, Request::Rollback);
+        assert_eq!(active_id(&mut s), Some(a.id()));
+    }
+
+    #[test]
+    fn a_rollback_is_persisted_and_activate_can_return_after_a_reboot() {
+        let mut s = qemu_service();
+        let (a, b) = (paper_table(), second_table());
+        upload(&mut s, &a.encode());
+        upload(&mut s, &b.encode());
+        assert!(matches!(
+            req(&mut s, Request::Rollback),
+            DeviceMessage::Response {
+                body: Response::Ok,
+                ..
+            }
+        ));
+        let mut s = reboot(s);
+        assert_eq!(active_id(&mut s), Some(a.id()));
+        // The rolled-back-from table lived on in RAM only; after the reboot both slots hold
+        // the rollback target, so there is nothing to roll back to.
+        assert_eq!(info(&mut s).previous_table, None);
+
+        // Without a reboot in between, Activate brings b back, and that is persisted too.
+        let mut s = qemu_service();
+        upload(&mut s, &a.encode());
+        upload(&mut s, &b.encode());
+        req(&mut s, Request::Rollback);
+        req(&mut s, Request::Activate { table_id: b.id() });
+        let mut s = reboot(s);
+        assert_eq!(active_id(&mut s), Some(b.id()));
+    }
+
+    #[test]
+    fn refused_uploads_leave_both_slots_untouched() {
+        let (a, b) = (paper_table(), second_table());
+        let mut nan = paper_table();
+        nan.thermal.models.bias_g.coeffs[1] = f64::NAN;
+        let mut flipped = b.encode();
+        flipped[150] ^= 0x20;
+        let refused: [&[u8]; 3] = [&nan.encode(), &flipped, &b.encode()[..ENCODED_LEN - 3]];
+        // With one table in flash (other slot blank) and with two different tables.
+        for preload in [&[a][..], &[a, b][..]] {
+            let mut s = probe_service();
+            for t in preload {
+                upload(&mut s, &t.encode());
+            }
+            let (mut s, before) = flash_bytes(s);
+            for bytes in refused {
+                assert!(error_code(&upload(&mut s, bytes)).is_some());
+            }
+            let (mut s, after) = flash_bytes(s);
+            assert!(before == after, "a refused upload changed the flash");
+            assert_eq!(
+                active_id(&mut s),
+                Some(preload.last().unwrap().id()),
+                "after reboot"
+            );
+        }
+    }
+
+    #[test]
+    fn the_erase_happens_at_upload_begin_unless_it_would_lose_the_rollback_table() {
+        let (a, b) = (paper_table(), second_table());
+        let begin = |s: &mut Service<Probe>| {
+            req(
+                s,
+                Request::UploadBegin {
+                    total_len: ENCODED_LEN as u32,
+                    crc32: 0,
+                },
+            )
+        };
+        let mut s = probe_service();
+        let counter = probe_counter(&mut s);
+        // Empty flash: slot A is erased at Begin, and the commit does not erase it again.
+        begin(&mut s);
+        assert_eq!(counter.get(), 1, "Begin on empty flash erases slot A");
+        upload(&mut s, &a.encode());
+        assert_eq!(
+            counter.get(),
+            2,
+            "the new Begin erases A again (a Begin restarts), the commit does not"
+        );
+        // Slot B is blank: erased at Begin.
+        begin(&mut s);
+        assert_eq!(counter.get(), 3);
+        upload(&mut s, &b.encode());
+        assert_eq!(counter.get(), 4, "Begin erased B, the commit did not");
+        // Now slot A holds a, the rollback table: Begin must leave it, the commit erases it.
+        begin(&mut s);
+        assert_eq!(
+            counter.get(),
+            4,
+            "Begin erased the slot holding the rollback table"
+        );
+        upload(&mut s, &a.encode());
+        assert_eq!(counter.get(), 5, "the commit erases the old slot itself");
+    }
+
+    #[test]
+    fn a_flash_failure_is_reported_and_the_active_table_stays() {
+        let mut s = probe_service();
+        let (a, b) = (paper_table(), second_table());
+        upload(&mut s, &a.encode());
+        let mut flash = s.into_flash().unwrap();
+        flash.fail_writes = true;
+        let mut s = Service::new(Board::Qemu, flash, LAYOUT);
+        assert_eq!(
+            error_code(&upload(&mut s, &b.encode())),
+            Some((ErrorCode::FlashFailed as u16, 1))
+        );
+        assert_eq!(active_id(&mut s), Some(a.id()));
+        let mut s = reboot(s);
+        assert_eq!(active_id(&mut s), Some(a.id()));
+    }
+
+    #[test]
+    fn a_layout_that_does_not_fit_leaves_a_running_device_that_refuses_commits() {
+        let mut s = Service::new(Board::Qemu, Flash::new(), SlotLayout::consecutive(4096));
+        assert_eq!(s.boot_table(), BootTable::StorageFault);
+        assert_eq!(
+            error_code(&upload(&mut s, &paper_table().encode())),
+            Some((ErrorCode::StorageUnavailable as u16, 0))
+        );
+        assert_eq!(active_id(&mut s), None);
+        assert!(matches!(
+            req(&mut s, Request::Ping),
+            DeviceMessage::Response { .. }
+        ));
     }
 }

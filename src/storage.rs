@@ -202,6 +202,15 @@ pub enum SlotState {
     Invalid(SlotFault),
 }
 
+/// The valid slots found by a scan.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ValidSlots {
+    /// The valid slot with the newest sequence number (the active one).
+    pub newest: Option<SlotInfo>,
+    /// The other slot, when it is valid too.
+    pub older: Option<SlotInfo>,
+}
+
 /// Result of classifying both slots.
 struct Scan {
     /// The valid slot with the newest sequence number.
@@ -379,6 +388,23 @@ impl<F: NorFlash> CalibrationStore<F> {
             .map_err(StorageError::Flash)?;
         self.erased = Some(target);
         Ok(target)
+    }
+
+    /// Both valid slots, newest first (re-scanned). The service uses the older one to restore
+    /// the rollback table at boot and to decide whether a rollback can leave the target's slot
+    /// untouched.
+    pub fn valid_slots(&mut self) -> Result<ValidSlots, StorageError<F::Error>> {
+        let Scan { newest, older } = self.scan()?;
+        self.active = newest;
+        Ok(ValidSlots { newest, older })
+    }
+
+    /// Decodes the table of a slot that [`Self::valid_slots`] reported valid. Decoded again
+    /// rather than trusted: the slot may have changed since the scan.
+    pub fn load_slot(&mut self, slot: Slot) -> Result<CalibrationTable, StorageError<F::Error>> {
+        let mut bytes = [0u8; ENCODED_LEN];
+        self.read_table_bytes(slot, &mut bytes)?;
+        CalibrationTable::decode(&bytes).map_err(StorageError::Table)
     }
 
     /// Rolls back to the table in the older valid slot.

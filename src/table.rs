@@ -84,6 +84,9 @@ pub enum TableError {
     BadMagic,
     /// A format version this firmware does not read.
     UnsupportedVersion(u16),
+    /// The reserved header field is not zero: a format this firmware does not read. Refused so
+    /// that every accepted table re-encodes to exactly the bytes received (its id, read-back).
+    Reserved(u16),
     /// The length field or the byte count is wrong.
     BadLength {
         /// Bytes expected.
@@ -100,7 +103,8 @@ pub enum TableError {
     },
     /// A number is NaN or infinite.
     NonFinite(Field),
-    /// A polynomial order above 4, or non-zero coefficients above the stated order.
+    /// A polynomial order above 4, non-zero coefficients above the stated order, or a stated
+    /// order above the highest non-zero coefficient.
     OrderTooHigh(Coefficient),
     /// The calibrated temperature range is empty or inverted, or Ts ≤ 0.
     EmptyRange,
@@ -278,7 +282,13 @@ impl Reader<'_> {
         if order >= N_COEFFS || coeffs.iter().skip(order + 1).any(|c| *c != 0.0) {
             return Err(TableError::OrderTooHigh(which));
         }
-        Ok(TempPoly { coeffs })
+        let poly = TempPoly { coeffs };
+        // The order byte is derived data (the encoder writes the highest non-zero power): one
+        // that claims more than the coefficients hold would not re-encode to the same bytes.
+        if poly.order() != order {
+            return Err(TableError::OrderTooHigh(which));
+        }
+        Ok(poly)
     }
 }
 
@@ -379,7 +389,10 @@ impl CalibrationTable {
         if version != FORMAT_VERSION {
             return Err(TableError::UnsupportedVersion(version));
         }
-        let _reserved = r.u16()?;
+        let reserved = r.u16()?;
+        if reserved != 0 {
+            return Err(TableError::Reserved(reserved));
+        }
         let payload_len = r.u32()?;
         if payload_len != PAYLOAD_LEN as u32 || bytes.len() != ENCODED_LEN {
             return Err(TableError::BadLength {
@@ -624,6 +637,7 @@ impl core::fmt::Display for TableError {
             TableError::Serial => f.write_str("serial number is not UTF-8"),
             TableError::Date => f.write_str("calibration date is not a calendar date"),
             TableError::TiltAxis => f.write_str("unknown tilt axis code"),
+            TableError::Reserved(v) => write!(f, "reserved header field is {v:#06x}, not 0"),
         }
     }
 }
@@ -754,5 +768,139 @@ pub(crate) mod tests {
             CalibrationTable::decode(&b),
             Err(TableError::OrderTooHigh(Coefficient::Bias))
         );
+    }
+}
+
+/// Bounded fuzzing of the validator inside `cargo test` (and so `cargo xtask test`): the
+/// cargo-fuzz target `fuzz/fuzz_targets/table_decode.rs` runs the same properties unbounded.
+#[cfg(test)]
+mod robustness {
+    use super::tests::paper_table;
+    use super::*;
+    use core::sync::atomic::{AtomicU64, Ordering};
+    use proptest::prelude::*;
+    use proptest::test_runner::{Config, TestRunner};
+
+    /// Cases per property: the issue asks for at least 100 000.
+    const CASES: u32 = 100_000;
+
+    fn runner() -> TestRunner {
+        // Explicit case count: PROPTEST_CASES in the environment cannot lower it.
+        TestRunner::new(Config {
+            cases: CASES,
+            failure_persistence: None,
+            ..Config::default()
+        })
+    }
+
+    /// Rewrites the CRC so that a mutation reaches the field checks behind it.
+    fn fix_crc(bytes: &mut [u8; ENCODED_LEN]) {
+        let crc = CRC32.checksum(&bytes[..ENCODED_LEN - 4]);
+        bytes[ENCODED_LEN - 4..].copy_from_slice(&crc.to_le_bytes());
+    }
+
+    /// The property every input must satisfy: refused with a `TableError` (a named error by
+    /// construction), or decoded to a table whose encoding is exactly the input, so nothing
+    /// the device accepts differs from what it will store, read back and report as its id.
+    fn check(bytes: &[u8]) -> Result<Option<CalibrationTable>, TestCaseError> {
+        match CalibrationTable::decode(bytes) {
+            Ok(t) => {
+                prop_assert_eq!(
+                    &t.encode()[..],
+                    bytes,
+                    "accepted but re-encodes differently"
+                );
+                Ok(Some(t))
+            }
+            Err(_) => Ok(None),
+        }
+    }
+
+    #[test]
+    fn random_bytes_are_refused_without_panicking() {
+        let count = AtomicU64::new(0);
+        let accepted = AtomicU64::new(0);
+        // Half the inputs carry a valid header and CRC so they reach the field checks.
+        let strategy = (
+            proptest::collection::vec(any::<u8>(), 0..2 * ENCODED_LEN),
+            any::<bool>(),
+        );
+        runner()
+            .run(&strategy, |(mut bytes, framed)| {
+                count.fetch_add(1, Ordering::Relaxed);
+                if framed {
+                    bytes.resize(ENCODED_LEN, 0);
+                    let mut b = [0u8; ENCODED_LEN];
+                    b.copy_from_slice(&bytes);
+                    b[..4].copy_from_slice(&MAGIC);
+                    b[4..6].copy_from_slice(&FORMAT_VERSION.to_le_bytes());
+                    b[6..8].copy_from_slice(&[0, 0]);
+                    b[8..12].copy_from_slice(&(PAYLOAD_LEN as u32).to_le_bytes());
+                    fix_crc(&mut b);
+                    bytes = b.to_vec();
+                }
+                if check(&bytes)?.is_some() {
+                    accepted.fetch_add(1, Ordering::Relaxed);
+                }
+                Ok(())
+            })
+            .unwrap();
+        assert_eq!(count.load(Ordering::Relaxed), u64::from(CASES));
+        // Random doubles are never a plausible calibration.
+        assert_eq!(accepted.load(Ordering::Relaxed), 0);
+    }
+
+    #[test]
+    fn every_mutation_of_a_valid_table_is_identical_or_refused() {
+        let original = paper_table().encode();
+        let count = AtomicU64::new(0);
+        let reached_fields = AtomicU64::new(0);
+        let strategy = (
+            proptest::collection::vec((0..ENCODED_LEN, any::<u8>(), any::<bool>()), 1..6),
+            any::<bool>(),
+            0..=ENCODED_LEN + 8,
+        );
+        runner()
+            .run(&strategy, |(edits, recrc, len)| {
+                count.fetch_add(1, Ordering::Relaxed);
+                let mut b = original;
+                for (at, value, flip_one_bit) in edits {
+                    // Single-bit flips (line noise) and whole-byte overwrites.
+                    b[at] = if flip_one_bit {
+                        b[at] ^ (1 << (value % 8))
+                    } else {
+                        value
+                    };
+                }
+                if recrc {
+                    fix_crc(&mut b);
+                }
+                let mut bytes = b.to_vec();
+                // One case in ~ENCODED_LEN keeps the length; the others truncate or extend.
+                if len != ENCODED_LEN && len % 4 == 0 {
+                    bytes.resize(len, 0xA5);
+                }
+                let decoded = check(&bytes)?;
+                match CalibrationTable::decode(&bytes) {
+                    Err(TableError::BadCrc { .. } | TableError::BadLength { .. }) => {}
+                    Err(_) => {
+                        reached_fields.fetch_add(1, Ordering::Relaxed);
+                    }
+                    Ok(_) => {
+                        reached_fields.fetch_add(1, Ordering::Relaxed);
+                    }
+                }
+                if !recrc && bytes.len() == ENCODED_LEN {
+                    // Without a CRC fix only a no-op mutation may pass.
+                    if let Some(t) = decoded {
+                        prop_assert_eq!(t.encode(), original);
+                    }
+                }
+                Ok(())
+            })
+            .unwrap();
+        assert_eq!(count.load(Ordering::Relaxed), u64::from(CASES));
+        // The CRC-fixed half must exercise the field checks, not stop at the CRC.
+        assert!(reached_fields.load(Ordering::Relaxed) > u64::from(CASES) / 4);
     }
 }

@@ -111,6 +111,7 @@ pub fn init(mut dp: pac::Peripherals) -> Parts {
             drdy,
             adcs: NoDrivers { _spi: spi },
         },
+        flash: super::Flash::new(dp.FLASH),
     }
 }
 

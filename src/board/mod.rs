@@ -10,6 +10,10 @@ use stm32f4xx_hal::prelude::*;
 mod frontend;
 #[cfg(feature = "board-frontend")]
 pub use frontend::*;
+#[cfg(feature = "board-frontend")]
+mod internal_flash;
+#[cfg(feature = "board-frontend")]
+pub use internal_flash::{Flash, SLOT_LAYOUT};
 
 #[cfg(feature = "board-qemu")]
 mod qemu;
@@ -26,6 +30,8 @@ pub struct Parts {
     pub rx: UartRx,
     pub tx: UartTx,
     pub acquisition: Acquisition,
+    /// The NOR flash holding the two calibration slots ([`SLOT_LAYOUT`]).
+    pub flash: Flash,
 }
 
 /// Unrecoverable start-up failures, each with its own exit code under QEMU.
@@ -35,6 +41,9 @@ pub enum Fatal {
     Uart = 3,
     /// The worker task could not be spawned.
     Spawn = 4,
+    /// The calibration flash could not be set up (QEMU: its RAM flash singleton was taken).
+    #[cfg(feature = "board-qemu")]
+    Flash = 5,
 }
 
 /// Next received byte, or None when the receive register is empty. Line errors (overrun,

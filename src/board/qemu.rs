@@ -12,6 +12,7 @@ use stm32f4xx_hal::{
 
 use super::{Fatal, Parts};
 use accomp::protocol::Board;
+use accomp::storage::{RamFlash, SlotLayout};
 
 /// Board reported in READY and Info.
 pub const BOARD: Board = Board::Qemu;
@@ -19,6 +20,20 @@ pub const BOARD: Board = Board::Qemu;
 /// QEMU clocks SysTick at 168 MHz whatever RCC says (qemu-notes.md), so that is the figure the
 /// monotonic needs to count milliseconds.
 pub const SYSTICK_HZ: u32 = 168_000_000;
+
+/// Bytes per calibration slot in RAM flash: one 1 KiB erase block holds the 444-byte slot image
+/// and its commit marker (docs/storage.md).
+const SLOT_BYTES: usize = 1024;
+
+/// RAM standing in for flash (QEMU's STM32 flash model is not worth trusting, and a QEMU
+/// restart is a power-off anyway): two slots, 4-byte program unit like the F405 at x32.
+pub type RamCalibrationFlash = RamFlash<{ 2 * SLOT_BYTES }, SLOT_BYTES, 4>;
+
+/// The calibration flash: a static RamFlash.
+pub type Flash = &'static mut RamCalibrationFlash;
+
+/// Slot A at 0, slot B at 1 KiB.
+pub const SLOT_LAYOUT: SlotLayout = SlotLayout::consecutive(SLOT_BYTES as u32);
 
 /// Exit codes seen by the host launcher (QEMU's own exit status).
 pub mod exit_code {
@@ -45,10 +60,16 @@ pub fn init(dp: pac::Peripherals) -> Parts {
     };
     let (tx, mut rx) = serial.split();
     rx.listen();
+    // Taken once, in init: None would mean init ran twice.
+    let flash = match cortex_m::singleton!(: RamCalibrationFlash = RamCalibrationFlash::new()) {
+        Some(f) => f,
+        None => fatal(Fatal::Flash),
+    };
     Parts {
         rx,
         tx,
         acquisition: Acquisition,
+        flash,
     }
 }
 

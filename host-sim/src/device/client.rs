@@ -136,6 +136,16 @@ impl Client {
         }
     }
 
+    /// The next message from the device, whatever it answers, within `timeout` (robustness
+    /// tests that send requests with [`Self::send`] and collect the answers themselves).
+    pub fn recv(&mut self, timeout: Duration) -> Result<DeviceMessage, ClientError> {
+        let deadline = Instant::now() + timeout;
+        match self.next_message(deadline, "a message") {
+            Err(ClientError::Timeout(..)) => Err(ClientError::Timeout(timeout, "a message")),
+            other => other,
+        }
+    }
+
     /// Waits for READY (sent once by the firmware when its receiver is live).
     pub fn wait_ready(&mut self, timeout: Duration) -> Result<(), ClientError> {
         let deadline = Instant::now() + timeout;
