@@ -5,6 +5,7 @@
 //! host and is the same code that runs on the board.
 
 use crate::pipeline::{self, RawSample};
+use crate::prepared::PreparedCalibration;
 use crate::protocol::{
     decode_message, peek_request_id, Board, DeviceInfo, DeviceMessage, ErrorCode, ErrorReply,
     FrameError, HostFrame, Request, Response, CHUNK_LEN, MAX_BENCH_COUNT, MAX_RATE_HZ,
@@ -28,6 +29,8 @@ pub struct Service {
     board: Board,
     active: Option<CalibrationTable>,
     previous: Option<CalibrationTable>,
+    /// The active table prepared for the per-sample path; rebuilt whenever `active` changes.
+    prepared: Option<PreparedCalibration>,
     upload: Upload,
     seq: u32,
     frames_dropped: u32,
@@ -42,6 +45,7 @@ impl Service {
             board,
             active: None,
             previous: None,
+            prepared: None,
             upload: Upload {
                 in_progress: false,
                 total_len: 0,
@@ -64,6 +68,7 @@ impl Service {
     /// Installs a table without the upload dance (restored from flash at boot).
     pub fn install(&mut self, table: CalibrationTable) {
         self.previous = self.active.replace(table);
+        self.prepare_active();
     }
 
     /// True when acquired samples are to be streamed.
@@ -81,9 +86,17 @@ impl Service {
         self.frames_dropped = self.frames_dropped.wrapping_add(1);
     }
 
+    /// Prepares the active table for the per-sample path (after every change of `active`).
+    fn prepare_active(&mut self) {
+        self.prepared = self
+            .active
+            .as_ref()
+            .and_then(|t| PreparedCalibration::new(t).ok());
+    }
+
     /// Runs one acquired or injected sample through the pipeline with the active table.
     pub fn sample(&mut self, id: u32, raw: &RawSample, now_us: u64) -> DeviceMessage {
-        let frame = pipeline::process(self.seq, now_us, raw, self.active.as_ref());
+        let frame = pipeline::process_prepared(self.seq, now_us, raw, self.prepared.as_ref());
         self.seq = self.seq.wrapping_add(1);
         DeviceMessage::Sample { id, frame }
     }
@@ -193,6 +206,7 @@ impl Service {
                     Ok(Response::Ok)
                 } else if self.previous.as_ref().map(CalibrationTable::id) == Some(table_id) {
                     core::mem::swap(&mut self.active, &mut self.previous);
+                    self.prepare_active();
                     Ok(Response::Ok)
                 } else {
                     Err(ErrorCode::TableNotFound.reply(0))
@@ -203,6 +217,7 @@ impl Service {
                     return Err(ErrorCode::NoPreviousTable.reply(0));
                 }
                 core::mem::swap(&mut self.active, &mut self.previous);
+                self.prepare_active();
                 Ok(Response::Ok)
             }
             Request::StreamStart => {
@@ -234,13 +249,13 @@ impl Service {
         if count == 0 || count > MAX_BENCH_COUNT {
             return Err(ErrorCode::InvalidCount.reply(MAX_BENCH_COUNT));
         }
-        let table = self.active.as_ref();
+        let table = self.prepared.as_ref();
         let start = clock();
         let mut sum = 0.0;
         for i in 0..count {
             // black_box: the same sample each time must still be computed each time.
             let r = core::hint::black_box(raw);
-            sum += pipeline::process(i, start, r, table).a_i_exact_g;
+            sum += pipeline::process_prepared(i, start, r, table).a_i_exact_g;
         }
         let elapsed_us = clock().saturating_sub(start);
         Ok(Response::Bench {
