@@ -307,6 +307,7 @@ struct PreparedTilt {
     reference_code_f64: f64,
     rad_per_code_f64: f64,
     sign: f64,
+    sign32: f32,
 }
 
 impl PreparedTilt {
@@ -321,6 +322,11 @@ impl PreparedTilt {
         // φ − φ0 = code·k − offset − φ0 = k·(code − (offset + φ0)/k).
         let reference_code_f64 = (lin.offset + t.reference.0) / lin.per_code;
         let reference_code = libm::round(reference_code_f64).clamp(-4e18, 4e18) as i64;
+        let sign = match t.axis {
+            TiltAxis::Input => 1.0,
+            TiltAxis::InputReversed => -1.0,
+            TiltAxis::None => 0.0,
+        };
         PreparedTilt {
             arcsec_per_code: lin.per_code as f32,
             offset_arcsec: lin.offset as f32,
@@ -329,11 +335,8 @@ impl PreparedTilt {
             rad_per_code: (lin.per_code * RAD_PER_ARCSEC) as f32,
             reference_code_f64,
             rad_per_code_f64: lin.per_code * RAD_PER_ARCSEC,
-            sign: match t.axis {
-                TiltAxis::Input => 1.0,
-                TiltAxis::InputReversed => -1.0,
-                TiltAxis::None => 0.0,
-            },
+            sign,
+            sign32: sign as f32,
         }
     }
 
@@ -650,12 +653,13 @@ impl FastThermal {
             None => e_v,
             Some(code) => {
                 let phi = tilt.phi_rad(code);
-                let d = if phi.abs() <= MAX_F32_TILT_RAD {
-                    f64::from(k1 as f32 * small_sin(phi))
+                // The sign (±1) is applied in f32, where it is exact and costs no soft-float call.
+                let signed_d = if phi.abs() <= MAX_F32_TILT_RAD {
+                    f64::from(tilt.sign32 * (k1 as f32 * small_sin(phi)))
                 } else {
-                    k1 * libm::sin(tilt.phi_rad_f64(code))
+                    tilt.sign * k1 * libm::sin(tilt.phi_rad_f64(code))
                 };
-                e_v - tilt.sign * d
+                e_v - signed_d
             }
         };
 
