@@ -35,6 +35,8 @@ pub enum Fatal {
     Uart = 3,
     /// The worker task could not be spawned.
     Spawn = 4,
+    /// The shared SPI bus could not be set up (front-end board).
+    Spi = 5,
 }
 
 /// Next received byte, or None when the receive register is empty. Line errors (overrun,
