@@ -695,3 +695,115 @@ fn unusable_bounds() -> ErrorBounds {
         temperature_c: f64::INFINITY,
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::table::tests::paper_table;
+
+    #[test]
+    fn the_root_series_matches_the_closed_form_to_f32_precision() {
+        for w in [-1e-2f64, -3e-3, -1e-5, 0.0, 2e-7, 4e-4, 1e-2] {
+            // 2/(1 + √(1 − w)) − 1 in f64, written as w/(1 + √(1 − w))² (no cancellation).
+            let s = (1.0 - w).sqrt();
+            let exact = w / ((1.0 + s) * (1.0 + s));
+            let got = f64::from(root_series(w as f32));
+            assert!(
+                (got - exact).abs() <= 4.0 * U32 * exact.abs(),
+                "w={w}: {got:e} vs {exact:e}"
+            );
+        }
+    }
+
+    #[test]
+    fn the_small_angle_sine_is_within_one_f32_ulp() {
+        for phi in [-5e-4f64, -1e-5, 3e-7, 2.4e-4, 5e-4] {
+            let got = f64::from(small_sin(phi as f32));
+            assert!((got - phi.sin()).abs() <= 2.0 * U32 * phi.abs(), "{phi}");
+        }
+    }
+
+    #[test]
+    fn rtd_temperature_matches_the_f64_cvd_inverse_from_minus_50_to_300_c() {
+        let t = paper_table();
+        let p = PreparedCalibration::new(&t).unwrap();
+        let mut c = -50.0;
+        while c <= 300.0 {
+            let ohms = t.rtd.cvd.resistance(Celsius(c)).0;
+            let code = libm::round(ohms / p.rtd.ohms_per_code) as u32;
+            let (r, got) = p.rtd(code).unwrap();
+            let want = t.rtd.cvd.temperature(RtdOhms(r)).unwrap().0;
+            // The f32 correction's bound (1e-7 °C at 30 °C, 4e-7 °C at 65 °C, 3e-6 °C at 300 °C);
+            // below 0 °C both take the f64 Newton path.
+            let bound = 10.0 * U32 * p.rtd.correction_c(c.max(0.0)).abs() + 1e-10;
+            assert!((got - want).abs() <= bound, "{c} °C: {got} vs {want}");
+            c += 3.7;
+        }
+    }
+
+    #[test]
+    fn rtd_thresholds_split_short_normal_and_open_at_the_cvd_limits() {
+        let mut t = paper_table();
+        // Gain 8: full scale 638 Ω, so the open threshold (1.05·R(850 °C) = 410 Ω) is a code.
+        t.rtd.pga_gain = 8.0;
+        let p = PreparedCalibration::new(&t).unwrap();
+        let (r_min, r_max) = t.rtd.cvd.resistance_limits();
+        let k = p.rtd.ohms_per_code;
+        let open = p.rtd.open_from;
+        assert!(f64::from(open) * k > r_max && f64::from(open - 1) * k <= r_max);
+        assert_eq!(
+            p.rtd(open).map_err(|e| e.1),
+            Err(RtdFault::Rtd(RtdError::Open))
+        );
+        assert!(p.rtd(open - 1).is_ok());
+        let normal = p.rtd.normal_from;
+        assert!(f64::from(normal) * k >= r_min && f64::from(normal - 1) * k < r_min);
+        assert_eq!(
+            p.rtd(normal - 1).map_err(|e| e.1),
+            Err(RtdFault::Rtd(RtdError::Short))
+        );
+        assert!(p.rtd(normal).is_ok());
+        assert_eq!(
+            p.rtd(AD7124_MAX_CODE).map_err(|e| e.1),
+            Err(RtdFault::Adc(AdcError::Saturated))
+        );
+        assert_eq!(
+            p.rtd(AD7124_MAX_CODE + 1).map_err(|e| e.1),
+            Err(RtdFault::Adc(AdcError::OutOfRange))
+        );
+    }
+
+    #[test]
+    fn the_papers_table_is_mixed_and_a_strongly_curved_one_falls_back_to_f64() {
+        let t = paper_table();
+        let p = PreparedCalibration::new(&t).unwrap();
+        assert_eq!(p.precision(), Precision::Mixed);
+        let b = p.error_bounds();
+        // Hand figure: bias x² term 7.5e-5 g → 8u·7.5e-5 ≈ 3.6e-11 g, tilt 1.8e-10 g, K1 x² term
+        // 9.4e-5 V/g ·8u·1.5/1.32 ≈ 5e-11 g, plus the x-rounding terms: a few 1e-10 g.
+        assert!(b.a_i_g > 1e-10 && b.a_i_g < 1e-9, "{b:?}");
+        assert!(b.linearized_v < BUDGET_LINEARIZED_V, "{b:?}");
+
+        let mut curved = t;
+        curved.thermal.models.bias_g.coeffs[4] = 5e-3;
+        let p = PreparedCalibration::new(&curved).unwrap();
+        assert_eq!(p.precision(), Precision::Double);
+        assert!(p.error_bounds().a_i_g > BUDGET_G);
+    }
+
+    #[test]
+    fn the_f64_fallback_gives_the_reference_compensation() {
+        let mut t = paper_table();
+        t.thermal.models.bias_g.coeffs[4] = 5e-3;
+        let p = PreparedCalibration::new(&t).unwrap();
+        let (a, lin, clamped) = p.compensate(1.3, 47.0, Some(0)).unwrap();
+        let e = crate::units::Volts(1.3);
+        let tilt0 = p.tilt.phi_rad_f64(0);
+        let (k, _) = t.thermal.coefficients_at(Celsius(47.0)).unwrap();
+        let e_c = crate::units::Volts(e.0 - k.scale_factor_v_per_g * libm::sin(tilt0));
+        let cross = t.orientation.cross;
+        let want = t.thermal.exact(e_c, Celsius(47.0), cross).unwrap();
+        let want_lin = t.thermal.linearized(e_c, Celsius(47.0), cross).unwrap();
+        assert_eq!((a, lin, clamped), (want.input.0, want_lin.output.0, false));
+    }
+}

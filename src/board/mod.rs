@@ -35,7 +35,8 @@ pub enum Fatal {
     Uart = 3,
     /// The worker task could not be spawned.
     Spawn = 4,
-    /// The shared SPI bus could not be set up (front-end board).
+    /// The shared SPI bus could not be set up (front-end board only).
+    #[cfg(feature = "board-frontend")]
     Spi = 5,
 }
 
