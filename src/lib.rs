@@ -12,6 +12,7 @@ pub mod drivers;
 pub mod model;
 pub mod pipeline;
 pub mod poly;
+pub mod prepared;
 pub mod protocol;
 pub mod reference;
 pub mod rtd;

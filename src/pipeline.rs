@@ -13,9 +13,9 @@
 use serde::{Deserialize, Serialize};
 
 use crate::adc::{Ad7124Code, AdcError, AdcScale, Ads1262Code, Coding};
-use crate::compensation::{tilt_output_change, CompensationError};
+use crate::prepared::{CompensateFault, PreparedCalibration, RtdFault};
 use crate::rtd::RtdError;
-use crate::table::{CalibrationTable, TiltAxis};
+use crate::table::CalibrationTable;
 use crate::units::{Celsius, Ohms, RtdOhms, TiltArcsec, Volts};
 
 /// ADS1262 reference voltage on the board (internal 2.5 V reference).
@@ -213,10 +213,25 @@ fn adc_fault(e: AdcError, status: &mut Status) {
     }
 }
 
-/// Processes one raw sample with the active table (if any) into an output frame.
+/// Processes one raw sample with a table (if any) into an output frame: prepares the table,
+/// then [`process_prepared`]. The host's reference path for one-off samples; the firmware keeps
+/// the prepared table and calls [`process_prepared`] directly.
+///
+/// A table that does not validate is treated like no table (the device never activates one).
+pub fn process(seq: u32, time_us: u64, raw: &RawSample, table: Option<&CalibrationTable>) -> Frame {
+    let prepared = table.and_then(|t| PreparedCalibration::new(t).ok());
+    process_prepared(seq, time_us, raw, prepared.as_ref())
+}
+
+/// Processes one raw sample with the prepared active table (if any) into an output frame.
 ///
 /// Pure function of its arguments: the firmware and the host get the same bits.
-pub fn process(seq: u32, time_us: u64, raw: &RawSample, table: Option<&CalibrationTable>) -> Frame {
+pub fn process_prepared(
+    seq: u32,
+    time_us: u64,
+    raw: &RawSample,
+    table: Option<&PreparedCalibration>,
+) -> Frame {
     let mut status = Status::default();
     let mut frame = Frame {
         seq,
@@ -230,12 +245,30 @@ pub fn process(seq: u32, time_us: u64, raw: &RawSample, table: Option<&Calibrati
         status,
     };
 
+    let Some(table) = table else {
+        // Without a table only E, on the ideal scale.
+        if driver_faults(raw.accel_flags, &mut status) {
+            status.set(Status::OUTPUT_INVALID);
+        } else {
+            match accel_scale(None).volts(raw.accel_code().raw()) {
+                Ok(v) => frame.output_v = v.0,
+                Err(e) => {
+                    adc_fault(e, &mut status);
+                    status.set(Status::OUTPUT_INVALID);
+                }
+            }
+        }
+        status.set(Status::NO_CALIBRATION);
+        frame.status = status;
+        return frame;
+    };
+
     // Accelerometer output E.
     if driver_faults(raw.accel_flags, &mut status) {
         status.set(Status::OUTPUT_INVALID);
     } else {
-        match accel_scale(table).volts(raw.accel_code().raw()) {
-            Ok(v) => frame.output_v = v.0,
+        match table.accel_volts(raw.accel) {
+            Ok(v) => frame.output_v = v,
             Err(e) => {
                 adc_fault(e, &mut status);
                 status.set(Status::OUTPUT_INVALID);
@@ -243,44 +276,46 @@ pub fn process(seq: u32, time_us: u64, raw: &RawSample, table: Option<&Calibrati
         }
     }
 
-    let Some(table) = table else {
-        status.set(Status::NO_CALIBRATION);
-        frame.status = status;
-        return frame;
-    };
-
     // RTD: ratiometric ohms → °C.
     if driver_faults(raw.rtd_flags, &mut status) {
         status.set(Status::RTD_INVALID);
     } else {
-        match table
-            .rtd_adc_scale()
-            .ratiometric_ohms(raw.rtd_code().raw(), table.rtd.reference_resistor)
-        {
-            // A unipolar code at full scale means the excitation found no path: open sensor.
-            Err(AdcError::Saturated) => status.set(Status::RTD_OPEN | Status::ADC_SATURATED),
-            Err(e) => {
-                adc_fault(e, &mut status);
-                status.set(Status::RTD_INVALID);
+        match table.rtd(raw.rtd) {
+            Ok((ohms, t)) => {
+                frame.rtd_ohms = ohms;
+                frame.temperature_c = t;
             }
-            Ok(r) => {
-                frame.rtd_ohms = r.0;
-                match table.rtd.cvd.temperature(r) {
-                    Ok(t) => frame.temperature_c = t.0,
-                    Err(RtdError::Open) => status.set(Status::RTD_OPEN),
-                    Err(RtdError::Short) => status.set(Status::RTD_SHORT),
-                    Err(_) => status.set(Status::RTD_INVALID),
+            Err((ohms, fault)) => {
+                if let Some(ohms) = ohms {
+                    frame.rtd_ohms = ohms;
+                }
+                match fault {
+                    // A unipolar code at full scale means the excitation found no path: open.
+                    RtdFault::Adc(AdcError::Saturated) => {
+                        status.set(Status::RTD_OPEN | Status::ADC_SATURATED)
+                    }
+                    RtdFault::Adc(e) => {
+                        adc_fault(e, &mut status);
+                        status.set(Status::RTD_INVALID);
+                    }
+                    RtdFault::Rtd(RtdError::Open) => status.set(Status::RTD_OPEN),
+                    RtdFault::Rtd(RtdError::Short) => status.set(Status::RTD_SHORT),
+                    RtdFault::Rtd(_) => status.set(Status::RTD_INVALID),
                 }
             }
         }
     }
 
     // Tiltmeter: volts → arcsec.
+    let mut tilt_code = None;
     if driver_faults(raw.tilt_flags, &mut status) {
         status.set(Status::TILT_INVALID);
     } else {
-        match tilt_scale(table).volts(raw.tilt_code().raw()) {
-            Ok(v) => frame.tilt_arcsec = v.0 * table.tilt.scale_arcsec_per_v,
+        match table.tilt_arcsec(raw.tilt) {
+            Ok(v) => {
+                frame.tilt_arcsec = v;
+                tilt_code = Some(raw.tilt);
+            }
             Err(e) => {
                 adc_fault(e, &mut status);
                 status.set(Status::TILT_INVALID);
@@ -294,7 +329,7 @@ pub fn process(seq: u32, time_us: u64, raw: &RawSample, table: Option<&Calibrati
         frame.status = status;
         return frame;
     }
-    match compensate(table, Volts(e), Celsius(t), TiltArcsec(frame.tilt_arcsec)) {
+    match table.compensate(e, t, tilt_code) {
         Ok((a_i, lin, clamped)) => {
             frame.a_i_exact_g = a_i;
             frame.output_linearized_v = lin;
@@ -302,58 +337,11 @@ pub fn process(seq: u32, time_us: u64, raw: &RawSample, table: Option<&Calibrati
                 status.set(Status::TEMP_OUT_OF_RANGE);
             }
         }
-        Err(CompensateError::TiltNeeded) => status.set(Status::TILT_INVALID),
-        Err(CompensateError::Failed) => status.set(Status::COMPENSATION_FAILED),
+        Err(CompensateFault::TiltNeeded) => status.set(Status::TILT_INVALID),
+        Err(CompensateFault::Failed) => status.set(Status::COMPENSATION_FAILED),
     }
     frame.status = status;
     frame
-}
-
-enum CompensateError {
-    /// The table asks for tilt correction but the tilt is NaN.
-    TiltNeeded,
-    /// The model could not be inverted or produced a non-finite value.
-    Failed,
-}
-
-impl From<CompensationError> for CompensateError {
-    fn from(_: CompensationError) -> Self {
-        CompensateError::Failed
-    }
-}
-
-/// Tilt correction (eq. 5) then both compensations; returns (a_i, linearized E, clamped).
-fn compensate(
-    table: &CalibrationTable,
-    e: Volts,
-    t: Celsius,
-    tilt: TiltArcsec,
-) -> Result<(f64, f64, bool), CompensateError> {
-    let thermal = &table.thermal;
-    let cross = table.orientation.cross;
-    let sign = match table.tilt.axis {
-        TiltAxis::Input => 1.0,
-        TiltAxis::InputReversed => -1.0,
-        TiltAxis::None => 0.0,
-    };
-    let e_corrected = if sign == 0.0 {
-        e
-    } else {
-        if tilt.0.is_nan() {
-            return Err(CompensateError::TiltNeeded);
-        }
-        // The tilt changes the projected input by sin(φ − φ0); its output change is K1 at the
-        // measured temperature times that (eq. 5).
-        let (k, _) = thermal.coefficients_at(t)?;
-        let d = tilt_output_change(k.scale_factor_v_per_g, tilt, table.tilt.reference);
-        Volts(e.0 - sign * d.0)
-    };
-    let exact = thermal.exact(e_corrected, t, cross)?;
-    let lin = thermal.linearized(e_corrected, t, cross)?;
-    if !(exact.input.0.is_finite() && lin.output.0.is_finite()) {
-        return Err(CompensateError::Failed);
-    }
-    Ok((exact.input.0, lin.output.0, exact.range.is_clamped()))
 }
 
 /// Why a physical value cannot be turned into a code.

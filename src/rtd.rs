@@ -80,7 +80,7 @@ impl CallendarVanDusen {
 
     /// Fault thresholds: 10 % below R(−200 °C) and 5 % above R(850 °C). The margins keep a
     /// healthy sensor at the span's edge (and table values rounded down) out of the fault path.
-    fn resistance_limits(&self) -> (f64, f64) {
+    pub(crate) fn resistance_limits(&self) -> (f64, f64) {
         (
             0.90 * self.resistance(Celsius(T_MIN_C)).0,
             1.05 * self.resistance(Celsius(T_MAX_C)).0,

@@ -11,6 +11,7 @@
 //! upload, commit, activate and rollback.
 
 use crate::pipeline::{self, RawSample};
+use crate::prepared::PreparedCalibration;
 use crate::protocol::{
     decode_message, peek_request_id, Board, DeviceInfo, DeviceMessage, ErrorCode, ErrorReply,
     FrameError, HostFrame, Request, Response, CHUNK_LEN, MAX_BENCH_COUNT, MAX_RATE_HZ,
@@ -54,6 +55,8 @@ pub struct Service<F> {
     board: Board,
     active: Option<CalibrationTable>,
     previous: Option<CalibrationTable>,
+    /// The active table prepared for the per-sample path; rebuilt whenever `active` changes.
+    prepared: Option<PreparedCalibration>,
     upload: Upload,
     seq: u32,
     frames_dropped: u32,
@@ -94,6 +97,7 @@ impl<F: NorFlash> Service<F> {
             board,
             active: None,
             previous: None,
+            prepared: None,
             upload: Upload {
                 in_progress: false,
                 total_len: 0,
@@ -124,6 +128,7 @@ impl<F: NorFlash> Service<F> {
             return Ok(BootTable::Empty);
         };
         self.active = Some(store.load_slot(newest.slot)?);
+        self.prepare_active();
         // After a rollback both slots hold the same table: nothing to roll back to then.
         if let Some(older) = older.filter(|o| o.table_id != newest.table_id) {
             self.previous = store.load_slot(older.slot).ok();
@@ -164,9 +169,17 @@ impl<F: NorFlash> Service<F> {
         self.frames_dropped = self.frames_dropped.wrapping_add(1);
     }
 
+    /// Prepares the active table for the per-sample path (after every change of `active`).
+    fn prepare_active(&mut self) {
+        self.prepared = self
+            .active
+            .as_ref()
+            .and_then(|t| PreparedCalibration::new(t).ok());
+    }
+
     /// Runs one acquired or injected sample through the pipeline with the active table.
     pub fn sample(&mut self, id: u32, raw: &RawSample, now_us: u64) -> DeviceMessage {
-        let frame = pipeline::process(self.seq, now_us, raw, self.active.as_ref());
+        let frame = pipeline::process_prepared(self.seq, now_us, raw, self.prepared.as_ref());
         self.seq = self.seq.wrapping_add(1);
         DeviceMessage::Sample { id, frame }
     }
@@ -311,13 +324,13 @@ impl<F: NorFlash> Service<F> {
         if count == 0 || count > MAX_BENCH_COUNT {
             return Err(ErrorCode::InvalidCount.reply(MAX_BENCH_COUNT));
         }
-        let table = self.active.as_ref();
+        let table = self.prepared.as_ref();
         let start = clock();
         let mut sum = 0.0;
         for i in 0..count {
             // black_box: the same sample each time must still be computed each time.
             let r = core::hint::black_box(raw);
-            sum += pipeline::process(i, start, r, table).a_i_exact_g;
+            sum += pipeline::process_prepared(i, start, r, table).a_i_exact_g;
         }
         let elapsed_us = clock().saturating_sub(start);
         Ok(Response::Bench {
@@ -371,6 +384,7 @@ impl<F: NorFlash> Service<F> {
         // Only a table the store has committed (programmed, read back, marked) becomes active.
         let slot = store.commit(bytes).map_err(storage_reply)?;
         self.previous = self.active.replace(table);
+        self.prepare_active();
         Ok(Response::Committed {
             table_id: slot.table_id,
         })
@@ -395,6 +409,7 @@ impl<F: NorFlash> Service<F> {
             store.commit(&target.encode()).map_err(storage_reply)?;
         }
         core::mem::swap(&mut self.active, &mut self.previous);
+        self.prepare_active();
         Ok(Response::Ok)
     }
 

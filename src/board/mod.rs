@@ -44,6 +44,9 @@ pub enum Fatal {
     /// The calibration flash could not be set up (QEMU: its RAM flash singleton was taken).
     #[cfg(feature = "board-qemu")]
     Flash = 5,
+    /// The shared SPI bus could not be set up (front-end board only).
+    #[cfg(feature = "board-frontend")]
+    Spi = 6,
 }
 
 /// Next received byte, or None when the receive register is empty. Line errors (overrun,

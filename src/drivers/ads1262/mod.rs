@@ -445,6 +445,21 @@ where
         Ok(ChannelSample { channel, sample })
     }
 
+    /// The channel the device converts, `None` before init or after a failed switch.
+    pub const fn selected(&self) -> Option<Channel> {
+        self.selected
+    }
+
+    /// Switch to `channel` (if not already there) and restart the conversion, without waiting:
+    /// for DRDY-interrupt-driven acquisition, where the next DRDY edge announces the settled
+    /// conversion of the new input. [`Ads1262::read_channel`] is the polled equivalent.
+    pub fn select_channel(&mut self, channel: Channel) -> Result<(), DriverError<SPI, DRDY>> {
+        if self.selected == Some(channel) {
+            return Ok(());
+        }
+        self.select(channel)
+    }
+
     fn select(&mut self, channel: Channel) -> Result<(), DriverError<SPI, DRDY>> {
         let cfg = self.config;
         let next = *cfg.channels.get(channel);
