@@ -36,6 +36,8 @@ enum Command {
     Discover(accomp_host::discover::DiscoverArgs),
     /// Stability (std, drift), OADEV and MDEV of a log's output columns.
     Stability(accomp_host::stability::StabilityArgs),
+    /// Figures like the paper's Figs. 2–5 and an Allan deviation plot (PNG or SVG).
+    Plot(accomp_host::plot::PlotArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -50,5 +52,6 @@ fn main() -> anyhow::Result<()> {
         Command::Load(args) => accomp_host::device_cli::run_load(&args),
         Command::Discover(args) => accomp_host::discover::run(&args),
         Command::Stability(args) => Ok(accomp_host::stability::run(&args)?),
+        Command::Plot(args) => accomp_host::plot::run(&args),
     }
 }

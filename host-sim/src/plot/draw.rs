@@ -1,0 +1,425 @@
+//! Rendering of the figure descriptions with plotters (SVG or PNG), nothing else.
+//!
+//! The figures are described as plain data ([`Figure`]) by the parent module, so what is plotted
+//! can be tested without pixels, and this module only turns them into drawing calls.
+//!
+//! Fonts: plotters' `ab_glyph` feature is used with DejaVu Sans embedded from the `dejavu` crate,
+//! registered once as "sans-serif". That gives real text metrics for layout in both backends and
+//! glyphs in PNGs without any system font library or font file (CI machines are bare Debian).
+//! SVG files name the family `sans-serif` and leave the glyphs to the viewer.
+
+use std::path::Path;
+use std::sync::OnceLock;
+
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use plotters::style::{register_font, FontStyle};
+
+use super::decimate::Run;
+use super::Format;
+
+/// A drawing failed: the backend's message, with the file it was writing.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{0}")]
+pub struct DrawError(pub String);
+
+impl<E: std::error::Error + Send + Sync> From<DrawingAreaErrorKind<E>> for DrawError {
+    fn from(e: DrawingAreaErrorKind<E>) -> Self {
+        DrawError(e.to_string())
+    }
+}
+
+/// One series of a time panel, already decimated.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Trace {
+    /// Legend text.
+    pub label: String,
+    /// Decimated runs (broken at gaps): line through the means, shading min..max.
+    pub runs: Vec<Run>,
+    /// Line colour.
+    pub color: RGBColor,
+}
+
+/// One panel of a time figure.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Panel {
+    /// Y axis description, with unit.
+    pub y_desc: String,
+    /// Series drawn in this panel.
+    pub traces: Vec<Trace>,
+}
+
+/// A figure of one or more stacked panels sharing the time axis.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TimeFigure {
+    /// Title over the whole figure.
+    pub title: String,
+    /// X axis description, with unit.
+    pub x_desc: String,
+    /// X range (start, end) in the axis unit.
+    pub x_range: (f64, f64),
+    /// Panels, top to bottom.
+    pub panels: Vec<Panel>,
+    /// Same y range in every panel (so before/after scatter compares by eye).
+    pub shared_y: bool,
+}
+
+/// One Allan deviation curve: `(tau_s, dev, ci_low, ci_high)` per point.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AdevCurve {
+    /// Legend text.
+    pub label: String,
+    /// Line and band colour.
+    pub color: RGBColor,
+    /// Points with positive finite values only.
+    pub points: Vec<(f64, f64, f64, f64)>,
+}
+
+/// A log-log Allan deviation figure with shaded confidence bands.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AdevFigure {
+    /// Title.
+    pub title: String,
+    /// Y axis description, with unit.
+    pub y_desc: String,
+    /// Curves.
+    pub curves: Vec<AdevCurve>,
+}
+
+/// Any figure this module draws.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Figure {
+    /// Series against time.
+    Time(TimeFigure),
+    /// Allan deviation.
+    Adev(AdevFigure),
+}
+
+/// Width of every figure, px. The decimation uses one bucket per pixel column of it.
+pub const WIDTH_PX: u32 = 1100;
+const PANEL_HEIGHT_PX: u32 = 380;
+const TITLE_HEIGHT_PX: u32 = 40;
+const FONT: &str = "sans-serif";
+const GREY_BAND: RGBColor = RGBColor(200, 200, 200);
+
+impl Figure {
+    /// Size in pixels (SVG user units).
+    pub fn size(&self) -> (u32, u32) {
+        match self {
+            Figure::Time(t) => (
+                WIDTH_PX,
+                TITLE_HEIGHT_PX + PANEL_HEIGHT_PX * t.panels.len().max(1) as u32,
+            ),
+            Figure::Adev(_) => (900, 680),
+        }
+    }
+}
+
+/// Registers the embedded font once; `false` if the font bytes were rejected.
+fn font_ready() -> bool {
+    static READY: OnceLock<bool> = OnceLock::new();
+    *READY.get_or_init(|| register_font(FONT, FontStyle::Normal, dejavu::sans::regular()).is_ok())
+}
+
+/// Writes `fig` to `path` in `format`.
+pub fn render(fig: &Figure, path: &Path, format: Format) -> Result<(), DrawError> {
+    if !font_ready() {
+        return Err(DrawError(
+            "the embedded DejaVu Sans font could not be loaded".into(),
+        ));
+    }
+    let size = fig.size();
+    match format {
+        Format::Svg => draw(&SVGBackend::new(path, size).into_drawing_area(), fig),
+        Format::Png => draw(&BitMapBackend::new(path, size).into_drawing_area(), fig),
+    }
+}
+
+fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, fig: &Figure) -> Result<(), DrawError>
+where
+    DB::ErrorType: 'static,
+{
+    root.fill(&WHITE)?;
+    match fig {
+        Figure::Time(t) => draw_time(root, t)?,
+        Figure::Adev(a) => draw_adev(root, a)?,
+    }
+    root.present()?;
+    Ok(())
+}
+
+/// Finite (min, max) of all points of the given panels.
+fn y_extent<'a>(panels: impl IntoIterator<Item = &'a Panel>) -> Option<(f64, f64)> {
+    let mut ext: Option<(f64, f64)> = None;
+    for p in panels {
+        for tr in &p.traces {
+            for b in tr.runs.iter().flatten() {
+                if b.min.is_finite() && b.max.is_finite() {
+                    ext =
+                        Some(ext.map_or((b.min, b.max), |(lo, hi)| (lo.min(b.min), hi.max(b.max))));
+                }
+            }
+        }
+    }
+    ext
+}
+
+/// Pads a range by 5 % each side (legend room on top: 15 %); a flat range gets a unit-sized one.
+fn padded((lo, hi): (f64, f64)) -> (f64, f64) {
+    let span = hi - lo;
+    if span > 0.0 {
+        (lo - 0.05 * span, hi + 0.15 * span)
+    } else {
+        let d = if lo != 0.0 { lo.abs() * 1e-3 } else { 1.0 };
+        (lo - d, hi + d)
+    }
+}
+
+/// Decimals that make ~10 ticks over `span` distinct.
+pub fn tick_decimals(span: f64) -> usize {
+    if !(span.is_finite() && span > 0.0) {
+        return 0;
+    }
+    let step = span / 10.0;
+    (-step.log10().floor()).clamp(0.0, 9.0) as usize
+}
+
+/// Fixed-point tick label without a "-0.00" for values that round to zero.
+pub fn fixed(v: f64, decimals: usize) -> String {
+    let s = format!("{v:.decimals$}");
+    if s.starts_with('-') && s[1..].chars().all(|c| c == '0' || c == '.') {
+        s[1..].to_owned()
+    } else {
+        s
+    }
+}
+
+/// Log-axis tick label: plain for 0.001 ≤ v < 10 000, `1e-6` style otherwise.
+pub fn log_tick(v: f64) -> String {
+    if (1e-3..1e4).contains(&v.abs()) {
+        let s = format!("{v:.3}");
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        format!("{v:.0e}")
+    }
+}
+
+/// True when `v` is 1, 2 or 5 times a power of ten (to a part in 1e6).
+pub fn is_125(v: f64) -> bool {
+    if !(v.is_finite() && v > 0.0) {
+        return false;
+    }
+    let mantissa = v / 10f64.powf(v.log10().floor());
+    [1.0, 2.0, 5.0, 10.0]
+        .iter()
+        .any(|m| (mantissa - m).abs() < 1e-6 * m)
+}
+
+fn draw_time<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    fig: &TimeFigure,
+) -> Result<(), DrawError>
+where
+    DB::ErrorType: 'static,
+{
+    let body = root.titled(&fig.title, (FONT, 22))?;
+    let areas = body.split_evenly((fig.panels.len().max(1), 1));
+    let shared = if fig.shared_y {
+        y_extent(&fig.panels)
+    } else {
+        None
+    };
+    let (x0, x1) = fig.x_range;
+    let x_dec = tick_decimals(x1 - x0);
+    let last = fig.panels.len().saturating_sub(1);
+    for (i, (area, panel)) in areas.iter().zip(&fig.panels).enumerate() {
+        let (y0, y1) = padded(shared.or_else(|| y_extent([panel])).unwrap_or((0.0, 1.0)));
+        let y_dec = tick_decimals(y1 - y0);
+        let mut chart = ChartBuilder::on(area)
+            .margin(12)
+            .x_label_area_size(if i == last { 45 } else { 25 })
+            .y_label_area_size(85)
+            .build_cartesian_2d(x0..x1, y0..y1)?;
+        // The time axis is named once, under the bottom panel.
+        let x_desc = if i == last { fig.x_desc.as_str() } else { "" };
+        chart
+            .configure_mesh()
+            .x_desc(x_desc)
+            .y_desc(panel.y_desc.as_str())
+            .label_style((FONT, 14))
+            .axis_desc_style((FONT, 16))
+            .x_label_formatter(&|v| fixed(*v, x_dec))
+            .y_label_formatter(&|v| fixed(*v, y_dec))
+            .light_line_style(WHITE.mix(0.0))
+            .draw()?;
+        // Bands first, so no trace's shading covers another trace's line.
+        let mut any_band = false;
+        for tr in &panel.traces {
+            for run in &tr.runs {
+                if run.iter().all(|b| b.min == b.max) {
+                    continue;
+                }
+                any_band = true;
+                let band: Vec<(f64, f64)> = run
+                    .iter()
+                    .map(|b| (b.x, b.max))
+                    .chain(run.iter().rev().map(|b| (b.x, b.min)))
+                    .collect();
+                chart.draw_series(std::iter::once(Polygon::new(
+                    band,
+                    tr.color.mix(0.25).filled(),
+                )))?;
+            }
+        }
+        for tr in &panel.traces {
+            let style = tr.color.stroke_width(1);
+            let mut first = true;
+            for run in &tr.runs {
+                let series =
+                    chart.draw_series(LineSeries::new(run.iter().map(|b| (b.x, b.mean)), style))?;
+                if first {
+                    let c = tr.color;
+                    series.label(tr.label.as_str()).legend(move |(x, y)| {
+                        PathElement::new(vec![(x, y), (x + 24, y)], c.stroke_width(2))
+                    });
+                    first = false;
+                }
+            }
+        }
+        if any_band {
+            chart
+                .draw_series(std::iter::empty::<Rectangle<(f64, f64)>>())?
+                .label("line: mean per pixel column; shading: its min–max")
+                .legend(|(x, y)| Rectangle::new([(x, y - 5), (x + 24, y + 5)], GREY_BAND.filled()));
+        }
+        if panel.traces.iter().any(|t| !t.label.is_empty()) {
+            chart
+                .configure_series_labels()
+                .position(SeriesLabelPosition::UpperRight)
+                .label_font((FONT, 15))
+                .background_style(WHITE.mix(0.85))
+                .border_style(BLACK.mix(0.5))
+                .draw()?;
+        }
+    }
+    Ok(())
+}
+
+fn draw_adev<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    fig: &AdevFigure,
+) -> Result<(), DrawError>
+where
+    DB::ErrorType: 'static,
+{
+    let pts = || fig.curves.iter().flat_map(|c| c.points.iter());
+    let tau_lo = pts().map(|p| p.0).fold(f64::INFINITY, f64::min);
+    let tau_hi = pts().map(|p| p.0).fold(0.0, f64::max);
+    let y_lo = pts().map(|p| p.2.min(p.1)).fold(f64::INFINITY, f64::min);
+    let y_hi = pts().map(|p| p.3.max(p.1)).fold(0.0, f64::max);
+    if !(tau_lo.is_finite() && tau_hi > 0.0 && y_lo.is_finite() && y_hi > 0.0) {
+        return Err(DrawError(
+            "no positive Allan deviation point to draw".into(),
+        ));
+    }
+    let (tau_lo, tau_hi) = (tau_lo / 1.5, tau_hi * 1.5);
+    let (y_lo, y_hi) = (y_lo / 2.0, y_hi * 3.0);
+    let mut chart = ChartBuilder::on(root)
+        .caption(&fig.title, (FONT, 20))
+        .margin(15)
+        .x_label_area_size(50)
+        .y_label_area_size(80)
+        .build_cartesian_2d((tau_lo..tau_hi).log_scale(), (y_lo..y_hi).log_scale())?;
+    chart
+        .configure_mesh()
+        .x_desc("averaging time τ (s)")
+        .y_desc(fig.y_desc.as_str())
+        .label_style((FONT, 14))
+        .axis_desc_style((FONT, 16))
+        // Enough key points for 1..9 in every decade (grid lines), labels only on 1, 2, 5.
+        .y_labels(40)
+        .light_line_style(WHITE.mix(0.0))
+        .bold_line_style(BLACK.mix(0.12))
+        .x_label_formatter(&|v| log_tick(*v))
+        .y_label_formatter(&|v| {
+            if is_125(*v) {
+                log_tick(*v)
+            } else {
+                String::new()
+            }
+        })
+        .draw()?;
+    for c in &fig.curves {
+        // Band: upper bounds left to right, then lower bounds back.
+        let band: Vec<(f64, f64)> = c
+            .points
+            .iter()
+            .map(|p| (p.0, p.3))
+            .chain(c.points.iter().rev().map(|p| (p.0, p.2.max(y_lo))))
+            .collect();
+        chart.draw_series(std::iter::once(Polygon::new(
+            band,
+            c.color.mix(0.18).filled(),
+        )))?;
+    }
+    for c in &fig.curves {
+        let col = c.color;
+        chart
+            .draw_series(LineSeries::new(
+                c.points.iter().map(|p| (p.0, p.1)),
+                col.stroke_width(2),
+            ))?
+            .label(c.label.as_str())
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], col.stroke_width(2)));
+        chart.draw_series(
+            c.points
+                .iter()
+                .map(|p| Circle::new((p.0, p.1), 3, col.filled())),
+        )?;
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .label_font((FONT, 15))
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK.mix(0.5))
+        .draw()?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tick_decimals_resolve_a_tenth_of_the_span() {
+        assert_eq!(tick_decimals(41.0), 0);
+        assert_eq!(tick_decimals(0.02), 3);
+        assert_eq!(tick_decimals(1.0), 1);
+        assert_eq!(tick_decimals(0.0), 0);
+    }
+
+    #[test]
+    fn fixed_labels_never_show_negative_zero() {
+        assert_eq!(fixed(-0.001, 2), "0.00");
+        assert_eq!(fixed(-0.0, 0), "0");
+        assert_eq!(fixed(-0.1, 2), "-0.10");
+        assert_eq!(fixed(12.345, 1), "12.3");
+    }
+
+    #[test]
+    fn only_1_2_5_mantissas_get_log_labels() {
+        assert!(is_125(1e-7) && is_125(2e-7) && is_125(5e-6) && is_125(100.0));
+        assert!(!is_125(3e-7) && !is_125(9e-7) && !is_125(0.0) && !is_125(-1.0));
+    }
+
+    #[test]
+    fn log_ticks_are_plain_in_the_middle_and_scientific_at_the_ends() {
+        assert_eq!(log_tick(10.0), "10");
+        assert_eq!(log_tick(0.5), "0.5");
+        assert_eq!(log_tick(1e-6), "1e-6");
+        assert_eq!(log_tick(1e6), "1e6");
+        assert_eq!(log_tick(1e4), "1e4");
+        assert_eq!(log_tick(2e-7), "2e-7");
+    }
+}
