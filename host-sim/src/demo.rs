@@ -121,6 +121,12 @@ pub struct Experiment {
     pub figures: Vec<Figure>,
     /// Frames whose values differ from the same core run on the PC (bit for bit).
     pub host_mismatches: usize,
+    /// Chunks of readings sent again after a lost answer.
+    pub retried_chunks: usize,
+    /// Inbound frames the device dropped since boot (Info, after this experiment).
+    pub device_frames_dropped: u32,
+    /// Frames from the device the host could not decode (since boot).
+    pub host_bad_frames: u64,
     /// Status bits seen, with the number of frames carrying each.
     pub status_counts: Vec<(String, usize)>,
     /// Peak-to-peak of the measured tilt, arcsec.
@@ -317,6 +323,49 @@ fn peak_to_peak(y: &[f64]) -> f64 {
     hi - lo
 }
 
+/// Readings per `process_samples` call: a lost frame costs at most one chunk's retry.
+const STREAM_CHUNK: usize = 256;
+/// Retries of one chunk before the demo gives up.
+const STREAM_RETRIES: usize = 3;
+
+/// Streams `raws` through the device in chunks. The device drops inbound frames when its queue
+/// is full and a frame can be lost on the line; the pipeline is stateless, so a chunk whose
+/// answers stop coming is simply sent again (late answers to the old ids are ignored by the
+/// client). Returns the frames in input order and the number of chunks retried.
+fn stream(
+    client: &mut device::Client,
+    raws: &[RawSample],
+    bar: &ProgressBar,
+) -> anyhow::Result<(Vec<Frame>, usize)> {
+    let mut out = Vec::with_capacity(raws.len());
+    let mut retried = 0;
+    for chunk in raws.chunks(STREAM_CHUNK) {
+        let base = out.len() as u64;
+        let mut tries = 0;
+        loop {
+            match client.process_samples(chunk, DEFAULT_WINDOW, |done, _| {
+                bar.set_position(base + done as u64)
+            }) {
+                Ok(frames) => {
+                    out.extend(frames);
+                    break;
+                }
+                Err(device::ClientError::Timeout(..)) if tries < STREAM_RETRIES => {
+                    tries += 1;
+                    retried += 1;
+                    bar.println(format!(
+                        "no answer within {:?} at reading {base}+: sending those {} readings again",
+                        client.timeout,
+                        chunk.len()
+                    ));
+                }
+                Err(e) => return Err(e.into()),
+            }
+        }
+    }
+    Ok((out, retried))
+}
+
 /// The floor: the measured output inverted with the simulation's *true* models at the true
 /// proof-mass temperature and true cross-axis inputs; for 0 g also eq. (5) with the true tilt.
 /// What remains is the instrument noise, the ADC and the input's own changes (tide gravity).
@@ -412,9 +461,9 @@ fn run_experiment(
     );
     let b = bar(raws.len() as u64, run.name);
     let started = Instant::now();
-    let frames = qemu_client
-        .process_samples(&raws, DEFAULT_WINDOW, |done, _| b.set_position(done as u64))?;
+    let (frames, retried_chunks) = stream(qemu_client, &raws, &b)?;
     b.finish_and_clear();
+    let info = qemu_client.info()?;
     let stream_wall_s = started.elapsed().as_secs_f64();
     anyhow::ensure!(
         frames.len() == raws.len(),
@@ -613,6 +662,9 @@ fn run_experiment(
         table_id: format!("{:08x}", table.id()),
         figures,
         host_mismatches,
+        retried_chunks,
+        device_frames_dropped: info.frames_dropped,
+        host_bad_frames: qemu_client.bad_frames,
         status_counts,
         tilt_pp_arcsec: peak_to_peak(&tilt),
         temperature_std_c: std_of(&temperature),
@@ -676,6 +728,12 @@ impl Report {
                     format!("NO ({} differ)", e.host_mismatches)
                 }
             ));
+            if e.retried_chunks > 0 || e.device_frames_dropped > 0 || e.host_bad_frames > 0 {
+                s.push_str(&format!(
+                    "  link: {} chunk(s) of {STREAM_CHUNK} readings sent again, device dropped {} frame(s), host could not decode {}\n",
+                    e.retried_chunks, e.device_frames_dropped, e.host_bad_frames
+                ));
+            }
             s.push_str(&format!(
                 "  measured temperature std {:.4} °C, tilt peak-to-peak {:.2}\"\n",
                 e.temperature_std_c, e.tilt_pp_arcsec
@@ -737,7 +795,7 @@ pub fn run_demo(args: &DemoArgs) -> anyhow::Result<Report> {
     };
     eprintln!("booting {} in QEMU", firmware.display());
     let (qemu, mut client) = Qemu::launch(&firmware, &opts)?;
-    client.timeout = Duration::from_secs(10);
+    client.timeout = Duration::from_secs(5);
 
     let runs = [
         Run {
