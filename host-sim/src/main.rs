@@ -38,6 +38,9 @@ enum Command {
     Plot(accomp_host::plot::PlotArgs),
     /// Stability (std, drift), OADEV and MDEV of a log's output columns.
     Stability(accomp_host::stability::StabilityArgs),
+    /// The paper's two experiments through the firmware in QEMU: fit, upload, stream raw codes,
+    /// record, report stability before/after compensation next to the paper and the floor.
+    Demo(accomp_host::demo::DemoArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -53,5 +56,6 @@ fn main() -> anyhow::Result<()> {
         Command::Discover(args) => accomp_host::discover::run(&args),
         Command::Plot(args) => accomp_host::plot::run(&args),
         Command::Stability(args) => Ok(accomp_host::stability::run(&args)?),
+        Command::Demo(args) => accomp_host::demo::run(&args),
     }
 }

@@ -232,7 +232,10 @@ fn test() -> Result<()> {
     Ok(())
 }
 
-fn demo(_args: &[String]) -> Result<()> {
+/// `cargo xtask demo [accomp demo options]`: builds the firmware, then `accomp demo` boots it in
+/// QEMU, fits Table 1, streams the simulated paper-1g and paper-0g tests through it and prints the
+/// report (log, figures and report files under target/demo/).
+fn demo(args: &[String]) -> Result<()> {
     ensure_qemu()?;
     let elf = build_firmware()?;
     eprintln!("firmware ELF: {}", elf.display());
@@ -241,16 +244,24 @@ fn demo(_args: &[String]) -> Result<()> {
         .map(|p| p.join("shared/data/jn06_a12124_coefficients_vs_temperature.csv"))
         .filter(|p| p.exists())
         .ok_or("../shared/data/jn06_a12124_coefficients_vs_temperature.csv not found")?;
-    let mut fit = cargo();
-    fit.args([
-        "run",
-        "--release",
-        "--quiet",
-        "--package",
-        "accomp-host",
-        "--",
-        "fit",
-    ])
-    .arg(&table1);
-    run("accomp fit (Table 1)", fit)
+    let mut run_demo = cargo();
+    run_demo
+        .args([
+            "run",
+            "--release",
+            "--quiet",
+            "--package",
+            "accomp-host",
+            "--",
+            "demo",
+            "--table1",
+        ])
+        .arg(&table1)
+        .arg("--firmware")
+        .arg(&elf)
+        .args(args);
+    run(
+        "accomp demo (firmware in QEMU, paper-1g and paper-0g)",
+        run_demo,
+    )
 }
