@@ -16,6 +16,7 @@
 //! Otherwise the next candidate by ΔBIC is tried; the loop ends when none passes both.
 
 use super::baseline::{ar1, gls, raw_residual, std, Basis, Rows};
+use super::noise::{NoiseModel, Whitener};
 use super::effects::{self, columns, Context, Effect, Param};
 use super::import::Dataset;
 use super::residual;
@@ -61,21 +62,24 @@ pub fn cross_validate(
     ds: &Dataset,
     cols: &[Vec<f64>],
     y: &[f64],
-    phi: f64,
+    noise: &NoiseModel,
     cfg: &Config,
 ) -> CvScore {
     let n = y.len();
+    let full = Whitener::new(noise, &ds.t_s, (0..n).collect());
     let nb = (cfg.folds * cfg.blocks_per_fold).max(2);
     let fold_of = |i: usize| (i * nb / n) % cfg.folds;
     let (mut s_raw, mut n_raw, mut s_w, mut n_w) = (0.0, 0usize, 0.0, 0usize);
     for f in 0..cfg.folds {
         let train: Vec<bool> = (0..n).map(|i| fold_of(i) != f).collect();
-        let rows = Rows::new(&ds.segment_start, Some(&train));
+        let rows = Rows::with_noise(noise, &ds.t_s, Some(&train));
         if rows.idx.len() < cols.len() + 2 {
             continue;
         }
-        let fit = gls(cols, y, phi, &rows);
+        let fit = gls(cols, y, 0.0, &rows);
         let r = raw_residual(cols, &fit.beta, y);
+        // One-step-ahead prediction errors of the noise model on the residual.
+        let e = full.filter(&r, false);
         for i in 0..n {
             if train[i] {
                 continue;
@@ -83,8 +87,7 @@ pub fn cross_validate(
             s_raw += r[i] * r[i];
             n_raw += 1;
             if i > 0 && !train[i - 1] && !ds.segment_start[i] {
-                let e = r[i] - phi * r[i - 1];
-                s_w += e * e;
+                s_w += e[i] * e[i];
                 n_w += 1;
             }
         }
@@ -143,6 +146,7 @@ struct Current<'a> {
     ds: &'a Dataset,
     rows: Rows,
     phi: f64,
+    noise: NoiseModel,
     basis: Basis,
     r_w: Vec<f64>,
     rss: f64,
@@ -224,25 +228,43 @@ fn best_theta(cur: &Current, e: &Effect, ctx: &Context) -> Option<(f64, f64)> {
 }
 
 /// Best single step: a fast scan of every position on the whitened residual (ignoring the
-/// small projection on the current model), then exact scoring around the best 10 positions.
+/// small projection on the current model; the whitened step is approximated by the whitening
+/// filter's step response measured at mid-record, truncated after 1000 rows and held constant
+/// beyond), then exact scoring around the best 10 positions.
 fn best_step(cur: &Current, ctx: &Context) -> Option<(f64, f64)> {
     let ds = cur.ds;
     let m = cur.rows.idx.len();
     if m < 10 {
         return None;
     }
-    let phi = cur.phi;
-    // Suffix sums of r_w over rows.
+    let mid = m / 2;
+    let i_mid = *cur.rows.idx.get(mid)?;
+    let h: Vec<f64> = (0..ds.len())
+        .map(|i| if i >= i_mid { 1.0 } else { 0.0 })
+        .collect();
+    let wh = cur.rows.whiten(&h, cur.phi);
+    let g: Vec<f64> = wh.get(mid..)?.iter().take(1000).copied().collect();
+    let lmax = g.len();
+    let g_tail = *g.last()?;
+    let mut e2 = vec![0.0; lmax + 1];
+    for l in 0..lmax {
+        e2[l + 1] = e2[l] + g[l] * g[l];
+    }
     let mut suffix = vec![0.0; m + 1];
     for j in (0..m).rev() {
         suffix[j] = suffix[j + 1] + cur.r_w[j];
     }
-    // Step at row j (first row at/after the step): h_w = 1 at j, (1 − φ) after.
     let mut scores: Vec<(f64, usize)> = (1..m)
         .map(|j| {
-            let num = cur.r_w[j] + (1.0 - phi) * suffix[j + 1];
-            let den = 1.0 + (1.0 - phi).powi(2) * (m - j - 1) as f64;
-            (num * num / den, j)
+            let len = m - j;
+            let l = len.min(lmax);
+            let mut num: f64 = g[..l].iter().zip(&cur.r_w[j..j + l]).map(|(a, b)| a * b).sum();
+            let mut den = e2[l];
+            if len > lmax {
+                num += g_tail * suffix[j + lmax];
+                den += g_tail * g_tail * (len - lmax) as f64;
+            }
+            (num * num / den.max(1e-300), j)
         })
         .collect();
     scores.sort_by(|a, b| b.0.total_cmp(&a.0));
@@ -336,23 +358,34 @@ pub struct Selection {
     pub last_round: Vec<(String, f64)>,
 }
 
+/// Noise model of a residual from its Allan deviation (white fallback).
+fn noise_of(ds: &Dataset, r: &[f64]) -> NoiseModel {
+    let pts = residual::adev(ds, r);
+    NoiseModel::fit(&pts, ds.dt_s, ds.span_s())
+        .unwrap_or_else(|| NoiseModel::white(std(r).powi(2).max(1e-300)))
+}
+
+/// Fits the model (columns) with the noise model of its own residual: ordinary least squares
+/// → Allan fit → GLS → Allan fit again (or the given noise model).
 fn fit_state<'a>(
     ds: &'a Dataset,
     cols: &[Vec<f64>],
     y: &[f64],
-    phi_hint: Option<f64>,
+    noise_hint: Option<&NoiseModel>,
 ) -> (Current<'a>, Vec<f64>, Vec<f64>) {
-    let all = Rows::new(&ds.segment_start, None);
-    let phi = match phi_hint {
-        Some(p) => p,
+    let noise = match noise_hint {
+        Some(m) => m.clone(),
         None => {
+            let all = Rows::new(&ds.segment_start, None);
             let ols = gls(cols, y, 0.0, &all);
-            let r0 = raw_residual(cols, &ols.beta, y);
-            let p1 = ar1(&r0, &ds.segment_start);
-            let f1 = gls(cols, y, p1, &all);
-            ar1(&raw_residual(cols, &f1.beta, y), &ds.segment_start)
+            let m1 = noise_of(ds, &raw_residual(cols, &ols.beta, y));
+            let rows1 = Rows::with_noise(&m1, &ds.t_s, None);
+            let f1 = gls(cols, y, 0.0, &rows1);
+            noise_of(ds, &raw_residual(cols, &f1.beta, y))
         }
     };
+    let all = Rows::with_noise(&noise, &ds.t_s, None);
+    let phi = 0.0;
     let fit = gls(cols, y, phi, &all);
     let raw = raw_residual(cols, &fit.beta, y);
     let wc: Vec<Vec<f64>> = cols.iter().map(|c| all.whiten(c, phi)).collect();
@@ -364,6 +397,7 @@ fn fit_state<'a>(
             ds,
             rows: all,
             phi,
+            noise,
             basis,
             r_w,
             rss,
@@ -380,14 +414,10 @@ fn score_all(
     ctx: &Context,
     done: &[Effect],
     tides: bool,
-    rho_raw: f64,
 ) -> Vec<Scored> {
-    let n = cur.r_w.len() as f64;
-    // n_eff from the lag-1 correlation of the *raw* residual: conservative on purpose. AR(1)
-    // whitening does not whiten flicker + random-walk mixtures; with the whitened residual's
-    // correlation the null logs accepted steps and trends (docs/discovery.md).
-    let rho = rho_raw.min(0.999);
-    let n_eff = (n * (1.0 - rho) / (1.0 + rho)).max(2.0);
+    // The whitening is the exact GLS one of the fitted noise model: every whitened row is an
+    // independent observation, n_eff = n.
+    let n_eff = (cur.r_w.len() as f64).max(2.0);
     let mut out = Vec::new();
     for e in cands {
         if !e.repeatable() && done.contains(e) {
@@ -471,16 +501,15 @@ pub fn select(
         .any(|e| matches!(e, Effect::TidalGravity | Effect::TidalTilt));
     let mut cols = base_cols.to_vec();
     let (cur0, base_raw, _) = fit_state(ds, &cols, target, None);
-    let baseline_cv = cross_validate(ds, &cols, target, cur0.phi, cfg);
+    let baseline_cv = cross_validate(ds, &cols, target, &cur0.noise, cfg);
     let baseline_std = std(&base_raw);
     let mut accepted: Vec<Accepted> = Vec::new();
     let mut done: Vec<Effect> = Vec::new();
     let mut last_round = Vec::new();
     let mut cur_std = baseline_std;
     while accepted.len() < cfg.max_effects {
-        let (cur, raw_now, _) = fit_state(ds, &cols, target, None);
-        let rho_raw = ar1(&raw_now, &ds.segment_start);
-        let scored = score_all(&cur, cands, ctx, &done, tides, rho_raw);
+        let (cur, _, _) = fit_state(ds, &cols, target, None);
+        let scored = score_all(&cur, cands, ctx, &done, tides);
         last_round = scored
             .iter()
             .map(|s| (s.effect.name().to_owned(), s.delta_bic))
@@ -491,10 +520,10 @@ pub fn select(
             .filter(|s| s.delta_bic < -cfg.bic_margin)
             .take(3)
         {
-            let before = cross_validate(ds, &cols, target, cur.phi, cfg);
+            let before = cross_validate(ds, &cols, target, &cur.noise, cfg);
             let mut trial = cols.clone();
             trial.extend(s.cols.iter().cloned());
-            let after = cross_validate(ds, &trial, target, cur.phi, cfg);
+            let after = cross_validate(ds, &trial, target, &cur.noise, cfg);
             if after.whitened < before.whitened * (1.0 - cfg.min_gain) && after.raw < before.raw {
                 took = Some((s.clone(), before, after));
                 break;
@@ -506,9 +535,8 @@ pub fn select(
         let sigma_theta = theta_sigma(&cur, &s, ctx, cur.basis.q.len());
         let k0 = cols.len();
         cols.extend(s.cols.iter().cloned());
-        let (cur1, raw1, beta1) = fit_state(ds, &cols, target, Some(cur.phi));
-        let all = Rows::new(&ds.segment_start, None);
-        let fit = gls(&cols, target, cur1.phi, &all);
+        let (cur1, raw1, beta1) = fit_state(ds, &cols, target, Some(&cur.noise));
+        let fit = gls(&cols, target, 0.0, &cur1.rows);
         // Standard errors inflated for the correlation the whitening left.
         let n = cur1.r_w.len() as f64;
         let mut seg = vec![false; cur1.r_w.len()];
@@ -547,7 +575,7 @@ pub fn select(
         done.push(s.effect);
     }
     let (cur_f, final_raw, beta) = fit_state(ds, &cols, target, None);
-    let final_cv = cross_validate(ds, &cols, target, cur0.phi, cfg);
+    let final_cv = cross_validate(ds, &cols, target, &cur0.noise, cfg);
     Selection {
         accepted,
         columns: cols,
@@ -574,9 +602,9 @@ pub fn gain_with(
     cfg: &Config,
 ) -> f64 {
     let (cur0, _, _) = fit_state(ds, base_cols, target, None);
-    let before = cross_validate(ds, base_cols, target, cur0.phi, cfg);
+    let before = cross_validate(ds, base_cols, target, &cur0.noise, cfg);
     let mut cols = base_cols.to_vec();
     cols.extend(extra.iter().cloned());
-    let after = cross_validate(ds, &cols, target, cur0.phi, cfg);
+    let after = cross_validate(ds, &cols, target, &cur0.noise, cfg);
     1.0 - after.raw / before.raw
 }
