@@ -60,7 +60,11 @@ impl Rows {
     }
     /// Rows whitened by the Kalman innovations of `model` (all points of `mask`; gaps are
     /// propagated over, no row is dropped).
-    pub fn with_noise(model: &super::noise::NoiseModel, t_s: &[f64], mask: Option<&[bool]>) -> Self {
+    pub fn with_noise(
+        model: &super::noise::NoiseModel,
+        t_s: &[f64],
+        mask: Option<&[bool]>,
+    ) -> Self {
         let idx: Vec<usize> = (0..t_s.len())
             .filter(|&t| mask.is_none_or(|m| m[t]))
             .collect();

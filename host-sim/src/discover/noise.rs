@@ -259,6 +259,12 @@ impl Whitener {
         out
     }
 
+    /// ln det of the noise covariance on these rows (Σ ln S_t): with the sum of squared
+    /// normalised innovations it makes −2 ln L, comparable between noise models.
+    pub fn log_det(&self) -> f64 {
+        self.s_sqrt.iter().map(|s| 2.0 * s.ln()).sum()
+    }
+
     /// Normalised innovations: the GLS-whitened series.
     pub fn whiten(&self, x: &[f64]) -> Vec<f64> {
         self.filter(x, true)
@@ -300,7 +306,10 @@ mod tests {
     fn white_noise_whitening_is_a_scaling_and_a_random_walk_is_differenced() {
         let t: Vec<f64> = (0..5).map(f64::from).collect();
         let w = Whitener::new(&NoiseModel::white(4.0), &t, (0..5).collect());
-        assert_eq!(w.whiten(&[2.0, 4.0, 6.0, 0.0, -2.0]), vec![1.0, 2.0, 3.0, 0.0, -1.0]);
+        assert_eq!(
+            w.whiten(&[2.0, 4.0, 6.0, 0.0, -2.0]),
+            vec![1.0, 2.0, 3.0, 0.0, -1.0]
+        );
         // A strong random walk with a tiny white part: innovations → first differences.
         let rw = NoiseModel {
             white_var: 1e-12,

@@ -16,9 +16,9 @@
 //! Otherwise the next candidate by ΔBIC is tried; the loop ends when none passes both.
 
 use super::baseline::{ar1, gls, raw_residual, std, Basis, Rows};
-use super::noise::{NoiseModel, Whitener};
 use super::effects::{self, columns, Context, Effect, Param};
 use super::import::Dataset;
+use super::noise::{NoiseModel, Whitener};
 use super::residual;
 
 /// Selection settings.
@@ -139,6 +139,8 @@ pub struct Scored {
     pub rss: f64,
     /// ΔBIC.
     pub delta_bic: f64,
+    /// Its penalty part (parameters and look-elsewhere).
+    pub penalty: f64,
 }
 
 /// The current model in the whitened domain, ready to score extensions quickly.
@@ -153,6 +155,11 @@ struct Current<'a> {
 }
 
 impl Current<'_> {
+    /// −2 ln L of the current model under its noise model (constant dropped).
+    fn neg2_loglik(&self) -> f64 {
+        self.rss + self.rows.kalman.as_ref().map_or(0.0, |w| w.log_det())
+    }
+
     /// Whitened RSS with extra raw columns (projected on the current basis first).
     fn rss_with(&self, extra: &[Vec<f64>]) -> f64 {
         let mut small = Basis::new(&[]);
@@ -258,7 +265,11 @@ fn best_step(cur: &Current, ctx: &Context) -> Option<(f64, f64)> {
         .map(|j| {
             let len = m - j;
             let l = len.min(lmax);
-            let mut num: f64 = g[..l].iter().zip(&cur.r_w[j..j + l]).map(|(a, b)| a * b).sum();
+            let mut num: f64 = g[..l]
+                .iter()
+                .zip(&cur.r_w[j..j + l])
+                .map(|(a, b)| a * b)
+                .sum();
             let mut den = e2[l];
             if len > lmax {
                 num += g_tail * suffix[j + lmax];
@@ -418,6 +429,11 @@ fn score_all(
     // The whitening is the exact GLS one of the fitted noise model: every whitened row is an
     // independent observation, n_eff = n.
     let n_eff = (cur.r_w.len() as f64).max(2.0);
+    // Look-elsewhere: a parameter found by searching M effectively independent values (every
+    // step position, every resolved frequency) is charged 2·ln M (Bonferroni: the largest of M
+    // χ²₁ values of pure noise is ≈ 2 ln M), at least the BIC's ln n.
+    let m_rows = cur.r_w.len() as f64;
+    let nl_penalty = |trials: f64| n_eff.ln().max(2.0 * trials.max(1.0).ln());
     let mut out = Vec::new();
     for e in cands {
         if !e.repeatable() && done.contains(e) {
@@ -425,15 +441,16 @@ fn score_all(
         }
         let (theta, rss, k_nl) = match e {
             Effect::Step => match best_step(cur, ctx) {
-                Some((th, r)) => (th, r, 1.0),
+                Some((th, r)) => (th, r, nl_penalty(m_rows)),
                 None => continue,
             },
             Effect::Periodic => match best_periodic(cur, ctx, tides) {
-                Some((p, r)) => (p, r, 1.0),
+                // Independent frequencies up to the periodogram's Nyquist (≤ 4096 bins).
+                Some((p, r)) => (p, r, nl_penalty(m_rows.min(4096.0) / 2.0)),
                 None => continue,
             },
             _ if !effects::grid(e, cur.ds).is_empty() => match best_theta(cur, e, ctx) {
-                Some((th, r)) => (th, r, 1.0),
+                Some((th, r)) => (th, r, nl_penalty(effects::grid(e, cur.ds).len() as f64)),
                 None => continue,
             },
             _ => (
@@ -446,14 +463,15 @@ fn score_all(
         if cols.is_empty() || rss <= 0.0 || cur.rss <= 0.0 {
             continue;
         }
-        let dk = cols.len() as f64 + k_nl;
-        let delta_bic = n_eff * (rss / cur.rss).ln() + dk * n_eff.ln();
+        let penalty = cols.len() as f64 * n_eff.ln() + k_nl;
+        let delta_bic = n_eff * (rss / cur.rss).ln() + penalty;
         out.push(Scored {
             effect: e.clone(),
             theta,
             cols,
             rss,
             delta_bic,
+            penalty,
         });
     }
     out.sort_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic));
@@ -487,6 +505,9 @@ fn theta_sigma(cur: &Current, s: &Scored, ctx: &Context, base_k: usize) -> f64 {
     }
 }
 
+/// Candidates re-scored with a re-fitted noise model per round.
+const RESCORE: usize = 4;
+
 /// Runs the greedy selection from a baseline (target and free columns).
 pub fn select(
     ds: &Dataset,
@@ -510,12 +531,33 @@ pub fn select(
     while accepted.len() < cfg.max_effects {
         let (cur, _, _) = fit_state(ds, &cols, target, None);
         let scored = score_all(&cur, cands, ctx, &done, tides);
-        last_round = scored
+        // The ranking above holds the noise model fixed; an effect present in the residual
+        // also inflates the fitted noise (its Allan variance), which hides it. The best few are
+        // therefore re-scored with the full likelihood, the noise model re-fitted to the
+        // residual of the extended model: ΔBIC = Δ(−2 ln L) + penalty.
+        let base_ll = cur.neg2_loglik();
+        let mut rescored: Vec<Scored> = scored
             .iter()
+            .take(RESCORE)
+            .map(|s| {
+                let mut trial = cols.clone();
+                trial.extend(s.cols.iter().cloned());
+                let (c1, _, _) = fit_state(ds, &trial, target, None);
+                let d = c1.neg2_loglik() - base_ll;
+                Scored {
+                    delta_bic: d + s.penalty,
+                    ..s.clone()
+                }
+            })
+            .collect();
+        rescored.sort_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic));
+        last_round = rescored
+            .iter()
+            .chain(scored.iter().skip(RESCORE))
             .map(|s| (s.effect.name().to_owned(), s.delta_bic))
             .collect();
         let mut took = None;
-        for s in scored
+        for s in rescored
             .iter()
             .filter(|s| s.delta_bic < -cfg.bic_margin)
             .take(3)
