@@ -138,6 +138,7 @@ impl NoiseModel {
 }
 
 /// Gaussian elimination with partial pivoting on the leading k×k block.
+#[allow(clippy::needless_range_loop)] // elimination: indices are the algorithm
 fn solve_small(a: &[[f64; 3]; 3], b: &[f64; 3], k: usize) -> Option<[f64; 3]> {
     let mut m = *a;
     let mut v = *b;
@@ -297,8 +298,8 @@ mod tests {
             })
             .collect();
         let m = NoiseModel::fit(&pts, dt, span).expect("fit");
-        for j in 0..3 {
-            assert!((m.h[j] / truth[j] - 1.0).abs() < 1e-6, "{j}: {:?}", m.h);
+        for (h, want) in m.h.iter().zip(truth) {
+            assert!((h / want - 1.0).abs() < 1e-6, "{:?}", m.h);
         }
     }
 
@@ -310,7 +311,8 @@ mod tests {
             w.whiten(&[2.0, 4.0, 6.0, 0.0, -2.0]),
             vec![1.0, 2.0, 3.0, 0.0, -1.0]
         );
-        // A strong random walk with a tiny white part: innovations → first differences.
+        // A strong random walk with a tiny white part: innovations → first differences (the
+        // walk starts at 0 with no uncertainty: the level is the regression's offset column).
         let rw = NoiseModel {
             white_var: 1e-12,
             flicker: Vec::new(),
@@ -318,8 +320,8 @@ mod tests {
             h: [0.0; 3],
         };
         let w = Whitener::new(&rw, &t, (0..5).collect());
-        let e = w.filter(&[1.0, 3.0, 6.0, 10.0, 15.0], false);
-        let want = [1.0, 2.0, 3.0, 4.0, 5.0];
+        let e = w.filter(&[0.0, 2.0, 5.0, 9.0, 14.0], false);
+        let want = [0.0, 2.0, 3.0, 4.0, 5.0];
         for (a, b) in e.iter().zip(want) {
             assert!((a - b).abs() < 1e-6, "{e:?}");
         }
