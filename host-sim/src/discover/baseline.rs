@@ -4,8 +4,9 @@
 //!
 //! Accelerometer residuals are not white: flicker and random-walk noise make neighbouring points
 //! nearly equal, so an ordinary least-squares fit counts the same information many times and
-//! any smooth column "explains" the noise. All fits here are therefore generalised least squares
-//! with an AR(1) noise model: rows and columns are *whitened*, `z_t = x_t − φ·x_{t−1}` inside each
+//! any smooth column "explains" the noise. The selection (`select`) whitens with a fitted
+//! white + flicker + random-walk model (`noise`, [`Rows::with_noise`]); the baseline's
+//! temperature-order choice here still uses the simpler AR(1) whitening: rows and columns are *whitened*, `z_t = x_t − φ·x_{t−1}` inside each
 //! contiguous segment (the first row of a segment is dropped), with φ the lag-1 autocorrelation of
 //! the current residual. Linear parameters are solved by a modified Gram–Schmidt QR with
 //! re-orthogonalisation (a QR factorisation: no normal equations are formed), columns scaled to

@@ -1,17 +1,19 @@
-//! Greedy model selection with an autocorrelation-aware BIC and blocked cross-validation.
+//! Greedy model selection with a noise-model likelihood and blocked cross-validation.
 //!
-//! At each round every applicable candidate is fitted (nonlinear parameter by grid + refine,
-//! linear ones by least squares on top of the current model, all in the AR(1)-whitened domain,
-//! see `baseline`). The candidate with the lowest ΔBIC is tried first; it is accepted only if
+//! At each round the noise model (white + flicker + random walk, see `noise`) is fitted to the
+//! current residual's Allan variance and every applicable candidate is fitted on top of the
+//! current model in that model's exact GLS-whitened domain (nonlinear parameter by grid +
+//! refine, linear ones by least squares). The best few are re-scored with the full likelihood
+//! (noise re-fitted with the candidate in the model). A candidate is accepted only if
 //!
-//! 1. ΔBIC = n_eff·ln(RSS₁/RSS₀) + Δk·ln(n_eff) < −`bic_margin`, where n_eff = n·(1−ρ)/(1+ρ)
-//!    with ρ the lag-1 autocorrelation left in the *whitened* residual (what AR(1) whitening
-//!    did not absorb, e.g. flicker noise), and Δk counts the grid-searched parameter too; and
-//! 2. the blocked cross-validated one-step-ahead error improves: the record is cut into
+//! 1. ΔBIC = Δ(−2 ln L) + (linear columns)·ln n + max(ln n, 2 ln M) < −`bic_margin`, M the
+//!    number of effectively independent values searched for its nonlinear parameter
+//!    (look-elsewhere); and
+//! 2. the blocked cross-validated errors improve: the record is cut into
 //!    `folds × blocks_per_fold` contiguous blocks, block b belongs to fold b mod `folds`; each
 //!    fold is predicted from a fit to the others (nonlinear parameters held at their full-record
-//!    values; documented optimism), and the whitened prediction error e_t = r_t − φ·r_{t−1}
-//!    inside held-out blocks is pooled.
+//!    values; documented optimism); both the raw held-out residual and the noise model's
+//!    one-step-ahead prediction error inside held-out blocks must fall.
 //!
 //! Otherwise the next candidate by ΔBIC is tried; the loop ends when none passes both.
 
