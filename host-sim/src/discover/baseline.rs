@@ -4,8 +4,9 @@
 //!
 //! Accelerometer residuals are not white: flicker and random-walk noise make neighbouring points
 //! nearly equal, so an ordinary least-squares fit counts the same information many times and
-//! any smooth column "explains" the noise. All fits here are therefore generalised least squares
-//! with an AR(1) noise model: rows and columns are *whitened*, `z_t = x_t − φ·x_{t−1}` inside each
+//! any smooth column "explains" the noise. The selection (`select`) whitens with a fitted
+//! white + flicker + random-walk model (`noise`, [`Rows::with_noise`]); the baseline's
+//! temperature-order choice here still uses the simpler AR(1) whitening: rows and columns are *whitened*, `z_t = x_t − φ·x_{t−1}` inside each
 //! contiguous segment (the first row of a segment is dropped), with φ the lag-1 autocorrelation of
 //! the current residual. Linear parameters are solved by a modified Gram–Schmidt QR with
 //! re-orthogonalisation (a QR factorisation: no normal equations are formed), columns scaled to
@@ -45,6 +46,8 @@ pub fn ar1(r: &[f64], seg_start: &[bool]) -> f64 {
 pub struct Rows {
     /// Indices t of whitened rows (t has a predecessor t−1 in the same segment and in the set).
     pub idx: Vec<usize>,
+    /// The exact whitening of a fitted noise model; when set, `whiten` ignores φ.
+    pub kalman: Option<super::noise::Whitener>,
 }
 
 impl Rows {
@@ -54,11 +57,30 @@ impl Rows {
         let idx = (1..seg_start.len())
             .filter(|&t| !seg_start[t] && inside(t) && inside(t - 1))
             .collect();
-        Rows { idx }
+        Rows { idx, kalman: None }
     }
-    /// `x_t − φ x_{t−1}` on these rows.
+    /// Rows whitened by the Kalman innovations of `model` (all points of `mask`; gaps are
+    /// propagated over, no row is dropped).
+    pub fn with_noise(
+        model: &super::noise::NoiseModel,
+        t_s: &[f64],
+        mask: Option<&[bool]>,
+    ) -> Self {
+        let idx: Vec<usize> = (0..t_s.len())
+            .filter(|&t| mask.is_none_or(|m| m[t]))
+            .collect();
+        let w = super::noise::Whitener::new(model, t_s, idx.clone());
+        Rows {
+            idx,
+            kalman: Some(w),
+        }
+    }
+    /// `x_t − φ x_{t−1}` on these rows, or the normalised innovations of the noise model.
     pub fn whiten(&self, x: &[f64], phi: f64) -> Vec<f64> {
-        self.idx.iter().map(|&t| x[t] - phi * x[t - 1]).collect()
+        match &self.kalman {
+            Some(w) => w.whiten(x),
+            None => self.idx.iter().map(|&t| x[t] - phi * x[t - 1]).collect(),
+        }
     }
 }
 

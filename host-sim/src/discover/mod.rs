@@ -13,6 +13,7 @@
 pub mod baseline;
 pub mod effects;
 pub mod import;
+pub mod noise;
 pub mod report;
 pub mod residual;
 pub mod select;

@@ -1,23 +1,26 @@
-//! Greedy model selection with an autocorrelation-aware BIC and blocked cross-validation.
+//! Greedy model selection with a noise-model likelihood and blocked cross-validation.
 //!
-//! At each round every applicable candidate is fitted (nonlinear parameter by grid + refine,
-//! linear ones by least squares on top of the current model, all in the AR(1)-whitened domain,
-//! see `baseline`). The candidate with the lowest ΔBIC is tried first; it is accepted only if
+//! At each round the noise model (white + flicker + random walk, see `noise`) is fitted to the
+//! current residual's Allan variance and every applicable candidate is fitted on top of the
+//! current model in that model's exact GLS-whitened domain (nonlinear parameter by grid +
+//! refine, linear ones by least squares). The best few are re-scored with the full likelihood
+//! (noise re-fitted with the candidate in the model). A candidate is accepted only if
 //!
-//! 1. ΔBIC = n_eff·ln(RSS₁/RSS₀) + Δk·ln(n_eff) < −`bic_margin`, where n_eff = n·(1−ρ)/(1+ρ)
-//!    with ρ the lag-1 autocorrelation left in the *whitened* residual (what AR(1) whitening
-//!    did not absorb, e.g. flicker noise), and Δk counts the grid-searched parameter too; and
-//! 2. the blocked cross-validated one-step-ahead error improves: the record is cut into
+//! 1. ΔBIC = Δ(−2 ln L) + (linear columns)·ln n + max(ln n, 2 ln M) < −`bic_margin`, M the
+//!    number of effectively independent values searched for its nonlinear parameter
+//!    (look-elsewhere); and
+//! 2. the blocked cross-validated errors improve: the record is cut into
 //!    `folds × blocks_per_fold` contiguous blocks, block b belongs to fold b mod `folds`; each
 //!    fold is predicted from a fit to the others (nonlinear parameters held at their full-record
-//!    values; documented optimism), and the whitened prediction error e_t = r_t − φ·r_{t−1}
-//!    inside held-out blocks is pooled.
+//!    values; documented optimism); both the raw held-out residual and the noise model's
+//!    one-step-ahead prediction error inside held-out blocks must fall.
 //!
 //! Otherwise the next candidate by ΔBIC is tried; the loop ends when none passes both.
 
 use super::baseline::{ar1, gls, raw_residual, std, Basis, Rows};
 use super::effects::{self, columns, Context, Effect, Param};
 use super::import::Dataset;
+use super::noise::{NoiseModel, Whitener};
 use super::residual;
 
 /// Selection settings.
@@ -61,21 +64,24 @@ pub fn cross_validate(
     ds: &Dataset,
     cols: &[Vec<f64>],
     y: &[f64],
-    phi: f64,
+    noise: &NoiseModel,
     cfg: &Config,
 ) -> CvScore {
     let n = y.len();
+    let full = Whitener::new(noise, &ds.t_s, (0..n).collect());
     let nb = (cfg.folds * cfg.blocks_per_fold).max(2);
     let fold_of = |i: usize| (i * nb / n) % cfg.folds;
     let (mut s_raw, mut n_raw, mut s_w, mut n_w) = (0.0, 0usize, 0.0, 0usize);
     for f in 0..cfg.folds {
         let train: Vec<bool> = (0..n).map(|i| fold_of(i) != f).collect();
-        let rows = Rows::new(&ds.segment_start, Some(&train));
+        let rows = Rows::with_noise(noise, &ds.t_s, Some(&train));
         if rows.idx.len() < cols.len() + 2 {
             continue;
         }
-        let fit = gls(cols, y, phi, &rows);
+        let fit = gls(cols, y, 0.0, &rows);
         let r = raw_residual(cols, &fit.beta, y);
+        // One-step-ahead prediction errors of the noise model on the residual.
+        let e = full.filter(&r, false);
         for i in 0..n {
             if train[i] {
                 continue;
@@ -83,8 +89,7 @@ pub fn cross_validate(
             s_raw += r[i] * r[i];
             n_raw += 1;
             if i > 0 && !train[i - 1] && !ds.segment_start[i] {
-                let e = r[i] - phi * r[i - 1];
-                s_w += e * e;
+                s_w += e[i] * e[i];
                 n_w += 1;
             }
         }
@@ -136,6 +141,8 @@ pub struct Scored {
     pub rss: f64,
     /// ΔBIC.
     pub delta_bic: f64,
+    /// Its penalty part (parameters and look-elsewhere).
+    pub penalty: f64,
 }
 
 /// The current model in the whitened domain, ready to score extensions quickly.
@@ -143,12 +150,18 @@ struct Current<'a> {
     ds: &'a Dataset,
     rows: Rows,
     phi: f64,
+    noise: NoiseModel,
     basis: Basis,
     r_w: Vec<f64>,
     rss: f64,
 }
 
 impl Current<'_> {
+    /// −2 ln L of the current model under its noise model (constant dropped).
+    fn neg2_loglik(&self) -> f64 {
+        self.rss + self.rows.kalman.as_ref().map_or(0.0, |w| w.log_det())
+    }
+
     /// Whitened RSS with extra raw columns (projected on the current basis first).
     fn rss_with(&self, extra: &[Vec<f64>]) -> f64 {
         let mut small = Basis::new(&[]);
@@ -224,25 +237,47 @@ fn best_theta(cur: &Current, e: &Effect, ctx: &Context) -> Option<(f64, f64)> {
 }
 
 /// Best single step: a fast scan of every position on the whitened residual (ignoring the
-/// small projection on the current model), then exact scoring around the best 10 positions.
+/// small projection on the current model; the whitened step is approximated by the whitening
+/// filter's step response measured at mid-record, truncated after 1000 rows and held constant
+/// beyond), then exact scoring around the best 10 positions.
 fn best_step(cur: &Current, ctx: &Context) -> Option<(f64, f64)> {
     let ds = cur.ds;
     let m = cur.rows.idx.len();
     if m < 10 {
         return None;
     }
-    let phi = cur.phi;
-    // Suffix sums of r_w over rows.
+    let mid = m / 2;
+    let i_mid = *cur.rows.idx.get(mid)?;
+    let h: Vec<f64> = (0..ds.len())
+        .map(|i| if i >= i_mid { 1.0 } else { 0.0 })
+        .collect();
+    let wh = cur.rows.whiten(&h, cur.phi);
+    let g: Vec<f64> = wh.get(mid..)?.iter().take(1000).copied().collect();
+    let lmax = g.len();
+    let g_tail = *g.last()?;
+    let mut e2 = vec![0.0; lmax + 1];
+    for l in 0..lmax {
+        e2[l + 1] = e2[l] + g[l] * g[l];
+    }
     let mut suffix = vec![0.0; m + 1];
     for j in (0..m).rev() {
         suffix[j] = suffix[j + 1] + cur.r_w[j];
     }
-    // Step at row j (first row at/after the step): h_w = 1 at j, (1 − φ) after.
     let mut scores: Vec<(f64, usize)> = (1..m)
         .map(|j| {
-            let num = cur.r_w[j] + (1.0 - phi) * suffix[j + 1];
-            let den = 1.0 + (1.0 - phi).powi(2) * (m - j - 1) as f64;
-            (num * num / den, j)
+            let len = m - j;
+            let l = len.min(lmax);
+            let mut num: f64 = g[..l]
+                .iter()
+                .zip(&cur.r_w[j..j + l])
+                .map(|(a, b)| a * b)
+                .sum();
+            let mut den = e2[l];
+            if len > lmax {
+                num += g_tail * suffix[j + lmax];
+                den += g_tail * g_tail * (len - lmax) as f64;
+            }
+            (num * num / den.max(1e-300), j)
         })
         .collect();
     scores.sort_by(|a, b| b.0.total_cmp(&a.0));
@@ -336,23 +371,34 @@ pub struct Selection {
     pub last_round: Vec<(String, f64)>,
 }
 
+/// Noise model of a residual from its Allan deviation (white fallback).
+fn noise_of(ds: &Dataset, r: &[f64]) -> NoiseModel {
+    let pts = residual::adev(ds, r);
+    NoiseModel::fit(&pts, ds.dt_s, ds.span_s())
+        .unwrap_or_else(|| NoiseModel::white(std(r).powi(2).max(1e-300)))
+}
+
+/// Fits the model (columns) with the noise model of its own residual: ordinary least squares
+/// → Allan fit → GLS → Allan fit again (or the given noise model).
 fn fit_state<'a>(
     ds: &'a Dataset,
     cols: &[Vec<f64>],
     y: &[f64],
-    phi_hint: Option<f64>,
+    noise_hint: Option<&NoiseModel>,
 ) -> (Current<'a>, Vec<f64>, Vec<f64>) {
-    let all = Rows::new(&ds.segment_start, None);
-    let phi = match phi_hint {
-        Some(p) => p,
+    let noise = match noise_hint {
+        Some(m) => m.clone(),
         None => {
+            let all = Rows::new(&ds.segment_start, None);
             let ols = gls(cols, y, 0.0, &all);
-            let r0 = raw_residual(cols, &ols.beta, y);
-            let p1 = ar1(&r0, &ds.segment_start);
-            let f1 = gls(cols, y, p1, &all);
-            ar1(&raw_residual(cols, &f1.beta, y), &ds.segment_start)
+            let m1 = noise_of(ds, &raw_residual(cols, &ols.beta, y));
+            let rows1 = Rows::with_noise(&m1, &ds.t_s, None);
+            let f1 = gls(cols, y, 0.0, &rows1);
+            noise_of(ds, &raw_residual(cols, &f1.beta, y))
         }
     };
+    let all = Rows::with_noise(&noise, &ds.t_s, None);
+    let phi = 0.0;
     let fit = gls(cols, y, phi, &all);
     let raw = raw_residual(cols, &fit.beta, y);
     let wc: Vec<Vec<f64>> = cols.iter().map(|c| all.whiten(c, phi)).collect();
@@ -364,6 +410,7 @@ fn fit_state<'a>(
             ds,
             rows: all,
             phi,
+            noise,
             basis,
             r_w,
             rss,
@@ -380,14 +427,15 @@ fn score_all(
     ctx: &Context,
     done: &[Effect],
     tides: bool,
-    rho_raw: f64,
 ) -> Vec<Scored> {
-    let n = cur.r_w.len() as f64;
-    // n_eff from the lag-1 correlation of the *raw* residual: conservative on purpose. AR(1)
-    // whitening does not whiten flicker + random-walk mixtures; with the whitened residual's
-    // correlation the null logs accepted steps and trends (docs/discovery.md).
-    let rho = rho_raw.min(0.999);
-    let n_eff = (n * (1.0 - rho) / (1.0 + rho)).max(2.0);
+    // The whitening is the exact GLS one of the fitted noise model: every whitened row is an
+    // independent observation, n_eff = n.
+    let n_eff = (cur.r_w.len() as f64).max(2.0);
+    // Look-elsewhere: a parameter found by searching M effectively independent values (every
+    // step position, every resolved frequency) is charged 2·ln M (Bonferroni: the largest of M
+    // χ²₁ values of pure noise is ≈ 2 ln M), at least the BIC's ln n.
+    let m_rows = cur.r_w.len() as f64;
+    let nl_penalty = |trials: f64| n_eff.ln().max(2.0 * trials.max(1.0).ln());
     let mut out = Vec::new();
     for e in cands {
         if !e.repeatable() && done.contains(e) {
@@ -395,15 +443,16 @@ fn score_all(
         }
         let (theta, rss, k_nl) = match e {
             Effect::Step => match best_step(cur, ctx) {
-                Some((th, r)) => (th, r, 1.0),
+                Some((th, r)) => (th, r, nl_penalty(m_rows)),
                 None => continue,
             },
             Effect::Periodic => match best_periodic(cur, ctx, tides) {
-                Some((p, r)) => (p, r, 1.0),
+                // Independent frequencies up to the periodogram's Nyquist (≤ 4096 bins).
+                Some((p, r)) => (p, r, nl_penalty(m_rows.min(4096.0) / 2.0)),
                 None => continue,
             },
             _ if !effects::grid(e, cur.ds).is_empty() => match best_theta(cur, e, ctx) {
-                Some((th, r)) => (th, r, 1.0),
+                Some((th, r)) => (th, r, nl_penalty(effects::grid(e, cur.ds).len() as f64)),
                 None => continue,
             },
             _ => (
@@ -416,14 +465,15 @@ fn score_all(
         if cols.is_empty() || rss <= 0.0 || cur.rss <= 0.0 {
             continue;
         }
-        let dk = cols.len() as f64 + k_nl;
-        let delta_bic = n_eff * (rss / cur.rss).ln() + dk * n_eff.ln();
+        let penalty = cols.len() as f64 * n_eff.ln() + k_nl;
+        let delta_bic = n_eff * (rss / cur.rss).ln() + penalty;
         out.push(Scored {
             effect: e.clone(),
             theta,
             cols,
             rss,
             delta_bic,
+            penalty,
         });
     }
     out.sort_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic));
@@ -457,6 +507,9 @@ fn theta_sigma(cur: &Current, s: &Scored, ctx: &Context, base_k: usize) -> f64 {
     }
 }
 
+/// Candidates re-scored with a re-fitted noise model per round.
+const RESCORE: usize = 4;
+
 /// Runs the greedy selection from a baseline (target and free columns).
 pub fn select(
     ds: &Dataset,
@@ -471,30 +524,50 @@ pub fn select(
         .any(|e| matches!(e, Effect::TidalGravity | Effect::TidalTilt));
     let mut cols = base_cols.to_vec();
     let (cur0, base_raw, _) = fit_state(ds, &cols, target, None);
-    let baseline_cv = cross_validate(ds, &cols, target, cur0.phi, cfg);
+    let baseline_cv = cross_validate(ds, &cols, target, &cur0.noise, cfg);
     let baseline_std = std(&base_raw);
     let mut accepted: Vec<Accepted> = Vec::new();
     let mut done: Vec<Effect> = Vec::new();
     let mut last_round = Vec::new();
     let mut cur_std = baseline_std;
     while accepted.len() < cfg.max_effects {
-        let (cur, raw_now, _) = fit_state(ds, &cols, target, None);
-        let rho_raw = ar1(&raw_now, &ds.segment_start);
-        let scored = score_all(&cur, cands, ctx, &done, tides, rho_raw);
-        last_round = scored
+        let (cur, _, _) = fit_state(ds, &cols, target, None);
+        let scored = score_all(&cur, cands, ctx, &done, tides);
+        // The ranking above holds the noise model fixed; an effect present in the residual
+        // also inflates the fitted noise (its Allan variance), which hides it. The best few are
+        // therefore re-scored with the full likelihood, the noise model re-fitted to the
+        // residual of the extended model: ΔBIC = Δ(−2 ln L) + penalty.
+        let base_ll = cur.neg2_loglik();
+        let mut rescored: Vec<Scored> = scored
             .iter()
+            .take(RESCORE)
+            .map(|s| {
+                let mut trial = cols.clone();
+                trial.extend(s.cols.iter().cloned());
+                let (c1, _, _) = fit_state(ds, &trial, target, None);
+                let d = c1.neg2_loglik() - base_ll;
+                Scored {
+                    delta_bic: d + s.penalty,
+                    ..s.clone()
+                }
+            })
+            .collect();
+        rescored.sort_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic));
+        last_round = rescored
+            .iter()
+            .chain(scored.iter().skip(RESCORE))
             .map(|s| (s.effect.name().to_owned(), s.delta_bic))
             .collect();
         let mut took = None;
-        for s in scored
+        for s in rescored
             .iter()
             .filter(|s| s.delta_bic < -cfg.bic_margin)
             .take(3)
         {
-            let before = cross_validate(ds, &cols, target, cur.phi, cfg);
+            let before = cross_validate(ds, &cols, target, &cur.noise, cfg);
             let mut trial = cols.clone();
             trial.extend(s.cols.iter().cloned());
-            let after = cross_validate(ds, &trial, target, cur.phi, cfg);
+            let after = cross_validate(ds, &trial, target, &cur.noise, cfg);
             if after.whitened < before.whitened * (1.0 - cfg.min_gain) && after.raw < before.raw {
                 took = Some((s.clone(), before, after));
                 break;
@@ -506,9 +579,8 @@ pub fn select(
         let sigma_theta = theta_sigma(&cur, &s, ctx, cur.basis.q.len());
         let k0 = cols.len();
         cols.extend(s.cols.iter().cloned());
-        let (cur1, raw1, beta1) = fit_state(ds, &cols, target, Some(cur.phi));
-        let all = Rows::new(&ds.segment_start, None);
-        let fit = gls(&cols, target, cur1.phi, &all);
+        let (cur1, raw1, beta1) = fit_state(ds, &cols, target, Some(&cur.noise));
+        let fit = gls(&cols, target, 0.0, &cur1.rows);
         // Standard errors inflated for the correlation the whitening left.
         let n = cur1.r_w.len() as f64;
         let mut seg = vec![false; cur1.r_w.len()];
@@ -547,7 +619,7 @@ pub fn select(
         done.push(s.effect);
     }
     let (cur_f, final_raw, beta) = fit_state(ds, &cols, target, None);
-    let final_cv = cross_validate(ds, &cols, target, cur0.phi, cfg);
+    let final_cv = cross_validate(ds, &cols, target, &cur0.noise, cfg);
     Selection {
         accepted,
         columns: cols,
@@ -574,9 +646,9 @@ pub fn gain_with(
     cfg: &Config,
 ) -> f64 {
     let (cur0, _, _) = fit_state(ds, base_cols, target, None);
-    let before = cross_validate(ds, base_cols, target, cur0.phi, cfg);
+    let before = cross_validate(ds, base_cols, target, &cur0.noise, cfg);
     let mut cols = base_cols.to_vec();
     cols.extend(extra.iter().cloned());
-    let after = cross_validate(ds, &cols, target, cur0.phi, cfg);
+    let after = cross_validate(ds, &cols, target, &cur0.noise, cfg);
     1.0 - after.raw / before.raw
 }
