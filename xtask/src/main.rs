@@ -94,9 +94,8 @@ fn ensure_flip_link() -> Result<()> {
     run("cargo install flip-link (firmware linker)", c)
 }
 
-/// Builds the front-end board firmware (it cannot run here, but it must build) and keeps its ELF
-/// next to the QEMU one as `accomp-fw-frontend`.
-fn build_frontend_firmware() -> Result<PathBuf> {
+/// `cargo build --release` of the firmware binary for the thumb target, plus board features.
+fn firmware_build(board_args: &[&str]) -> Result<Command> {
     ensure_flip_link()?;
     let mut c = cargo();
     c.args([
@@ -108,10 +107,15 @@ fn build_frontend_firmware() -> Result<PathBuf> {
         FIRMWARE_BIN,
         "--target",
         FIRMWARE_TARGET,
-        "--no-default-features",
-        "--features",
-        "board-frontend",
-    ]);
+    ])
+    .args(board_args);
+    Ok(c)
+}
+
+/// Builds the front-end board firmware (it cannot run here, but it must build) and keeps its ELF
+/// next to the QEMU one as `accomp-fw-frontend`.
+fn build_frontend_firmware() -> Result<PathBuf> {
+    let c = firmware_build(&["--no-default-features", "--features", "board-frontend"])?;
     run("firmware release build, board-frontend", c)?;
     let elf = firmware_elf();
     let kept = elf.with_file_name(format!("{FIRMWARE_BIN}-frontend"));
@@ -120,18 +124,7 @@ fn build_frontend_firmware() -> Result<PathBuf> {
 }
 
 fn build_firmware() -> Result<PathBuf> {
-    ensure_flip_link()?;
-    let mut c = cargo();
-    c.args([
-        "build",
-        "--release",
-        "--package",
-        "accomp",
-        "--bin",
-        FIRMWARE_BIN,
-        "--target",
-        FIRMWARE_TARGET,
-    ]);
+    let c = firmware_build(&[])?;
     run(
         "firmware release build, board-qemu (thumbv7em-none-eabihf)",
         c,
