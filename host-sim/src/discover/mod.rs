@@ -36,6 +36,9 @@ pub struct DiscoverArgs {
     /// Write a Markdown report with figures into this directory.
     #[arg(long)]
     pub report: Option<PathBuf>,
+    /// Image format of the report's figures.
+    #[arg(long, value_enum, default_value = "png")]
+    pub report_format: crate::plot::Format,
     /// Record format.
     #[arg(long, value_enum, default_value = "auto")]
     pub format: Format,
@@ -185,7 +188,7 @@ pub fn run(args: &DiscoverArgs) -> anyhow::Result<()> {
         &select::Config::default(),
     )?;
     if let Some(dir) = &args.report {
-        report::write_report(&d, dir)?;
+        report::write_report(&d, dir, args.report_format)?;
     }
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report::json(&d))?);

@@ -1,6 +1,16 @@
 //! Text, JSON and Markdown output of a discovery.
+//!
+//! The Markdown report links three figures drawn by the plot module ([`crate::plot::draw`]):
+//! the residual before/after vs time, its Lomb–Scargle spectrum with the significant lines
+//! marked, and its Allan deviation before/after with confidence bands.
 
-use super::Discovery;
+use super::{residual, Discovery};
+use crate::plot::decimate::buckets;
+use crate::plot::draw::{
+    self, AdevCurve, AdevFigure, Figure, Marker, Panel, TimeFigure, Trace, XYCurve, XYFigure,
+};
+use crate::plot::Format;
+use plotters::style::RGBColor;
 use serde_json::{json, Map, Value};
 use std::fmt::Write as _;
 use std::path::Path;
@@ -79,6 +89,8 @@ pub fn json(d: &Discovery) -> Value {
         }
     })
 }
+
+const SECONDS_PER_DAY: f64 = 86_400.0;
 
 /// Human-readable summary.
 pub fn text(d: &Discovery) -> String {
@@ -176,11 +188,248 @@ pub fn text(d: &Discovery) -> String {
     o
 }
 
-/// Writes `report.md` (and figures) into `dir`.
-pub fn write_report(d: &Discovery, dir: &Path) -> anyhow::Result<()> {
+/// File stems of the report's figures, in the order they appear in `report.md`.
+pub const FIGURES: [&str; 3] = ["residual_time", "residual_spectrum", "residual_adev"];
+
+const BEFORE: RGBColor = RGBColor(200, 40, 40);
+const AFTER: RGBColor = RGBColor(25, 90, 200);
+/// False-alarm probability of the spectrum's significance line and of the marked lines.
+const FAP_MARKED: f64 = 0.01;
+/// At most this many significant lines are marked (more would hide the spectrum).
+const MAX_MARKED_LINES: usize = 6;
+/// The spectrum's y axis spans at most this many decades under its peak: the periodogram's
+/// troughs reach 1e-8 and would squeeze the lines into the top of the figure.
+const SPECTRUM_DECADES: f64 = 5.0;
+
+/// A display scale for a unit: SI prefix for `g` and volts (`V`, or `v` as the log's column
+/// suffix gives it), a power of ten otherwise.
+fn display_scale(unit: &str, typical: f64) -> (f64, String) {
+    if !(typical.is_finite() && typical > 0.0) {
+        return (1.0, unit.to_owned());
+    }
+    let e3 = (typical.log10() / 3.0).floor() as i32 * 3;
+    if e3 == 0 {
+        return (1.0, unit.to_owned());
+    }
+    let prefix = match (unit, e3) {
+        ("g" | "V" | "v", -3) => Some("m"),
+        ("g" | "V" | "v", -6) => Some("µ"),
+        ("g" | "V" | "v", -9) => Some("n"),
+        _ => None,
+    };
+    let factor = 10f64.powi(-e3);
+    match prefix {
+        Some(p) => (factor, format!("{p}{unit}")),
+        None => (factor, format!("1e{e3} {unit}")),
+    }
+}
+
+/// Residual vs time, baseline (top) and final (bottom), same y range; a NaN is inserted at every
+/// segment start so gaps are not bridged.
+fn residual_time_figure(d: &Discovery) -> Figure {
+    let ds = &d.dataset;
+    let s = &d.selection;
+    let t0 = ds.t_s.first().copied().unwrap_or(0.0);
+    let span = ds.t_s.last().copied().unwrap_or(t0) - t0;
+    let (t_unit, t_div) = if span <= 2.0 * SECONDS_PER_DAY {
+        ("h", 3600.0)
+    } else {
+        ("days", SECONDS_PER_DAY)
+    };
+    let (k, unit) = display_scale(&ds.output_unit, s.baseline_std);
+    let series = |r: &[f64]| {
+        let (mut x, mut y) = (Vec::with_capacity(r.len()), Vec::with_capacity(r.len()));
+        for (i, (&t, &v)) in ds.t_s.iter().zip(r).enumerate() {
+            if i > 0 && ds.segment_start.get(i).copied().unwrap_or(false) {
+                x.push(f64::NAN);
+                y.push(f64::NAN);
+            }
+            x.push((t - t0) / t_div);
+            y.push(v * k);
+        }
+        buckets(&x, &y, draw::WIDTH_PX as usize)
+    };
+    let n_eff = s.accepted.len();
+    let panel = |label: String, r: &[f64], color| Panel {
+        y_desc: format!("residual ({unit})"),
+        traces: vec![Trace {
+            label,
+            runs: series(r),
+            color,
+        }],
+    };
+    Figure::Time(TimeFigure {
+        title: format!("{}: residual before / after discovery", ds.output_name),
+        x_desc: format!("time since first point ({t_unit})"),
+        x_range: (0.0, if span > 0.0 { span / t_div } else { 1.0 }),
+        panels: vec![
+            panel(
+                format!(
+                    "baseline residual: σ = {:.3e} {}",
+                    s.baseline_std, ds.output_unit
+                ),
+                &s.baseline_residual,
+                BEFORE,
+            ),
+            panel(
+                format!(
+                    "final residual ({n_eff} effect(s) added): σ = {:.3e} {}",
+                    s.final_std, ds.output_unit
+                ),
+                &s.final_residual,
+                AFTER,
+            ),
+        ],
+        shared_y: true,
+    })
+}
+
+/// Readable period: s, h or days.
+fn period_label(period_s: f64) -> String {
+    if period_s < 3600.0 {
+        format!("{period_s:.0} s")
+    } else if period_s < 3.0 * SECONDS_PER_DAY {
+        format!("{:.2} h", period_s / 3600.0)
+    } else {
+        format!("{:.1} d", period_s / SECONDS_PER_DAY)
+    }
+}
+
+/// Lomb–Scargle power of the baseline and final residuals against frequency, log-log, with the
+/// 1 % false-alarm level and the significant lines of the baseline residual marked.
+fn residual_spectrum_figure(d: &Discovery) -> Figure {
+    let curve = |label: &str, sp: &residual::Spectrum, color| XYCurve {
+        label: label.to_owned(),
+        color,
+        points: sp
+            .frequency_hz
+            .iter()
+            .copied()
+            .zip(sp.power.iter().copied())
+            .collect(),
+    };
+    let peak = d
+        .spectrum_before
+        .power
+        .iter()
+        .chain(&d.spectrum_after.power)
+        .copied()
+        .filter(|p| p.is_finite())
+        .fold(0.0, f64::max);
+    // The power z whose false-alarm probability over the M independent frequencies is
+    // FAP_MARKED, inverting 1 − (1 − e^{−z})^M (residual.rs). The spectrum runs from 1/span to
+    // f_max, so M = span · f_max = last / first frequency.
+    let fap_level = match (
+        d.spectrum_before.frequency_hz.first(),
+        d.spectrum_before.frequency_hz.last(),
+    ) {
+        (Some(&f0), Some(&f1)) if f0 > 0.0 && f1 > f0 => {
+            let m = f1 / f0;
+            let single = -((1.0 - FAP_MARKED).ln() / m).exp_m1();
+            vec![Marker {
+                at: -single.ln(),
+                label: format!("false-alarm probability {:.0} %", 100.0 * FAP_MARKED),
+            }]
+        }
+        _ => Vec::new(),
+    };
+    let x_markers = d
+        .spectrum_before
+        .lines
+        .iter()
+        .filter(|l| l.fap < FAP_MARKED)
+        .take(MAX_MARKED_LINES)
+        .map(|l| Marker {
+            at: l.frequency_hz,
+            label: period_label(l.period_s),
+        })
+        .collect();
+    Figure::XY(XYFigure {
+        title: format!(
+            "{}: Lomb–Scargle spectrum of the residual (marked: lines with FAP < {:.0} %)",
+            d.dataset.output_name,
+            100.0 * FAP_MARKED
+        ),
+        x_desc: "frequency (Hz)".into(),
+        y_desc: "normalised power".into(),
+        x_log: true,
+        y_log: true,
+        y_floor: (peak > 0.0).then(|| peak * 10f64.powf(-SPECTRUM_DECADES)),
+        curves: vec![
+            curve("baseline residual", &d.spectrum_before, BEFORE),
+            curve("final residual", &d.spectrum_after, AFTER),
+        ],
+        x_markers,
+        y_markers: fap_level,
+    })
+}
+
+/// OADEV of the baseline and final residuals with their 68 % confidence bands.
+fn residual_adev_figure(d: &Discovery) -> Figure {
+    let ds = &d.dataset;
+    let curve = |label: &str, r: &[f64], color| AdevCurve {
+        label: label.to_owned(),
+        color,
+        points: residual::adev_points(ds, r)
+            .iter()
+            .filter(|p| p.dev.is_finite() && p.dev > 0.0 && p.ci_high.is_finite())
+            .map(|p| (p.tau_s, p.dev, p.ci_low, p.ci_high))
+            .collect(),
+    };
+    Figure::Adev(AdevFigure {
+        title: format!(
+            "{}: Allan deviation of the residual, shaded: 68 % confidence interval",
+            ds.output_name
+        ),
+        y_desc: format!("σ_y(τ) ({})", ds.output_unit),
+        curves: vec![
+            curve("baseline residual", &d.selection.baseline_residual, BEFORE),
+            curve("final residual", &d.selection.final_residual, AFTER),
+        ],
+    })
+}
+
+/// The report's figures, as plain data, with their file stems ([`FIGURES`]) and captions.
+pub fn figures(d: &Discovery) -> Vec<(&'static str, &'static str, Figure)> {
+    vec![
+        (
+            FIGURES[0],
+            "Residual before (baseline) and after (accepted effects) vs time",
+            residual_time_figure(d),
+        ),
+        (
+            FIGURES[1],
+            "Lomb–Scargle spectrum of the residual; vertical lines: significant lines of the baseline residual",
+            residual_spectrum_figure(d),
+        ),
+        (
+            FIGURES[2],
+            "Allan deviation of the residual before and after, 68 % confidence bands",
+            residual_adev_figure(d),
+        ),
+    ]
+}
+
+/// Writes `report.md` and its figures (`<stem>.png` or `.svg`) into `dir`.
+///
+/// A figure that cannot be drawn (e.g. a record too short for any Allan deviation point) is left
+/// out with a note in the report instead of failing the whole report.
+pub fn write_report(d: &Discovery, dir: &Path, format: Format) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir)?;
     let mut md = String::new();
     let _ = writeln!(md, "# Model discovery report\n\n```text\n{}```\n", text(d));
+    let _ = writeln!(md, "## Figures\n");
+    for (stem, caption, fig) in figures(d) {
+        let name = format!("{stem}.{}", format.ext());
+        match draw::render(&fig, &dir.join(&name), format) {
+            Ok(()) => {
+                let _ = writeln!(md, "### {caption}\n\n![{caption}]({name})\n");
+            }
+            Err(e) => {
+                let _ = writeln!(md, "### {caption}\n\nnot drawn: {e}\n");
+            }
+        }
+    }
     std::fs::write(dir.join("report.md"), md)?;
     Ok(())
 }

@@ -284,15 +284,20 @@ pub fn trend(ds: &Dataset, resid: &[f64]) -> Trend {
 /// Overlapping Allan deviation (octave taus) of the residual placed on its time grid (gaps as
 /// NaN, nothing interpolated), via the stability module.
 pub fn adev(ds: &Dataset, resid: &[f64]) -> Vec<(f64, f64)> {
+    adev_points(ds, resid)
+        .iter()
+        .map(|p| (p.tau_s, p.dev))
+        .collect()
+}
+
+/// [`adev`] with the whole points (confidence interval, EDF) for the report's figure.
+pub fn adev_points(ds: &Dataset, resid: &[f64]) -> Vec<crate::allan::AllanPoint> {
     let grid = match crate::stability::Grid::from_time(&ds.t_s) {
         Ok(g) => g,
         Err(_) => return Vec::new(),
     };
     let placed = grid.place(resid);
-    match crate::allan::oadev(&placed, ds.dt_s, crate::allan::TauSet::Octave) {
-        Ok(pts) => pts.iter().map(|p| (p.tau_s, p.dev)).collect(),
-        Err(_) => Vec::new(),
-    }
+    crate::allan::oadev(&placed, ds.dt_s, crate::allan::TauSet::Octave).unwrap_or_default()
 }
 
 #[cfg(test)]

@@ -11,6 +11,7 @@
 use std::path::Path;
 use std::sync::OnceLock;
 
+use plotters::coord::ranged1d::{AsRangedCoord, ValueFormatter};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::{register_font, FontStyle};
@@ -86,6 +87,51 @@ pub struct AdevFigure {
     pub curves: Vec<AdevCurve>,
 }
 
+/// One line of an [`XYFigure`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct XYCurve {
+    /// Legend text.
+    pub label: String,
+    /// Line colour.
+    pub color: RGBColor,
+    /// Points in drawing order; non-finite ones (and non-positive ones on a log axis) are
+    /// skipped and break the line.
+    pub points: Vec<(f64, f64)>,
+}
+
+/// A labelled reference line across the plot: vertical at an x value, or horizontal at a y value.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Marker {
+    /// Position on its axis.
+    pub at: f64,
+    /// Text written next to the line.
+    pub label: String,
+}
+
+/// A general line plot of y against x, each axis linear or logarithmic (spectra, sweeps).
+#[derive(Debug, Clone, PartialEq)]
+pub struct XYFigure {
+    /// Title.
+    pub title: String,
+    /// X axis description, with unit.
+    pub x_desc: String,
+    /// Y axis description, with unit.
+    pub y_desc: String,
+    /// Logarithmic x axis.
+    pub x_log: bool,
+    /// Logarithmic y axis.
+    pub y_log: bool,
+    /// Y values below this are drawn at it (a log axis otherwise spans the deep, empty troughs
+    /// of a periodogram). `None`: the data's own minimum.
+    pub y_floor: Option<f64>,
+    /// Curves.
+    pub curves: Vec<XYCurve>,
+    /// Vertical reference lines (e.g. significant spectral lines).
+    pub x_markers: Vec<Marker>,
+    /// Horizontal reference lines (e.g. a significance level).
+    pub y_markers: Vec<Marker>,
+}
+
 /// Any figure this module draws.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Figure {
@@ -93,6 +139,8 @@ pub enum Figure {
     Time(TimeFigure),
     /// Allan deviation.
     Adev(AdevFigure),
+    /// Y against x, linear or log axes.
+    XY(XYFigure),
 }
 
 /// Width of every figure, px. The decimation uses one bucket per pixel column of it.
@@ -110,7 +158,7 @@ impl Figure {
                 WIDTH_PX,
                 TITLE_HEIGHT_PX + PANEL_HEIGHT_PX * t.panels.len().max(1) as u32,
             ),
-            Figure::Adev(_) => (900, 680),
+            Figure::Adev(_) | Figure::XY(_) => (900, 680),
         }
     }
 }
@@ -143,6 +191,7 @@ where
     match fig {
         Figure::Time(t) => draw_time(root, t)?,
         Figure::Adev(a) => draw_adev(root, a)?,
+        Figure::XY(f) => draw_xy(root, f)?,
     }
     root.present()?;
     Ok(())
@@ -381,6 +430,198 @@ where
                 .iter()
                 .map(|p| Circle::new((p.0, p.1), 3, col.filled())),
         )?;
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .label_font((FONT, 15))
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK.mix(0.5))
+        .draw()?;
+    Ok(())
+}
+
+/// Clamps `y` to the figure's floor.
+fn floored(fig: &XYFigure, y: f64) -> f64 {
+    fig.y_floor.map_or(y, |f| y.max(f))
+}
+
+/// True when a point can be drawn on the figure's axes.
+fn drawable(fig: &XYFigure, (x, y): (f64, f64)) -> bool {
+    let y = floored(fig, y);
+    x.is_finite() && y.is_finite() && (!fig.x_log || x > 0.0) && (!fig.y_log || y > 0.0)
+}
+
+/// Axis range over `values`: a log axis starts just under a power of ten (see [`draw_adev`]) and
+/// gets ×3 headroom for the legend; a linear one is [`padded`].
+fn axis_range(values: impl Iterator<Item = f64>, log: bool) -> Option<(f64, f64)> {
+    let (lo, hi) = values.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+        (lo.min(v), hi.max(v))
+    });
+    if !(lo.is_finite() && hi.is_finite()) {
+        return None;
+    }
+    Some(if log {
+        let lo = 0.99 * 10f64.powf(lo.log10().floor());
+        (lo, if hi > lo { hi * 3.0 } else { lo * 100.0 })
+    } else {
+        padded((lo, hi))
+    })
+}
+
+fn draw_xy<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    fig: &XYFigure,
+) -> Result<(), DrawError>
+where
+    DB::ErrorType: 'static,
+{
+    let pts = || {
+        fig.curves
+            .iter()
+            .flat_map(|c| c.points.iter().copied())
+            .filter(|&p| drawable(fig, p))
+    };
+    let (Some(xr), Some(yr)) = (
+        axis_range(pts().map(|p| p.0), fig.x_log),
+        axis_range(pts().map(|p| floored(fig, p.1)), fig.y_log),
+    ) else {
+        return Err(DrawError("no finite point to draw".into()));
+    };
+    // plotters gives log and linear axes different coordinate types: one call per combination.
+    match (fig.x_log, fig.y_log) {
+        (false, false) => draw_xy_on(root, fig, xr.0..xr.1, yr.0..yr.1, yr),
+        (true, false) => draw_xy_on(root, fig, (xr.0..xr.1).log_scale(), yr.0..yr.1, yr),
+        (false, true) => draw_xy_on(root, fig, xr.0..xr.1, (yr.0..yr.1).log_scale(), yr),
+        (true, true) => draw_xy_on(
+            root,
+            fig,
+            (xr.0..xr.1).log_scale(),
+            (yr.0..yr.1).log_scale(),
+            yr,
+        ),
+    }
+}
+
+fn draw_xy_on<DB, X, Y>(
+    root: &DrawingArea<DB, Shift>,
+    fig: &XYFigure,
+    x_spec: X,
+    y_spec: Y,
+    (y_lo, y_hi): (f64, f64),
+) -> Result<(), DrawError>
+where
+    DB: DrawingBackend,
+    DB::ErrorType: 'static,
+    X: AsRangedCoord<Value = f64>,
+    Y: AsRangedCoord<Value = f64>,
+    X::CoordDescType: ValueFormatter<f64>,
+    Y::CoordDescType: ValueFormatter<f64>,
+{
+    let mut chart = ChartBuilder::on(root)
+        .caption(&fig.title, (FONT, 20))
+        .margin(15)
+        .x_label_area_size(50)
+        .y_label_area_size(80)
+        .build_cartesian_2d(x_spec, y_spec)?;
+    let (x_lo, x_hi) = {
+        let r = chart.x_range();
+        (r.start, r.end)
+    };
+    let x_dec = tick_decimals(x_hi - x_lo);
+    let y_dec = tick_decimals(y_hi - y_lo);
+    let (x_log, y_log) = (fig.x_log, fig.y_log);
+    let x_fmt = move |v: &f64| {
+        if x_log {
+            if is_125(*v) {
+                log_tick(*v)
+            } else {
+                String::new()
+            }
+        } else {
+            fixed(*v, x_dec)
+        }
+    };
+    let y_fmt = move |v: &f64| {
+        if y_log {
+            if is_125(*v) {
+                log_tick(*v)
+            } else {
+                String::new()
+            }
+        } else {
+            fixed(*v, y_dec)
+        }
+    };
+    chart
+        .configure_mesh()
+        .x_desc(fig.x_desc.as_str())
+        .y_desc(fig.y_desc.as_str())
+        .label_style((FONT, 14))
+        .axis_desc_style((FONT, 16))
+        // Log y: key points for 1..9 in every decade (grid lines), labels on 1, 2, 5 only.
+        // (x: plotters repeats decade labels when asked for many log key points on x.)
+        .y_labels(if y_log { 40 } else { 10 })
+        .light_line_style(WHITE.mix(0.0))
+        .bold_line_style(BLACK.mix(0.12))
+        .x_label_formatter(&x_fmt)
+        .y_label_formatter(&y_fmt)
+        .draw()?;
+    let marker_style = BLACK.mix(0.45).stroke_width(1);
+    let inside = fig.x_markers.iter().filter(|m| m.at > x_lo && m.at < x_hi);
+    for (i, m) in inside.enumerate() {
+        chart.draw_series(std::iter::once(PathElement::new(
+            vec![(m.at, y_lo), (m.at, y_hi)],
+            marker_style,
+        )))?;
+        // Text under the top, right of the line, on one of three staggered heights so labels
+        // of neighbouring lines do not overprint.
+        let h = 0.95 - 0.04 * (i % 3) as f64;
+        let y_text = if y_log {
+            y_lo * (y_hi / y_lo).powf(h)
+        } else {
+            y_lo + h * (y_hi - y_lo)
+        };
+        chart.draw_series(std::iter::once(Text::new(
+            m.label.clone(),
+            (m.at, y_text),
+            (FONT, 13).into_font().color(&BLACK.mix(0.7)),
+        )))?;
+    }
+    for m in fig.y_markers.iter().filter(|m| m.at > y_lo && m.at < y_hi) {
+        chart
+            .draw_series(std::iter::once(PathElement::new(
+                vec![(x_lo, m.at), (x_hi, m.at)],
+                marker_style,
+            )))?
+            .label(m.label.as_str())
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 24, y)], BLACK.mix(0.45).stroke_width(1))
+            });
+    }
+    for c in &fig.curves {
+        let col = c.color;
+        let mut first = true;
+        // Runs of drawable points: a skipped point breaks the line instead of bridging it.
+        let mut runs: Vec<Vec<(f64, f64)>> = vec![Vec::new()];
+        for &p in &c.points {
+            if drawable(fig, p) {
+                if let Some(r) = runs.last_mut() {
+                    r.push((p.0, floored(fig, p.1)));
+                }
+            } else if runs.last().is_some_and(|r| !r.is_empty()) {
+                runs.push(Vec::new());
+            }
+        }
+        for run in runs.into_iter().filter(|r| !r.is_empty()) {
+            let series = chart.draw_series(LineSeries::new(run, col.stroke_width(1)))?;
+            if first {
+                series.label(c.label.as_str()).legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 24, y)], col.stroke_width(2))
+                });
+                first = false;
+            }
+        }
     }
     chart
         .configure_series_labels()

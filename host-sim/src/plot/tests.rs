@@ -86,7 +86,7 @@ fn opts(dir: &Path, format: Format, kind: Kind) -> PlotOptions {
 fn time_figure(f: Figure) -> TimeFigure {
     match f {
         Figure::Time(t) => t,
-        Figure::Adev(_) => panic!("expected a time figure"),
+        _ => panic!("expected a time figure"),
     }
 }
 
