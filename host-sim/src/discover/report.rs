@@ -433,3 +433,25 @@ pub fn write_report(d: &Discovery, dir: &Path, format: Format) -> anyhow::Result
     std::fs::write(dir.join("report.md"), md)?;
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn display_scale_uses_si_prefixes_for_g_and_volts_and_powers_of_ten_otherwise() {
+        assert_eq!(display_scale("g", 5e-6), (1e6, "µg".to_owned()));
+        assert_eq!(display_scale("v", 2e-3), (1e3, "mv".to_owned()));
+        assert_eq!(display_scale("nm/s²", 3e-6), (1e6, "1e-6 nm/s²".to_owned()));
+        assert_eq!(display_scale("g", 2.0), (1.0, "g".to_owned()));
+        assert_eq!(display_scale("g", 0.5), (1e3, "mg".to_owned()));
+        assert_eq!(display_scale("g", 0.0), (1.0, "g".to_owned()));
+    }
+
+    #[test]
+    fn period_labels_switch_from_seconds_to_hours_to_days() {
+        assert_eq!(period_label(600.0), "600 s");
+        assert_eq!(period_label(12.42 * 3600.0), "12.42 h");
+        assert_eq!(period_label(14.0 * 86_400.0), "14.0 d");
+    }
+}
