@@ -13,6 +13,25 @@
 pub mod ad7124;
 pub mod ads1262;
 
+/// Chip-boundary test doubles shared by both drivers' tests.
+#[cfg(test)]
+pub(crate) mod test_support {
+    use embedded_hal::spi::{ErrorKind, ErrorType, Operation, SpiDevice};
+
+    /// An SPI device whose every transaction fails (embedded-hal-mock cannot inject bus errors).
+    pub(crate) struct BrokenBus;
+
+    impl ErrorType for BrokenBus {
+        type Error = ErrorKind;
+    }
+
+    impl SpiDevice for BrokenBus {
+        fn transaction(&mut self, _: &mut [Operation<'_, u8>]) -> Result<(), ErrorKind> {
+            Err(ErrorKind::Other)
+        }
+    }
+}
+
 /// Everything a driver call can fail with.
 ///
 /// `SpiE` is the bus error of the [`embedded_hal::spi::SpiDevice`], `PinE` the error of the

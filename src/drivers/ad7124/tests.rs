@@ -2,7 +2,8 @@
 //! re-declared here from the AD7124-4 datasheet (Rev. B), not imported from the driver.
 
 use super::*;
-use embedded_hal::spi::{ErrorKind, ErrorType, Operation};
+use crate::drivers::test_support::BrokenBus;
+use embedded_hal::spi::ErrorKind;
 use embedded_hal_mock::eh1::delay::NoopDelay;
 use embedded_hal_mock::eh1::digital::{Mock as PinMock, State, Transaction as PinT};
 use embedded_hal_mock::eh1::spi::{Mock as SpiMock, Transaction as SpiT};
@@ -388,16 +389,6 @@ fn drdy_pin_failure_is_a_pin_error() {
     let mut d = driver(&[], &pin, Ad7124Config::board_default());
     assert_eq!(d.read_rtd(), Err(Error::Pin(err)));
     finish(d);
-}
-
-struct BrokenBus;
-impl ErrorType for BrokenBus {
-    type Error = ErrorKind;
-}
-impl SpiDevice for BrokenBus {
-    fn transaction(&mut self, _: &mut [Operation<'_, u8>]) -> Result<(), ErrorKind> {
-        Err(ErrorKind::Other)
-    }
 }
 
 #[test]

@@ -3,7 +3,8 @@
 //! with itself; checksums and CRCs are hand-computed or computed by the tiny bitwise CRC below.
 
 use super::*;
-use embedded_hal::spi::{ErrorKind, ErrorType, Operation};
+use crate::drivers::test_support::BrokenBus;
+use embedded_hal::spi::ErrorKind;
 use embedded_hal_mock::eh1::delay::NoopDelay;
 use embedded_hal_mock::eh1::digital::{Mock as PinMock, State, Transaction as PinT};
 use embedded_hal_mock::eh1::spi::{Mock as SpiMock, Transaction as SpiT};
@@ -477,16 +478,6 @@ fn start_and_stop_send_their_opcodes() {
 }
 
 /// An SPI device whose every transfer fails, as a broken bus would.
-struct BrokenBus;
-impl ErrorType for BrokenBus {
-    type Error = ErrorKind;
-}
-impl SpiDevice for BrokenBus {
-    fn transaction(&mut self, _: &mut [Operation<'_, u8>]) -> Result<(), ErrorKind> {
-        Err(ErrorKind::Other)
-    }
-}
-
 #[test]
 fn bus_failure_is_reported_as_spi_error() {
     let mut d = Ads1262::new(
