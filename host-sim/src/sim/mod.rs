@@ -6,6 +6,7 @@
 //! - `rtd.rs`: Callendar–Van Dusen sensor with a fixed unknown offset, excitation, noise;
 //! - `tilt.rs`: foundation (building thermal tilt, creep) and the tiltmeter;
 //! - `tide.rs`: solid-earth tide gravity and tilt at the site (core `tide` model);
+//! - `barometer.rs`: station pressure (height, atmospheric tide, weather) and the barometer;
 //! - `adc.rs`: ADS1262 and AD7124 codes as the board sees them;
 //! - `noise.rs`: seeded processes (AR(1), random walk, flicker, Allan noise);
 //! - `scenario.rs`: the TOML scenario and presets; `time.rs`: UTC; `writer.rs`: the log.
@@ -14,6 +15,7 @@
 
 pub mod accelerometer;
 pub mod adc;
+pub mod barometer;
 pub mod cli;
 pub mod noise;
 pub mod rtd;
@@ -29,6 +31,7 @@ use std::io::Write;
 use accomp::units::{Volts, RAD_PER_ARCSEC};
 
 use accelerometer::{axes, AccelError, Accelerometer, DividingHead};
+use barometer::Barometer;
 use noise::{stream, AllanNoise, SimRng};
 use rtd::Rtd;
 use scenario::Scenario;
@@ -51,6 +54,7 @@ mod streams {
     pub const FOUNDATION: u64 = 6;
     pub const TILTMETER: u64 = 7;
     pub const ADC: u64 = 8;
+    pub const BAROMETER: u64 = 9;
 }
 
 /// Why a simulation fails.
@@ -96,6 +100,8 @@ pub struct Sample {
     pub temperature_c: f64,
     /// Tilt measured by the tiltmeter (NaN when saturated).
     pub tilt_arcsec: f64,
+    /// Station pressure measured by the barometer, hPa.
+    pub pressure_hpa: f64,
     /// ADS1262 accelerometer code, signed.
     pub accel_code: i32,
     /// AD7124 RTD code.
@@ -128,6 +134,8 @@ pub struct Sample {
     pub truth_output_v: f64,
     /// Head angle including indexing error, degrees.
     pub truth_head_angle_deg: f64,
+    /// True station pressure, hPa.
+    pub truth_pressure_hpa: f64,
 }
 
 /// The whole station.
@@ -145,6 +153,7 @@ pub struct Simulator {
     rtd: Rtd,
     foundation: Foundation,
     tide: TideSampler,
+    barometer: Barometer,
     rng_room: SimRng,
     rng_thermostat: SimRng,
     rng_accel: SimRng,
@@ -153,6 +162,7 @@ pub struct Simulator {
     rng_foundation: SimRng,
     rng_tiltmeter: SimRng,
     rng_adc: SimRng,
+    rng_barometer: SimRng,
 }
 
 impl Simulator {
@@ -167,6 +177,7 @@ impl Simulator {
         let mut rng_thermostat = stream(seed, streams::THERMOSTAT);
         let mut rng_accel = stream(seed, streams::ACCEL_NOISE);
         let mut rng_rtd = stream(seed, streams::RTD);
+        let mut rng_barometer = stream(seed, streams::BAROMETER);
         let models = s.accelerometer.calibration.load(s.thermostat.setpoint_c)?;
         let noise = AllanNoise::new(
             &s.accelerometer.noise_g,
@@ -193,6 +204,7 @@ impl Simulator {
             rtd: Rtd::new(&s.rtd, &mut rng_rtd),
             foundation: Foundation::new(&s.foundation, dt),
             tide: TideSampler::new(tide_model, start, s.tide.step_s),
+            barometer: Barometer::new(&s.barometer, s.site.height_m, dt, &mut rng_barometer),
             rng_room,
             rng_thermostat,
             rng_accel,
@@ -201,6 +213,7 @@ impl Simulator {
             rng_foundation: stream(seed, streams::FOUNDATION),
             rng_tiltmeter: stream(seed, streams::TILTMETER),
             rng_adc: stream(seed, streams::ADC),
+            rng_barometer,
             scenario: scenario.clone(),
         })
     }
@@ -309,11 +322,14 @@ impl Simulator {
         )
         .map_err(adc_err)?;
 
+        let pressure = self.barometer.step(solar_h, &mut self.rng_barometer);
+
         Ok(Sample {
             time_s: t,
             output_v: accel.volts.map_or(f64::NAN, |v| v.0),
             temperature_c,
             tilt_arcsec: tilt_conv.volts.map_or(f64::NAN, |v| v.0 * k),
+            pressure_hpa: pressure.measured_hpa,
             accel_code: accel.code as i32,
             rtd_code: rtd.code,
             tilt_code: tilt_conv.code as i32,
@@ -330,6 +346,7 @@ impl Simulator {
             truth_noise_g: e.noise_g,
             truth_output_v: e.output.0,
             truth_head_angle_deg: head.to_degrees(),
+            truth_pressure_hpa: pressure.truth_hpa,
         })
     }
 }
@@ -350,6 +367,7 @@ pub fn columns(opts: &Options) -> Vec<Column> {
         c("output_v", 10),
         c("temperature_c", 6),
         c("tilt_arcsec", 6),
+        c("pressure_hpa", 3),
     ];
     if opts.codes {
         for name in ["accel_code", "rtd_code", "tilt_code"] {
@@ -373,13 +391,20 @@ pub fn columns(opts: &Options) -> Vec<Column> {
         c("truth_noise_g", 12),
         c("truth_output_v", 12),
         c("truth_head_angle_deg", 8),
+        c("truth_pressure_hpa", 4),
     ]);
     v
 }
 
 fn row(s: &Sample, opts: &Options, out: &mut Vec<f64>) {
     out.clear();
-    out.extend([s.time_s, s.output_v, s.temperature_c, s.tilt_arcsec]);
+    out.extend([
+        s.time_s,
+        s.output_v,
+        s.temperature_c,
+        s.tilt_arcsec,
+        s.pressure_hpa,
+    ]);
     if opts.codes {
         out.extend([
             f64::from(s.accel_code),
@@ -401,6 +426,7 @@ fn row(s: &Sample, opts: &Options, out: &mut Vec<f64>) {
         s.truth_noise_g,
         s.truth_output_v,
         s.truth_head_angle_deg,
+        s.truth_pressure_hpa,
     ]);
 }
 
@@ -603,6 +629,34 @@ mod tests {
             std(&comp),
             std(&raw)
         );
+    }
+
+    #[test]
+    fn the_barometer_draws_from_its_own_stream_and_changes_no_other_channel() {
+        let a = short_0g();
+        let mut b = short_0g();
+        b.barometer.weather_std_hpa = 0.0;
+        b.barometer.noise_hpa = 0.5;
+        let (mut sa, mut sb) = (
+            Simulator::new(&a, 8).unwrap(),
+            Simulator::new(&b, 8).unwrap(),
+        );
+        let mut pressure_differs = false;
+        for _ in 0..sa.samples() {
+            let (x, y) = (sa.step().unwrap(), sb.step().unwrap());
+            assert_eq!(
+                (x.output_v, x.temperature_c, x.tilt_arcsec),
+                (y.output_v, y.temperature_c, y.tilt_arcsec)
+            );
+            pressure_differs |= x.pressure_hpa != y.pressure_hpa;
+        }
+        assert!(pressure_differs);
+        // 60 m above sea level in the standard atmosphere: 1006.07 hPa, ± the weather and tide.
+        let log = Log::read(&run(&a, 8, false)[..]).unwrap();
+        let p = log.column("pressure_hpa").unwrap();
+        let mean = p.iter().sum::<f64>() / p.len() as f64;
+        assert!((mean - 1006.07).abs() < 20.0, "{mean}");
+        assert!(log.column("truth_pressure_hpa").is_some());
     }
 
     #[test]

@@ -10,6 +10,7 @@ use super::accelerometer::{
     AccelerometerParams, CalibrationSource, HeadPosition, OrientationParams, SpindleAxis,
 };
 use super::adc::{Ad7124Params, AdcParams, Ads1262Params};
+use super::barometer::BarometerParams;
 use super::noise::AllanParams;
 use super::rtd::RtdParams;
 use super::thermostat::{RoomParams, ThermostatParams};
@@ -56,6 +57,8 @@ pub struct Scenario {
     pub tiltmeter: TiltmeterParams,
     /// The converters.
     pub adc: AdcParams,
+    /// Station pressure and the barometer.
+    pub barometer: BarometerParams,
 }
 
 /// Why a scenario is refused.
@@ -136,6 +139,11 @@ impl Scenario {
             self.adc.ads1262.noise_uv_rms,
             self.foundation.creep_arcsec_per_sqrt_day,
             self.room.door_rate_per_day,
+            self.barometer.s2_amplitude_hpa,
+            self.barometer.s1_amplitude_hpa,
+            self.barometer.weather_std_hpa,
+            self.barometer.noise_hpa,
+            self.barometer.resolution_hpa,
         ];
         if stds.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
             return bad("noise levels, rates and resolutions must be finite and ≥ 0");
@@ -149,6 +157,7 @@ impl Scenario {
             self.foundation.building_lag_h,
             self.adc.board_lowpass_min,
             self.tide.step_s,
+            self.barometer.weather_tau_h,
         ];
         if taus.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
             return bad("time constants must be finite and ≥ 0");
@@ -157,6 +166,17 @@ impl Scenario {
             && self.tiltmeter.scale_arcsec_per_v != 0.0)
         {
             return bad("tiltmeter.scale_arcsec_per_v must be non-zero");
+        }
+        let b = &self.barometer;
+        if !(b.sea_level_hpa.is_finite() && b.sea_level_hpa > 0.0) {
+            return bad("barometer.sea_level_hpa must be > 0");
+        }
+        // The barometric formula of the troposphere holds below 11 km.
+        if !(self.site.height_m.is_finite() && self.site.height_m < 11_000.0) {
+            return bad("site.height_m must be below 11 km (barometric formula)");
+        }
+        if !(b.s2_peak_solar_h.is_finite() && b.s1_peak_solar_h.is_finite()) {
+            return bad("barometer peak hours must be finite");
         }
         Ok(())
     }
@@ -222,6 +242,24 @@ fn tiltmeter() -> TiltmeterParams {
         noise_arcsec: 0.02,
         resolution_arcsec: 0.1,
         scale_arcsec_per_v: 10.0,
+    }
+}
+
+/// Beijing's barometric environment: standard sea-level mean; S2 = 1.16·cos³(40°) ≈ 0.5 hPa
+/// peaking at 10 and 22 LST; S1 0.3 hPa peaking at 7 LST (continental mid latitude); weather
+/// 4 hPa with a 2-day correlation time (a season of passing systems); a PTB330-class barometer
+/// (0.01 hPa noise and resolution). Sources in `barometer.rs`.
+fn barometer() -> BarometerParams {
+    BarometerParams {
+        sea_level_hpa: 1013.25,
+        s2_amplitude_hpa: 0.5,
+        s2_peak_solar_h: 10.0,
+        s1_amplitude_hpa: 0.3,
+        s1_peak_solar_h: 7.0,
+        weather_std_hpa: 4.0,
+        weather_tau_h: 48.0,
+        noise_hpa: 0.01,
+        resolution_hpa: 0.01,
     }
 }
 
@@ -293,6 +331,7 @@ fn paper_1g() -> Scenario {
         },
         tiltmeter: tiltmeter(),
         adc: board(),
+        barometer: barometer(),
     }
 }
 
@@ -354,6 +393,7 @@ fn paper_0g() -> Scenario {
         },
         tiltmeter: tiltmeter(),
         adc: board(),
+        barometer: barometer(),
     }
 }
 
