@@ -262,7 +262,9 @@ pub fn grid(e: &Effect, ds: &Dataset) -> Vec<f64> {
     let dt = ds.dt_s;
     match e {
         Effect::ThermalLag => log_grid(2.0 * dt, span / 5.0, 24),
-        Effect::ThermalHysteresis => log_grid(5.0 * dt, span / 20.0, 8),
+        // 24 windows: the look-elsewhere charge 2 ln 24 stays below the BIC's ln n for any
+        // record this long, so a finer grid costs nothing and misses the branch length less.
+        Effect::ThermalHysteresis => log_grid(5.0 * dt, span / 20.0, 24),
         Effect::Warmup => log_grid(3.0 * dt, span / 3.0, 24),
         Effect::AgingDrift => log_grid(span / 1000.0, span * 3.0, 24),
         Effect::AmbientCoupling(_) => {

@@ -46,8 +46,8 @@ pub fn json(d: &Discovery) -> Value {
                 "residual_std_after": a.std_after,
                 "residual_std_out_of_sample_before": a.cv_before.raw,
                 "residual_std_out_of_sample_after": a.cv_after.raw,
-                "one_step_std_out_of_sample_before": a.cv_before.whitened,
-                "one_step_std_out_of_sample_after": a.cv_after.whitened,
+                "prediction_z_out_of_sample_before": a.cv_before.prediction_z,
+                "prediction_z_out_of_sample_after": a.cv_after.prediction_z,
                 "gain_out_of_sample": a.gain_out_of_sample(),
                 "delta_bic": a.delta_bic,
             });
@@ -68,7 +68,7 @@ pub fn json(d: &Discovery) -> Value {
             "description": d.baseline_description,
             "residual_std": s.baseline_std,
             "residual_std_out_of_sample": s.baseline_cv.raw,
-            "one_step_std_out_of_sample": s.baseline_cv.whitened,
+            "prediction_z_out_of_sample": s.baseline_cv.prediction_z,
             "residual_std_g": g(s.baseline_std),
         },
         "not_candidates": d.not_candidates.iter().map(|(n, w)| json!({"name": n, "why": w})).collect::<Vec<_>>(),
@@ -76,7 +76,7 @@ pub fn json(d: &Discovery) -> Value {
         "final": {
             "residual_std": s.final_std,
             "residual_std_out_of_sample": s.final_cv.raw,
-            "one_step_std_out_of_sample": s.final_cv.whitened,
+            "prediction_z_out_of_sample": s.final_cv.prediction_z,
             "residual_std_g": g(s.final_std),
         },
         "analysis": {

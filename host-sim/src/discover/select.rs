@@ -13,14 +13,15 @@
 //!    `folds × blocks_per_fold` contiguous blocks, block b belongs to fold b mod `folds`; each
 //!    fold is predicted from a fit to the others (nonlinear parameters held at their full-record
 //!    values; documented optimism); both the raw held-out residual and the noise model's
-//!    one-step-ahead prediction error inside held-out blocks must fall.
+//!    prediction error of the held-out rows from the training rows before them (normalised by
+//!    its predicted standard deviation) must fall.
 //!
 //! Otherwise the next candidate by ΔBIC is tried; the loop ends when none passes both.
 
 use super::baseline::{ar1, gls, raw_residual, std, Basis, Rows};
 use super::effects::{self, columns, Context, Effect, Param};
 use super::import::Dataset;
-use super::noise::{NoiseModel, Whitener};
+use super::noise::{held_out_chi2, NoiseModel};
 use super::residual;
 
 /// Selection settings.
@@ -42,7 +43,7 @@ impl Default for Config {
     fn default() -> Self {
         Self {
             folds: 5,
-            blocks_per_fold: 4,
+            blocks_per_fold: 20,
             bic_margin: 0.0,
             min_gain: 0.0,
             max_effects: 8,
@@ -55,8 +56,10 @@ impl Default for Config {
 pub struct CvScore {
     /// RMS of the raw held-out residual, output unit.
     pub raw: f64,
-    /// RMS of the whitened (one-step-ahead) held-out residual, output unit.
-    pub whitened: f64,
+    /// RMS of the held-out residual's prediction errors from the training rows before them,
+    /// each normalised by its predicted standard deviation (noise model; dimensionless, 1 for
+    /// a residual that is exactly the modelled noise).
+    pub prediction_z: f64,
 }
 
 /// Blocked cross-validation of a model (columns fixed).
@@ -68,10 +71,9 @@ pub fn cross_validate(
     cfg: &Config,
 ) -> CvScore {
     let n = y.len();
-    let full = Whitener::new(noise, &ds.t_s, (0..n).collect());
     let nb = (cfg.folds * cfg.blocks_per_fold).max(2);
     let fold_of = |i: usize| (i * nb / n) % cfg.folds;
-    let (mut s_raw, mut n_raw, mut s_w, mut n_w) = (0.0, 0usize, 0.0, 0usize);
+    let (mut s_raw, mut n_raw, mut s_z, mut n_z) = (0.0, 0usize, 0.0, 0usize);
     for f in 0..cfg.folds {
         let train: Vec<bool> = (0..n).map(|i| fold_of(i) != f).collect();
         let rows = Rows::with_noise(noise, &ds.t_s, Some(&train));
@@ -80,23 +82,17 @@ pub fn cross_validate(
         }
         let fit = gls(cols, y, 0.0, &rows);
         let r = raw_residual(cols, &fit.beta, y);
-        // One-step-ahead prediction errors of the noise model on the residual.
-        let e = full.filter(&r, false);
-        for i in 0..n {
-            if train[i] {
-                continue;
-            }
-            s_raw += r[i] * r[i];
+        for (ri, _) in r.iter().zip(&train).filter(|(_, t)| !**t) {
+            s_raw += ri * ri;
             n_raw += 1;
-            if i > 0 && !train[i - 1] && !ds.segment_start[i] {
-                s_w += e[i] * e[i];
-                n_w += 1;
-            }
         }
+        let (chi2, m) = held_out_chi2(noise, &ds.t_s, &train, &r);
+        s_z += chi2;
+        n_z += m;
     }
     CvScore {
         raw: (s_raw / n_raw.max(1) as f64).sqrt(),
-        whitened: (s_w / n_w.max(1) as f64).sqrt(),
+        prediction_z: (s_z / n_z.max(1) as f64).sqrt(),
     }
 }
 
@@ -568,7 +564,9 @@ pub fn select(
             let mut trial = cols.clone();
             trial.extend(s.cols.iter().cloned());
             let after = cross_validate(ds, &trial, target, &cur.noise, cfg);
-            if after.whitened < before.whitened * (1.0 - cfg.min_gain) && after.raw < before.raw {
+            if after.prediction_z < before.prediction_z * (1.0 - cfg.min_gain)
+                && after.raw < before.raw
+            {
                 took = Some((s.clone(), before, after));
                 break;
             }

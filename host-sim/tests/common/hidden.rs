@@ -1,0 +1,207 @@
+//! Shared by the hidden-effect tests (`discover_hidden*.rs`): how large a hidden effect is,
+//! measured the way detection theory measures it.
+//!
+//! "A magnitude near the noise level" is the **matched-filter signal-to-noise ratio**: the
+//! detection statistic an ideal detector would have if it knew the shape of the effect and the
+//! true noise, after the nuisance columns of the baseline (offset, drift, temperature
+//! polynomial…) have absorbed what they can:
+//!
+//!   SNR² = ‖P⊥ W s‖², W the whitening by the true noise covariance, P⊥ the projection
+//!   orthogonal to the whitened nuisance columns.
+//!
+//! This puts every effect on the same footing. The earlier definition (amplitude over the Allan
+//! deviation at the effect's own time scale) made a start-of-record transient of "SNR 3" carry
+//! an ideal χ² of ≈ 10 while a periodic line of "SNR 3" carried hundreds, so per-effect rates
+//! measured the definition rather than the tool.
+//!
+//! The noise is the simulator's sensor noise as documented in `sim/noise.rs` (written here
+//! again from that description, not called): white of Allan deviation w at 1 s, flicker as a
+//! sum of stationary AR(1) components with correlation times Δ·r^k up to 10 × the run
+//! (r = √10), each of variance f²·ln r/(2 ln 2), and a random walk K per √s starting at zero.
+//! That is a linear state-space model, so W is the Kalman filter's normalised innovations.
+
+// Each test crate uses a different subset of this module.
+#![allow(dead_code)]
+
+use accomp_host::sim::noise::AllanParams;
+
+/// The noise of the simulated sensor as a state-space model sampled every `interval_s`.
+struct NoiseStateSpace {
+    /// AR(1) coefficients of the flicker components, then 1.0 for the random walk.
+    phi: Vec<f64>,
+    /// Process noise variance per step, same order.
+    q: Vec<f64>,
+    /// Initial state variance, same order (stationary for AR(1), zero for the walk).
+    p0: Vec<f64>,
+    /// White measurement noise variance.
+    r: f64,
+}
+
+impl NoiseStateSpace {
+    fn new(p: &AllanParams, interval_s: f64, duration_s: f64) -> Self {
+        let ratio = 10f64.sqrt();
+        let (mut phi, mut q, mut p0) = (Vec::new(), Vec::new(), Vec::new());
+        if p.flicker_floor > 0.0 {
+            let v = p.flicker_floor.powi(2) * ratio.ln() / (2.0 * std::f64::consts::LN_2);
+            let tau_max = 10.0 * duration_s.max(interval_s);
+            let mut tau = interval_s;
+            while tau <= tau_max * ratio {
+                let f = (-interval_s / tau).exp();
+                phi.push(f);
+                q.push(v * (1.0 - f * f));
+                p0.push(v);
+                tau *= ratio;
+            }
+        }
+        phi.push(1.0);
+        q.push(p.random_walk_per_sqrt_s.powi(2) * interval_s);
+        p0.push(0.0);
+        NoiseStateSpace {
+            phi,
+            q,
+            p0,
+            r: p.white_adev_1s.powi(2) / interval_s,
+        }
+    }
+
+    /// Normalised innovations of every column (all columns share the gains).
+    fn whiten(&self, columns: &[&[f64]]) -> Vec<Vec<f64>> {
+        let k = self.phi.len();
+        let n = columns.first().map_or(0, |c| c.len());
+        let mut p = vec![0.0; k * k];
+        for i in 0..k {
+            p[i * k + i] = self.p0[i];
+        }
+        let mut states = vec![vec![0.0; k]; columns.len()];
+        let mut out = vec![Vec::with_capacity(n); columns.len()];
+        let mut ph = vec![0.0; k];
+        for t in 0..n {
+            // Predict: x ← Φx, P ← ΦPΦ + Q (Φ diagonal).
+            for i in 0..k {
+                for j in 0..k {
+                    p[i * k + j] *= self.phi[i] * self.phi[j];
+                }
+                p[i * k + i] += self.q[i];
+            }
+            // Observation y = Σ states + white: S = 1ᵀP1 + r, gain P1/S.
+            for i in 0..k {
+                ph[i] = (0..k).map(|j| p[i * k + j]).sum();
+            }
+            let s = ph.iter().sum::<f64>() + self.r;
+            let sqrt_s = s.sqrt();
+            for ((c, x), o) in columns.iter().zip(states.iter_mut()).zip(out.iter_mut()) {
+                for (xi, f) in x.iter_mut().zip(&self.phi) {
+                    *xi *= f;
+                }
+                let e = c[t] - x.iter().sum::<f64>();
+                o.push(e / sqrt_s);
+                for (xi, h) in x.iter_mut().zip(&ph) {
+                    *xi += h / s * e;
+                }
+            }
+            // P ← P − (P1)(P1)ᵀ/S.
+            for i in 0..k {
+                for j in 0..k {
+                    p[i * k + j] -= ph[i] * ph[j] / s;
+                }
+            }
+        }
+        out
+    }
+}
+
+/// Matched-filter SNR of the effect `shape` (in the noise's unit, one value per sample of a run
+/// sampled every `interval_s` for `duration_s`) against the sensor noise `noise`, after
+/// projecting out the `nuisance` columns (each one value per sample).
+pub fn matched_filter_snr(
+    shape: &[f64],
+    nuisance: &[Vec<f64>],
+    noise: &AllanParams,
+    interval_s: f64,
+    duration_s: f64,
+) -> f64 {
+    let model = NoiseStateSpace::new(noise, interval_s, duration_s);
+    let mut cols: Vec<&[f64]> = nuisance.iter().map(Vec::as_slice).collect();
+    cols.push(shape);
+    let mut w = model.whiten(&cols);
+    // Gram–Schmidt (twice, for orthogonality at these condition numbers) of the whitened
+    // nuisance columns, then the shape's part orthogonal to them.
+    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+    let mut basis: Vec<Vec<f64>> = Vec::new();
+    for col in w.drain(..) {
+        let mut v = col;
+        for _ in 0..2 {
+            for b in &basis {
+                let c = dot(&v, b);
+                for (vi, bi) in v.iter_mut().zip(b) {
+                    *vi -= c * bi;
+                }
+            }
+        }
+        let norm = dot(&v, &v).sqrt();
+        if basis.len() == nuisance.len() {
+            return norm;
+        }
+        if norm > 1e-9 * (v.len() as f64).sqrt() {
+            basis.push(v.iter().map(|x| x / norm).collect());
+        } else {
+            // A nuisance column dependent on the others adds nothing; keep the count aligned.
+            basis.push(vec![0.0; v.len()]);
+        }
+    }
+    0.0
+}
+
+/// Offset, linear drift and a cubic in the centred temperature: the nuisance columns of a
+/// static baseline (what it can absorb of any effect).
+pub fn static_nuisance(t_s: &[f64], temperature_c: &[f64]) -> Vec<Vec<f64>> {
+    let n = t_s.len().max(1) as f64;
+    let t_mean = t_s.iter().sum::<f64>() / n;
+    let c_mean = temperature_c.iter().sum::<f64>() / n;
+    let dc: Vec<f64> = temperature_c.iter().map(|c| c - c_mean).collect();
+    vec![
+        vec![1.0; t_s.len()],
+        t_s.iter().map(|t| t - t_mean).collect(),
+        dc.clone(),
+        dc.iter().map(|d| d * d).collect(),
+        dc.iter().map(|d| d * d * d).collect(),
+    ]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn noise(w: f64, f: f64, k: f64) -> AllanParams {
+        AllanParams {
+            white_adev_1s: w,
+            flicker_floor: f,
+            random_walk_per_sqrt_s: k,
+        }
+    }
+
+    #[test]
+    fn in_white_noise_the_snr_of_a_constant_is_its_size_over_the_standard_error_of_a_mean() {
+        // n samples of std σ: a constant of size a has SNR a·√n/σ.
+        let (n, dt) = (400usize, 4.0_f64);
+        let sigma = 2.0e-6 / dt.sqrt();
+        let s = vec![1.0e-6; n];
+        let snr = matched_filter_snr(&s, &[], &noise(2.0e-6, 0.0, 0.0), dt, n as f64 * dt);
+        let expect = 1.0e-6 * (n as f64).sqrt() / sigma;
+        assert!((snr / expect - 1.0).abs() < 1e-9, "{snr} vs {expect}");
+        // …and nothing is left of it once an offset column may absorb it.
+        let snr0 = matched_filter_snr(&s, &[vec![1.0; n]], &noise(2.0e-6, 0.0, 0.0), dt, 1600.0);
+        assert!(snr0 < 1e-6 * expect, "{snr0}");
+    }
+
+    #[test]
+    fn in_a_random_walk_a_step_is_seen_only_through_its_one_increment() {
+        // Pure random walk (no white): whitening is differencing, so a step of size a has
+        // SNR a/(K√Δ) whatever its position.
+        let (n, dt, k) = (200usize, 10.0_f64, 1.0e-8);
+        let s: Vec<f64> = (0..n).map(|i| if i >= 80 { 5.0e-8 } else { 0.0 }).collect();
+        let snr = matched_filter_snr(&s, &[], &noise(1e-15, 0.0, k), dt, n as f64 * dt);
+        let expect = 5.0e-8 / (k * dt.sqrt());
+        assert!((snr / expect - 1.0).abs() < 1e-6, "{snr} vs {expect}");
+    }
+}
