@@ -128,7 +128,7 @@ fn effective_noise(sc: &Scenario) -> AllanParams {
     let n = &sc.accelerometer.noise_g;
     AllanParams {
         white_adev_1s: (n.white_adev_1s.powi(2) + tilt_rms_rad.powi(2) * INTERVAL_S).sqrt(),
-        ..n.clone()
+        ..*n
     }
 }
 
