@@ -98,10 +98,11 @@ fn draw(rng: &mut ChaCha8Rng) -> (Hidden, f64) {
     (h, snr)
 }
 
-/// Building thermal tilt of the test station, arcsec/°C: 20 × the preset's 0.21 (about 6" of
-/// daily tilt instead of 0.45"). With the preset's tilt a 100 % tiltmeter gain error has a
-/// matched-filter SNR of only 2.6, so no realistic `tilt_coupling` could be near the noise;
-/// at 20 × an SNR of 5–10 is a gain error of 10–25 %. Same station for every draw and the nulls.
+/// Building thermal tilt of the test station, arcsec/°C: 20 × the preset's 0.21 (about 9" of
+/// peak-to-peak daily tilt instead of 0.45"). With the preset's tilt a 100 % tiltmeter gain
+/// error has a matched-filter SNR of only 2.6, so no realistic `tilt_coupling` could be near the
+/// noise; at 20 × an SNR of 5–10 is a gain error of 10–25 %. Same station for every draw and the
+/// nulls.
 const BUILDING_ARCSEC_PER_C: f64 = 4.2;
 
 /// The preset as the baseline station: catalogue effects built into the preset switched off
