@@ -188,8 +188,8 @@ fn run_one(hidden: Option<Hidden>, seed: u64) -> (Vec<String>, Option<(f64, f64)
 const SEED: u64 = 20_240_715;
 /// Draws per test: each discovery of a 17 280-point record takes a few seconds in the dev
 /// profile, and the file must run in < 60 s.
-const HIDDEN_DRAWS: usize = 5;
-const NULL_DRAWS: usize = 5;
+const HIDDEN_DRAWS: usize = 8;
+const NULL_DRAWS: usize = 8;
 
 #[test]
 fn coil_heating_follows_a_first_order_lag_of_the_squared_input() {
