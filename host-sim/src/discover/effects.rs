@@ -13,7 +13,8 @@ pub enum Effect {
     ThermalLag,
     /// Different bias on heating and cooling branches: column sign(dT/dt) (smoothed).
     ThermalHysteresis,
-    /// Bias ∝ input² (power dissipated by the torquer current): column input².
+    /// Bias following the torquer power ∝ input² through the coil's thermal time constant: column
+    /// L_τ[a²] − a² (the instantaneous part is the baseline's K2·a², per-position levels).
     SelfHeating,
     /// Exponential transient after power-on: column exp(−t/τ).
     Warmup,
@@ -231,9 +232,9 @@ pub fn candidates(
         say("thermal_lag", "no varying temperature channel");
         say("thermal_hysteresis", "no varying temperature channel");
     }
-    match ds.channel(ChannelKind::Input) {
-        Some(c) if super::baseline::std(&c.values) > 1e-3 => yes.push(Effect::SelfHeating),
-        _ => say("self_heating", "no changing input_g channel"),
+    match ds.changing_input() {
+        Some(_) => yes.push(Effect::SelfHeating),
+        None => say("self_heating", "no changing input_g channel"),
     }
     yes.push(Effect::Warmup);
     yes.push(Effect::AgingDrift);
@@ -301,6 +302,9 @@ pub fn grid(e: &Effect, ds: &Dataset) -> Vec<f64> {
     let dt = ds.dt_s;
     match e {
         Effect::ThermalLag => log_grid(2.0 * dt, span / 5.0, 24),
+        // The coil's time constant: from two samples to a fifth of the record (a longer lag is
+        // a slow trend, not a response to the programme).
+        Effect::SelfHeating => log_grid(2.0 * dt, span / 5.0, 24),
         // 24 windows: the look-elsewhere charge 2 ln 24 stays below the BIC's ln n for any
         // record this long, so a finer grid costs nothing and misses the branch length less.
         Effect::ThermalHysteresis => log_grid(5.0 * dt, span / 20.0, 24),
@@ -335,9 +339,17 @@ pub fn columns(e: &Effect, ds: &Dataset, ctx: &Context, theta: f64) -> Vec<Vec<f
         Effect::ThermalHysteresis => temp()
             .map(|tc| vec![rate_sign(&tc, t, seg, theta)])
             .unwrap_or_default(),
+        // Torquer power ∝ I² ∝ a²: the coil temperature and with it the bias follow a² through a
+        // first-order lag; the step part a² is collinear with K2·a² (the baseline's levels), so
+        // only the lag error carries the effect. Restarted per segment at the current input (the
+        // coil is taken as settled at the start of a segment).
         Effect::SelfHeating => ds
-            .channel(ChannelKind::Input)
-            .map(|c| vec![centred(c.values.iter().map(|a| a * a).collect())])
+            .changing_input()
+            .map(|a| {
+                let a2: Vec<f64> = a.iter().map(|x| x * x).collect();
+                let l = lag_filter(&a2, t, seg, theta);
+                vec![l.iter().zip(&a2).map(|(l, u)| l - u).collect()]
+            })
             .unwrap_or_default(),
         Effect::Warmup => vec![t.iter().map(|x| (-(x - t0) / theta).exp()).collect()],
         Effect::AgingDrift => vec![t.iter().map(|x| (1.0 + (x - t0) / theta).ln()).collect()],
@@ -349,8 +361,13 @@ pub fn columns(e: &Effect, ds: &Dataset, ctx: &Context, theta: f64) -> Vec<Vec<f
             .tide_gravity_g
             .as_ref()
             .map(|g| {
+                // The tide acts along the vertical: projected on the input axis, sign(input) on
+                // a static 1 g test, the row's input on a head programme.
                 let s = u * ds.input_g.unwrap_or(1.0).signum();
-                vec![g.iter().map(|v| v * s).collect()]
+                vec![match ds.changing_input() {
+                    Some(a) => g.iter().zip(a).map(|(v, a)| v * a * u).collect(),
+                    None => g.iter().map(|v| v * s).collect(),
+                }]
             })
             .unwrap_or_default(),
         Effect::TidalTilt => ctx
@@ -433,7 +450,7 @@ pub fn parameters(
             ("half_width".into(), p(b0, s0)),
             ("rate_window_s".into(), theta),
         ],
-        Effect::SelfHeating => vec![("coefficient".into(), p(b0, s0))],
+        Effect::SelfHeating => vec![("tau_s".into(), theta), ("coefficient".into(), p(b0, s0))],
         Effect::Warmup => vec![("tau_s".into(), theta), ("amplitude".into(), p(b0, s0))],
         Effect::AgingDrift => vec![("tau_s".into(), theta), ("amplitude".into(), p(b0, s0))],
         Effect::Step => vec![("time_s".into(), theta), ("size".into(), p(b0, s0))],
@@ -515,6 +532,44 @@ mod tests {
             .collect();
         let a = moving_average(&alt, &t, &seg, 900.0);
         assert!((a[500].abs() - 1.0 / 31.0).abs() < 1e-12, "{}", a[500]);
+    }
+
+    #[test]
+    fn self_heating_column_is_the_lag_error_of_the_squared_input_after_a_head_move() {
+        use crate::discover::import::Channel;
+        let n = 200;
+        let t: Vec<f64> = (0..n).map(|i| 10.0 * f64::from(i)).collect();
+        // +1 g for 100 rows, then 0 g: a² drops from 1 to 0 at t = 1000 s.
+        let a: Vec<f64> = (0..n).map(|i| if i < 100 { 1.0 } else { 0.0 }).collect();
+        let mut seg = vec![false; n as usize];
+        seg[0] = true;
+        let ds = Dataset {
+            t_s: t,
+            y: vec![0.0; n as usize],
+            segment_start: seg,
+            channels: vec![Channel {
+                name: "input_g".into(),
+                kind: ChannelKind::Input,
+                values: a,
+            }],
+            output_name: "output_g".into(),
+            output_unit: "g".into(),
+            unit_per_g: Some(1.0),
+            input_g: Some(1.0),
+            start_unix_s: None,
+            site: None,
+            dt_s: 10.0,
+            notes: Vec::new(),
+        };
+        let c = columns(&Effect::SelfHeating, &ds, &Context::default(), 300.0);
+        // Settled before the move; after it the coil cools as e^{−(t − 990)/τ}: the filter holds
+        // each sample's input over the interval before it, so the move is dated to the last
+        // sample at the old position (at most one interval early).
+        assert_eq!(c[0][99], 0.0);
+        let want = (-(1300.0 - 990.0) / 300.0_f64).exp();
+        assert!((c[0][130] - want).abs() < 1e-12, "{}", c[0][130]);
+        let (yes, _) = candidates(&ds, &Context::default(), false);
+        assert!(yes.contains(&Effect::SelfHeating));
     }
 
     #[test]

@@ -385,6 +385,9 @@ fn classify(name: &str) -> Option<(ChannelKind, f64)> {
     }
 }
 
+/// An `input_g` channel with a larger standard deviation than this (g) is a changing input.
+pub const CHANGING_INPUT_STD_G: f64 = 1.0e-3;
+
 /// Options of the reduction to a dataset.
 #[derive(Debug, Clone, PartialEq)]
 pub struct DatasetOptions {
@@ -485,14 +488,24 @@ pub fn dataset_from_log(log: &Log, opts: &DatasetOptions) -> Result<Dataset, Imp
     let mut counts = Vec::new();
     let t0 = t[keep[0]];
     let mut cur: Option<i64> = None;
+    // A changing input (a dividing-head programme) also closes a bin: a block mean across a
+    // head move would be an input value the head never held, and the baseline's one level per
+    // input value would need a level for every mixed bin.
+    let input_col = chans
+        .iter()
+        .find(|c| c.1 == ChannelKind::Input)
+        .map(|c| c.3);
+    let mut cur_input = f64::NAN;
     for &i in &keep {
         let b = if bin > 0.0 {
             ((t[i] - t0) / bin).floor() as i64
         } else {
             i as i64
         };
-        if cur != Some(b) {
+        let moved = input_col.is_some_and(|c| c[i] != cur_input);
+        if cur != Some(b) || moved {
             cur = Some(b);
+            cur_input = input_col.map_or(f64::NAN, |c| c[i]);
             ts.push(0.0);
             ys.push(0.0);
             for c in cs.iter_mut() {
@@ -590,6 +603,21 @@ impl Dataset {
     pub fn is_one_g(&self) -> bool {
         self.input_g.is_some_and(|g| g.abs() > 0.5)
     }
+    /// The per-row input (g) when the record has an `input_g` channel that changes (a
+    /// dividing-head programme; more than 1 mg standard deviation), else `None` (a static test:
+    /// the scalar [`Dataset::input_g`] describes it).
+    pub fn changing_input(&self) -> Option<&[f64]> {
+        self.channel(ChannelKind::Input)
+            .filter(|c| super::baseline::std(&c.values) > CHANGING_INPUT_STD_G)
+            .map(|c| c.values.as_slice())
+    }
+    /// The nominal input at row `i`, g: the input channel when it changes, else the scalar.
+    pub fn input_at(&self, i: usize) -> Option<f64> {
+        match self.changing_input() {
+            Some(v) => v.get(i).copied(),
+            None => self.input_g,
+        }
+    }
 }
 
 #[cfg(test)]
@@ -606,6 +634,28 @@ mod tests {
         assert_eq!(log.meta("start_utc"), Some("2021-06-08T00:00:00.000Z"));
         assert_eq!(log.time_s(), &[0.0, 120.0]);
         assert_eq!(bad.iter().map(|b| b.line).collect::<Vec<_>>(), vec![2, 4]);
+    }
+
+    #[test]
+    fn an_input_g_column_is_the_input_channel_and_bins_never_straddle_a_head_move() {
+        // 100 rows at 1 s, the head at +1 g for 35 s, then 0 g.
+        let mut log = Log::with_time((0..100).map(f64::from).collect()).unwrap();
+        log.set_meta("input_g", "1").unwrap();
+        log.push_column("output_v", vec![0.5; 100]).unwrap();
+        let a: Vec<f64> = (0..100).map(|i| if i < 35 { 1.0 } else { 0.0 }).collect();
+        log.push_column("input_g", a).unwrap();
+        let opts = DatasetOptions {
+            max_points: 10,
+            ..DatasetOptions::default()
+        };
+        let ds = dataset_from_log(&log, &opts).unwrap();
+        let input = ds.changing_input().unwrap();
+        assert!(input.iter().all(|&v| v == 1.0 || v == 0.0), "{input:?}");
+        // Bins of 99 s / 10 = 9.9 s: 11 by time (the last holds t = 99 s), and the one over
+        // 29.7–39.6 s split at the move.
+        assert_eq!(ds.len(), 12);
+        assert_eq!(ds.input_at(3), Some(1.0));
+        assert_eq!(ds.input_at(4), Some(0.0));
     }
 
     #[test]
