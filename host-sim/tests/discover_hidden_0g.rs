@@ -365,7 +365,7 @@ const SEED: u64 = 20_240_610;
 #[test]
 fn hidden_0g_tilt_effects_are_named_with_their_parameters() {
     let mut rng = ChaCha8Rng::seed_from_u64(SEED);
-    const HIDDEN_DRAWS: usize = 30;
+    const HIDDEN_DRAWS: usize = 25;
     let (mut named, mut params) = (0, 0);
     // Per effect: (draws, named).
     let mut per_effect: std::collections::BTreeMap<&str, (usize, usize)> = Default::default();
@@ -400,7 +400,7 @@ fn hidden_0g_tilt_effects_are_named_with_their_parameters() {
 #[test]
 fn null_0g_logs_with_a_barometer_accept_nothing() {
     let mut rng = ChaCha8Rng::seed_from_u64(SEED ^ 0x5EED);
-    const NULL_DRAWS: usize = 20;
+    const NULL_DRAWS: usize = 15;
     let mut false_discoveries = 0;
     for i in 0..NULL_DRAWS {
         let seed = rng.random::<u64>();
