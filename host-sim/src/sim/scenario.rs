@@ -426,6 +426,24 @@ mod tests {
     }
 
     #[test]
+    fn a_scenario_without_the_barometer_table_is_refused() {
+        let text = Scenario::preset("paper-0g").unwrap().to_toml();
+        let start = text.find("[barometer]").unwrap();
+        let end = text[start + 1..]
+            .find("\n[")
+            .map_or(text.len(), |i| start + 1 + i + 1);
+        let without = format!("{}{}", &text[..start], &text[end..]);
+        assert!(!without.contains("s2_amplitude_hpa"));
+        assert!(matches!(
+            Scenario::from_toml(&without),
+            Err(ScenarioError::Toml(_))
+        ));
+        let mut s = Scenario::preset("paper-0g").unwrap();
+        s.barometer.sea_level_hpa = 0.0;
+        assert!(matches!(s.validate(), Err(ScenarioError::Invalid(m)) if m.contains("sea_level")));
+    }
+
+    #[test]
     fn impossible_values_are_refused_by_name() {
         let mut s = Scenario::preset("paper-0g").unwrap();
         s.run.interval_s = 0.0;
