@@ -485,27 +485,3 @@ fn series_rejects_a_non_positive_interval() {
         Err(TideError::NotFinite)
     ));
 }
-
-/// Release-mode timing: `cargo test --release --lib tide::tests::bench -- --ignored --nocapture`.
-#[test]
-#[ignore]
-fn bench_ns_per_evaluation() {
-    let st = hannover();
-    let start = 1_700_000_000.0;
-    let n = 3_500_000usize;
-    let t0 = std::time::Instant::now();
-    let mut acc = 0.0;
-    for (_, s) in st.series(start, 1.0).unwrap().take(n) {
-        acc += s.gravity_nm_s2 + s.tilt_north_mas;
-    }
-    let series_ns = t0.elapsed().as_nanos() as f64 / n as f64;
-    let m = 200_000usize;
-    let t1 = std::time::Instant::now();
-    for i in 0..m {
-        acc += st.tide_at_unix_seconds(start + i as f64).gravity_nm_s2;
-    }
-    let direct_ns = t1.elapsed().as_nanos() as f64 / m as f64;
-    println!(
-        "series (1 s step): {series_ns:.1} ns/sample; direct: {direct_ns:.1} ns/eval ({acc:.1})"
-    );
-}
