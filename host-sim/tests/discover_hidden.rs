@@ -168,12 +168,7 @@ fn simulate(unit: &Hidden, snr: f64, seed: u64) -> (Log, Hidden) {
     let mut sc = Scenario::preset("paper-1g").expect("preset");
     sc.run.duration_s = DURATION_S;
     sc.run.interval_s = INTERVAL_S;
-    // Effects of the catalogue that the preset has built in are switched off in the baseline
-    // station, so that "no hidden effect" means none: tide, proof-mass lag, ADC reference tempco
-    // (an ambient coupling through the board temperature).
-    sc.tide.enabled = false;
-    sc.thermostat.proof_mass_lag_s = 1.0e-3;
-    sc.adc.ads1262.vref_tempco_ppm_per_c = 0.0;
+    hidden::quiet_station(&mut sc);
     if let Hidden::ThermalLag { tau_s } = unit {
         sc.thermostat.proof_mass_lag_s = *tau_s;
     }
@@ -219,15 +214,17 @@ fn simulate(unit: &Hidden, snr: f64, seed: u64) -> (Log, Hidden) {
     for (o, e) in out.iter_mut().zip(&unit_g) {
         *o += k1 * k * e;
     }
-    let mut log = Log::with_time(t).expect("time");
-    for (k, v) in &meta {
-        log.set_meta(k, v).expect("meta");
-    }
-    log.push_column("output_v", out).expect("col");
-    log.push_column("temperature_c", temp).expect("col");
-    log.push_column("tilt_arcsec", tilt).expect("col");
-    log.push_column("ambient_c", room).expect("col");
-    log.push_column("pressure_hpa", pressure).expect("col");
+    let log = hidden::log_with(
+        t,
+        &meta,
+        vec![
+            ("output_v", out),
+            ("temperature_c", temp),
+            ("tilt_arcsec", tilt),
+            ("ambient_c", room),
+            ("pressure_hpa", pressure),
+        ],
+    );
     (log, hidden)
 }
 
@@ -316,14 +313,6 @@ fn hidden_series_g(
     }
 }
 
-fn param(a: &select::Accepted, key: &str) -> (f64, f64) {
-    a.params
-        .iter()
-        .find(|(k, _)| k == key)
-        .map(|(_, p)| (p.value, p.sigma))
-        .unwrap_or((f64::NAN, f64::NAN))
-}
-
 /// |est − truth| within max(rel·|truth|, abs).
 fn close(est: f64, truth: f64, rel: f64, abs: f64) -> bool {
     (est - truth).abs() <= (rel * truth.abs()).max(abs)
@@ -331,7 +320,7 @@ fn close(est: f64, truth: f64, rel: f64, abs: f64) -> bool {
 
 /// Parameter checks per effect (tolerances stated here and in docs/discovery.md).
 fn parameters_ok(h: &Hidden, a: &select::Accepted, k1: f64) -> Result<(), String> {
-    let g = |key: &str| param(a, key).0;
+    let g = |key: &str| hidden::param_value(a, key);
     let ok = match h {
         Hidden::ThermalLag { tau_s } => close(g("tau_s").ln(), tau_s.ln(), 0.0, 0.7),
         Hidden::ThermalHysteresis { half_width_g, .. } => {
@@ -505,16 +494,10 @@ fn hidden_effects_are_named_with_their_parameters() {
 
 #[test]
 fn null_logs_with_flicker_and_random_walk_accept_nothing() {
-    let mut rng = ChaCha8Rng::seed_from_u64(SEED ^ 0x5EED);
     const NULL_DRAWS: usize = 10;
-    let mut false_discoveries = 0;
-    for i in 0..NULL_DRAWS {
-        let seed = rng.random::<u64>();
-        let o = run_one(&Hidden::None, 0.0, seed);
-        eprintln!("null draw {i}: accepted {:?}", o.accepted);
-        false_discoveries += usize::from(!o.accepted.is_empty());
-    }
-    eprintln!("FALSE-DISCOVERY RATE {false_discoveries}/{NULL_DRAWS}");
+    let false_discoveries = hidden::false_discoveries("1 g", SEED ^ 0x5EED, NULL_DRAWS, |seed| {
+        run_one(&Hidden::None, 0.0, seed).accepted
+    });
     // Threshold stated in docs/discovery.md before the rate was measured: at most 10 %.
     assert!(
         false_discoveries * 10 <= NULL_DRAWS,

@@ -113,9 +113,7 @@ fn scenario() -> Scenario {
     sc.run.duration_s = DURATION_S;
     sc.run.interval_s = INTERVAL_S;
     sc.foundation.building_arcsec_per_c = BUILDING_ARCSEC_PER_C;
-    sc.tide.enabled = false;
-    sc.thermostat.proof_mass_lag_s = 1.0e-3;
-    sc.adc.ads1262.vref_tempco_ppm_per_c = 0.0;
+    hidden::quiet_station(&mut sc);
     sc
 }
 
@@ -258,22 +256,21 @@ fn simulate(unit: &Hidden, snr: f64, seed: u64) -> (Log, Hidden) {
             }
         }
     }
-    let mut log = Log::with_time(t).expect("time");
-    for (key, v) in &meta {
-        log.set_meta(key, v).expect("meta");
-    }
-    log.push_column("output_v", out).expect("col");
-    log.push_column("temperature_c", temp).expect("col");
-    log.push_column("tilt_arcsec", tilt).expect("col");
-    log.push_column("pressure_hpa", pressure).expect("col");
+    let log = hidden::log_with(
+        t,
+        &meta,
+        vec![
+            ("output_v", out),
+            ("temperature_c", temp),
+            ("tilt_arcsec", tilt),
+            ("pressure_hpa", pressure),
+        ],
+    );
     (log, hidden)
 }
 
 fn param(a: &select::Accepted, key: &str) -> f64 {
-    a.params
-        .iter()
-        .find(|(k, _)| k == key)
-        .map_or(f64::NAN, |(_, p)| p.value)
+    hidden::param_value(a, key)
 }
 
 /// Angle difference wrapped to ±180°.
@@ -399,16 +396,10 @@ fn hidden_0g_tilt_effects_are_named_with_their_parameters() {
 
 #[test]
 fn null_0g_logs_with_a_barometer_accept_nothing() {
-    let mut rng = ChaCha8Rng::seed_from_u64(SEED ^ 0x5EED);
     const NULL_DRAWS: usize = 15;
-    let mut false_discoveries = 0;
-    for i in 0..NULL_DRAWS {
-        let seed = rng.random::<u64>();
-        let o = run_one(&Hidden::None, 0.0, seed);
-        eprintln!("0 g null draw {i}: accepted {:?}", o.accepted);
-        false_discoveries += usize::from(!o.accepted.is_empty());
-    }
-    eprintln!("0 g FALSE-DISCOVERY RATE {false_discoveries}/{NULL_DRAWS}");
+    let false_discoveries = hidden::false_discoveries("0 g", SEED ^ 0x5EED, NULL_DRAWS, |seed| {
+        run_one(&Hidden::None, 0.0, seed).accepted
+    });
     assert!(
         false_discoveries * 10 <= NULL_DRAWS,
         "false discoveries on {false_discoveries}/{NULL_DRAWS} null logs"

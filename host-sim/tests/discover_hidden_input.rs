@@ -89,11 +89,7 @@ fn simulate(unit: Option<Hidden>, snr: f64, seed: u64) -> (Log, Option<Hidden>) 
     let mut sc = Scenario::preset("paper-1g").expect("preset");
     sc.run.duration_s = DURATION_S;
     sc.run.interval_s = INTERVAL_S;
-    // The same baseline station as discover_hidden.rs: no tide, no proof-mass lag, no ADC
-    // reference tempco, so "no hidden effect" means none.
-    sc.tide.enabled = false;
-    sc.thermostat.proof_mass_lag_s = 1.0e-3;
-    sc.adc.ads1262.vref_tempco_ppm_per_c = 0.0;
+    hidden_snr::quiet_station(&mut sc);
     sc.accelerometer.orientation.positions = PROGRAMME_DEG
         .iter()
         .map(|&angle_deg| HeadPosition {
@@ -160,22 +156,17 @@ fn simulate(unit: Option<Hidden>, snr: f64, seed: u64) -> (Log, Option<Hidden>) 
             ..h
         }
     });
-    let mut log = Log::with_time(t).expect("time");
-    for (k, v) in &meta {
-        log.set_meta(k, v).expect("meta");
-    }
-    log.push_column("output_v", out).expect("col");
-    log.push_column("temperature_c", temp).expect("col");
-    log.push_column("tilt_arcsec", tilt).expect("col");
-    log.push_column("input_g", nominal_a).expect("col");
+    let log = hidden_snr::log_with(
+        t,
+        &meta,
+        vec![
+            ("output_v", out),
+            ("temperature_c", temp),
+            ("tilt_arcsec", tilt),
+            ("input_g", nominal_a),
+        ],
+    );
     (log, hidden)
-}
-
-fn param(a: &select::Accepted, key: &str) -> f64 {
-    a.params
-        .iter()
-        .find(|(k, _)| k == key)
-        .map_or(f64::NAN, |(_, p)| p.value)
 }
 
 /// Tolerances: the coefficient within ±30 %; τ within a factor e^0.7, the same as for
@@ -206,7 +197,12 @@ fn run_one(
         .accepted
         .iter()
         .find(|a| a.effect.name() == "self_heating")
-        .map(|a| (param(a, "tau_s"), param(a, "coefficient_g")));
+        .map(|a| {
+            (
+                hidden_snr::param_value(a, "tau_s"),
+                hidden_snr::param_value(a, "coefficient_g"),
+            )
+        });
     if found.is_none() {
         eprintln!("    last round (ΔBIC): {:?}", d.selection.last_round);
     }
@@ -270,15 +266,10 @@ fn self_heating_is_named_with_its_time_constant_and_coefficient() {
 
 #[test]
 fn null_logs_with_a_head_programme_accept_nothing() {
-    let mut rng = ChaCha8Rng::seed_from_u64(SEED ^ 0x5EED);
-    let mut false_discoveries = 0;
-    for i in 0..NULL_DRAWS {
-        let seed = rng.random::<u64>();
-        let (names, _, _) = run_one(None, 0.0, seed);
-        eprintln!("null draw {i}: accepted {names:?}");
-        false_discoveries += usize::from(!names.is_empty());
-    }
-    eprintln!("HEAD-PROGRAMME FALSE DISCOVERIES {false_discoveries}/{NULL_DRAWS}");
+    let false_discoveries =
+        hidden_snr::false_discoveries("head-programme", SEED ^ 0x5EED, NULL_DRAWS, |seed| {
+            run_one(None, 0.0, seed).0
+        });
     // Threshold stated before measuring: nothing accepted in ≥ 90 % of the null logs.
     assert!(
         false_discoveries * 10 <= NULL_DRAWS,

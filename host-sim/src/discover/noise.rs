@@ -165,6 +165,26 @@ fn solve_small(a: &[[f64; 3]; 3], b: &[f64; 3], k: usize) -> Option<[f64; 3]> {
     Some(x)
 }
 
+/// Kalman prediction over `dt_s` for the model's states (flicker OU components, then the
+/// random walk): fills the diagonal transition `a` and process noise `q`, and advances the
+/// covariance `p` (k×k, row-major) to P ← A P A + Q.
+fn predict_covariance(model: &NoiseModel, dt_s: f64, a: &mut [f64], q: &mut [f64], p: &mut [f64]) {
+    let nf = model.flicker.len();
+    let k = nf + 1;
+    for (j, &(tc, v)) in model.flicker.iter().enumerate() {
+        a[j] = (-dt_s / tc).exp();
+        q[j] = v * (1.0 - a[j] * a[j]);
+    }
+    a[nf] = 1.0;
+    q[nf] = model.rw_per_s * dt_s;
+    for r in 0..k {
+        for c in 0..k {
+            p[r * k + c] *= a[r] * a[c];
+        }
+        p[r * k + r] += q[r];
+    }
+}
+
 /// The Kalman whitening of a noise model on a set of observed rows.
 #[derive(Debug, Clone)]
 pub struct Whitener {
@@ -201,19 +221,7 @@ impl Whitener {
         for &i in &idx {
             let dt = prev_t.map_or(0.0, |pt| (t_s[i] - pt).max(0.0));
             prev_t = Some(t_s[i]);
-            for (j, &(tc, v)) in model.flicker.iter().enumerate() {
-                a[j] = (-dt / tc).exp();
-                q[j] = v * (1.0 - a[j] * a[j]);
-            }
-            a[nf] = 1.0;
-            q[nf] = model.rw_per_s * dt;
-            // P ← A P A + Q (A diagonal).
-            for r in 0..k {
-                for c in 0..k {
-                    p[r * k + c] *= a[r] * a[c];
-                }
-                p[r * k + r] += q[r];
-            }
+            predict_covariance(model, dt, &mut a, &mut q, &mut p);
             // H = [1 … 1]: PHᵀ = row sums, S = total + R.
             for r in 0..k {
                 ph[r] = p[r * k..(r + 1) * k].iter().sum();
@@ -301,18 +309,7 @@ pub fn held_out_chi2(
     for ((&t, &obs), &xi) in t_s.iter().zip(observed).zip(x) {
         let dt = prev_t.map_or(0.0, |pt| (t - pt).max(0.0));
         prev_t = Some(t);
-        for (j, &(tc, v)) in model.flicker.iter().enumerate() {
-            a[j] = (-dt / tc).exp();
-            q[j] = v * (1.0 - a[j] * a[j]);
-        }
-        a[nf] = 1.0;
-        q[nf] = model.rw_per_s * dt;
-        for r in 0..k {
-            for c in 0..k {
-                p[r * k + c] *= a[r] * a[c];
-            }
-            p[r * k + r] += q[r];
-        }
+        predict_covariance(model, dt, &mut a, &mut q, &mut p);
         let mut pred = 0.0;
         for (s, f) in state.iter_mut().zip(&a) {
             *s *= f;

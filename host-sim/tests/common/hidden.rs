@@ -23,7 +23,59 @@
 // Each test crate uses a different subset of this module.
 #![allow(dead_code)]
 
+use accomp_host::discover::select::Accepted;
+use accomp_host::log::Log;
 use accomp_host::sim::noise::AllanParams;
+use accomp_host::sim::scenario::Scenario;
+
+/// Switches off the catalogue effects a preset has built in — the tide, the proof-mass thermal
+/// lag, the ADC reference tempco (an ambient coupling through the board temperature) — so that
+/// "no hidden effect" in a simulated log means none.
+pub fn quiet_station(sc: &mut Scenario) {
+    sc.tide.enabled = false;
+    sc.thermostat.proof_mass_lag_s = 1.0e-3;
+    sc.adc.ads1262.vref_tempco_ppm_per_c = 0.0;
+}
+
+/// The value of an accepted effect's parameter (NaN when it has no such key).
+pub fn param_value(a: &Accepted, key: &str) -> f64 {
+    a.params
+        .iter()
+        .find(|(k, _)| k == key)
+        .map_or(f64::NAN, |(_, p)| p.value)
+}
+
+/// A log with the simulator's metadata and the given columns, as the board would record it.
+pub fn log_with(t_s: Vec<f64>, meta: &[(String, String)], columns: Vec<(&str, Vec<f64>)>) -> Log {
+    let mut log = Log::with_time(t_s).expect("time");
+    for (k, v) in meta {
+        log.set_meta(k, v).expect("meta");
+    }
+    for (name, values) in columns {
+        log.push_column(name, values).expect("column");
+    }
+    log
+}
+
+/// Runs `accepted_on(seed)` on `draws` null logs (seeds from `seed`) and returns how many
+/// accepted anything, printing each.
+pub fn false_discoveries(
+    label: &str,
+    seed: u64,
+    draws: usize,
+    mut accepted_on: impl FnMut(u64) -> Vec<String>,
+) -> usize {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let mut count = 0;
+    for i in 0..draws {
+        let accepted = accepted_on(rng.random::<u64>());
+        eprintln!("{label} null draw {i}: accepted {accepted:?}");
+        count += usize::from(!accepted.is_empty());
+    }
+    eprintln!("{label} FALSE-DISCOVERY RATE {count}/{draws}");
+    count
+}
 
 /// The noise of the simulated sensor as a state-space model sampled every `interval_s`.
 struct NoiseStateSpace {
