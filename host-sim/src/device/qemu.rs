@@ -76,6 +76,14 @@ pub struct Qemu {
     elf: PathBuf,
 }
 
+/// Connections tried before giving up on READY (see `Qemu::launch`).
+const CONNECT_ATTEMPTS: u32 = 3;
+
+/// Whether a local TCP connection ended up connected to itself (same address on both ends).
+fn is_self_connection(s: &TcpStream) -> bool {
+    matches!((s.local_addr(), s.peer_addr()), (Ok(a), Ok(b)) if a == b)
+}
+
 fn free_port() -> std::io::Result<u16> {
     // The OS picks a free port; QEMU binds it right after we release it.
     Ok(TcpListener::bind("127.0.0.1:0")?.local_addr()?.port())
@@ -127,26 +135,59 @@ impl Qemu {
             elf: elf.to_path_buf(),
         };
         let deadline = Instant::now() + opts.ready_timeout;
-        let stream = loop {
-            match TcpStream::connect(("127.0.0.1", port)) {
-                Ok(s) => break s,
-                Err(e) => {
-                    if qemu.exited().is_some() || Instant::now() >= deadline {
-                        return Err(qemu.failure(format!("cannot connect to QEMU's UART: {e}")));
+        // A connection can fail after it is made: connecting in a loop to a local port nobody
+        // listens on yet can, on Linux, connect the socket to itself (source port = the
+        // destination, both in the ephemeral range), and under load a first connection has been
+        // reset before READY (CI, 2026-11-21) while QEMU stayed up and kept waiting. QEMU's
+        // server socket takes a new client after a disconnect, so such a connection is dropped
+        // and the next one tried, as long as QEMU runs and time is left.
+        let mut attempt = 0u32;
+        let client = loop {
+            attempt += 1;
+            let stream = loop {
+                match TcpStream::connect(("127.0.0.1", port)) {
+                    Ok(s) if is_self_connection(&s) => {
+                        drop(s);
+                        std::thread::sleep(Duration::from_millis(20));
                     }
-                    std::thread::sleep(Duration::from_millis(20));
+                    Ok(s) => break s,
+                    Err(e) => {
+                        if qemu.exited().is_some() || Instant::now() >= deadline {
+                            return Err(qemu.failure(format!("cannot connect to QEMU's UART: {e}")));
+                        }
+                        std::thread::sleep(Duration::from_millis(20));
+                    }
+                }
+            };
+            let transport = match TcpTransport::new(stream) {
+                Ok(t) => t,
+                Err(e) => return Err(qemu.failure(format!("socket set-up: {e}"))),
+            };
+            let mut client = Client::new(Box::new(transport));
+            let left = deadline.saturating_duration_since(Instant::now());
+            // On a later connection the guest may have booted already and sent READY down the
+            // dropped one: then a ping answered proves the link instead.
+            let ready = if attempt == 1 {
+                client.wait_ready(left)
+            } else {
+                client
+                    .wait_ready(left.min(Duration::from_secs(3)))
+                    .or_else(|_| client.ping())
+            };
+            match ready {
+                Ok(()) => break client,
+                Err(e) => {
+                    let give_up = attempt >= CONNECT_ATTEMPTS
+                        || qemu.exited().is_some()
+                        || Instant::now() >= deadline;
+                    if give_up {
+                        return Err(qemu.failure(format!(
+                            "no READY from the firmware (connection {attempt}): {e}"
+                        )));
+                    }
                 }
             }
         };
-        let transport = match TcpTransport::new(stream) {
-            Ok(t) => t,
-            Err(e) => return Err(qemu.failure(format!("socket set-up: {e}"))),
-        };
-        let mut client = Client::new(Box::new(transport));
-        let left = deadline.saturating_duration_since(Instant::now());
-        if let Err(e) = client.wait_ready(left) {
-            return Err(qemu.failure(format!("no READY from the firmware: {e}")));
-        }
         Ok((qemu, client))
     }
 
