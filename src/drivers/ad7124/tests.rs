@@ -136,7 +136,7 @@ fn driver(spi: &[SpiT<u8>], pin: &[PinT], config: Ad7124Config) -> Driver {
 fn initialised(then: &[SpiT<u8>], pin: &[PinT]) -> Driver {
     let spi = [board_init(), then.to_vec()].concat();
     let mut d = driver(&spi, pin, Ad7124Config::board_default());
-    d.init().unwrap();
+    assert!(d.init().is_ok(), "board-default init failed");
     d
 }
 
@@ -409,10 +409,8 @@ fn bus_failure_is_reported_as_spi_error() {
 fn scale_reads_the_board_code_for_100_ohm_back_as_100_ohm() {
     let scale = Ad7124Config::board_default().scale(crate::units::Volts(1.2775));
     // 2^24 · 100 Ω · 16 / 5110 Ω = 5 253 140.04 → code 5 253 140; 1 LSB = 19.0 µΩ.
-    let r = scale
-        .ratiometric_ohms(Ad7124Code(5_253_140).raw(), crate::units::Ohms(5110.0))
-        .unwrap();
-    assert!((r.0 - 100.0).abs() < 2e-5, "{}", r.0);
+    let r = scale.ratiometric_ohms(Ad7124Code(5_253_140).raw(), crate::units::Ohms(5110.0));
+    assert!(r.is_ok_and(|r| (r.0 - 100.0).abs() < 2e-5), "{r:?}");
     let bipolar = Ad7124Config {
         bipolar: true,
         ..Ad7124Config::board_default()

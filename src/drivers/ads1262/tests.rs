@@ -130,13 +130,12 @@ fn reference_crc_matches_the_catalogue_check_value() {
 #[test]
 fn init_resets_identifies_writes_verifies_and_starts() {
     let mut d = driver(&board_init(), &[], Ads1262Config::board_default());
-    let info = d.init().unwrap();
     assert_eq!(
-        info,
-        DeviceInfo {
+        d.init(),
+        Ok(DeviceInfo {
             part: Part::Ads1262,
             revision: 3
-        }
+        })
     );
     finish(d);
 }
@@ -264,9 +263,10 @@ fn conversion_with_good_checksum_is_decoded() {
     // 0x12+0x34+0x56+0x78 = 0x114; + 0x9B = 0x1AF → checksum 0xAF.
     let spi = rdata1(&[0x40, 0x12, 0x34, 0x56, 0x78, 0xAF]);
     let mut d = driver(&spi, &[], Ads1262Config::board_default());
-    let s = d.read_conversion().unwrap();
-    assert_eq!(s.code, Ads1262Code(0x1234_5678));
-    assert_eq!(s.status, Some(Status(0x40)));
+    assert_eq!(
+        d.read_conversion().map(|s| (s.code, s.status)),
+        Ok((Ads1262Code(0x1234_5678), Some(Status(0x40))))
+    );
     finish(d);
 }
 
@@ -275,7 +275,7 @@ fn negative_conversion_is_sign_extended() {
     // 0xFF+0xFF+0xFF+0xFE = 0x3FB; + 0x9B = 0x496 → 0x96.
     let spi = rdata1(&[0x40, 0xFF, 0xFF, 0xFF, 0xFE, 0x96]);
     let mut d = driver(&spi, &[], Ads1262Config::board_default());
-    assert_eq!(d.read_conversion().unwrap().code, Ads1262Code(-2));
+    assert_eq!(d.read_conversion().map(|s| s.code), Ok(Ads1262Code(-2)));
     finish(d);
 }
 
@@ -305,7 +305,10 @@ fn crc_mode_accepts_a_good_crc_and_rejects_a_bad_one() {
     let bad = [&[0x40][..], &data, &[crc ^ 0x01]].concat();
     let spi = [rdata1(&good), rdata1(&bad)].concat();
     let mut d = driver(&spi, &[], cfg);
-    assert_eq!(d.read_conversion().unwrap().code, Ads1262Code(0x0080_0001));
+    assert_eq!(
+        d.read_conversion().map(|s| s.code),
+        Ok(Ads1262Code(0x0080_0001))
+    );
     assert_eq!(
         d.read_conversion(),
         Err(Error::CrcMismatch {
@@ -325,8 +328,10 @@ fn frame_without_status_and_check_byte_is_four_bytes() {
     };
     let spi = rdata1(&[0x7F, 0x00, 0x00, 0x00]);
     let mut d = driver(&spi, &[], cfg);
-    let s = d.read_conversion().unwrap();
-    assert_eq!((s.code, s.status), (Ads1262Code(0x7F00_0000), None));
+    assert_eq!(
+        d.read_conversion().map(|s| (s.code, s.status)),
+        Ok((Ads1262Code(0x7F00_0000), None))
+    );
     finish(d);
 }
 
@@ -335,7 +340,10 @@ fn status_alarms_are_reported_with_the_code() {
     // ADC1 new data + REF_ALM + PGAD_ALM; checksum of 00 00 01 00 = 0x01 + 0x9B = 0x9C.
     let spi = rdata1(&[0x40 | 0x10 | 0x02, 0x00, 0x00, 0x01, 0x00, 0x9C]);
     let mut d = driver(&spi, &[], Ads1262Config::board_default());
-    let st = d.read_conversion().unwrap().status.unwrap();
+    let status = d.read_conversion().map(|s| s.status);
+    let Ok(Some(st)) = status else {
+        panic!("no status byte decoded: {status:?}");
+    };
     assert!(st.reference_alarm() && st.pga_differential_alarm() && st.any_alarm());
     assert!(!st.pga_low_alarm() && !st.pga_high_alarm());
     finish(d);
@@ -376,14 +384,16 @@ fn read_channel_switches_the_mux_restarts_and_waits_for_drdy() {
         PinT::get(State::Low),
     ];
     let mut d = driver(&spi, &pin, Ads1262Config::board_default());
-    d.init().unwrap();
-    let a = d.read_channel(Channel::Tiltmeter).unwrap();
+    assert!(d.init().is_ok());
     assert_eq!(
-        (a.channel, a.sample.code),
-        (Channel::Tiltmeter, Ads1262Code(0x10))
+        d.read_channel(Channel::Tiltmeter)
+            .map(|a| (a.channel, a.sample.code)),
+        Ok((Channel::Tiltmeter, Ads1262Code(0x10)))
     );
-    let b = d.read_channel(Channel::Tiltmeter).unwrap();
-    assert_eq!(b.sample.code, Ads1262Code(0x11));
+    assert_eq!(
+        d.read_channel(Channel::Tiltmeter).map(|b| b.sample.code),
+        Ok(Ads1262Code(0x11))
+    );
     finish(d);
 }
 
@@ -406,9 +416,9 @@ fn read_channel_rewrites_the_gain_when_channels_differ() {
     .concat();
     let pin = [PinT::get(State::Low), PinT::get(State::Low)];
     let mut d = driver(&spi, &pin, cfg);
-    d.init().unwrap();
-    d.read_channel(Channel::Tiltmeter).unwrap();
-    d.read_channel(Channel::Accelerometer).unwrap();
+    assert!(d.init().is_ok());
+    assert!(d.read_channel(Channel::Tiltmeter).is_ok());
+    assert!(d.read_channel(Channel::Accelerometer).is_ok());
     finish(d);
 }
 
@@ -430,7 +440,7 @@ fn failed_mux_switch_is_retried_on_the_next_read() {
         &[PinT::get(State::Low)],
         Ads1262Config::board_default(),
     );
-    d.init().unwrap();
+    assert!(d.init().is_ok());
     assert_eq!(
         d.read_channel(Channel::Tiltmeter),
         Err(Error::ReadBack {
@@ -472,8 +482,8 @@ fn drdy_pin_failure_is_a_pin_error() {
 fn start_and_stop_send_their_opcodes() {
     let spi = [command(START1), command(STOP1)].concat();
     let mut d = driver(&spi, &[], Ads1262Config::board_default());
-    d.start().unwrap();
-    d.stop().unwrap();
+    assert_eq!(d.start(), Ok(()));
+    assert_eq!(d.stop(), Ok(()));
     finish(d);
 }
 
@@ -500,6 +510,6 @@ fn scale_uses_the_channel_gain_and_reads_one_g_as_1_33_volts() {
     let tilt = cfg.scale(Channel::Tiltmeter, crate::units::Volts(2.5));
     assert_eq!((acc.bits, acc.pga_gain, tilt.pga_gain), (32, 1.0, 8.0));
     // 1.33 V at gain 1, Vref 2.5 V: code = 1.33 / 2.5 · 2^31 = 1 142 461 300.7 → 1 142 461 301.
-    let v = acc.volts(Ads1262Code(1_142_461_301).raw()).unwrap().0;
-    assert!((v - 1.33).abs() < 2e-9, "{v}");
+    let v = acc.volts(Ads1262Code(1_142_461_301).raw());
+    assert!(v.is_ok_and(|v| (v.0 - 1.33).abs() < 2e-9), "{v:?}");
 }
