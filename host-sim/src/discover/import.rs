@@ -7,6 +7,7 @@
 //! (filters, differences and whitening restart there).
 
 use crate::log::{Log, LogError};
+use crate::sim::time::{civil_from_days, days_from_civil};
 use accomp::tide::{UtcTime, STANDARD_GRAVITY_M_S2};
 use std::path::Path;
 
@@ -90,13 +91,7 @@ pub fn civil_unix_seconds(
     second: f64,
 ) -> Option<f64> {
     UtcTime::new(year, month, day, hour, minute, second).ok()?;
-    let y = i64::from(year) - i64::from(month <= 2);
-    let era = y.div_euclid(400);
-    let yoe = y - era * 400;
-    let mp = (i64::from(month) + 9) % 12;
-    let doy = (153 * mp + 2) / 5 + i64::from(day) - 1;
-    let doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
-    let days = era * 146_097 + doe - 719_468;
+    let days = days_from_civil(i64::from(year), i64::from(month), i64::from(day));
     Some((days * 86_400 + i64::from(hour) * 3600 + i64::from(minute) * 60) as f64 + second)
 }
 
@@ -104,15 +99,7 @@ pub fn civil_unix_seconds(
 pub fn format_utc(unix_s: f64) -> String {
     let days = (unix_s / 86_400.0).floor();
     let sod = unix_s - days * 86_400.0;
-    let z = days as i64 + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z - era * 146_097;
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let day = doy - (153 * mp + 2) / 5 + 1;
-    let month = if mp < 10 { mp + 3 } else { mp - 9 };
-    let year = yoe + era * 400 + i64::from(month <= 2);
+    let (year, month, day) = civil_from_days(days as i64);
     let h = (sod / 3600.0).floor();
     let m = ((sod - h * 3600.0) / 60.0).floor();
     let s = sod - h * 3600.0 - m * 60.0;
