@@ -20,6 +20,7 @@ use std::fs;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
+use crate::device::samples_csv::status_names;
 use accomp::compensation::tilt_compensated;
 use accomp::model::CrossAxis;
 use accomp::pipeline::{self, ChannelFlags, Frame, RawSample, Status};
@@ -296,19 +297,6 @@ fn same_values(a: &Frame, b: &Frame) -> bool {
         .map(f64::to_bits)
     };
     v(a) == v(b) && a.status == b.status
-}
-
-fn status_text(s: Status) -> String {
-    let names: Vec<&str> = Status::NAMES
-        .iter()
-        .filter(|(bit, _)| s.has(*bit))
-        .map(|(_, n)| *n)
-        .collect();
-    if names.is_empty() {
-        "OK".into()
-    } else {
-        names.join("|")
-    }
 }
 
 fn std_of(y: &[f64]) -> f64 {
@@ -611,7 +599,7 @@ fn run_experiment(
         TextColumn::from_strings(
             &frames
                 .iter()
-                .map(|f| status_text(f.status))
+                .map(|f| status_names(f.status))
                 .collect::<Vec<_>>(),
         ),
     )?;

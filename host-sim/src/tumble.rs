@@ -61,7 +61,7 @@ impl RotationAxis {
     }
 
     /// The cross-axis inputs of equation (1) at head angle θ with gravity g (in g).
-    fn cross(self, g: f64, theta: f64) -> CrossAxis {
+    pub fn cross(self, g: f64, theta: f64) -> CrossAxis {
         let c = g * theta.cos();
         match self {
             RotationAxis::Output => CrossAxis {

@@ -9,7 +9,7 @@
 use std::fmt::Write as _;
 
 use accomp::compensation::{CoefficientModels, ThermalCompensator};
-use accomp::model::{CrossAxis, StaticCoefficients};
+use accomp::model::StaticCoefficients;
 use accomp::poly::{TempPoly, TemperatureScale};
 use accomp::units::{Celsius, Gs, RAD_PER_ARCMIN, RAD_PER_ARCSEC};
 
@@ -209,17 +209,8 @@ pub fn simulate_tumble(cfg: &TumbleSimConfig) -> Result<(String, Vec<TrueTest>),
                 let actual = nominal_deg.to_radians()
                     + (cfg.tilt_arcsec + cfg.index_error_arcsec * rng.normal()) * RAD_PER_ARCSEC;
                 let a_i = g * actual.sin();
-                let cross_g = g * actual.cos();
-                let cross = match cfg.rotation_axis {
-                    RotationAxis::Output => CrossAxis {
-                        a_p: Gs(cross_g),
-                        a_o: Gs(0.0),
-                    },
-                    RotationAxis::Pendulum => CrossAxis {
-                        a_p: Gs(0.0),
-                        a_o: Gs(cross_g),
-                    },
-                };
+                // The solver's own convention for which cross axis the head turns through.
+                let cross = cfg.rotation_axis.cross(g, actual);
                 let e_true = k.output(Gs(a_i), cross).0
                     + k.scale_factor_v_per_g * cfg.k3_g_per_g3 * a_i * a_i * a_i;
                 for _ in 0..cfg.readings_per_position {
