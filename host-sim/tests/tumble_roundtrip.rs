@@ -36,11 +36,6 @@ struct Outcome {
     chi2_tumble: f64,
 }
 
-pub fn round_trip_for_sweep(cfg: &TumbleSimConfig) -> (f64, f64, f64) {
-    let o = round_trip(cfg);
-    (o.worst_fit_t, o.worst_weighted_sigma, o.chi2_tumble)
-}
-
 fn round_trip(cfg: &TumbleSimConfig) -> Outcome {
     let (log_text, truth) = simulate_tumble(cfg).unwrap();
     assert_eq!(truth.len(), 8);
@@ -144,10 +139,10 @@ fn over_200_seeds_the_round_trip_checks_fail_at_their_stated_rates() {
     let (mut unweighted, mut weighted, mut chi2_out) = (0, 0, 0);
     for seed in 1..=SEEDS as u64 {
         let cfg = TumbleSimConfig::table1_default(seed).unwrap();
-        let (t, w, chi2) = round_trip_for_sweep(&cfg);
-        unweighted += usize::from(t >= T5_3SIGMA);
-        weighted += usize::from(w >= 3.0);
-        chi2_out += usize::from(!(12.0..63.0).contains(&chi2));
+        let o = round_trip(&cfg);
+        unweighted += usize::from(o.worst_fit_t >= T5_3SIGMA);
+        weighted += usize::from(o.worst_weighted_sigma >= 3.0);
+        chi2_out += usize::from(!(12.0..63.0).contains(&o.chi2_tumble));
     }
     eprintln!(
         "4 positions, {SEEDS} seeds: unweighted > t5 {unweighted}, weighted > 3σ {weighted}, \
@@ -171,10 +166,9 @@ fn over_200_seeds_the_round_trip_checks_fail_at_their_stated_rates() {
     );
 }
 
-#[test]
-fn eight_temperatures_four_point_tumble_then_fit_recover_the_true_order2_models() {
-    let cfg = TumbleSimConfig::table1_default(7).unwrap();
-    let o = round_trip(&cfg);
+/// The three checks of a round trip: both order-2 fits within 3σ of the truth, and the tumble's
+/// 32 estimates consistent with their stated SEs.
+fn assert_recovers_the_true_models(o: &Outcome) {
     assert!(
         o.worst_fit_t < T5_3SIGMA,
         "accomp fit's order-2 model deviates {:.2} s·√h from the true model",
@@ -195,26 +189,17 @@ fn eight_temperatures_four_point_tumble_then_fit_recover_the_true_order2_models(
 }
 
 #[test]
+fn eight_temperatures_four_point_tumble_then_fit_recover_the_true_order2_models() {
+    let cfg = TumbleSimConfig::table1_default(7).unwrap();
+    assert_recovers_the_true_models(&round_trip(&cfg));
+}
+
+#[test]
 fn eight_temperatures_twelve_point_tumble_with_k3_then_fit_recover_the_true_models() {
     let mut cfg = TumbleSimConfig::table1_default(11).unwrap();
     cfg.positions = 12;
     cfg.k3_g_per_g3 = 2e-5;
-    let o = round_trip(&cfg);
-    assert!(
-        o.worst_fit_t < T5_3SIGMA,
-        "accomp fit's order-2 model deviates {:.2} s·√h from the true model",
-        o.worst_fit_t
-    );
-    assert!(
-        o.worst_weighted_sigma < 3.0,
-        "the weighted order-2 fit deviates {:.2} σ from the true model",
-        o.worst_weighted_sigma
-    );
-    assert!(
-        (12.0..63.0).contains(&o.chi2_tumble),
-        "χ² of the tumble estimates {:.1} for 32 values",
-        o.chi2_tumble
-    );
+    assert_recovers_the_true_models(&round_trip(&cfg));
 }
 
 #[test]
