@@ -254,14 +254,8 @@ fn self_heating_is_named_with_its_time_constant_and_coefficient() {
     eprintln!("SELF-HEATING: named {named}/{HIDDEN_DRAWS}, within tolerance {ok}/{HIDDEN_DRAWS}");
     // Thresholds stated before measuring: named in ≥ 80 % of the draws, with τ and coefficient
     // within tolerance in ≥ 80 % of the draws.
-    assert!(
-        named * 10 >= HIDDEN_DRAWS * 8,
-        "self_heating named in {named}/{HIDDEN_DRAWS} draws"
-    );
-    assert!(
-        ok * 10 >= HIDDEN_DRAWS * 8,
-        "self_heating within tolerance in {ok}/{HIDDEN_DRAWS} draws"
-    );
+    hidden_snr::assert_at_least_percent(named, HIDDEN_DRAWS, 80, "self_heating named");
+    hidden_snr::assert_at_least_percent(ok, HIDDEN_DRAWS, 80, "self_heating within tolerance");
 }
 
 #[test]
@@ -271,8 +265,10 @@ fn null_logs_with_a_head_programme_accept_nothing() {
             run_one(None, 0.0, seed).0
         });
     // Threshold stated before measuring: nothing accepted in ≥ 90 % of the null logs.
-    assert!(
-        false_discoveries * 10 <= NULL_DRAWS,
-        "false discoveries on {false_discoveries}/{NULL_DRAWS} null logs"
+    hidden_snr::assert_at_most_percent(
+        false_discoveries,
+        NULL_DRAWS,
+        10,
+        "false discoveries on head-programme null logs",
     );
 }

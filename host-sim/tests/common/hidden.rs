@@ -57,6 +57,23 @@ pub fn log_with(t_s: Vec<f64>, meta: &[(String, String)], columns: Vec<(&str, Ve
     log
 }
 
+/// Asserts that `count` of `total` is at least `percent` % (integer arithmetic, so 8 of 10 is
+/// exactly 80 %).
+pub fn assert_at_least_percent(count: usize, total: usize, percent: usize, what: &str) {
+    assert!(
+        count * 100 >= total * percent,
+        "{what}: {count}/{total}, below {percent} %"
+    );
+}
+
+/// Asserts that `count` of `total` is at most `percent` %.
+pub fn assert_at_most_percent(count: usize, total: usize, percent: usize, what: &str) {
+    assert!(
+        count * 100 <= total * percent,
+        "{what}: {count}/{total}, above {percent} %"
+    );
+}
+
 /// Runs `accepted_on(seed)` on `draws` null logs (seeds from `seed`) and returns how many
 /// accepted anything, printing each.
 pub fn false_discoveries(
