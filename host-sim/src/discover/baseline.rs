@@ -639,6 +639,7 @@ mod tests {
             site: None,
             dt_s: 10.0,
             notes: Vec::new(),
+            warnings: Vec::new(),
         };
         (ds, a, temp)
     }

@@ -77,6 +77,9 @@ pub struct Discovery {
     pub adev_before: Vec<(f64, f64)>,
     /// ADEV of the final residual.
     pub adev_after: Vec<(f64, f64)>,
+    /// Warnings about the input and the run (also in the selection's own `warnings`); printed
+    /// first in the text output and listed in the JSON `warnings`.
+    pub warnings: Vec<String>,
 }
 
 /// The shared series of the candidates.
@@ -126,6 +129,7 @@ pub fn discover(
         trend,
         adev_before,
         adev_after,
+        warnings: ds.warnings.clone(),
         dataset: ds,
     })
 }

@@ -348,6 +348,7 @@ mod tests {
             site: None,
             dt_s: 1.0,
             notes: Vec::new(),
+            warnings: Vec::new(),
         };
         let tr = trend(&ds, &r);
         assert_eq!(tr.step_time_s, 700.0);
