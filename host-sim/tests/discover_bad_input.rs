@@ -99,7 +99,8 @@ fn one_absurd_output_value_is_dropped_with_a_warning_and_the_residual_stays_fini
     let d = run(&log_of(t, temp, out), 50_000);
     let w = warnings(&d);
     assert!(
-        w.iter().any(|w| w.contains("output_v") && w.contains("1e300")),
+        w.iter()
+            .any(|w| w.contains("output_v") && w.contains("1e300")),
         "{w:?}"
     );
     assert!(d.selection.baseline_std.is_finite() && d.selection.baseline_std < 1e-3);

@@ -68,14 +68,24 @@ fn gmetrology_record_names_the_earth_tide_with_a_gravimetric_factor_near_one() {
     // With the noise model fitted, a smooth drift is not cut into "tares": every accepted step
     // is a jump of the record at its time, larger than the jump noise there (select.rs
     // refuses the others and says so in `refused`).
-    for a in d.selection.accepted.iter().filter(|a| a.effect.name() == "step") {
+    for a in d
+        .selection
+        .accepted
+        .iter()
+        .filter(|a| a.effect.name() == "step")
+    {
         let t = hidden_free_param(a, "time_s");
         let size = hidden_free_param(a, "size");
         let r = &d.selection.baseline_residual;
-        let j = d.dataset.t_s.iter().position(|&x| x > t).expect("step inside");
+        let j = d
+            .dataset
+            .t_s
+            .iter()
+            .position(|&x| x > t)
+            .expect("step inside");
         let w = 16.min(j).min(r.len() - j);
-        let jump = r[j..j + w].iter().sum::<f64>() / w as f64
-            - r[j - w..j].iter().sum::<f64>() / w as f64;
+        let jump =
+            r[j..j + w].iter().sum::<f64>() / w as f64 - r[j - w..j].iter().sum::<f64>() / w as f64;
         assert!(
             jump * size.signum() > 0.5 * size.abs(),
             "step at {t} s of {size}: the record jumps only {jump} there"
@@ -101,7 +111,10 @@ fn assert_noise_fitted(d: &accomp_host::discover::Discovery) {
     for part in ["baseline", "final"] {
         let n = &j[part]["noise"];
         for key in ["white", "flicker", "random_walk"] {
-            assert!(n[key].as_f64().is_some_and(f64::is_finite), "{part}.{key}: {n}");
+            assert!(
+                n[key].as_f64().is_some_and(f64::is_finite),
+                "{part}.{key}: {n}"
+            );
         }
         assert_eq!(n["method"], METHOD_KALMAN_ML);
     }

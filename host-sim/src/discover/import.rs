@@ -426,7 +426,9 @@ fn absurd_rows(col: &[f64]) -> Vec<usize> {
         .max(f64::MIN_POSITIVE);
     col.iter()
         .enumerate()
-        .filter(|(_, x)| x.is_infinite() || (x.is_finite() && (*x - med).abs() > ABSURD_SPREAD * spread))
+        .filter(|(_, x)| {
+            x.is_infinite() || (x.is_finite() && (*x - med).abs() > ABSURD_SPREAD * spread)
+        })
         .map(|(i, _)| i)
         .collect()
 }
@@ -496,7 +498,10 @@ pub fn dataset_from_log(log: &Log, opts: &DatasetOptions) -> Result<Dataset, Imp
         // A channel mostly empty would cost most rows; it is left out and said so.
         if finite * 10 < col.len() * 9 {
             warnings.push(if finite == 0 {
-                format!("channel {n} is empty (all {} values NaN): left out of the model", col.len())
+                format!(
+                    "channel {n} is empty (all {} values NaN): left out of the model",
+                    col.len()
+                )
             } else {
                 format!(
                     "channel {n} has only {finite} finite values of {}: left out of the model",
@@ -511,7 +516,8 @@ pub fn dataset_from_log(log: &Log, opts: &DatasetOptions) -> Result<Dataset, Imp
     // Values that are not measurements (±inf, 1e300) are dropped with a warning: one of them
     // makes every sum of squares infinite.
     let mut absurd = vec![false; t.len()];
-    for (name, col) in std::iter::once((&out_name, y_raw)).chain(chans.iter().map(|c| (&c.0, c.3))) {
+    for (name, col) in std::iter::once((&out_name, y_raw)).chain(chans.iter().map(|c| (&c.0, c.3)))
+    {
         let rows = absurd_rows(col);
         if let Some(&first) = rows.first() {
             warnings.push(format!(
@@ -527,9 +533,7 @@ pub fn dataset_from_log(log: &Log, opts: &DatasetOptions) -> Result<Dataset, Imp
         }
     }
     let keep: Vec<usize> = (0..t.len())
-        .filter(|&i| {
-            !absurd[i] && y_raw[i].is_finite() && chans.iter().all(|c| c.3[i].is_finite())
-        })
+        .filter(|&i| !absurd[i] && y_raw[i].is_finite() && chans.iter().all(|c| c.3[i].is_finite()))
         .collect();
     let mut notes = vec![format!(
         "{} rows read, {} dropped for a gap (NaN) in the output or a channel",
@@ -749,8 +753,11 @@ mod tests {
         // 2000 rows at 1 s, the head at +1 g for 701 s, then 0 g.
         let mut log = Log::with_time((0..2000).map(f64::from).collect()).unwrap();
         log.set_meta("input_g", "1").unwrap();
-        log.push_column("output_v", (0..2000).map(|i| 0.5 + 1e-3 * f64::from(i % 7)).collect())
-            .unwrap();
+        log.push_column(
+            "output_v",
+            (0..2000).map(|i| 0.5 + 1e-3 * f64::from(i % 7)).collect(),
+        )
+        .unwrap();
         let a: Vec<f64> = (0..2000).map(|i| if i < 701 { 1.0 } else { 0.0 }).collect();
         log.push_column("input_g", a).unwrap();
         let opts = DatasetOptions {

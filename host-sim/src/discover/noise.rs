@@ -251,7 +251,10 @@ impl NoiseModel {
         NoiseModel {
             white_var: w,
             flicker: if f > 0.0 {
-                times.iter().map(|&t| (t, f * (t / mid).powf(beta))).collect()
+                times
+                    .iter()
+                    .map(|&t| (t, f * (t / mid).powf(beta)))
+                    .collect()
             } else {
                 Vec::new()
             },
@@ -311,7 +314,11 @@ impl NoiseModel {
                 0.0
             };
             NoiseFit {
-                model: NoiseModel::white(if var.is_finite() { var.max(1e-300) } else { 1.0 }),
+                model: NoiseModel::white(if var.is_finite() {
+                    var.max(1e-300)
+                } else {
+                    1.0
+                }),
                 method: METHOD_WHITE_FALLBACK,
                 neg2_loglik: f64::NAN,
                 evaluations: 0,
@@ -326,7 +333,9 @@ impl NoiseModel {
         }
         let var = super::baseline::std(&values).powi(2);
         if !(var > 0.0 && var.is_finite()) {
-            return fail(format!("the residual's variance is {var:e}: nothing to model"));
+            return fail(format!(
+                "the residual's variance is {var:e}: nothing to model"
+            ));
         }
         let dt = dt_s.max(1e-9);
         let (b_lo, b_hi) = FLICKER_SLOPE_RANGE;
@@ -341,8 +350,16 @@ impl NoiseModel {
         };
         let model_at = |p: P, w: f64| {
             let p = clamp(p);
-            let f = if p[0] <= LN_RATIO_MIN + 0.5 { 0.0 } else { w * p[0].exp() };
-            let q = if p[1] <= LN_RATIO_MIN + 0.5 { 0.0 } else { w * p[1].exp() / dt };
+            let f = if p[0] <= LN_RATIO_MIN + 0.5 {
+                0.0
+            } else {
+                w * p[0].exp()
+            };
+            let q = if p[1] <= LN_RATIO_MIN + 0.5 {
+                0.0
+            } else {
+                w * p[1].exp() / dt
+            };
             NoiseModel::from_levels_from(w, f, p[2], q, dt * p[3].exp(), dt, span_s)
         };
         let mut evals = 0usize;
@@ -411,7 +428,11 @@ impl NoiseModel {
         let mut simplex = vec![(x0, f0)];
         for d in 0..D {
             let mut p = x0;
-            p[d] += if p[d] + steps[d] > hi[d] { -steps[d] } else { steps[d] };
+            p[d] += if p[d] + steps[d] > hi[d] {
+                -steps[d]
+            } else {
+                steps[d]
+            };
             let v = eval(p, &mut evals).0;
             simplex.push((p, v));
         }
@@ -734,7 +755,15 @@ mod tests {
     #[test]
     fn likelihood_fit_of_a_residual_with_no_variance_fails_loudly() {
         let t: Vec<f64> = (0..100).map(f64::from).collect();
-        let f = NoiseModel::fit_ml(&t, &(0..100).collect::<Vec<_>>(), &[3.0; 100], 1.0, 99.0, &[], 50);
+        let f = NoiseModel::fit_ml(
+            &t,
+            &(0..100).collect::<Vec<_>>(),
+            &[3.0; 100],
+            1.0,
+            99.0,
+            &[],
+            50,
+        );
         assert_eq!(f.method, METHOD_WHITE_FALLBACK);
         assert!(f.failure.is_some());
     }

@@ -411,7 +411,8 @@ fn noise_of(ds: &Dataset, r: &[f64], warm: Option<&NoiseModel>) -> NoiseFit {
         Some(m) => NoiseModel::fit_ml(&ds.t_s, &idx, r, ds.dt_s, ds.span_s(), &[m], ML_EVALS_WARM),
         None => {
             let adev_start = NoiseModel::fit(&residual::adev(ds, r), ds.dt_s, ds.span_s());
-            let cold = NoiseModel::fit_ml(&ds.t_s, &idx, r, ds.dt_s, ds.span_s(), &[], ML_EVALS_COLD);
+            let cold =
+                NoiseModel::fit_ml(&ds.t_s, &idx, r, ds.dt_s, ds.span_s(), &[], ML_EVALS_COLD);
             match adev_start {
                 Some(a) if cold.failure.is_none() => {
                     // The Allan fit is a second start; keep the more likely of the two.
@@ -667,7 +668,11 @@ pub fn select(
                 continue;
             }
             if let Some(why) = implausible(ds, &cur, &cols, target, &cur_raw, s) {
-                refuse(&mut refused, s.effect.name(), format!("ΔBIC {:.1}, but {why}", s.delta_bic));
+                refuse(
+                    &mut refused,
+                    s.effect.name(),
+                    format!("ΔBIC {:.1}, but {why}", s.delta_bic),
+                );
                 continue;
             }
             let (before, fwd_before) = *before_scores.get_or_insert_with(|| {
@@ -784,7 +789,9 @@ fn refuse(list: &mut Vec<(String, String)>, name: &str, why: String) {
 
 /// What a parameter at the edge of its range usually means.
 fn edge_hint(e: &Effect, theta: f64, ds: &Dataset) -> String {
-    let lower = effects::grid(e, ds).first().is_some_and(|g| theta <= *g * 1.0001);
+    let lower = effects::grid(e, ds)
+        .first()
+        .is_some_and(|g| theta <= *g * 1.0001);
     match e {
         Effect::ThermalLag | Effect::AmbientCoupling(_) if lower => {
             "; the shortest lag improving the fit is the signature of the channel's own \
