@@ -77,6 +77,8 @@ pub struct Discovery {
     pub adev_before: Vec<(f64, f64)>,
     /// ADEV of the final residual.
     pub adev_after: Vec<(f64, f64)>,
+    /// Reading noise of each measured regressor channel (errors in variables).
+    pub channel_noise: Vec<residual::ChannelNoise>,
     /// Warnings about the input and the run (also in the selection's own `warnings`); printed
     /// first in the text output and listed in the JSON `warnings`.
     pub warnings: Vec<String>,
@@ -130,6 +132,7 @@ pub fn discover(
         adev_before,
         adev_after,
         warnings: ds.warnings.clone(),
+        channel_noise: residual::channel_noise(&ds),
         dataset: ds,
     })
 }

@@ -38,10 +38,13 @@ pub fn json(d: &Discovery) -> Value {
         .iter()
         .map(|a| {
             let (p, sig) = params_json(&a.params);
+            let (p0, sig0) = params_json(&a.params_at_acceptance);
             let mut o = json!({
                 "name": a.effect.name(),
                 "parameters": p,
                 "uncertainties": sig,
+                "parameters_at_acceptance": p0,
+                "uncertainties_at_acceptance": sig0,
                 "residual_std_before": a.std_before,
                 "residual_std_after": a.std_after,
                 "residual_std_out_of_sample_before": a.cv_before.raw,
@@ -84,6 +87,12 @@ pub fn json(d: &Discovery) -> Value {
         },
         "not_candidates": d.not_candidates.iter().map(|(n, w)| json!({"name": n, "why": w})).collect::<Vec<_>>(),
         "effects": effects,
+        "channel_noise": d.channel_noise,
+        "joint_fit": s.joint.as_ref().map(|j| json!({
+            "coefficients": j.names,
+            "covariance": j.covariance,
+            "note": "parameters of `effects` come from this fit; the covariance is of the effects' linear coefficients (output units), conditional on the nonlinear parameters, whose uncertainties come from the likelihood profile",
+        })),
         "refused": s.refused.iter().map(|(n, w)| json!({"name": n, "why": w})).collect::<Vec<_>>(),
         "forward_splits": super::select::FORWARD_SPLITS,
         "final": {
@@ -162,6 +171,13 @@ pub fn text(d: &Discovery) -> String {
         s.baseline_std, s.baseline_cv.raw
     );
     let _ = writeln!(o, "  noise: {}", noise_text(&s.baseline_noise, unit));
+    for c in &d.channel_noise {
+        let _ = writeln!(
+            o,
+            "  channel_noise: {} reads with {:.3e} {} noise per point (channel std {:.3e})",
+            c.channel, c.noise, c.unit, c.std
+        );
+    }
     let _ = writeln!(o, "what the baseline gets wrong:");
     let _ = writeln!(
         o,

@@ -104,8 +104,10 @@ pub struct Accepted {
     pub effect: Effect,
     /// Its nonlinear parameter (NaN if none).
     pub theta: Param,
-    /// Named parameters with uncertainties.
+    /// Named parameters with uncertainties, from the final joint fit of all accepted effects.
     pub params: Vec<(String, Param)>,
+    /// The same from the round it was accepted in (the model then had fewer effects).
+    pub params_at_acceptance: Vec<(String, Param)>,
     /// ΔBIC at acceptance.
     pub delta_bic: f64,
     /// In-sample residual std before/after, output unit.
@@ -392,6 +394,8 @@ pub struct Selection {
     /// Candidates that passed the BIC but were not accepted, with why (edge of the search
     /// range, physically implausible, a step below the noise, no forward-prediction gain).
     pub refused: Vec<(String, String)>,
+    /// The final joint fit of all accepted effects (parameters in `accepted` come from it).
+    pub joint: Option<JointFit>,
     /// Forward-chaining score of the baseline.
     pub baseline_forward: CvScore,
     /// Of the final model.
@@ -745,6 +749,7 @@ pub fn select(
                 value: s.theta,
                 sigma: sigma_theta,
             },
+            params_at_acceptance: params.clone(),
             params,
             delta_bic: s.delta_bic,
             std_before: cur_std,
@@ -757,7 +762,16 @@ pub fn select(
         cur_std = std_after;
         done.push(s.effect);
     }
-    let (cur_f, final_raw, beta) = fit_state(ds, &cols, target, NoiseChoice::Fit(Some(&warm)));
+    let (cur_f, _, _) = fit_state(ds, &cols, target, NoiseChoice::Fit(Some(&warm)));
+    let joint = (!accepted.is_empty())
+        .then(|| joint_fit(ds, target, base_cols, &mut accepted, ctx, &cur_f.noise));
+    if let Some(j) = &joint {
+        cols = base_cols.to_vec();
+        for c in &j.effect_columns {
+            cols.extend(c.iter().cloned());
+        }
+    }
+    let (cur_f, final_raw, beta) = fit_state(ds, &cols, target, NoiseChoice::Fixed(&cur_f.noise));
     let final_cv = cross_validate(ds, &cols, target, &cur0.noise.model, cfg);
     let final_forward = forward_validate(ds, &cols, target, &cur0.noise.model);
     Selection {
@@ -774,10 +788,152 @@ pub fn select(
         last_round,
         warnings: noise_warnings(&cur0.noise, &cur_f.noise),
         refused,
+        joint,
         baseline_forward: forward_validate(ds, base_cols, target, &cur0.noise.model),
         final_forward,
         baseline_noise: cur0.noise,
         final_noise: cur_f.noise,
+    }
+}
+
+/// The final joint fit: every accepted effect refitted together with the baseline, nonlinear
+/// parameters included (one coordinate sweep: each θ re-optimised with all other columns in
+/// the model), under the final noise model.
+#[derive(Debug, Clone)]
+pub struct JointFit {
+    /// Names of the effects' linear coefficients, in order (`<index>:<effect>:c<j>`).
+    pub names: Vec<String>,
+    /// Their covariance (output units², conditional on the nonlinear parameters, whose own
+    /// uncertainties come from the profile curvature), scaled by the whitened residual variance.
+    pub covariance: Vec<Vec<f64>>,
+    /// Columns of each effect at its jointly fitted θ.
+    pub effect_columns: Vec<Vec<Vec<f64>>>,
+}
+
+/// Joint refit of the accepted effects; replaces each one's `params` and `theta` by the joint
+/// values (the acceptance round's stay in `params_at_acceptance`).
+fn joint_fit(
+    ds: &Dataset,
+    target: &[f64],
+    base_cols: &[Vec<f64>],
+    accepted: &mut [Accepted],
+    ctx: &Context,
+    noise: &NoiseFit,
+) -> JointFit {
+    let mut thetas: Vec<f64> = accepted.iter().map(|a| a.theta.value).collect();
+    let mut ecols: Vec<Vec<Vec<f64>>> = accepted
+        .iter()
+        .zip(&thetas)
+        .map(|(a, &th)| columns(&a.effect, ds, ctx, th))
+        .collect();
+    let others = |ecols: &[Vec<Vec<f64>>], skip: usize| {
+        let mut c = base_cols.to_vec();
+        for (j, e) in ecols.iter().enumerate() {
+            if j != skip {
+                c.extend(e.iter().cloned());
+            }
+        }
+        c
+    };
+    let mut sigmas = vec![f64::NAN; accepted.len()];
+    for i in 0..accepted.len() {
+        let th = thetas[i];
+        if !th.is_finite() {
+            continue;
+        }
+        let e = accepted[i].effect.clone();
+        let (cur, _, _) = fit_state(ds, &others(&ecols, i), target, NoiseChoice::Fixed(noise));
+        let eval = |x: f64| cur.rss_with(&columns(&e, ds, ctx, x));
+        let g = effects::grid(&e, ds);
+        let (lo, hi, h) = match e {
+            Effect::Step => (th - 3.0 * ds.dt_s, th + 3.0 * ds.dt_s, ds.dt_s),
+            Effect::Periodic => {
+                let span = ds.span_s().max(ds.dt_s);
+                let f = 1.0 / th;
+                (
+                    1.0 / (f + 0.5 / span),
+                    1.0 / (f - 0.5 / span).max(0.5 / span),
+                    0.02 * th,
+                )
+            }
+            _ => {
+                let (gmin, gmax) = (
+                    g.iter()
+                        .copied()
+                        .filter(|v| *v > 0.0)
+                        .fold(f64::INFINITY, f64::min),
+                    g.iter().copied().fold(0.0, f64::max),
+                );
+                ((th / 1.5).max(gmin), (th * 1.5).min(gmax), 0.02 * th)
+            }
+        };
+        let best = if matches!(e, Effect::ThermalHysteresis) || !(hi > lo) || lo <= 0.0 {
+            th
+        } else {
+            let x = golden(|lx| eval(lx.exp()), lo.ln(), hi.ln(), 16).exp();
+            if eval(x) < eval(th) {
+                x
+            } else {
+                th
+            }
+        };
+        thetas[i] = best;
+        ecols[i] = columns(&e, ds, ctx, best);
+        // σ_θ from the RSS profile's curvature, with the others in the model.
+        let (r0, rp, rm) = (eval(best), eval(best + h), eval((best - h).max(h * 0.01)));
+        let curv = (rp + rm - 2.0 * r0) / (h * h);
+        let n = cur.r_w.len() as f64;
+        let s2 = r0 / (n - (cur.basis.q.len() + ecols[i].len()) as f64).max(1.0);
+        sigmas[i] = if curv > 0.0 {
+            (2.0 * s2 / curv).sqrt()
+        } else {
+            f64::NAN
+        };
+    }
+    let all = others(&ecols, usize::MAX);
+    let rows = Rows::with_noise(&noise.model, &ds.t_s, None);
+    let fit = gls(&all, target, 0.0, &rows);
+    let wc: Vec<Vec<f64>> = all.iter().map(|c| rows.whiten(c, 0.0)).collect();
+    let basis = Basis::new(&wc);
+    // Standard errors inflated for the correlation the whitening left, as in each round.
+    let r_w = basis.residual(&rows.whiten(target, 0.0));
+    let mut seg = vec![false; r_w.len()];
+    if let Some(f) = seg.first_mut() {
+        *f = true;
+    }
+    let rho = ar1(&r_w, &seg).min(0.99);
+    let infl2 = (1.0 + rho) / (1.0 - rho);
+    let s2 = infl2 * fit.rss_w / (fit.n_w.saturating_sub(fit.k).max(1)) as f64;
+    let cov_all = basis.covariance();
+    let se: Vec<f64> = fit.se.iter().map(|v| v * infl2.sqrt()).collect();
+    let k0 = base_cols.len();
+    let mut names = Vec::new();
+    let mut at = k0;
+    for (i, a) in accepted.iter_mut().enumerate() {
+        let m = ecols[i].len();
+        for j in 0..m {
+            names.push(format!("{i}:{}:c{j}", a.effect.name()));
+        }
+        a.theta = Param {
+            value: thetas[i],
+            sigma: sigmas[i],
+        };
+        a.params = effects::parameters(
+            &a.effect,
+            ds,
+            a.theta,
+            &fit.beta[at..at + m],
+            &se[at..at + m],
+        );
+        at += m;
+    }
+    let covariance = (k0..all.len())
+        .map(|r| (k0..all.len()).map(|c| cov_all[r][c] * s2).collect())
+        .collect();
+    JointFit {
+        names,
+        covariance,
+        effect_columns: ecols,
     }
 }
 
