@@ -17,6 +17,7 @@ pub mod noise;
 pub mod report;
 pub mod residual;
 pub mod select;
+pub mod tidal;
 
 use effects::{Context, Effect};
 use import::{Dataset, DatasetOptions, Format};
