@@ -859,7 +859,8 @@ impl Station {
 
         // Radial/geocentric-north → ellipsoid normal/geodetic-north; upward tidal acceleration
         // lowers the gravity the station feels.
-        let band = |i: usize| -(self.cos_dev * g_up[i] + self.sin_dev * g_north[i]) * NM_S2_PER_M_S2;
+        let band =
+            |i: usize| -(self.cos_dev * g_up[i] + self.sin_dev * g_north[i]) * NM_S2_PER_M_S2;
         let species = GravitySpecies {
             long_period_nm_s2: band(0),
             diurnal_nm_s2: band(1),

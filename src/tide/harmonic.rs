@@ -154,7 +154,10 @@ fn legendre(l: u8, m: u8, x: f64, u: f64) -> (f64, f64) {
         (2, 0) => (0.5 * (3.0 * x * x - 1.0), -3.0 * x * u),
         (2, 1) => (3.0 * x * u, 3.0 * (x * x - u * u)),
         (2, 2) => (3.0 * u * u, 6.0 * u * x),
-        (3, 0) => (0.5 * (5.0 * x * x * x - 3.0 * x), -1.5 * (5.0 * x * x - 1.0) * u),
+        (3, 0) => (
+            0.5 * (5.0 * x * x * x - 3.0 * x),
+            -1.5 * (5.0 * x * x - 1.0) * u,
+        ),
         (3, 1) => (
             1.5 * u * (5.0 * x * x - 1.0),
             1.5 * x * (5.0 * x * x - 1.0 - 10.0 * u * u),
@@ -183,10 +186,9 @@ impl Station {
         // odd orders (diurnal, M3) come out inverted against the ephemeris tide.
         let nrm = if m % 2 == 1 { -1.0 } else { 1.0 } * normalisation(l, m);
         let ratio = self.radius_m / CATALOGUE_RADIUS_M;
-        let mut scale = GM_EARTH_M3_S2 / (CATALOGUE_RADIUS_M * CATALOGUE_RADIUS_M)
-            * wave.amplitude_m
-            * nrm
-            / self.radius_m;
+        let mut scale =
+            GM_EARTH_M3_S2 / (CATALOGUE_RADIUS_M * CATALOGUE_RADIUS_M) * wave.amplitude_m * nrm
+                / self.radius_m;
         for _ in 0..l {
             scale *= ratio;
         }
@@ -209,8 +211,7 @@ impl Station {
             (2, 1) => {
                 let w = wave.speed_deg_h();
                 f.delta_21
-                    + super::DELTA_FCN * (w - super::OMEGA_O1_DEG_H)
-                        / (super::OMEGA_FCN_DEG_H - w)
+                    + super::DELTA_FCN * (w - super::OMEGA_O1_DEG_H) / (super::OMEGA_FCN_DEG_H - w)
             }
             (2, _) => f.delta_22,
             _ => f.delta_3,

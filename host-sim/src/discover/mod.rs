@@ -78,6 +78,8 @@ pub struct Discovery {
     pub adev_before: Vec<(f64, f64)>,
     /// ADEV of the final residual.
     pub adev_after: Vec<(f64, f64)>,
+    /// Wave-group tidal analysis of a gravity record, or why it was not run.
+    pub tidal: Result<tidal::TidalAnalysis, String>,
 }
 
 /// The shared series of the candidates.
@@ -115,6 +117,7 @@ pub fn discover(
     let trend = residual::trend(&ds, &sel.baseline_residual);
     let adev_before = residual::adev(&ds, &sel.baseline_residual);
     let adev_after = residual::adev(&ds, &sel.final_residual);
+    let tidal = tidal::for_discovery(&ds, &base.target, &base.columns, &ctx, &sel.accepted);
     Ok(Discovery {
         baseline_description: base.description.clone(),
         baseline_names: base.names.clone(),
@@ -127,6 +130,7 @@ pub fn discover(
         trend,
         adev_before,
         adev_after,
+        tidal,
         dataset: ds,
     })
 }

@@ -39,16 +39,56 @@ pub struct GroupDef {
 /// The groups analysed, in frequency order (boundaries between the main waves; the grouping
 /// ETERNA users take for one to three months of data).
 pub const GROUPS: [GroupDef; 10] = [
-    GroupDef { name: "Q1", from_cpd: 0.5, to_cpd: 0.911 },
-    GroupDef { name: "O1", from_cpd: 0.911, to_cpd: 0.947 },
-    GroupDef { name: "M1", from_cpd: 0.947, to_cpd: 0.986 },
-    GroupDef { name: "P1K1", from_cpd: 0.986, to_cpd: 1.016 },
-    GroupDef { name: "J1", from_cpd: 1.016, to_cpd: 1.5 },
-    GroupDef { name: "N2", from_cpd: 1.5, to_cpd: 1.916 },
-    GroupDef { name: "M2", from_cpd: 1.916, to_cpd: 1.95 },
-    GroupDef { name: "L2", from_cpd: 1.95, to_cpd: 1.986 },
-    GroupDef { name: "S2K2", from_cpd: 1.986, to_cpd: 2.5 },
-    GroupDef { name: "M3", from_cpd: 2.5, to_cpd: 3.5 },
+    GroupDef {
+        name: "Q1",
+        from_cpd: 0.5,
+        to_cpd: 0.911,
+    },
+    GroupDef {
+        name: "O1",
+        from_cpd: 0.911,
+        to_cpd: 0.947,
+    },
+    GroupDef {
+        name: "M1",
+        from_cpd: 0.947,
+        to_cpd: 0.986,
+    },
+    GroupDef {
+        name: "P1K1",
+        from_cpd: 0.986,
+        to_cpd: 1.016,
+    },
+    GroupDef {
+        name: "J1",
+        from_cpd: 1.016,
+        to_cpd: 1.5,
+    },
+    GroupDef {
+        name: "N2",
+        from_cpd: 1.5,
+        to_cpd: 1.916,
+    },
+    GroupDef {
+        name: "M2",
+        from_cpd: 1.916,
+        to_cpd: 1.95,
+    },
+    GroupDef {
+        name: "L2",
+        from_cpd: 1.95,
+        to_cpd: 1.986,
+    },
+    GroupDef {
+        name: "S2K2",
+        from_cpd: 1.986,
+        to_cpd: 2.5,
+    },
+    GroupDef {
+        name: "M3",
+        from_cpd: 2.5,
+        to_cpd: 3.5,
+    },
 ];
 
 /// Knot spacing of the B-spline drift, seconds (2 days: passes < 0.1 % of a diurnal wave's
@@ -157,16 +197,16 @@ fn merged_groups(span_s: f64) -> Vec<(String, GroupDef)> {
     let span_d = span_s / 86_400.0;
     let main = |g: &GroupDef| -> f64 {
         match g.name {
-        "Q1" => 0.893_244,
-        "O1" => 0.929_536,
-        "M1" => 0.966_446,
-        "P1K1" => 1.002_738,
-        "J1" => 1.039_030,
-        "N2" => 1.895_982,
-        "M2" => 1.932_274,
-        "L2" => 1.968_565,
-        "S2K2" => 2.0,
-        _ => 2.898_410,
+            "Q1" => 0.893_244,
+            "O1" => 0.929_536,
+            "M1" => 0.966_446,
+            "P1K1" => 1.002_738,
+            "J1" => 1.039_030,
+            "N2" => 1.895_982,
+            "M2" => 1.932_274,
+            "L2" => 1.968_565,
+            "S2K2" => 2.0,
+            _ => 2.898_410,
         }
     };
     let mut out: Vec<(String, GroupDef, f64)> = Vec::new();
@@ -223,7 +263,16 @@ impl GroupTides {
         let nodes = ((t1 - t0) / NODE_S).ceil() as usize + 1;
         let ng = groups.len();
         // Node values: [group][rigid cos, rigid sin, elastic cos, elastic sin][node].
-        let mut nv = vec![[vec![0.0; nodes], vec![0.0; nodes], vec![0.0; nodes], vec![0.0; nodes]]; ng];
+        let mut nv = vec![
+            [
+                vec![0.0; nodes],
+                vec![0.0; nodes],
+                vec![0.0; nodes],
+                vec![0.0; nodes]
+            ];
+            ng
+        ];
+        #[allow(clippy::needless_range_loop)] // k is the node index of four arrays per group
         for k in 0..nodes {
             let args = DoodsonArguments::at_unix_seconds(start_unix_s + t0 + k as f64 * NODE_S);
             for (g, ws) in waves.iter().enumerate() {
@@ -257,9 +306,11 @@ impl GroupTides {
 
     /// Index of the largest wave (rigid amplitude at the station) of group g.
     fn main_wave(&self, g: usize) -> Option<&(Wave, WaveGravity, f64)> {
-        self.waves[g]
-            .iter()
-            .max_by(|a, b| a.1.amplitude_nm_s2.abs().total_cmp(&b.1.amplitude_nm_s2.abs()))
+        self.waves[g].iter().max_by(|a, b| {
+            a.1.amplitude_nm_s2
+                .abs()
+                .total_cmp(&b.1.amplitude_nm_s2.abs())
+        })
     }
 }
 
@@ -381,8 +432,7 @@ fn lstsq(cols: &[&[f64]], y: &[f64]) -> (Vec<f64>, Vec<Vec<f64>>) {
 /// spectrum (2/N)|Σ r e^{−iωt}| has mean σ√(π/N)).
 fn band_noise(t_s: &[f64], r: &[f64], from_cpd: f64, to_cpd: f64) -> f64 {
     let n = r.len() as f64;
-    let span = (t_s.last().copied().unwrap_or(0.0) - t_s.first().copied().unwrap_or(0.0))
-        .max(1.0);
+    let span = (t_s.last().copied().unwrap_or(0.0) - t_s.first().copied().unwrap_or(0.0)).max(1.0);
     // Half a Rayleigh step: every resolved frequency is sampled.
     let df = 0.5 / span;
     let (f0, f1) = (from_cpd / 86_400.0, to_cpd / 86_400.0);
@@ -451,13 +501,11 @@ pub fn analyse(
     let gt = GroupTides::new(&st, start, &ds.t_s, ds.span_s());
     let ng = gt.names.len();
     let scaled = |v: &[f64]| -> Vec<f64> { v.iter().map(|x| x * to_unit).collect() };
-    let pressure = ds
-        .channel(ChannelKind::Pressure)
-        .map(|c| -> Vec<f64> {
-            let m = c.values.iter().sum::<f64>() / c.values.len() as f64;
-            // Pa → hPa, centred.
-            c.values.iter().map(|p| (p - m) / 100.0).collect()
-        });
+    let pressure = ds.channel(ChannelKind::Pressure).map(|c| -> Vec<f64> {
+        let m = c.values.iter().sum::<f64>() / c.values.len() as f64;
+        // Pa → hPa, centred.
+        c.values.iter().map(|p| (p - m) / 100.0).collect()
+    });
     let drift = spline_drift(&ds.t_s, &ds.segment_start, DRIFT_KNOT_S);
 
     // One fit per reference: the columns differ only by the δ per wave inside a group.
@@ -575,7 +623,10 @@ pub fn analyse(
         let sg = cov_r[j][j].max(0.0).sqrt() * s;
         let nm = 1.0 / to_unit;
         Admittance {
-            per_hpa: Param { value: v, sigma: sg },
+            per_hpa: Param {
+                value: v,
+                sigma: sg,
+            },
             nm_s2_per_hpa: Param {
                 value: v * nm,
                 sigma: sg * nm,
@@ -604,6 +655,29 @@ pub fn analyse(
                      no ocean loading); phase positive = the record leads"
             .into(),
     })
+}
+
+/// The analysis inside `accomp discover`: the record's baseline target, with the baseline's
+/// columns and every accepted effect except the tide itself and the pressure admittance (which
+/// the analysis fits) as nuisance columns, at their accepted nonlinear parameters.
+pub fn for_discovery(
+    ds: &Dataset,
+    target: &[f64],
+    base_cols: &[Vec<f64>],
+    ctx: &super::effects::Context,
+    accepted: &[super::select::Accepted],
+) -> Result<TidalAnalysis, String> {
+    use super::effects::Effect;
+    if let Some(why) = not_applicable(ds) {
+        return Err(why);
+    }
+    let mut nuisance = base_cols.to_vec();
+    for a in accepted {
+        if !matches!(a.effect, Effect::TidalGravity | Effect::PressureAdmittance) {
+            nuisance.extend(super::effects::columns(&a.effect, ds, ctx, a.theta.value));
+        }
+    }
+    analyse(ds, target, &nuisance)
 }
 
 /// Weighted least squares of the group phases κ_g = −ω_g·τ (groups with factor σ/δ < 10 %):
@@ -643,7 +717,11 @@ fn fit_delay(groups: &mut [GroupFit]) -> DelayFit {
             .sum();
         let dof = m.saturating_sub(1);
         let c = if dof > 0 { chi2 / dof as f64 } else { f64::NAN };
-        let infl = if c.is_finite() { c.max(1.0).sqrt() } else { 1.0 };
+        let infl = if c.is_finite() {
+            c.max(1.0).sqrt()
+        } else {
+            1.0
+        };
         Some((
             Param {
                 value: tau,
@@ -677,8 +755,7 @@ fn fit_delay(groups: &mut [GroupFit]) -> DelayFit {
         .collect();
     if delay_s.value.is_finite() {
         for g in groups.iter_mut() {
-            g.phase_after_delay_deg =
-                g.phase_deg.value + (omega(g) * delay_s.value).to_degrees();
+            g.phase_after_delay_deg = g.phase_deg.value + (omega(g) * delay_s.value).to_degrees();
         }
     }
     DelayFit {
@@ -686,6 +763,26 @@ fn fit_delay(groups: &mut [GroupFit]) -> DelayFit {
         chi2_per_dof,
         by_band,
         groups_used: used,
+    }
+}
+
+/// Text for the discovery report: the analysis, or one line saying why a record was not
+/// analysed (nothing for records that are not gravity records at all).
+pub fn text_of(t: &Result<TidalAnalysis, String>) -> String {
+    match t {
+        Ok(a) => a.text(),
+        Err(why) if !why.starts_with("not a gravity record") => {
+            format!("tidal analysis (wave groups): not run, {why}\n")
+        }
+        Err(_) => String::new(),
+    }
+}
+
+/// JSON for the discovery report (`"not_run"` with the reason when it was not run).
+pub fn json_of(t: &Result<TidalAnalysis, String>) -> serde_json::Value {
+    match t {
+        Ok(a) => serde_json::to_value(a).unwrap_or(serde_json::Value::Null),
+        Err(why) => serde_json::json!({ "not_run": why }),
     }
 }
 
@@ -737,7 +834,11 @@ impl TidalAnalysis {
             let _ = writeln!(
                 o,
                 "  pressure admittance = {:.3e} ± {:.1e} {}/hPa = {:.3} ± {:.3} nm/s²/hPa",
-                p.per_hpa.value, p.per_hpa.sigma, self.unit, p.nm_s2_per_hpa.value, p.nm_s2_per_hpa.sigma
+                p.per_hpa.value,
+                p.per_hpa.sigma,
+                self.unit,
+                p.nm_s2_per_hpa.value,
+                p.nm_s2_per_hpa.sigma
             );
         }
         let _ = writeln!(o, "  ({})", self.references);

@@ -20,7 +20,9 @@ fn slope(a: &[f64], b: &[f64]) -> f64 {
 }
 
 fn wave(doodson: [i8; 6]) -> Wave {
-    let w = CTE1973.iter().find(|w| w.degree == 2 && w.doodson == doodson);
+    let w = CTE1973
+        .iter()
+        .find(|w| w.degree == 2 && w.doodson == doodson);
     w.copied().unwrap_or(Wave::new(2, doodson, 0.0))
 }
 
@@ -40,7 +42,11 @@ fn speeds_of_the_main_constituents_match_the_published_ones() {
     ];
     for (d, l, want) in cases {
         let w = Wave::new(l, d, 1.0);
-        assert!((w.speed_deg_h() - want).abs() < 2e-6, "{d:?}: {}", w.speed_deg_h());
+        assert!(
+            (w.speed_deg_h() - want).abs() < 2e-6,
+            "{d:?}: {}",
+            w.speed_deg_h()
+        );
     }
     // The catalogue holds them with their classical sizes (Cartwright & Edden 1973): M2 is
     // the largest wave, K1 the largest diurnal one, O1 negative in this normalisation.
@@ -56,13 +62,18 @@ fn m2_at_the_equator_has_the_hand_computed_rigid_amplitude() {
     let w = wave([2, 0, 0, 0, 0, 0]);
     let r = GRS80_A_M;
     let n22 = sqrt(5.0 / (4.0 * core::f64::consts::PI) / 24.0);
-    let up = 2.0 * GM_EARTH_M3_S2 / (CATALOGUE_RADIUS_M * CATALOGUE_RADIUS_M) * w.amplitude_m
+    let up = 2.0 * GM_EARTH_M3_S2 / (CATALOGUE_RADIUS_M * CATALOGUE_RADIUS_M)
+        * w.amplitude_m
         * n22
         * 3.0
         * r
         / (CATALOGUE_RADIUS_M * CATALOGUE_RADIUS_M);
     let g = st.wave_gravity(&w);
-    assert!((g.amplitude_nm_s2 + up * 1e9).abs() < 1e-6, "{}", g.amplitude_nm_s2);
+    assert!(
+        (g.amplitude_nm_s2 + up * 1e9).abs() < 1e-6,
+        "{}",
+        g.amplitude_nm_s2
+    );
     // ≈ 75 µGal, the textbook M2 body tide at the equator before the δ factor.
     assert!((g.amplitude_nm_s2.abs() - 750.0).abs() < 10.0);
 }
@@ -87,7 +98,12 @@ fn catalogue_matches_the_ephemeris_tide() {
     // Two independent routes to the same elastic tide: Meeus' ephemeris with the direct
     // potential, and the CTE catalogue with Doodson arguments. Measured: 1.1, 1.0, 0.7 nm/s²
     // rms of ~650 nm/s² (0.15 %), slopes 0.9993–0.9998.
-    for (lat, lon, h) in [HANNOVER, (33.98, 116.79, 0.0), (0.0, 0.0, 0.0), (-70.0, 40.0, 0.0)] {
+    for (lat, lon, h) in [
+        HANNOVER,
+        (33.98, 116.79, 0.0),
+        (0.0, 0.0, 0.0),
+        (-70.0, 40.0, 0.0),
+    ] {
         let (d, m, s) = compare(lat, lon, h);
         assert!(d < 1.5 && m > 300.0, "{lat}: rms diff {d} of {m}");
         assert!((s - 1.0).abs() < 0.0015, "{lat}: slope {s}");
@@ -100,10 +116,23 @@ fn catalogue_bands_match_the_ephemeris_species() {
     // the split the synthetic tidal-analysis records are built from.
     let st = Station::new(33.98, 116.79, 0.0).unwrap();
     let t0 = UtcTime::new(2021, 6, 8, 0, 0, 0.0).unwrap().unix_seconds();
-    let bands: [(&str, fn(&Wave) -> bool, fn(&GravitySpecies) -> f64); 4] = [
-        ("long", |w| w.degree == 2 && w.order() == 0, |s| s.long_period_nm_s2),
-        ("diurnal", |w| w.degree == 2 && w.order() == 1, |s| s.diurnal_nm_s2),
-        ("semidiurnal", |w| w.degree == 2 && w.order() == 2, |s| s.semidiurnal_nm_s2),
+    type Band = (&'static str, fn(&Wave) -> bool, fn(&GravitySpecies) -> f64);
+    let bands: [Band; 4] = [
+        (
+            "long",
+            |w| w.degree == 2 && w.order() == 0,
+            |s| s.long_period_nm_s2,
+        ),
+        (
+            "diurnal",
+            |w| w.degree == 2 && w.order() == 1,
+            |s| s.diurnal_nm_s2,
+        ),
+        (
+            "semidiurnal",
+            |w| w.degree == 2 && w.order() == 2,
+            |s| s.semidiurnal_nm_s2,
+        ),
         ("degree 3", |w| w.degree == 3, |s| s.degree3_nm_s2),
     ];
     for (name, pick, part) in bands {
@@ -116,12 +145,17 @@ fn catalogue_bands_match_the_ephemeris_species() {
             e[i] = part(&sp);
             d[i] = st.harmonic_gravity_nm_s2(&waves, t) - e[i];
             let total = st.tide_at_unix_seconds(t).gravity_nm_s2;
-            let sum = sp.long_period_nm_s2 + sp.diurnal_nm_s2 + sp.semidiurnal_nm_s2
-                + sp.degree3_nm_s2;
+            let sum =
+                sp.long_period_nm_s2 + sp.diurnal_nm_s2 + sp.semidiurnal_nm_s2 + sp.degree3_nm_s2;
             assert!((sum - total).abs() < 1e-9);
         }
         // Long-period: the permanent tide is in both; the band is compared whole.
-        assert!(rms(&d) < 0.01 * rms(&e) + 0.3, "{name}: {} of {}", rms(&d), rms(&e));
+        assert!(
+            rms(&d) < 0.01 * rms(&e) + 0.3,
+            "{name}: {} of {}",
+            rms(&d),
+            rms(&e)
+        );
     }
 }
 
@@ -133,7 +167,9 @@ fn catalogue_tide_matches_eterna_at_hannover() {
     let st = Station::new(HANNOVER.0, HANNOVER.1, HANNOVER.2).unwrap();
     let dk1 = st.elastic_factors().delta_k1;
     for (hour, want) in [(0u8, -448.648), (1, -564.549)] {
-        let t = UtcTime::new(1990, 1, 1, hour, 0, 0.0).unwrap().unix_seconds();
+        let t = UtcTime::new(1990, 1, 1, hour, 0, 0.0)
+            .unwrap()
+            .unix_seconds();
         let got = st.harmonic_gravity_nm_s2(&CTE1973, t) / dk1;
         assert!((got - want).abs() < 1.5, "{hour}h: {got}");
     }
@@ -144,11 +180,14 @@ fn gravimetric_factor_follows_the_station_factors_and_the_fcn_resonance() {
     let st = Station::new(HANNOVER.0, HANNOVER.1, HANNOVER.2).unwrap();
     let f = st.elastic_factors();
     assert_eq!(st.gravimetric_factor(&wave([2, 0, 0, 0, 0, 0])), f.delta_22);
-    assert_eq!(st.gravimetric_factor(&wave([1, -1, 0, 0, 0, 0])), f.delta_21 + {
-        // O1's speed differs from the resonance reference by < 1e-6 °/h.
-        let w = wave([1, -1, 0, 0, 0, 0]).speed_deg_h();
-        DELTA_FCN * (w - OMEGA_O1_DEG_H) / (OMEGA_FCN_DEG_H - w)
-    });
+    assert_eq!(
+        st.gravimetric_factor(&wave([1, -1, 0, 0, 0, 0])),
+        f.delta_21 + {
+            // O1's speed differs from the resonance reference by < 1e-6 °/h.
+            let w = wave([1, -1, 0, 0, 0, 0]).speed_deg_h();
+            DELTA_FCN * (w - OMEGA_O1_DEG_H) / (OMEGA_FCN_DEG_H - w)
+        }
+    );
     // K1 from the resonance formula = the station's δ_K1 (docs/tide.md: 1.13168 at Hannover).
     let k1 = st.gravimetric_factor(&wave([1, 1, 0, 0, 0, 0]));
     assert!((k1 - 1.131_68).abs() < 2e-5, "{k1}");

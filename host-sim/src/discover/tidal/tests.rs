@@ -55,10 +55,8 @@ fn synthetic(days: f64, truth: &Truth, seed: u64) -> Dataset {
             + walk_hpa;
         // Spring drift: 0.7 mGal/day and a decaying transient, mGal.
         let drift_mgal = 5882.0 + 0.7 * day + 0.05 * (-day / 3.0).exp();
-        let g_nm = tide
-            + truth.admittance_nm_s2_per_hpa * (hpa - 1002.0)
-            + red
-            + white.sample(&mut rng);
+        let g_nm =
+            tide + truth.admittance_nm_s2_per_hpa * (hpa - 1002.0) + red + white.sample(&mut rng);
         // Quantised to 1 µGal = 0.001 mGal, as the gMetrology record.
         let mgal = ((drift_mgal + g_nm / NM_S2_PER_MGAL) * 1000.0).round() / 1000.0;
         seg.push(t_s.is_empty() || i == gap.1);
@@ -180,11 +178,21 @@ fn no_delay_gives_zero_phase_and_a_zero_delay() {
     let ds = synthetic(30.0, &truth, 11);
     let a = analyse(&ds, &ds.y, &[]).unwrap();
     let d = a.delay.delay_s;
-    assert!(d.value.abs() < 4.0 * d.sigma + 3.0, "{} ± {}", d.value, d.sigma);
+    assert!(
+        d.value.abs() < 4.0 * d.sigma + 3.0,
+        "{} ± {}",
+        d.value,
+        d.sigma
+    );
     let m2 = group(&a, "M2");
     assert!((m2.amplitude_factor_vs_elastic_model.value - 1.0).abs() < 0.004);
     let pa = a.pressure_admittance.as_ref().unwrap().nm_s2_per_hpa;
-    assert!(pa.value.abs() < 4.0 * pa.sigma, "{} ± {}", pa.value, pa.sigma);
+    assert!(
+        pa.value.abs() < 4.0 * pa.sigma,
+        "{} ± {}",
+        pa.value,
+        pa.sigma
+    );
 }
 
 #[test]
