@@ -17,6 +17,7 @@ pub mod noise;
 pub mod report;
 pub mod residual;
 pub mod select;
+pub mod tidal;
 
 use effects::{Context, Effect};
 use import::{Dataset, DatasetOptions, Format};
@@ -82,6 +83,8 @@ pub struct Discovery {
     /// Warnings about the input and the run (also in the selection's own `warnings`); printed
     /// first in the text output and listed in the JSON `warnings`.
     pub warnings: Vec<String>,
+    /// Wave-group tidal analysis of a gravity record, or why it was not run.
+    pub tidal: Result<tidal::TidalAnalysis, String>,
 }
 
 /// The shared series of the candidates.
@@ -119,6 +122,7 @@ pub fn discover(
     let trend = residual::trend(&ds, &sel.baseline_residual);
     let adev_before = residual::adev(&ds, &sel.baseline_residual);
     let adev_after = residual::adev(&ds, &sel.final_residual);
+    let tidal = tidal::for_discovery(&ds, &base.target, &base.columns, &ctx, &sel.accepted);
     Ok(Discovery {
         baseline_description: base.description.clone(),
         baseline_names: base.names.clone(),
@@ -133,6 +137,7 @@ pub fn discover(
         adev_after,
         warnings: ds.warnings.clone(),
         channel_noise: residual::channel_noise(&ds),
+        tidal,
         dataset: ds,
     })
 }
