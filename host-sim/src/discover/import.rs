@@ -626,7 +626,7 @@ pub fn dataset_from_log(log: &Log, opts: &DatasetOptions) -> Result<Dataset, Imp
     }
     let out_std = super::baseline::std(&ys);
     let out_mean = ys.iter().sum::<f64>() / ys.len() as f64;
-    if !(out_std > 1e-12 * out_mean.abs()) {
+    if out_std.is_nan() || out_std <= 1e-12 * out_mean.abs() {
         return Err(ImportError::Shape(format!(
             "the output {out_name} is constant ({out_mean:e}, standard deviation {out_std:e}): \
              there is nothing to discover"

@@ -296,6 +296,7 @@ impl NoiseModel {
     /// ln(f/w) and ln(q·dt/w) in [−30, 25] and the flicker slope β in
     /// [`FLICKER_SLOPE_RANGE`]: a start grid (or the given `start` models: the previous round's,
     /// an Allan fit), then Nelder–Mead; `max_evals` bounds the work.
+    #[allow(clippy::needless_range_loop)] // Nelder–Mead: indices over the D coordinates
     pub fn fit_ml(
         t_s: &[f64],
         idx: &[usize],
@@ -374,7 +375,7 @@ impl NoiseModel {
         };
         let to_p = |m: &NoiseModel| -> Option<P> {
             let w = m.white_var;
-            if !(w > 0.0) {
+            if w.is_nan() || w <= 0.0 {
                 return None;
             }
             let q = if m.rw_per_s > 0.0 {

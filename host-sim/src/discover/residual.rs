@@ -378,7 +378,7 @@ mod tests {
     fn channel_noise_is_the_reading_noise_not_the_slow_signal() {
         // A slow 0.5 °C sine plus an alternating ±0.01 °C reading error (σ = 0.01 °C).
         let n = 2000;
-        let t: Vec<f64> = (0..n).map(f64::from).collect();
+        let t: Vec<f64> = (0..n).map(|i| i as f64).collect();
         let v: Vec<f64> = t
             .iter()
             .enumerate()

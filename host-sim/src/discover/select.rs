@@ -867,7 +867,8 @@ fn joint_fit(
                 ((th / 1.5).max(gmin), (th * 1.5).min(gmax), 0.02 * th)
             }
         };
-        let best = if matches!(e, Effect::ThermalHysteresis) || !(hi > lo) || lo <= 0.0 {
+        let best = if matches!(e, Effect::ThermalHysteresis) || hi <= lo || hi.is_nan() || lo <= 0.0
+        {
             th
         } else {
             let x = golden(|lx| eval(lx.exp()), lo.ln(), hi.ln(), 16).exp();
@@ -1026,7 +1027,7 @@ fn implausible(
     let get = |k: &str| params.iter().find(|(n, _)| n == k).map(|(_, p)| p.value);
     match s.effect {
         Effect::TiltCoupling => get("gain")
-            .filter(|g| !(g.abs() <= TILT_GAIN_MAX))
+            .filter(|g| g.is_nan() || g.abs() > TILT_GAIN_MAX)
             .map(|g| {
                 format!(
                     "its gain {g:.3e} is not a tiltmeter gain error (plausible within \
