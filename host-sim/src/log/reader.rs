@@ -20,7 +20,8 @@
 //! What a field means (number, gap, text) is the caller's business: [`Row`] hands out the
 //! trimmed bytes or text of each field with the line they came from.
 
-use std::io::{BufRead, Cursor, Read};
+use std::collections::VecDeque;
+use std::io::{BufRead, Chain, Cursor, Read};
 
 /// The UTF-8 byte-order mark.
 const BOM: &[u8] = b"\xEF\xBB\xBF";
@@ -132,9 +133,30 @@ pub struct Records<R: Read> {
     meta: Vec<(String, String)>,
     header: Vec<String>,
     header_line: usize,
-    csv: csv::Reader<std::io::Chain<Cursor<Vec<u8>>, R>>,
+    csv: csv::Reader<NewlineOffsets<Chain<Cursor<Vec<u8>>, R>>>,
     record: csv::ByteRecord,
-    line: usize,
+    /// Newlines of the csv stream before the current record (the stream starts at the header).
+    newlines_before: usize,
+}
+
+/// Remembers the byte offsets of the newlines that pass through, so that a record's byte
+/// position gives its line exactly: csv's own line counter skips blank lines. Only the newlines
+/// read ahead of the current record are kept (a buffer's worth).
+struct NewlineOffsets<R> {
+    inner: R,
+    offset: u64,
+    pending: VecDeque<u64>,
+}
+
+impl<R: Read> Read for NewlineOffsets<R> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let n = self.inner.read(buf)?;
+        for (i, _) in buf[..n].iter().enumerate().filter(|(_, b)| **b == b'\n') {
+            self.pending.push_back(self.offset + i as u64);
+        }
+        self.offset += n as u64;
+        Ok(n)
+    }
 }
 
 /// One record and the line it starts on.
@@ -220,7 +242,11 @@ impl<R: BufRead> Records<R> {
             .has_headers(false)
             .flexible(true)
             .trim(csv::Trim::All)
-            .from_reader(Cursor::new(header_bytes).chain(r));
+            .from_reader(NewlineOffsets {
+                inner: Cursor::new(header_bytes).chain(r),
+                offset: 0,
+                pending: VecDeque::new(),
+            });
         let mut record = csv::ByteRecord::new();
         let csv_error = |e: csv::Error| ReadError::Csv {
             line: header_line,
@@ -254,7 +280,7 @@ impl<R: BufRead> Records<R> {
             header_line,
             csv,
             record,
-            line: header_line,
+            newlines_before: 0,
         })
     }
 
@@ -299,27 +325,37 @@ impl<R: BufRead> Records<R> {
         })
     }
 
+    /// The file line of the byte at `offset` of the csv stream.
+    fn line_at(&mut self, offset: u64) -> usize {
+        let pending = &mut self.csv.get_mut().pending;
+        while pending.front().is_some_and(|&nl| nl < offset) {
+            pending.pop_front();
+            self.newlines_before += 1;
+        }
+        self.header_line + self.newlines_before
+    }
+
     /// The next record, `None` at the end of the file.
     pub fn next_row(&mut self) -> Result<Option<Row<'_>>, ReadError> {
         loop {
-            let more = self
-                .csv
-                .read_byte_record(&mut self.record)
-                .map_err(|e| ReadError::Csv {
-                    line: self.header_line
-                        + e.position().map_or(self.line + 1, |p| p.line() as usize)
-                        - 1,
-                    reason: e.to_string(),
-                })?;
+            let read = self.csv.read_byte_record(&mut self.record);
+            let more = match read {
+                Ok(more) => more,
+                Err(e) => {
+                    let at = e.position().map_or(u64::MAX, |p| p.byte());
+                    return Err(ReadError::Csv {
+                        line: self.line_at(at),
+                        reason: e.to_string(),
+                    });
+                }
+            };
             if !more {
                 return Ok(None);
             }
-            // The csv stream starts at the header line.
-            self.line = self
-                .record
-                .position()
-                .map_or(self.line + 1, |p| self.header_line + p.line() as usize - 1);
-            let line = self.line;
+            // csv's record position counts skipped blank lines into the record; the reader's
+            // position just after it does not: the record's last byte is the one before.
+            let end = self.csv.position().byte();
+            let line = self.line_at(end.saturating_sub(1));
             if self.record.get(0).is_some_and(|f| f.starts_with(b"#")) {
                 return Err(ReadError::CommentAfterHeader { line });
             }
