@@ -16,12 +16,15 @@
 use core::cell::Cell;
 
 use crate::adc::AdcError;
+use crate::adc::AdcScale;
 use crate::compensation::ThermalCompensator;
 use crate::fixed::{
     from_f32, from_f64, mul_code, sqrt_f32, to_f32, to_f64, CODE_FACTOR_BITS, G_BITS, VOLT_BITS,
 };
+use crate::frontend::{
+    accel_scale, rtd_scale, tilt_scale, AD7124_FULL_SCALE, AD7124_MAX_CODE, ADS1262_HALF_SCALE,
+};
 use crate::model::CrossAxis;
-use crate::pipeline::{ACCEL_PGA_GAIN, ADS1262_VREF, TILT_PGA_GAIN};
 use crate::poly::{TempPoly, N_COEFFS};
 use crate::rtd::{CallendarVanDusen, RtdError};
 use crate::table::{CalibrationTable, TableError, TiltAxis};
@@ -29,13 +32,6 @@ use crate::units::{Celsius, RtdOhms, RAD_PER_ARCSEC};
 
 /// Unit roundoff of f32 (round to nearest): 2^-24.
 const U32: f64 = 1.0 / 16_777_216.0;
-/// 2^31: the ADS1262's half scale.
-const ADS1262_HALF_SCALE: f64 = 2_147_483_648.0;
-/// 2^24: the AD7124's full scale.
-const AD7124_FULL_SCALE: f64 = 16_777_216.0;
-/// Largest AD7124 code (24 bits, all ones): reads as saturated.
-const AD7124_MAX_CODE: u32 = 0x00FF_FFFF;
-
 /// The precision budget of the compensated a_i against an f64 reference.
 pub const BUDGET_G: f64 = 1e-9;
 /// The precision budget of the linearized output against an f64 reference (≈ 2.3e-9 g). Looser
@@ -285,8 +281,9 @@ pub(crate) enum RtdFault {
 impl PreparedRtd {
     fn new(table: &CalibrationTable) -> Self {
         let cvd = table.rtd.cvd;
-        let ohms_per_code = table.rtd.reference_resistor.0 / AD7124_FULL_SCALE / table.rtd.pga_gain
-            * table.rtd.adc_gain_correction;
+        let scale = rtd_scale(table);
+        let ohms_per_code = table.rtd.reference_resistor.0 / AD7124_FULL_SCALE / scale.pga_gain
+            * scale.gain_correction;
         let (r_min, r_max) = cvd.resistance_limits();
         let ohms = |code: u32| f64::from(code) * ohms_per_code;
         PreparedRtd {
@@ -360,10 +357,13 @@ struct Ads1262Linear {
 }
 
 impl Ads1262Linear {
-    fn new(pga_gain: f64, gain_correction: f64, offset_v: f64, unit_per_v: f64) -> Self {
+    /// The map of a front-end scale ([`crate::frontend`]), in `unit_per_v` units per volt.
+    fn new(scale: &AdcScale, unit_per_v: f64) -> Self {
         Ads1262Linear {
-            per_code: ADS1262_VREF.0 / ADS1262_HALF_SCALE / pga_gain * gain_correction * unit_per_v,
-            offset: offset_v * unit_per_v,
+            per_code: scale.vref.0 / ADS1262_HALF_SCALE / scale.pga_gain
+                * scale.gain_correction
+                * unit_per_v,
+            offset: scale.offset.0 * unit_per_v,
         }
     }
 }
@@ -395,12 +395,7 @@ struct PreparedTilt {
 impl PreparedTilt {
     fn new(table: &CalibrationTable) -> Self {
         let t = &table.tilt;
-        let lin = Ads1262Linear::new(
-            TILT_PGA_GAIN,
-            t.adc_gain_correction,
-            t.adc_offset.0,
-            t.scale_arcsec_per_v,
-        );
+        let lin = Ads1262Linear::new(&tilt_scale(table), t.scale_arcsec_per_v);
         // φ − φ0 = code·k − offset − φ0 = k·(code − (offset + φ0)/k).
         let reference_code_f64 = (lin.offset + t.reference.0) / lin.per_code;
         let reference_code = libm::round(reference_code_f64).clamp(-4e18, 4e18) as i64;
@@ -515,12 +510,7 @@ impl PreparedCalibration {
         table.validate()?;
         let thermal = table.thermal;
         let cross = table.orientation.cross;
-        let accel = Ads1262Linear::new(
-            ACCEL_PGA_GAIN,
-            table.accel.adc_gain_correction,
-            table.accel.adc_offset.0,
-            1.0,
-        );
+        let accel = Ads1262Linear::new(&accel_scale(Some(table)), 1.0);
         let tilt = PreparedTilt::new(table);
         let rtd = PreparedRtd::new(table);
         let (fast, bounds) = FastThermal::new(&thermal, cross, &rtd, accel);

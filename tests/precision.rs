@@ -276,8 +276,7 @@ mod firmware_path {
             f.output_v,
             e_ref
         );
-        let ohms_ref = table
-            .rtd_adc_scale()
+        let ohms_ref = accomp::frontend::rtd_scale(&table)
             .ratiometric_ohms(raw.rtd, table.rtd.reference_resistor)
             .unwrap()
             .0;
