@@ -492,6 +492,47 @@ mod tests {
         assert!(f.temperature_c.is_nan() && f.a_i_exact_g.is_nan() && f.tilt_arcsec.is_nan());
     }
 
+    /// Every f64 of a frame as bits (NaN compares equal to itself), plus seq and status.
+    fn frame_bits(f: &Frame) -> [u64; 8] {
+        [
+            f.output_v.to_bits(),
+            f.temperature_c.to_bits(),
+            f.rtd_ohms.to_bits(),
+            f.tilt_arcsec.to_bits(),
+            f.a_i_exact_g.to_bits(),
+            f.output_linearized_v.to_bits(),
+            u64::from(f.status.0),
+            u64::from(f.seq),
+        ]
+    }
+
+    #[test]
+    fn a_cached_temperature_gives_the_same_bits_as_a_fresh_preparation() {
+        let mut t = paper_table();
+        // ±250" at full scale, so that a tilt beyond the f32 range (103") is a valid code.
+        t.tilt.scale_arcsec_per_v = 100.0;
+        let warm = crate::prepared::PreparedCalibration::new(&t).unwrap();
+        let cases = [
+            (1.3, 45.0, 2.0),
+            (-0.7, 45.0, 1.0),
+            (0.9, 52.5, -3.0),
+            (1.1, 45.0, 0.5),
+            (0.2, 70.0, 0.0),
+            (1.25, 20.0, 90.0),
+            (0.2, 70.0, 200.0),
+        ];
+        // Twice through: hits (same code as the previous sample) and misses alternate.
+        for (i, &(e, c, tilt)) in cases.iter().chain(cases.iter()).enumerate() {
+            let raw = raw_from_physical(&t, Volts(e), Celsius(c), TiltArcsec(tilt)).unwrap();
+            let cold = crate::prepared::PreparedCalibration::new(&t).unwrap();
+            let from_warm = process_prepared(i as u32, 0, &raw, Some(&warm));
+            let from_cold = process_prepared(i as u32, 0, &raw, Some(&cold));
+            assert_eq!(frame_bits(&from_warm), frame_bits(&from_cold), "case {i}");
+            assert!(from_warm.a_i_exact_g.is_finite(), "case {i}");
+            assert_eq!(warm.cached_rtd_code(), Some(raw.rtd));
+        }
+    }
+
     #[test]
     fn every_status_bit_has_a_distinct_name() {
         let mut all = 0u16;
