@@ -62,7 +62,7 @@ const NULL_DRAWS: usize = 40;
 
 #[test]
 fn independently_generated_null_logs_with_noisy_channels_accept_nothing() {
-    let mut rng = synth::rng(0x4E55_11);
+    let mut rng = synth::rng(0x004E_5511);
     let mut false_discoveries = 0;
     for i in 0..NULL_DRAWS {
         let (acc, what) = accepted_on_null(rng.random::<u64>());

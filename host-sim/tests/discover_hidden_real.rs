@@ -7,8 +7,8 @@
 //! barometric pressure. Its residual is cut into 4-day windows. A window gets either nothing
 //! (null) or one injected effect — a step, a periodic line (non-tidal period), a warm-up
 //! transient — sized by its matched-filter SNR against that window's own noise, measured by
-//! an AR(30) prediction-error filter fitted to the window (Levinson–Durbin; not the detector's
-//! noise model). The tool runs blind on `gravity_mgal` (no site, so no tide candidate).
+//! an AR(12) prediction-error filter fitted to the window's 5-min means (Levinson–Durbin; not
+//! the detector's noise model). The tool runs blind on `gravity_mgal` (no site, so no tide candidate).
 //!
 //! Reported: detection rate against SNR with Wilson 95 % intervals (docs/discovery.md), and
 //! the false discoveries on the uninjected windows with their exact binomial bound.
@@ -171,17 +171,29 @@ fn ar_whitener(x: &[f64], p: usize) -> impl Fn(&[f64]) -> Vec<f64> {
     }
 }
 
-/// Matched-filter SNR of `shape` after the offset and drift, in the AR-whitened domain.
-fn snr(shape: &[f64], whiten: &impl Fn(&[f64]) -> Vec<f64>) -> f64 {
-    let n = shape.len();
+/// Rows per bin of the SNR yardstick (5 min): the record repeats readings (the instrument
+/// updates more slowly than its 1-min log), which an AR fitted to the raw rows would predict
+/// perfectly and so credit a step with far more SNR than any detector of the rows can use.
+const SNR_BIN: usize = 5;
+
+fn bin_means(x: &[f64]) -> Vec<f64> {
+    x.chunks(SNR_BIN)
+        .map(|c| c.iter().sum::<f64>() / c.len() as f64)
+        .collect()
+}
+
+/// Matched-filter SNR of `shape` against the noise of `window` (both raw rows): 5-min means,
+/// AR(12) prediction-error whitening fitted to the window, after offset and drift.
+fn snr(shape: &[f64], window: &[f64]) -> f64 {
+    let whiten = ar_whitener(&bin_means(window), 12);
+    let s = bin_means(shape);
+    let n = s.len();
     let nuisance = [
         vec![1.0; n],
         (0..n).map(|i| i as f64 / n as f64).collect::<Vec<_>>(),
     ];
-    let mut cols: Vec<Vec<f64>> = nuisance.iter().map(|c| whiten(c)).collect();
-    cols.push(whiten(shape));
-    let s = cols.pop().expect("shape");
-    let r = ls_residual(&cols, &s);
+    let cols: Vec<Vec<f64>> = nuisance.iter().map(|c| whiten(c)).collect();
+    let r = ls_residual(&cols, &whiten(&s));
     r.iter().map(|v| v * v).sum::<f64>().sqrt()
 }
 
@@ -269,8 +281,13 @@ fn effects_injected_into_the_real_gravimeter_residual_are_found_by_snr() {
         let mut hits = 0;
         for j in 0..PER_BAND {
             let w = wins[rng.random_range(0..wins.len())].clone();
-            let t = &res.t_s[w.clone()];
-            let (t0, span) = (t[0], t[t.len() - 1] - t[0]);
+            // Window time from its first row: the tool's `time_s` is on this clock.
+            let t_rel: Vec<f64> = res.t_s[w.clone()]
+                .iter()
+                .map(|x| x - res.t_s[w.start])
+                .collect();
+            let t = &t_rel[..];
+            let (t0, span) = (0.0, t[t.len() - 1]);
             let inj = match j % 3 {
                 0 => Injected::Step {
                     at: t0 + rng.random_range(0.2..0.8) * span,
@@ -285,11 +302,10 @@ fn effects_injected_into_the_real_gravimeter_residual_are_found_by_snr() {
                 },
             };
             let x = &res.r_mgal[w.clone()];
-            let whiten = ar_whitener(x, 30);
             let unit = inj.unit(t);
             let target = rng.random_range(lo..hi);
             let sign = if rng.random::<bool>() { 1.0 } else { -1.0 };
-            let size = sign * target / snr(&unit, &whiten);
+            let size = sign * target / snr(&unit, x);
             let y: Vec<f64> = x.iter().zip(&unit).map(|(a, b)| a + size * b).collect();
             let d = run_window(t, y);
             let ok = inj.found(&d, size);

@@ -50,7 +50,7 @@ pub fn play(u: &[f64], r: f64) -> Vec<f64> {
 
 /// The branch column (T − p_r[T])/r ∈ [−1, 1]: +1 on a heating branch, −1 on a cooling branch.
 pub fn branch(temp_c: &[f64], r_c: f64) -> Vec<f64> {
-    if !(r_c > 0.0) || !r_c.is_finite() {
+    if r_c.is_nan() || r_c <= 0.0 || r_c.is_infinite() {
         return vec![0.0; temp_c.len()];
     }
     play(temp_c, r_c)
@@ -122,11 +122,12 @@ pub fn nnls(cols: &[Vec<f64>], y: &[f64]) -> Vec<f64> {
             if d.abs() < 1e-300 {
                 continue;
             }
-            for r in 0..m {
+            let pivot_row = a[c].clone();
+            for (r, row) in a.iter_mut().enumerate() {
                 if r != c {
-                    let f = a[r][c] / d;
-                    for cc in c..=m {
-                        a[r][cc] -= f * a[c][cc];
+                    let f = row[c] / d;
+                    for (x, p) in row.iter_mut().zip(&pivot_row).skip(c) {
+                        *x -= f * p;
                     }
                 }
             }
