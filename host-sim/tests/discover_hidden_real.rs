@@ -26,21 +26,20 @@ use std::path::PathBuf;
 
 const FILE: &str = "gmetrology_relative_gravimeter_2021-06-08_51d.tsf";
 
-/// The record: in the repository's data/measured/ when it is there, else the developers'
-/// shared copy. Missing: the test fails loudly (it did not run).
+/// The record, shipped in the repository's data/measured/ (MIT licence). Missing: the test
+/// fails loudly (it did not run).
 fn record() -> PathBuf {
-    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
-    let candidates = [
-        root.join("../data/measured").join(FILE),
-        root.join("../../shared/data/measured").join(FILE),
-    ];
-    for c in &candidates {
-        if c.exists() {
-            return c.clone();
-        }
+    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../data/measured")
+        .join(FILE);
+    if !p.exists() {
+        eprintln!(
+            "\n!!!!!!!! REAL-RESIDUAL TEST DID NOT RUN: {} is missing !!!!!!!!\n",
+            p.display()
+        );
+        panic!("measured record {} missing", p.display());
     }
-    eprintln!("\n!!!!!!!! REAL-RESIDUAL TEST DID NOT RUN: {FILE} is missing !!!!!!!!\n");
-    panic!("measured record {FILE} missing: {candidates:?}");
+    p
 }
 
 /// Solves the least squares y ≈ Σ β_j x_j by modified Gram–Schmidt; returns the residual.
