@@ -21,6 +21,7 @@ pub mod report;
 pub mod residual;
 pub mod select;
 pub mod shape;
+pub mod tidal;
 
 use effects::{Context, Effect};
 use import::{Dataset, DatasetOptions, Format};
@@ -83,6 +84,8 @@ pub struct Discovery {
     pub adev_after: Vec<(f64, f64)>,
     /// Shape checks of the accepted effects (a poor fit is said, see `shape`).
     pub shape_checks: Vec<shape::ShapeCheck>,
+    /// Wave-group tidal analysis of a gravity record, or why it was not run.
+    pub tidal: Result<tidal::TidalAnalysis, String>,
 }
 
 /// The shared series of the candidates.
@@ -132,6 +135,7 @@ pub fn discover(
         &sel.accepted,
         &final_noise,
     );
+    let tidal = tidal::for_discovery(&ds, &base.target, &base.columns, &ctx, &sel.accepted);
     Ok(Discovery {
         shape_checks,
         baseline_description: base.description.clone(),
@@ -145,6 +149,7 @@ pub fn discover(
         trend,
         adev_before,
         adev_after,
+        tidal,
         dataset: ds,
     })
 }
