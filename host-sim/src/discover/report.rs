@@ -95,6 +95,7 @@ pub fn json(d: &Discovery) -> Value {
         })),
         "refused": s.refused.iter().map(|(n, w)| json!({"name": n, "why": w})).collect::<Vec<_>>(),
         "forward_splits": super::select::FORWARD_SPLITS,
+        "shape_checks": d.shape_checks,
         "final": {
             "residual_std": s.final_std,
             "residual_std_out_of_sample": s.final_cv.raw,
@@ -237,6 +238,21 @@ pub fn text(d: &Discovery) -> String {
     }
     for (n, why) in &s.refused {
         let _ = writeln!(o, "  refused: {n}: {why}");
+    }
+    for c in &d.shape_checks {
+        let _ = writeln!(
+            o,
+            "  shape check {}: a second component at {:.5e} improves χ² by {:.1} (a new effect is charged {:.1}){}",
+            c.effect,
+            c.second_theta,
+            c.delta_chi2,
+            c.threshold,
+            if c.poor {
+                " — POOR FIT: the catalogue shape does not describe the data; the name is the closest cause"
+            } else {
+                ": shape adequate"
+            }
+        );
     }
     let rest: Vec<String> = s
         .last_round
