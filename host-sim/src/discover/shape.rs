@@ -159,6 +159,7 @@ mod tests {
             site: None,
             dt_s: 10.0,
             notes: Vec::new(),
+            warnings: Vec::new(),
         }
     }
 
@@ -180,11 +181,14 @@ mod tests {
                 sigma: f64::NAN,
             },
             params: Vec::new(),
+            params_at_acceptance: Vec::new(),
             delta_bic: -100.0,
             std_before: 1.0,
             std_after: 1.0,
             cv_before: cv,
             cv_after: cv,
+            forward_before: cv,
+            forward_after: cv,
         };
         let c = check(
             &ds,
