@@ -6,6 +6,7 @@
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
 
+pub mod acquisition;
 pub mod adc;
 pub mod compensation;
 pub mod drivers;
