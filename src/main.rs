@@ -290,6 +290,17 @@ mod app {
             if let Some(msg) = reply {
                 send(cx.local.tx, &msg);
             }
+            // Erase ahead the slot the next upload will write, after the answer is out and
+            // only when no request is waiting. On the STM32F405 this stalls the CPU for the
+            // sector erase (single bank, RM0090 §3.5; docs/storage.md): it happens right after
+            // a change of table or at boot, never during an upload.
+            if service.erase_pending() && inbound.is_empty() {
+                match service.erase_ahead() {
+                    Ok(true) => defmt::info!("spare calibration slot erased ahead"),
+                    Ok(false) => {}
+                    Err(e) => defmt::warn!("erase ahead failed: code {}", e.code),
+                }
+            }
         }
     }
 

@@ -337,10 +337,13 @@ pub fn process_prepared(
         status.set(Status::TILT_INVALID);
     } else {
         match table.tilt_arcsec(raw.tilt) {
-            Ok(v) => {
+            Ok(v) if v.is_finite() => {
                 frame.tilt_arcsec = v;
                 tilt_code = Some(raw.tilt);
             }
+            // A non-finite tilt (an absurd table the validator should have refused) is invalid,
+            // never a silent NaN next to status OK.
+            Ok(_) => status.set(Status::TILT_INVALID),
             Err(e) => {
                 adc_fault(e, &mut status);
                 status.set(Status::TILT_INVALID);
@@ -348,6 +351,17 @@ pub fn process_prepared(
         }
     }
 
+    // Same rule for E and T: a non-finite value is flagged invalid and stays NaN.
+    if !frame.output_v.is_finite() && !status.has(Status::OUTPUT_INVALID) {
+        frame.output_v = f64::NAN;
+        status.set(Status::OUTPUT_INVALID);
+    }
+    if !frame.temperature_c.is_finite()
+        && !status.has(Status::RTD_OPEN | Status::RTD_SHORT | Status::RTD_INVALID)
+    {
+        frame.temperature_c = f64::NAN;
+        status.set(Status::RTD_INVALID);
+    }
     let (e, t) = (frame.output_v, frame.temperature_c);
     if e.is_nan() || t.is_nan() {
         // Already flagged above; the compensated values stay NaN.
@@ -355,6 +369,9 @@ pub fn process_prepared(
         return frame;
     }
     match table.compensate(e, t, tilt_code) {
+        Ok((a_i, lin, _)) if !(a_i.is_finite() && lin.is_finite()) => {
+            status.set(Status::COMPENSATION_FAILED)
+        }
         Ok((a_i, lin, clamped)) => {
             frame.a_i_exact_g = a_i;
             frame.output_linearized_v = lin;

@@ -17,7 +17,7 @@ use crate::pipeline::{Frame, RawSample};
 use crate::table::{Coefficient, Field, TableError};
 
 /// Protocol version reported by Info; bumped on any incompatible message change.
-pub const PROTOCOL_VERSION: u16 = 2;
+pub const PROTOCOL_VERSION: u16 = 3;
 /// Largest data chunk of an upload or read-back.
 pub const CHUNK_LEN: usize = 64;
 /// Largest postcard message body (before CRC and COBS).
@@ -53,22 +53,33 @@ pub enum Request {
     Ping,
     /// Firmware version, board, tables, uptime, counters.
     Info,
-    /// Start an upload of `total_len` bytes whose CRC-32 (ISO-HDLC, as the table's) is `crc32`.
+    /// Start upload `upload_id` of `total_len` bytes. `body_crc32` is the CRC-32/ISO-HDLC of
+    /// the upload without its last four bytes: for a table, its own stored CRC-32, i.e. its id.
+    /// (A CRC over a whole table is the same constant for every valid table — the CRC residue —
+    /// and would identify nothing.)
     UploadBegin {
+        /// Chosen by the host, different for each upload; chunks and commit must repeat it.
+        upload_id: u32,
         /// Bytes that will follow in chunks.
         total_len: u32,
-        /// CRC-32 of the whole upload, checked before decoding.
-        crc32: u32,
+        /// CRC-32 of all bytes but the last four, checked before decoding.
+        body_crc32: u32,
     },
-    /// The next chunk of the upload; `offset` must equal the bytes received so far.
+    /// The next chunk of upload `upload_id`; `offset` must equal the bytes received so far.
     UploadChunk {
+        /// The id given in UploadBegin.
+        upload_id: u32,
         /// Byte offset of `data` in the upload.
         offset: u32,
         /// At most [`CHUNK_LEN`] bytes.
         data: Vec<u8, CHUNK_LEN>,
     },
-    /// Validate the complete upload and make it the active table (the old one becomes previous).
-    UploadCommit,
+    /// Validate upload `upload_id` and make it the active table (the old one becomes
+    /// previous). A table identical to the active one is a no-op that keeps the previous one.
+    UploadCommit {
+        /// The id given in UploadBegin.
+        upload_id: u32,
+    },
     /// Read the active table's encoding from `offset` (answered with a TableChunk).
     ReadTable {
         /// Byte offset into the encoded table.
@@ -103,6 +114,12 @@ pub enum Request {
         /// How many times, 1..=MAX_BENCH_COUNT.
         count: u32,
     },
+}
+
+/// The checksum UploadBegin carries for `bytes`: CRC-32/ISO-HDLC of all but the last four
+/// bytes (for a calibration table: its stored CRC-32, which is its id).
+pub fn upload_body_crc32(bytes: &[u8]) -> u32 {
+    crate::table::CRC32.checksum(bytes.get(..bytes.len().saturating_sub(4)).unwrap_or(&[]))
 }
 
 /// Largest Bench count (keeps the device answering within a few seconds on the board).
@@ -270,6 +287,9 @@ pub enum ErrorCode {
     UploadIncomplete = 13,
     /// Bytes received do not match UploadBegin's CRC-32. Detail: computed CRC.
     UploadCrcMismatch = 14,
+    /// Chunk or commit of an upload other than the one in progress (a later UploadBegin
+    /// replaced it). Detail: the id of the upload in progress.
+    UploadIdMismatch = 15,
     /// Table: wrong magic. Detail: 0.
     TableBadMagic = 20,
     /// Table: unsupported format version. Detail: version found.
@@ -300,6 +320,8 @@ pub enum ErrorCode {
     TableTiltAxis = 33,
     /// Table: reserved header field not zero. Detail: its value.
     TableReserved = 34,
+    /// Table: a finite value outside its physical bounds. Detail: field code.
+    TableOutOfBounds = 35,
     /// ReadTable with no active table. Detail: 0.
     NoTable = 40,
     /// ReadTable offset beyond the table. Detail: table length.
@@ -329,7 +351,7 @@ pub enum ErrorCode {
 
 impl ErrorCode {
     /// Every code, for documentation and exhaustive tests.
-    pub const ALL: [ErrorCode; 35] = [
+    pub const ALL: [ErrorCode; 37] = [
         ErrorCode::Malformed,
         ErrorCode::FrameCrc,
         ErrorCode::FrameTooLong,
@@ -339,6 +361,7 @@ impl ErrorCode {
         ErrorCode::UploadTooLong,
         ErrorCode::UploadIncomplete,
         ErrorCode::UploadCrcMismatch,
+        ErrorCode::UploadIdMismatch,
         ErrorCode::TableBadMagic,
         ErrorCode::TableUnsupportedVersion,
         ErrorCode::TableBadLength,
@@ -354,6 +377,7 @@ impl ErrorCode {
         ErrorCode::TableDate,
         ErrorCode::TableTiltAxis,
         ErrorCode::TableReserved,
+        ErrorCode::TableOutOfBounds,
         ErrorCode::NoTable,
         ErrorCode::OffsetOutOfRange,
         ErrorCode::NoPreviousTable,
@@ -425,6 +449,7 @@ impl From<TableError> for ErrorReply {
             TableError::Date => C::TableDate.reply(0),
             TableError::TiltAxis => C::TableTiltAxis.reply(0),
             TableError::Reserved(v) => C::TableReserved.reply(u32::from(v)),
+            TableError::OutOfBounds(f) => C::TableOutOfBounds.reply(field_code(f)),
         }
     }
 }
@@ -717,6 +742,7 @@ mod tests {
             HostFrame {
                 id: u32::MAX,
                 request: Request::UploadChunk {
+                    upload_id: u32::MAX,
                     offset: 384,
                     data: Vec::from_slice(&[0u8; CHUNK_LEN]).unwrap(),
                 },

@@ -4,30 +4,37 @@
 //! (upload sequencing, validation before activation, rollback, error codes) is unit-tested on the
 //! host and is the same code that runs on the board.
 //!
-//! Tables persist in a [`CalibrationStore`] over the board's NOR flash (internal sectors 10–11
+//! Tables persist in a [`CalibrationStore`] over the board's NOR flash (internal sectors 9–11
 //! on the front-end, a [`crate::storage::RamFlash`] on QEMU): a table becomes active in RAM only
-//! after the store has committed it, and boot restores the newest valid slot (and the older one
-//! as the rollback table). The RAM copies are what the pipeline uses; flash is touched only by
-//! upload, commit, activate and rollback.
+//! after the store has committed it, and boot restores the newest valid slot (and the newest
+//! one with another table as the rollback table). The RAM copies are what the pipeline uses;
+//! flash is touched only by commit, activate, rollback and [`Service::erase_ahead`].
+//!
+//! What the user expects of load/activate/rollback (tested exhaustively against a reference
+//! model): loading the active table again changes nothing; any change of the active table
+//! (load of another table, activate of the previous one, rollback) makes the table active
+//! before it the rollback table; rollback and activate swap back; all of it survives a reboot.
 
 use crate::pipeline::{self, RawSample};
 use crate::prepared::PreparedCalibration;
 use crate::protocol::{
-    decode_message, peek_request_id, Board, BootReport, DeviceInfo, DeviceMessage, ErrorCode,
-    ErrorReply, FrameError, HostFrame, Request, Response, CHUNK_LEN, MAX_BENCH_COUNT, MAX_RATE_HZ,
-    PROTOCOL_VERSION, SET_RATES_SPS,
+    decode_message, peek_request_id, upload_body_crc32, Board, BootReport, DeviceInfo,
+    DeviceMessage, ErrorCode, ErrorReply, FrameError, HostFrame, Request, Response, CHUNK_LEN,
+    MAX_BENCH_COUNT, MAX_RATE_HZ, PROTOCOL_VERSION, SET_RATES_SPS,
 };
-use crate::storage::{CalibrationStore, Slot, SlotLayout, SlotState, StorageError, ValidSlots};
-use crate::table::{CalibrationTable, CRC32, ENCODED_LEN};
+use crate::storage::{CalibrationStore, SlotLayout, StorageError, ValidSlots};
+use crate::table::{CalibrationTable, ENCODED_LEN};
 use embedded_storage::nor_flash::{NorFlash, NorFlashError, NorFlashErrorKind};
 
 /// Default acquisition rate in samples per second.
 pub const DEFAULT_RATE_HZ: u32 = 10;
 
+#[derive(Clone)]
 struct Upload {
     in_progress: bool,
+    upload_id: u32,
     total_len: usize,
-    crc32: u32,
+    body_crc32: u32,
     received: usize,
     buf: [u8; ENCODED_LEN],
 }
@@ -51,6 +58,8 @@ pub enum BootTable {
 }
 
 /// Protocol state of the device: tables, upload in progress, counters, and the flash store.
+/// Clone (with a cloneable flash) lets tests branch a device's state.
+#[derive(Clone)]
 pub struct Service<F> {
     board: Board,
     active: Option<CalibrationTable>,
@@ -66,6 +75,8 @@ pub struct Service<F> {
     store: Option<CalibrationStore<F>>,
     boot: BootTable,
     boot_report: BootReport,
+    /// The spare slot may not be erased yet: [`Service::erase_ahead`] has work to do.
+    erase_pending: bool,
 }
 
 /// The protocol reply for a storage failure. Generic over the driver's error, which the wire
@@ -78,10 +89,7 @@ pub fn storage_reply<E: NorFlashError>(e: StorageError<E>) -> ErrorReply {
             _ => 2,
         }),
         StorageError::Table(t) => t.into(),
-        StorageError::Verify(slot) => ErrorCode::FlashVerify.reply(match slot {
-            Slot::A => 0,
-            Slot::B => 1,
-        }),
+        StorageError::Verify(slot) => ErrorCode::FlashVerify.reply(slot.index() as u32),
         StorageError::NoValidSlot | StorageError::NoPreviousSlot => {
             ErrorCode::NoPreviousTable.reply(0)
         }
@@ -91,8 +99,8 @@ pub fn storage_reply<E: NorFlashError>(e: StorageError<E>) -> ErrorReply {
 
 impl<F: NorFlash> Service<F> {
     /// Opens the calibration store on `flash` and restores the newest valid table (active) and
-    /// the other valid slot's table, when it differs (previous, for rollback). Never fails: a
-    /// device without a usable store still answers and streams (flagged NO_CALIBRATION).
+    /// the newest valid slot with another table (previous, for rollback). Never fails: a device
+    /// without a usable store still answers and streams (flagged NO_CALIBRATION).
     pub fn new(board: Board, flash: F, layout: SlotLayout) -> Self {
         let mut s = Service {
             board,
@@ -101,8 +109,9 @@ impl<F: NorFlash> Service<F> {
             prepared: None,
             upload: Upload {
                 in_progress: false,
+                upload_id: 0,
                 total_len: 0,
-                crc32: 0,
+                body_crc32: 0,
                 received: 0,
                 buf: [0; ENCODED_LEN],
             },
@@ -113,10 +122,13 @@ impl<F: NorFlash> Service<F> {
             store: None,
             boot: BootTable::StorageFault,
             boot_report: BootReport::default(),
+            erase_pending: false,
         };
         if let Ok(mut store) = CalibrationStore::new(flash, layout) {
             s.boot = s.restore(&mut store).unwrap_or(BootTable::StorageFault);
             s.store = Some(store);
+            // An erase is remembered in RAM only: after a boot the spare is erased again.
+            s.erase_pending = true;
         }
         s
     }
@@ -125,15 +137,14 @@ impl<F: NorFlash> Service<F> {
         &mut self,
         store: &mut CalibrationStore<F>,
     ) -> Result<BootTable, StorageError<F::Error>> {
-        let ValidSlots { newest, older } = store.valid_slots()?;
+        let ValidSlots { newest, previous } = store.valid_slots()?;
         let Some(newest) = newest else {
             return Ok(BootTable::Empty);
         };
         self.active = Some(store.load_slot(newest.slot)?);
         self.prepare_active();
-        // After a rollback both slots hold the same table: nothing to roll back to then.
-        if let Some(older) = older.filter(|o| o.table_id != newest.table_id) {
-            self.previous = store.load_slot(older.slot).ok();
+        if let Some(previous) = previous {
+            self.previous = store.load_slot(previous.slot).ok();
         }
         Ok(BootTable::Restored {
             sequence: newest.sequence,
@@ -239,24 +250,35 @@ impl<F: NorFlash> Service<F> {
         match request {
             Request::Ping => Ok(Response::Pong),
             Request::Info => Ok(Response::Info(self.info(now_us))),
-            Request::UploadBegin { total_len, crc32 } => {
+            Request::UploadBegin {
+                upload_id,
+                total_len,
+                body_crc32,
+            } => {
                 let total_len = total_len as usize;
                 // A new Begin always restarts: a host that lost track can start over.
                 self.upload.in_progress = false;
                 if total_len > ENCODED_LEN {
                     return Err(ErrorCode::UploadTooLong.reply(ENCODED_LEN as u32));
                 }
-                self.prepare_flash()?;
                 self.upload.in_progress = true;
+                self.upload.upload_id = upload_id;
                 self.upload.total_len = total_len;
-                self.upload.crc32 = crc32;
+                self.upload.body_crc32 = body_crc32;
                 self.upload.received = 0;
                 Ok(Response::Ok)
             }
-            Request::UploadChunk { offset, data } => {
+            Request::UploadChunk {
+                upload_id,
+                offset,
+                data,
+            } => {
                 let u = &mut self.upload;
                 if !u.in_progress {
                     return Err(ErrorCode::NoUpload.reply(0));
+                }
+                if upload_id != u.upload_id {
+                    return Err(ErrorCode::UploadIdMismatch.reply(u.upload_id));
                 }
                 if offset as usize != u.received {
                     return Err(ErrorCode::ChunkOutOfOrder.reply(u.received as u32));
@@ -272,7 +294,7 @@ impl<F: NorFlash> Service<F> {
                 u.received = end;
                 Ok(Response::Ok)
             }
-            Request::UploadCommit => self.commit(),
+            Request::UploadCommit { upload_id } => self.commit(upload_id),
             Request::ReadTable { offset } => {
                 let table = self.active.as_ref().ok_or(ErrorCode::NoTable.reply(0))?;
                 // Re-encoding is deterministic (decode → encode is bit-exact), so the device
@@ -347,30 +369,40 @@ impl<F: NorFlash> Service<F> {
         })
     }
 
-    /// Erases the slot the commit will write while the upload is under way, but only when the
-    /// erase loses nothing: that slot is blank, half-written, or holds the active table again
-    /// (after a rollback). When it holds the rollback table, the erase waits for the commit, so
-    /// an upload that is refused leaves both slots as they were.
-    fn prepare_flash(&mut self) -> Result<(), ErrorReply> {
-        let Some(store) = self.store.as_mut() else {
-            return Ok(());
-        };
-        let newest = store.valid_slots().map_err(storage_reply)?.newest;
-        let target = newest.map_or(Slot::A, |n| n.slot.other());
-        let keeps_something = match store.slot_state(target).map_err(storage_reply)? {
-            SlotState::Valid(info) => Some(info.table_id) != newest.map(|n| n.table_id),
-            SlotState::Blank | SlotState::Invalid(_) => false,
-        };
-        if !keeps_something {
-            store.prepare_commit().map_err(storage_reply)?;
-        }
-        Ok(())
+    /// Whether [`Self::erase_ahead`] has work to do.
+    pub fn erase_pending(&self) -> bool {
+        self.erase_pending
     }
 
-    fn commit(&mut self) -> Result<Response, ErrorReply> {
+    /// Erases the slot the next upload (or rollback) will write, so that the upload itself
+    /// only programs. The firmware calls it after it has sent the answer to a request that
+    /// changed the active table, and once after boot. The spare holds neither the active nor
+    /// the rollback table, so this loses nothing and is power-fail safe (docs/storage.md).
+    /// Returns Ok(true) when an erase ran. A failure is reported for logging only: the next
+    /// commit erases the slot itself.
+    pub fn erase_ahead(&mut self) -> Result<bool, ErrorReply> {
+        if !self.erase_pending {
+            return Ok(false);
+        }
+        self.erase_pending = false;
+        let Some(store) = self.store.as_mut() else {
+            return Ok(false);
+        };
+        if store.spare_erased().map_err(storage_reply)? {
+            return Ok(false);
+        }
+        store.prepare_commit().map_err(storage_reply)?;
+        Ok(true)
+    }
+
+    fn commit(&mut self, upload_id: u32) -> Result<Response, ErrorReply> {
         let u = &mut self.upload;
         if !u.in_progress {
             return Err(ErrorCode::NoUpload.reply(0));
+        }
+        if upload_id != u.upload_id {
+            // Not this upload's commit: the upload in progress stays open.
+            return Err(ErrorCode::UploadIdMismatch.reply(u.upload_id));
         }
         // Whatever happens next, this upload is finished: a retry starts with UploadBegin.
         u.in_progress = false;
@@ -378,18 +410,29 @@ impl<F: NorFlash> Service<F> {
             return Err(ErrorCode::UploadIncomplete.reply(u.received as u32));
         }
         let bytes = u.buf.get(..u.total_len).unwrap_or(&[]);
-        let computed = CRC32.checksum(bytes);
-        if computed != u.crc32 {
+        let computed = upload_body_crc32(bytes);
+        if computed != u.body_crc32 {
             return Err(ErrorCode::UploadCrcMismatch.reply(computed));
         }
         // Validated before the store sees it: a refused table never reaches flash.
         let table = CalibrationTable::decode(bytes).map_err(ErrorReply::from)?;
+        // The active table again: nothing to write, and the rollback table stays.
+        if self
+            .active
+            .as_ref()
+            .is_some_and(|a| a.encode()[..] == *bytes)
+        {
+            return Ok(Response::Committed {
+                table_id: table.id(),
+            });
+        }
         let store = self
             .store
             .as_mut()
             .ok_or(ErrorCode::StorageUnavailable.reply(0))?;
         // Only a table the store has committed (programmed, read back, marked) becomes active.
         let slot = store.commit(bytes).map_err(storage_reply)?;
+        self.erase_pending = true;
         self.previous = self.active.replace(table);
         self.prepare_active();
         Ok(Response::Committed {
@@ -397,9 +440,9 @@ impl<F: NorFlash> Service<F> {
         })
     }
 
-    /// Makes the previous table active, in flash first. When the older slot still holds it,
-    /// the store rolls back without touching that slot (its only copy survives any power cut);
-    /// otherwise (a prepared erase or a rollback consumed it) the RAM copy is committed anew.
+    /// Makes the previous table active, in flash first: it is committed anew into the spare
+    /// slot, so the table active until now stays in its slot and becomes the rollback table
+    /// (also after a reboot).
     fn switch_to_previous(&mut self) -> Result<Response, ErrorReply> {
         let target = self
             .previous
@@ -409,12 +452,8 @@ impl<F: NorFlash> Service<F> {
             .store
             .as_mut()
             .ok_or(ErrorCode::StorageUnavailable.reply(0))?;
-        let older = store.valid_slots().map_err(storage_reply)?.older;
-        if older.map(|o| o.table_id) == Some(target.id()) {
-            store.activate_previous().map_err(storage_reply)?;
-        } else {
-            store.commit(&target.encode()).map_err(storage_reply)?;
-        }
+        store.commit(&target.encode()).map_err(storage_reply)?;
+        self.erase_pending = true;
         core::mem::swap(&mut self.active, &mut self.previous);
         self.prepare_active();
         Ok(Response::Ok)
@@ -445,16 +484,22 @@ impl<F: NorFlash> Service<F> {
 }
 
 #[cfg(test)]
+mod fuzz_tests;
+#[cfg(test)]
+mod model_tests;
+
+#[cfg(test)]
 mod tests {
     use super::*;
     use crate::pipeline::{raw_from_physical, Status};
     use crate::protocol::{encode_frame, FrameDecoder, MAX_FRAME_LEN};
     use crate::storage::RamFlash;
     use crate::table::tests::paper_table;
+    use crate::table::CRC32;
     use crate::units::{Celsius, TiltArcsec, Volts};
 
-    /// The QEMU board's flash: two 1 KiB slots.
-    type Flash = RamFlash<2048, 1024, 4>;
+    /// The QEMU board's flash: three 1 KiB slots.
+    type Flash = RamFlash<3072, 1024, 4>;
     const LAYOUT: SlotLayout = SlotLayout::consecutive(1024);
 
     fn qemu_service() -> Service<Flash> {
@@ -471,26 +516,35 @@ mod tests {
         s.handle(HostFrame { id: 9, request }, &|| 1_000)
     }
 
+    /// The checksum UploadBegin carries: CRC-32 of all but the last four bytes.
+    fn body_crc(bytes: &[u8]) -> u32 {
+        CRC32.checksum(&bytes[..bytes.len().saturating_sub(4)])
+    }
+
+    fn chunk(upload_id: u32, bytes: &[u8], offset: usize) -> Request {
+        let end = (offset + CHUNK_LEN).min(bytes.len());
+        Request::UploadChunk {
+            upload_id,
+            offset: offset as u32,
+            data: heapless::Vec::from_slice(&bytes[offset..end]).unwrap(),
+        }
+    }
+
+    fn begin(upload_id: u32, bytes: &[u8]) -> Request {
+        Request::UploadBegin {
+            upload_id,
+            total_len: bytes.len() as u32,
+            body_crc32: body_crc(bytes),
+        }
+    }
+
     fn upload<F: NorFlash>(s: &mut Service<F>, bytes: &[u8]) -> DeviceMessage {
-        let crc32 = CRC32.checksum(bytes);
-        let begin = req(
-            s,
-            Request::UploadBegin {
-                total_len: bytes.len() as u32,
-                crc32,
-            },
-        );
+        let begin = req(s, begin(7, bytes));
         if !matches!(begin, DeviceMessage::Response { .. }) {
             return begin;
         }
-        for (i, chunk) in bytes.chunks(CHUNK_LEN).enumerate() {
-            let r = req(
-                s,
-                Request::UploadChunk {
-                    offset: (i * CHUNK_LEN) as u32,
-                    data: heapless::Vec::from_slice(chunk).unwrap(),
-                },
-            );
+        for offset in (0..bytes.len()).step_by(CHUNK_LEN) {
+            let r = req(s, chunk(7, bytes, offset));
             assert_eq!(
                 r,
                 DeviceMessage::Response {
@@ -499,7 +553,7 @@ mod tests {
                 }
             );
         }
-        req(s, Request::UploadCommit)
+        req(s, Request::UploadCommit { upload_id: 7 })
     }
 
     fn error_code(m: &DeviceMessage) -> Option<(u16, u32)> {
@@ -564,31 +618,21 @@ mod tests {
     fn chunks_out_of_order_name_the_expected_offset() {
         let mut s = qemu_service();
         let bytes = paper_table().encode();
-        req(
-            &mut s,
-            Request::UploadBegin {
-                total_len: ENCODED_LEN as u32,
-                crc32: CRC32.checksum(&bytes),
-            },
-        );
-        let chunk = |o: usize| Request::UploadChunk {
-            offset: o as u32,
-            data: heapless::Vec::from_slice(&bytes[o..o + CHUNK_LEN]).unwrap(),
-        };
-        req(&mut s, chunk(0));
-        let r = req(&mut s, chunk(2 * CHUNK_LEN));
+        req(&mut s, begin(3, &bytes));
+        req(&mut s, chunk(3, &bytes, 0));
+        let r = req(&mut s, chunk(3, &bytes, 2 * CHUNK_LEN));
         assert_eq!(
             error_code(&r),
             Some((ErrorCode::ChunkOutOfOrder as u16, CHUNK_LEN as u32))
         );
-        let r = req(&mut s, Request::UploadCommit);
+        let r = req(&mut s, Request::UploadCommit { upload_id: 3 });
         assert_eq!(
             error_code(&r),
             Some((ErrorCode::UploadIncomplete as u16, CHUNK_LEN as u32))
         );
         // The commit closed the upload: a further chunk has no upload to join.
         assert_eq!(
-            error_code(&req(&mut s, chunk(CHUNK_LEN))).map(|e| e.0),
+            error_code(&req(&mut s, chunk(3, &bytes, CHUNK_LEN))).map(|e| e.0),
             Some(ErrorCode::NoUpload as u16)
         );
     }
@@ -600,25 +644,75 @@ mod tests {
         req(
             &mut s,
             Request::UploadBegin {
+                upload_id: 1,
                 total_len: ENCODED_LEN as u32,
-                crc32: 0x1234_5678,
+                body_crc32: 0x1234_5678,
             },
         );
-        for (i, c) in bytes.chunks(CHUNK_LEN).enumerate() {
-            req(
-                &mut s,
-                Request::UploadChunk {
-                    offset: (i * CHUNK_LEN) as u32,
-                    data: heapless::Vec::from_slice(c).unwrap(),
-                },
-            );
+        for offset in (0..bytes.len()).step_by(CHUNK_LEN) {
+            req(&mut s, chunk(1, &bytes, offset));
         }
-        let r = req(&mut s, Request::UploadCommit);
+        let r = req(&mut s, Request::UploadCommit { upload_id: 1 });
         assert_eq!(
             error_code(&r),
-            Some((ErrorCode::UploadCrcMismatch as u16, CRC32.checksum(&bytes)))
+            Some((ErrorCode::UploadCrcMismatch as u16, paper_table().id()))
         );
         assert_eq!(active_id(&mut s), None);
+    }
+
+    #[test]
+    fn the_upload_checksum_is_the_table_id_and_differs_between_tables() {
+        // Regression (#15.2): a CRC over a whole table is the CRC-32 residue, the same for every
+        // valid table; the body CRC is the table's own CRC, i.e. its id.
+        let (a, b) = (paper_table(), second_table());
+        assert_eq!(body_crc(&a.encode()), a.id());
+        assert_ne!(body_crc(&a.encode()), body_crc(&b.encode()));
+        assert_eq!(CRC32.checksum(&a.encode()), CRC32.checksum(&b.encode()));
+    }
+
+    #[test]
+    fn chunks_and_commit_of_a_replaced_upload_are_refused_by_id() {
+        // Begin A, chunk A0, Begin B, chunk B0, then A's remaining chunks and commit: refused
+        // with UploadIdMismatch naming B; B continues and commits B.
+        let mut s = qemu_service();
+        let (a, b) = (paper_table().encode(), second_table().encode());
+        req(&mut s, begin(1, &a));
+        req(&mut s, chunk(1, &a, 0));
+        req(&mut s, begin(2, &b));
+        req(&mut s, chunk(2, &b, 0));
+        for offset in (CHUNK_LEN..a.len()).step_by(CHUNK_LEN) {
+            assert_eq!(
+                error_code(&req(&mut s, chunk(1, &a, offset))),
+                Some((ErrorCode::UploadIdMismatch as u16, 2))
+            );
+        }
+        assert_eq!(
+            error_code(&req(&mut s, Request::UploadCommit { upload_id: 1 })),
+            Some((ErrorCode::UploadIdMismatch as u16, 2))
+        );
+        assert_eq!(active_id(&mut s), None);
+        for offset in (CHUNK_LEN..b.len()).step_by(CHUNK_LEN) {
+            req(&mut s, chunk(2, &b, offset));
+        }
+        assert!(matches!(
+            req(&mut s, Request::UploadCommit { upload_id: 2 }),
+            DeviceMessage::Response { body: Response::Committed { table_id }, .. }
+                if table_id == second_table().id()
+        ));
+    }
+
+    #[test]
+    fn a_chunk_of_another_upload_with_the_same_bytes_is_still_refused() {
+        // Same table uploaded twice under two ids: the stale upload's chunk is refused even
+        // though its bytes would fit.
+        let mut s = qemu_service();
+        let a = paper_table().encode();
+        req(&mut s, begin(10, &a));
+        req(&mut s, begin(11, &a));
+        assert_eq!(
+            error_code(&req(&mut s, chunk(10, &a, 0))).map(|e| e.0),
+            Some(ErrorCode::UploadIdMismatch as u16)
+        );
     }
 
     #[test]
@@ -854,6 +948,12 @@ mod tests {
         b
     }
 
+    fn third_table() -> CalibrationTable {
+        let mut c = paper_table();
+        c.date.day = 3;
+        c
+    }
+
     fn raw() -> RawSample {
         raw_from_physical(&paper_table(), Volts(1.3), Celsius(50.0), TiltArcsec(0.0)).unwrap()
     }
@@ -919,7 +1019,7 @@ mod tests {
     }
 
     #[test]
-    fn a_rollback_is_persisted_and_activate_can_return_after_a_reboot() {
+    fn a_rollback_is_persisted_with_its_own_rollback_table() {
         let mut s = qemu_service();
         let (a, b) = (paper_table(), second_table());
         upload(&mut s, &a.encode());
@@ -932,19 +1032,48 @@ mod tests {
             }
         ));
         let mut s = reboot(s);
-        assert_eq!(active_id(&mut s), Some(a.id()));
-        // The rolled-back-from table lived on in RAM only; after the reboot both slots hold
-        // the rollback target, so there is nothing to roll back to.
-        assert_eq!(info(&mut s).previous_table, None);
-
-        // Without a reboot in between, Activate brings b back, and that is persisted too.
-        let mut s = qemu_service();
-        upload(&mut s, &a.encode());
-        upload(&mut s, &b.encode());
-        req(&mut s, Request::Rollback);
+        let i = info(&mut s);
+        assert_eq!(
+            (i.active_table, i.previous_table),
+            (Some(a.id()), Some(b.id())),
+            "the rolled-back-from table is the rollback table after a reboot"
+        );
         req(&mut s, Request::Activate { table_id: b.id() });
         let mut s = reboot(s);
-        assert_eq!(active_id(&mut s), Some(b.id()));
+        let i = info(&mut s);
+        assert_eq!(
+            (i.active_table, i.previous_table),
+            (Some(b.id()), Some(a.id()))
+        );
+    }
+
+    #[test]
+    fn re_uploading_the_active_table_keeps_the_rollback_table() {
+        // Regression (#15.1): T1, T2, T2 again used to make "previous" T2, Rollback a no-op
+        // and Activate(T1) TableNotFound, with T1's slot erased.
+        let mut s = probe_service();
+        let counter = probe_counter(&mut s);
+        let (t1, t2) = (paper_table(), second_table());
+        upload(&mut s, &t1.encode());
+        upload(&mut s, &t2.encode());
+        let erases = counter.get();
+        let (mut s, before) = flash_bytes(s);
+        assert!(matches!(
+            upload(&mut s, &t2.encode()),
+            DeviceMessage::Response { body: Response::Committed { table_id }, .. } if table_id == t2.id()
+        ));
+        let (mut s, after) = flash_bytes(s);
+        assert!(before == after, "the no-op upload wrote to flash");
+        assert_eq!(counter.get(), erases);
+        let i = info(&mut s);
+        assert_eq!(
+            (i.active_table, i.previous_table),
+            (Some(t2.id()), Some(t1.id()))
+        );
+        req(&mut s, Request::Rollback);
+        assert_eq!(active_id(&mut s), Some(t1.id()));
+        req(&mut s, Request::Activate { table_id: t2.id() });
+        assert_eq!(active_id(&mut s), Some(t2.id()));
     }
 
     #[test]
@@ -976,42 +1105,47 @@ mod tests {
     }
 
     #[test]
-    fn the_erase_happens_at_upload_begin_unless_it_would_lose_the_rollback_table() {
-        let (a, b) = (paper_table(), second_table());
-        let begin = |s: &mut Service<Probe>| {
-            req(
-                s,
-                Request::UploadBegin {
-                    total_len: ENCODED_LEN as u32,
-                    crc32: 0,
-                },
-            )
-        };
+    fn the_spare_is_erased_ahead_after_a_change_so_the_next_commit_does_not_erase() {
+        let (a, b, c) = (paper_table(), second_table(), third_table());
         let mut s = probe_service();
         let counter = probe_counter(&mut s);
-        // Empty flash: slot A is erased at Begin, and the commit does not erase it again.
-        begin(&mut s);
-        assert_eq!(counter.get(), 1, "Begin on empty flash erases slot A");
-        upload(&mut s, &a.encode());
+        // After boot: the spare (A on empty flash) is erased ahead, once.
+        assert!(s.erase_pending());
+        assert_eq!(s.erase_ahead(), Ok(true));
+        assert_eq!(s.erase_ahead(), Ok(false), "nothing pending any more");
+        assert_eq!(counter.get(), 1);
+        // Begin, chunks and a refused upload erase nothing.
+        let mut nan = paper_table();
+        nan.rtd.cvd.r0 = f64::NAN;
+        assert!(error_code(&upload(&mut s, &nan.encode())).is_some());
+        assert!(!s.erase_pending());
+        for (n, t) in [a, b, c, a].iter().enumerate() {
+            upload(&mut s, &t.encode());
+            assert_eq!(
+                counter.get(),
+                1 + n as u32,
+                "commit {n} erased: it was not erased ahead"
+            );
+            assert!(s.erase_pending());
+            assert_eq!(s.erase_ahead(), Ok(true));
+            assert_eq!(counter.get(), 2 + n as u32);
+        }
+        // A rollback writes into the erased spare too, then erases the next one.
+        req(&mut s, Request::Rollback);
+        assert_eq!(counter.get(), 5);
+        assert_eq!(s.erase_ahead(), Ok(true));
+        let i = info(&mut s);
         assert_eq!(
-            counter.get(),
-            2,
-            "the new Begin erases A again (a Begin restarts), the commit does not"
+            (i.active_table, i.previous_table),
+            (Some(c.id()), Some(a.id()))
         );
-        // Slot B is blank: erased at Begin.
-        begin(&mut s);
-        assert_eq!(counter.get(), 3);
-        upload(&mut s, &b.encode());
-        assert_eq!(counter.get(), 4, "Begin erased B, the commit did not");
-        // Now slot A holds a, the rollback table: Begin must leave it, the commit erases it.
-        begin(&mut s);
+        let mut s = reboot(s);
+        let i = info(&mut s);
         assert_eq!(
-            counter.get(),
-            4,
-            "Begin erased the slot holding the rollback table"
+            (i.active_table, i.previous_table),
+            (Some(c.id()), Some(a.id()))
         );
-        upload(&mut s, &a.encode());
-        assert_eq!(counter.get(), 5, "the commit erases the old slot itself");
+        let _ = b;
     }
 
     #[test]

@@ -1,10 +1,14 @@
-//! Power-fail-safe calibration storage: two slots (A/B) on any `embedded-storage` NOR flash.
+//! Power-fail-safe calibration storage: three slots (A/B/C) on any `embedded-storage` NOR flash.
 //!
-//! The board keeps its calibration table in internal flash (STM32F405 sectors 10 and 11); the
-//! QEMU board keeps it in [`RamFlash`]. A new table is written to the slot that is *not* active,
-//! read back, and only then made valid by programming a commit marker as the very last step, so
-//! a power cut at any point leaves either the old or the new table active, never none and never
-//! a mix. The layout and the reasoning per step are in docs/storage.md.
+//! The board keeps its calibration table in internal flash (STM32F405 sectors 9, 10 and 11);
+//! the QEMU board keeps it in [`RamFlash`]. The newest valid slot holds the active table, the
+//! newest valid slot with a *different* table holds the rollback ("previous") table, and the
+//! third slot is the spare: a new table (or a rollback, which re-commits the previous table) is
+//! written to the spare only, read back, and only then made valid by programming a commit
+//! marker as the very last step. So a power cut at any point leaves either the old or the new
+//! table active with its rollback table intact, never none and never a mix; and the spare can
+//! be erased ahead of the next upload ([`CalibrationStore::prepare_commit`]) without losing
+//! anything. The layout and the reasoning per step are in docs/storage.md.
 //!
 //! Slot layout (offsets inside a slot; `align` = lcm(WRITE_SIZE, READ_SIZE, 4)):
 //!
@@ -76,58 +80,61 @@ pub fn sequence_newer(a: u32, b: u32) -> bool {
     (a.wrapping_sub(b) as i32) > 0
 }
 
-/// One of the two slots.
+/// Number of slots: active, previous (rollback) and a spare that the next commit writes.
+pub const SLOT_COUNT: usize = 3;
+
+/// One of the three slots.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Slot {
     /// First slot.
     A,
     /// Second slot.
     B,
+    /// Third slot.
+    C,
 }
 
 impl Slot {
-    /// The other slot.
-    pub fn other(self) -> Slot {
-        match self {
-            Slot::A => Slot::B,
-            Slot::B => Slot::A,
-        }
+    /// Every slot, in scan order (the order that breaks ties).
+    pub const ALL: [Slot; SLOT_COUNT] = [Slot::A, Slot::B, Slot::C];
+
+    /// 0 for A, 1 for B, 2 for C (the wire's FlashVerify detail).
+    pub const fn index(self) -> usize {
+        self as usize
     }
 }
 
-/// Where the two slots lie in the flash device (offsets relative to the device's start).
+/// Where the slots lie in the flash device (offsets relative to the device's start).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct SlotLayout {
-    /// Offset of slot A, a multiple of ERASE_SIZE.
-    pub slot_a_offset: u32,
-    /// Offset of slot B, a multiple of ERASE_SIZE.
-    pub slot_b_offset: u32,
+    /// Offsets of slots A, B and C, multiples of ERASE_SIZE.
+    pub slot_offsets: [u32; SLOT_COUNT],
     /// Bytes per slot, a non-zero multiple of ERASE_SIZE.
     pub slot_len: u32,
 }
 
 impl SlotLayout {
-    /// STM32F405 sectors 10 (0x080C_0000) and 11 (0x080E_0000), 128 KiB each, as offsets from
-    /// the flash base 0x0800_0000. memory.x must keep the program below 0x080C_0000.
-    pub const STM32F405_SECTORS_10_11: SlotLayout = SlotLayout {
-        slot_a_offset: 0x000C_0000,
-        slot_b_offset: 0x000E_0000,
+    /// STM32F405 sectors 9 (0x080A_0000), 10 (0x080C_0000) and 11 (0x080E_0000), 128 KiB
+    /// each, as offsets from the flash base 0x0800_0000. memory.x keeps the program below
+    /// 0x080A_0000.
+    pub const STM32F405_SECTORS_9_11: SlotLayout = SlotLayout {
+        slot_offsets: [0x000A_0000, 0x000C_0000, 0x000E_0000],
         slot_len: 0x0002_0000,
     };
 
-    /// Slot A at offset 0 and slot B right after it (RAM flash, test flashes).
+    /// Slots A, B and C back to back from offset 0 (RAM flash, test flashes).
     pub const fn consecutive(slot_len: u32) -> SlotLayout {
         SlotLayout {
-            slot_a_offset: 0,
-            slot_b_offset: slot_len,
+            slot_offsets: [0, slot_len, 2 * slot_len],
             slot_len,
         }
     }
 
     fn offset(&self, slot: Slot) -> u32 {
         match slot {
-            Slot::A => self.slot_a_offset,
-            Slot::B => self.slot_b_offset,
+            Slot::A => self.slot_offsets[0],
+            Slot::B => self.slot_offsets[1],
+            Slot::C => self.slot_offsets[2],
         }
     }
 }
@@ -141,7 +148,7 @@ pub enum LayoutError {
     NotEraseAligned,
     /// A slot cannot hold the header, table and commit marker.
     SlotTooSmall,
-    /// The two slots overlap.
+    /// Two slots overlap.
     Overlap,
     /// A slot extends past the end of the flash.
     OutOfBounds,
@@ -159,7 +166,7 @@ pub enum StorageError<E> {
     Verify(Slot),
     /// Neither slot holds a valid table (factory-empty flash or both corrupted).
     NoValidSlot,
-    /// Rollback asked for, but the other slot holds no valid table.
+    /// Rollback asked for, but no valid slot holds a table other than the active one.
     NoPreviousSlot,
     /// The slot layout does not fit the flash geometry.
     Layout(LayoutError),
@@ -207,16 +214,19 @@ pub enum SlotState {
 pub struct ValidSlots {
     /// The valid slot with the newest sequence number (the active one).
     pub newest: Option<SlotInfo>,
-    /// The other slot, when it is valid too.
-    pub older: Option<SlotInfo>,
+    /// The newest valid slot whose table differs from the active one (the rollback table).
+    pub previous: Option<SlotInfo>,
 }
 
-/// Result of classifying both slots.
+/// Result of classifying every slot.
+#[derive(Debug, Clone, Copy)]
 struct Scan {
     /// The valid slot with the newest sequence number.
     newest: Option<SlotInfo>,
-    /// The other slot, when it is valid too.
-    older: Option<SlotInfo>,
+    /// The newest valid slot holding a table other than `newest`'s.
+    previous: Option<SlotInfo>,
+    /// Each slot's state, in [`Slot::ALL`] order.
+    states: [SlotState; SLOT_COUNT],
 }
 
 /// Derived from the flash type's sizes once, at construction.
@@ -230,8 +240,9 @@ struct Geometry {
     marker_len: usize,
 }
 
-/// The two-slot calibration store. Owns the flash; [`CalibrationStore::into_flash`] gives it
+/// The three-slot calibration store. Owns the flash; [`CalibrationStore::into_flash`] gives it
 /// back.
+#[derive(Clone)]
 pub struct CalibrationStore<F> {
     flash: F,
     layout: SlotLayout,
@@ -271,22 +282,23 @@ impl<F: NorFlash> CalibrationStore<F> {
             return Err(LayoutError::AlignmentTooLarge);
         }
         let erase = F::ERASE_SIZE.max(1) as u64;
-        let (a, b, len) = (
-            u64::from(layout.slot_a_offset),
-            u64::from(layout.slot_b_offset),
-            u64::from(layout.slot_len),
-        );
-        if len == 0 || a % erase != 0 || b % erase != 0 || len % erase != 0 {
+        let len = u64::from(layout.slot_len);
+        let offsets = layout.slot_offsets.map(u64::from);
+        if len == 0 || len % erase != 0 || offsets.iter().any(|o| o % erase != 0) {
             return Err(LayoutError::NotEraseAligned);
         }
         if ((image_len + marker_len) as u64) > len {
             return Err(LayoutError::SlotTooSmall);
         }
-        if a < b + len && b < a + len {
-            return Err(LayoutError::Overlap);
+        for (i, a) in offsets.iter().enumerate() {
+            for b in offsets.iter().skip(i + 1) {
+                if *a < b + len && *b < a + len {
+                    return Err(LayoutError::Overlap);
+                }
+            }
         }
         let capacity = flash.capacity() as u64;
-        if a + len > capacity || b + len > capacity {
+        if offsets.iter().any(|o| o + len > capacity) {
             return Err(LayoutError::OutOfBounds);
         }
         Ok(Geometry {
@@ -343,14 +355,16 @@ impl<F: NorFlash> CalibrationStore<F> {
     /// Stores a new table and makes it active.
     ///
     /// 1. Validate with [`CalibrationTable::decode`]; a refused table touches nothing.
-    /// 2. Erase the inactive slot (unless [`Self::prepare_commit`] just did).
-    /// 3. Program header and table.
-    /// 4. Read back and compare; check the marker area is still erased.
-    /// 5. Program the commit marker — the single step that makes the new slot valid.
-    /// 6. Re-read the slot and check it classifies as valid with the new sequence.
+    /// 2. Scan; the target is the spare: neither the active slot nor the rollback slot.
+    /// 3. Erase the target (unless [`Self::prepare_commit`] already did in this power cycle).
+    /// 4. Program header and table.
+    /// 5. Read back and compare; check the marker area is still erased.
+    /// 6. Program the commit marker — the single step that makes the new slot valid.
+    /// 7. Re-read the slot and check it classifies as valid with the new sequence.
     ///
-    /// A power cut before step 5 completes leaves the old table active (the new slot has no
-    /// valid marker); after it, the new table (its sequence is one above the old).
+    /// A power cut before step 6 completes leaves the old table active (the new slot has no
+    /// valid marker); after it, the new table (its sequence is one above the old). The active
+    /// and the rollback slot are never written, so the rollback table survives too.
     pub fn commit(&mut self, table: &[u8]) -> Result<SlotInfo, StorageError<F::Error>> {
         CalibrationTable::decode(table).map_err(StorageError::Table)?;
         let mut bytes = [0u8; ENCODED_LEN];
@@ -361,24 +375,26 @@ impl<F: NorFlash> CalibrationStore<F> {
                 found: table.len() as u32,
             }))?;
         bytes.copy_from_slice(src);
-        let (target, sequence) = match self.boot()? {
-            Some(active) => (active.slot.other(), active.sequence.wrapping_add(1)),
-            None => (Slot::A, FIRST_SEQUENCE),
-        };
-        self.write_slot(target, sequence, &bytes)
+        let scan = self.scan()?;
+        self.active = scan.newest;
+        let target = self.spare(&scan);
+        self.write_slot(target, next_sequence(scan.newest), &bytes)
     }
 
-    /// Erases the slot the next [`Self::commit`] will write, so the commit itself skips the
-    /// erase. On the STM32F405 a 128 KiB sector erase takes seconds (datasheet tERASE128KB)
-    /// while programming a table takes milliseconds: the firmware calls this when an upload
-    /// begins, and the erase overlaps the transfer. Power-fail safe: it touches only the
-    /// inactive slot (the same one commit would erase). It does discard the previous table
-    /// kept for rollback, exactly as the commit would.
+    /// Erases the slot the next [`Self::commit`] (or rollback) will write — the spare, which
+    /// holds neither the active nor the rollback table — so the commit itself skips the erase.
+    /// On the STM32F405 a 128 KiB sector erase takes seconds (datasheet tERASE128KB) while
+    /// programming a table takes milliseconds: the firmware calls this right after a commit or
+    /// a rollback and at boot ("erase ahead"), so an upload never waits for an erase. Power-fail
+    /// safe and loses nothing: the spare is by construction not needed. Returns the slot, and
+    /// does nothing when that slot's erase already completed in this power cycle.
     pub fn prepare_commit(&mut self) -> Result<Slot, StorageError<F::Error>> {
-        let target = match self.boot()? {
-            Some(active) => active.slot.other(),
-            None => Slot::A,
-        };
+        let scan = self.scan()?;
+        self.active = scan.newest;
+        let target = self.spare(&scan);
+        if self.erased == Some(target) {
+            return Ok(target);
+        }
         // Cleared before the erase and set only after it completes: a failed or interrupted
         // erase must be redone by the commit.
         self.erased = None;
@@ -390,13 +406,21 @@ impl<F: NorFlash> CalibrationStore<F> {
         Ok(target)
     }
 
-    /// Both valid slots, newest first (re-scanned). The service uses the older one to restore
-    /// the rollback table at boot and to decide whether a rollback can leave the target's slot
-    /// untouched.
+    /// Whether the next commit's target is known erased (an erase completed in this power
+    /// cycle and nothing was written since): then a commit costs programming time only.
+    pub fn spare_erased(&mut self) -> Result<bool, StorageError<F::Error>> {
+        let scan = self.scan()?;
+        Ok(self.erased == Some(self.spare(&scan)))
+    }
+
+    /// The active and the rollback slot (re-scanned). The service restores the rollback table
+    /// from `previous` at boot.
     pub fn valid_slots(&mut self) -> Result<ValidSlots, StorageError<F::Error>> {
-        let Scan { newest, older } = self.scan()?;
+        let Scan {
+            newest, previous, ..
+        } = self.scan()?;
         self.active = newest;
-        Ok(ValidSlots { newest, older })
+        Ok(ValidSlots { newest, previous })
     }
 
     /// Decodes the table of a slot that [`Self::valid_slots`] reported valid. Decoded again
@@ -407,52 +431,92 @@ impl<F: NorFlash> CalibrationStore<F> {
         CalibrationTable::decode(&bytes).map_err(StorageError::Table)
     }
 
-    /// Rolls back to the table in the older valid slot.
-    ///
-    /// Choice: the older slot's table is re-committed with a new sequence number into the
-    /// *newer* slot (the one being rolled back from), and the older slot is never touched.
-    /// During the erase and program of the newer slot the older slot is the only valid one, so
-    /// a power cut leaves either the current table (erase not yet effective) or the rollback
-    /// target active. Afterwards both slots hold the rollback target, so it survives the rot of
-    /// one slot. This works on any `NorFlash` (no re-programming of a written word, which
-    /// invalidating the newer slot's marker in place would need). If both slots already hold
-    /// the same table, nothing is written.
+    /// Rolls back to the rollback table: it is re-committed, with a new sequence number, into
+    /// the spare — exactly like an upload of it. Neither the active slot nor the rollback slot
+    /// is touched, so a power cut leaves the current table or the rollback target active, and
+    /// afterwards the rolled-back-from table is the new rollback table (a second rollback
+    /// returns to it, also after a reboot).
     pub fn activate_previous(&mut self) -> Result<SlotInfo, StorageError<F::Error>> {
-        let Scan { newest, older } = self.scan()?;
-        let newest = newest.ok_or(StorageError::NoValidSlot)?;
+        let scan = self.scan()?;
+        let newest = scan.newest.ok_or(StorageError::NoValidSlot)?;
         self.active = Some(newest);
-        let older = older.ok_or(StorageError::NoPreviousSlot)?;
+        let previous = scan.previous.ok_or(StorageError::NoPreviousSlot)?;
         let mut bytes = [0u8; ENCODED_LEN];
-        self.read_table_bytes(older.slot, &mut bytes)?;
-        let mut current = [0u8; ENCODED_LEN];
-        self.read_table_bytes(newest.slot, &mut current)?;
-        if bytes == current {
-            return Ok(newest);
-        }
+        self.read_table_bytes(previous.slot, &mut bytes)?;
         // The bytes come from a slot that just classified valid, but decode again: a slot can
         // change between two reads on failing flash, and nothing unvalidated gets committed.
         CalibrationTable::decode(&bytes).map_err(StorageError::Table)?;
-        self.write_slot(newest.slot, newest.sequence.wrapping_add(1), &bytes)
+        let target = self.spare(&scan);
+        self.write_slot(target, next_sequence(Some(newest)), &bytes)
     }
 
-    /// Both slots classified: the newest valid one, and the other one if it is valid too.
-    fn scan(&mut self) -> Result<Scan, StorageError<F::Error>> {
-        let a = self.slot_state(Slot::A)?;
-        let b = self.slot_state(Slot::B)?;
-        let (newest, older) = match (a, b) {
-            (SlotState::Valid(a), SlotState::Valid(b)) => {
-                // Equal sequences cannot come from this code; A wins so the choice is stable.
-                if sequence_newer(b.sequence, a.sequence) {
-                    (Some(b), Some(a))
-                } else {
-                    (Some(a), Some(b))
-                }
-            }
-            (SlotState::Valid(a), _) => (Some(a), None),
-            (_, SlotState::Valid(b)) => (Some(b), None),
-            _ => (None, None),
+    /// The slot the next commit writes: neither the active nor the rollback slot. Among the
+    /// candidates (at least one, since there are three slots): the one erased ahead in this
+    /// power cycle, else a blank one, else an invalid one (a write cut short), else the valid
+    /// one with the oldest sequence (a stale copy). Ties go to scan order.
+    fn spare(&self, scan: &Scan) -> Slot {
+        let used = |s: Slot| {
+            scan.newest.map(|i| i.slot) == Some(s) || scan.previous.map(|i| i.slot) == Some(s)
         };
-        Ok(Scan { newest, older })
+        let rank = |s: Slot| -> (u8, u32) {
+            if self.erased == Some(s) {
+                return (0, 0);
+            }
+            match scan.states[s.index()] {
+                SlotState::Blank => (1, 0),
+                SlotState::Invalid(_) => (2, 0),
+                // Older first: distance back from the newest sequence, larger is older.
+                SlotState::Valid(i) => (
+                    3,
+                    u32::MAX
+                        - scan
+                            .newest
+                            .map_or(0, |n| n.sequence.wrapping_sub(i.sequence)),
+                ),
+            }
+        };
+        let mut best = None;
+        for s in Slot::ALL {
+            if used(s) {
+                continue;
+            }
+            best = match best {
+                Some(b) if rank(b) <= rank(s) => Some(b),
+                _ => Some(s),
+            };
+        }
+        best.unwrap_or(Slot::C)
+    }
+
+    /// Every slot classified: the newest valid one, the newest valid one with another table,
+    /// and each state.
+    fn scan(&mut self) -> Result<Scan, StorageError<F::Error>> {
+        let mut states = [SlotState::Blank; SLOT_COUNT];
+        for (state, slot) in states.iter_mut().zip(Slot::ALL) {
+            *state = self.slot_state(slot)?;
+        }
+        let valid = || {
+            states.iter().filter_map(|s| match s {
+                SlotState::Valid(i) => Some(*i),
+                _ => None,
+            })
+        };
+        // Equal sequences cannot come from this code; the first in scan order wins so the
+        // choice is stable.
+        let newest_of = |it: &mut dyn Iterator<Item = SlotInfo>| {
+            it.fold(None, |best: Option<SlotInfo>, i| match best {
+                Some(b) if !sequence_newer(i.sequence, b.sequence) => Some(b),
+                _ => Some(i),
+            })
+        };
+        let newest = newest_of(&mut valid());
+        let previous =
+            newest.and_then(|n| newest_of(&mut valid().filter(|i| i.table_id != n.table_id)));
+        Ok(Scan {
+            newest,
+            previous,
+            states,
+        })
     }
 
     fn read_slot(
@@ -558,6 +622,11 @@ impl<F: NorFlash> CalibrationStore<F> {
             _ => Err(StorageError::Verify(slot)),
         }
     }
+}
+
+/// Sequence number of the next commit: one above the active slot's, or the first one.
+fn next_sequence(newest: Option<SlotInfo>) -> u32 {
+    newest.map_or(FIRST_SEQUENCE, |n| n.sequence.wrapping_add(1))
 }
 
 /// Header, table and erased padding of a slot image.

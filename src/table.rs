@@ -122,6 +122,26 @@ pub enum TableError {
     Date,
     /// The tilt axis code is unknown.
     TiltAxis,
+    /// A finite value outside its physical bounds (docs/calibration-format.md lists them with
+    /// the reasoning): temperature range outside the platinum RTD's, a coefficient model that
+    /// leaves its bound somewhere in the calibrated range, an absurd tilt scale or reference.
+    OutOfBounds(Field),
+}
+
+/// Physical bounds of the table's fields (docs/calibration-format.md gives the reasoning).
+pub mod bounds {
+    /// Lowest and highest temperature of the Callendar–Van Dusen equation (IEC 60751), °C.
+    pub const RTD_RANGE_C: (f64, f64) = (-200.0, 850.0);
+    /// |K0| over the calibrated range, g: ten times a navigation-grade bias budget.
+    pub const MAX_BIAS_G: f64 = 0.1;
+    /// |K2| over the calibrated range, g/g²: about 100 times a servo accelerometer's.
+    pub const MAX_NONLINEARITY_G_PER_G2: f64 = 1e-2;
+    /// |δp|, |δo| over the calibrated range, rad (≈ 69 arcmin): far above any case alignment.
+    pub const MAX_MISALIGNMENT_RAD: f64 = 0.02;
+    /// Tiltmeter sensitivity magnitude, arcsec/V.
+    pub const TILT_SCALE_ARCSEC_PER_V: (f64, f64) = (1e-3, 1e5);
+    /// |φ0|, arcsec (10°): beyond any tiltmeter's range.
+    pub const MAX_TILT_REFERENCE_ARCSEC: f64 = 36_000.0;
 }
 
 /// Calibration date.
@@ -395,10 +415,16 @@ impl CalibrationTable {
         }
         let payload_len = r.u32()?;
         if payload_len != PAYLOAD_LEN as u32 || bytes.len() != ENCODED_LEN {
+            // The length that is wrong: the byte count when the header is right (a truncated
+            // or padded file), else what the header claims.
+            let found = if payload_len == PAYLOAD_LEN as u32 {
+                bytes.len()
+            } else {
+                (payload_len as usize).saturating_add(HEADER_LEN + 4)
+            };
             return Err(TableError::BadLength {
                 expected: ENCODED_LEN as u32,
-                found: (bytes.len() as u32)
-                    .min(payload_len.saturating_add((HEADER_LEN + 4) as u32)),
+                found: found.min(u32::MAX as usize) as u32,
             });
         }
         let body = bytes.get(..ENCODED_LEN - 4).ok_or(TableError::BadLength {
@@ -512,6 +538,15 @@ impl CalibrationTable {
         if s.max.0 <= s.min.0 || s.half_span_c <= 0.0 {
             return Err(TableError::EmptyRange);
         }
+        let (rtd_lo, rtd_hi) = bounds::RTD_RANGE_C;
+        if s.min.0 < rtd_lo
+            || s.max.0 > rtd_hi
+            || s.center.0 < s.min.0
+            || s.center.0 > s.max.0
+            || s.half_span_c > rtd_hi - rtd_lo
+        {
+            return Err(TableError::OutOfBounds(Field::TemperatureScale));
+        }
         let t0 = self.thermal.reference.0;
         if !t0.is_finite() {
             return Err(TableError::NonFinite(Field::ReferenceTemperature));
@@ -531,12 +566,39 @@ impl CalibrationTable {
                 return Err(TableError::NonFinite(Field::Polynomial(which)));
             }
         }
-        // K1 must be plausible over the whole range, not only at its ends: sample it densely.
+        // Every model must stay inside its bounds over the whole range, not only at its ends:
+        // sample densely (a quartic has at most three extrema; 65 points also bound it between
+        // samples to well within the margins of the bounds).
         for i in 0..=64 {
             let t = s.min.0 + (s.max.0 - s.min.0) * f64::from(i) / 64.0;
-            let k1 = m.scale_factor_v_per_g.eval(s.x_unclamped(Celsius(t)));
+            let x = s.x_unclamped(Celsius(t));
+            let k1 = m.scale_factor_v_per_g.eval(x);
             if !(0.01..=100.0).contains(&k1) {
                 return Err(TableError::ScaleFactorImplausible);
+            }
+            for (which, p, bound) in [
+                (Coefficient::Bias, &m.bias_g, bounds::MAX_BIAS_G),
+                (
+                    Coefficient::Nonlinearity,
+                    &m.nonlinearity_g_per_g2,
+                    bounds::MAX_NONLINEARITY_G_PER_G2,
+                ),
+                (
+                    Coefficient::MisalignmentP,
+                    &m.misalignment_p_rad,
+                    bounds::MAX_MISALIGNMENT_RAD,
+                ),
+                (
+                    Coefficient::MisalignmentO,
+                    &m.misalignment_o_rad,
+                    bounds::MAX_MISALIGNMENT_RAD,
+                ),
+            ] {
+                // Also refuses a NaN from an overflowing evaluation.
+                let v = libm::fabs(p.eval(x));
+                if v.is_nan() || v > bound {
+                    return Err(TableError::OutOfBounds(Field::Polynomial(which)));
+                }
             }
         }
         if self.rtd.cvd.validate().is_err()
@@ -563,6 +625,13 @@ impl CalibrationTable {
         }
         if !self.tilt.reference.0.is_finite() {
             return Err(TableError::NonFinite(Field::Tilt));
+        }
+        let (tilt_lo, tilt_hi) = bounds::TILT_SCALE_ARCSEC_PER_V;
+        let tilt_scale = libm::fabs(self.tilt.scale_arcsec_per_v);
+        if !(tilt_lo..=tilt_hi).contains(&tilt_scale)
+            || libm::fabs(self.tilt.reference.0) > bounds::MAX_TILT_REFERENCE_ARCSEC
+        {
+            return Err(TableError::OutOfBounds(Field::Tilt));
         }
         let o = &self.orientation;
         for v in [o.cross.a_p.0, o.cross.a_o.0, o.nominal_input.0] {
@@ -638,6 +707,10 @@ impl core::fmt::Display for TableError {
             TableError::Date => f.write_str("calibration date is not a calendar date"),
             TableError::TiltAxis => f.write_str("unknown tilt axis code"),
             TableError::Reserved(v) => write!(f, "reserved header field is {v:#06x}, not 0"),
+            TableError::OutOfBounds(field) => write!(
+                f,
+                "{field:?} outside its physical bounds (docs/calibration-format.md)"
+            ),
         }
     }
 }

@@ -15,7 +15,7 @@ fuzz_target!(|data: &[u8]| {
     let mut decoder = FrameDecoder::<MAX_FRAME_LEN>::new();
     let mut service = Service::new(
         Board::Qemu,
-        RamFlash::<2048, 1024, 4>::new(),
+        RamFlash::<3072, 1024, 4>::new(),
         SlotLayout::consecutive(1024),
     );
     let clock = || 0u64;

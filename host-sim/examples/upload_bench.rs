@@ -3,9 +3,10 @@
 //!
 //!     cargo xtask firmware && cargo run --release -p accomp-host --example upload_bench
 use accomp::protocol::{
-    encode_frame, DeviceMessage, HostFrame, Request, Response, CHUNK_LEN, MAX_FRAME_LEN,
+    encode_frame, upload_body_crc32, DeviceMessage, HostFrame, Request, Response, CHUNK_LEN,
+    MAX_FRAME_LEN,
 };
-use accomp::table::{CRC32, ENCODED_LEN};
+use accomp::table::ENCODED_LEN;
 use accomp_host::device::{firmware_path, paper_table, qemu::QemuOptions, Qemu};
 use std::time::{Duration, Instant};
 
@@ -19,19 +20,22 @@ fn main() {
     let id = 0xFFFF_FFF0u32; // ids near the top: worst-case varint length
     let host = |r: Request| frame_len(&HostFrame { id, request: r });
     let dev = |b: Response| frame_len(&DeviceMessage::Response { id, body: b });
+    let uid = 0xFFFF_FFF1u32; // worst-case varint length too
     let mut up = host(Request::UploadBegin {
+        upload_id: uid,
         total_len: ENCODED_LEN as u32,
-        crc32: CRC32.checksum(&table),
+        body_crc32: upload_body_crc32(&table),
     });
     let mut down = dev(Response::Ok);
     for (i, c) in table.chunks(CHUNK_LEN).enumerate() {
         up += host(Request::UploadChunk {
+            upload_id: uid,
             offset: (i * CHUNK_LEN) as u32,
             data: heapless::Vec::from_slice(c).unwrap(),
         });
         down += dev(Response::Ok);
     }
-    up += host(Request::UploadCommit);
+    up += host(Request::UploadCommit { upload_id: uid });
     down += dev(Response::Committed { table_id: id });
     let (up_upload, down_upload) = (up, down);
     for (i, c) in table.chunks(CHUNK_LEN).enumerate() {
@@ -65,21 +69,24 @@ fn main() {
         t2.date.day = 1 + (k % 2) as u8;
         let bytes = t2.encode();
         let t0 = Instant::now();
+        let upload_id = c.new_upload_id();
         c.call(Request::UploadBegin {
+            upload_id,
             total_len: ENCODED_LEN as u32,
-            crc32: CRC32.checksum(&bytes),
+            body_crc32: upload_body_crc32(&bytes),
         })
         .unwrap();
         begin += t0.elapsed();
         for (i, ch) in bytes.chunks(CHUNK_LEN).enumerate() {
             c.call(Request::UploadChunk {
+                upload_id,
                 offset: (i * CHUNK_LEN) as u32,
                 data: heapless::Vec::from_slice(ch).unwrap(),
             })
             .unwrap();
         }
         let tc = Instant::now();
-        c.call(Request::UploadCommit).unwrap();
+        c.call(Request::UploadCommit { upload_id }).unwrap();
         commit += tc.elapsed();
         assert_eq!(c.read_table().unwrap(), bytes.to_vec());
         total += t0.elapsed();

@@ -40,7 +40,7 @@ use crate::sim::scenario::Scenario;
 use crate::sim::{Sample, Simulator};
 use crate::stability::mean_std;
 
-/// File name of Table 1 under the shared data directory.
+/// File name of Table 1 under the repository's `data/`.
 pub const TABLE1_FILE: &str = "jn06_a12124_coefficients_vs_temperature.csv";
 /// The paper's figures: (uncompensated, compensated) stability in g.
 pub const PAPER_1G: (f64, f64) = (1.43e-5, 6.6e-6);
@@ -56,8 +56,8 @@ const DEMO_DATE: CalibrationDate = CalibrationDate {
 /// Arguments of `accomp demo`.
 #[derive(Debug, Args)]
 pub struct DemoArgs {
-    /// Table 1 CSV (default: ../shared/data/jn06_a12124_coefficients_vs_temperature.csv from the
-    /// current directory or from the workspace).
+    /// Table 1 CSV (default: data/jn06_a12124_coefficients_vs_temperature.csv of the repository
+    /// the binary was built from).
     #[arg(long)]
     pub table1: Option<PathBuf>,
     /// Where the log, figures, tables and report are written.
@@ -165,13 +165,10 @@ pub struct Report {
     pub wall_s: f64,
 }
 
+/// Table 1 in the repository's `data/` (where the sources were built from).
 fn default_table1() -> PathBuf {
-    let here = Path::new("..").join("shared/data").join(TABLE1_FILE);
-    if here.is_file() {
-        return here;
-    }
     Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../shared/data")
+        .join("../data")
         .join(TABLE1_FILE)
 }
 
@@ -839,9 +836,7 @@ mod tests {
     use super::*;
 
     fn fitted() -> CalibrationTable {
-        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../../shared/data")
-            .join(TABLE1_FILE);
+        let path = default_table1();
         fit_table1(&path).expect("Table 1 fits").0
     }
 

@@ -979,12 +979,12 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
 mod tests {
     use super::*;
 
-    /// Table 1 of the paper, located like CI does: the `shared/` tree beside the repository.
-    /// A missing file is a failure, not a skip.
+    /// Table 1 of the paper, from the repository's `data/`. A missing file is a failure, not a
+    /// skip.
     pub(crate) fn table1() -> CoefficientTable {
         let path = concat!(
             env!("CARGO_MANIFEST_DIR"),
-            "/../../shared/data/jn06_a12124_coefficients_vs_temperature.csv"
+            "/../data/jn06_a12124_coefficients_vs_temperature.csv"
         );
         let text = std::fs::read_to_string(path)
             .unwrap_or_else(|e| panic!("Table 1 data missing at {path}: {e}"));

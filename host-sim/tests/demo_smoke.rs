@@ -10,7 +10,7 @@ use accomp_host::log::Log;
 
 fn table1() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../shared/data/jn06_a12124_coefficients_vs_temperature.csv")
+        .join("../data/jn06_a12124_coefficients_vs_temperature.csv")
 }
 
 fn out_dir() -> PathBuf {

@@ -9,14 +9,14 @@ use accomp::units::{Celsius, RAD_PER_ARCMIN};
 
 const TABLE1: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
-    "/../../shared/data/jn06_a12124_coefficients_vs_temperature.csv"
+    "/../data/jn06_a12124_coefficients_vs_temperature.csv"
 );
 
-/// The data must be there (CI clones `shared/` beside the repository): fail loudly otherwise.
+/// The data is in the repository (data/): fail loudly if it is not there.
 fn table1() -> &'static str {
     assert!(
         Path::new(TABLE1).is_file(),
-        "Table 1 data missing at {TABLE1}: the shared/ tree must sit beside the repository"
+        "Table 1 data missing at {TABLE1}: the repository's data/ folder is incomplete"
     );
     TABLE1
 }

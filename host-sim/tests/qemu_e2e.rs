@@ -6,8 +6,8 @@
 use std::time::Instant;
 
 use accomp::pipeline::{self, raw_from_physical, ChannelFlags, RawSample, Status};
-use accomp::protocol::{ErrorCode, Request, Response};
-use accomp::table::{CalibrationTable, CRC32, ENCODED_LEN};
+use accomp::protocol::{upload_body_crc32, ErrorCode, Request, Response};
+use accomp::table::{CalibrationTable, ENCODED_LEN};
 use accomp::units::{Celsius, Gs, TiltArcsec, Volts};
 use accomp_host::device::{
     firmware_path, paper_table, qemu::QemuOptions, Client, ClientError, Qemu,
@@ -170,12 +170,14 @@ fn garbage_and_malformed_frames_are_ignored_and_corrupted_tables_refused() {
     }
     // A chunk out of order names the offset the device expected.
     c.call(Request::UploadBegin {
+        upload_id: 5,
         total_len: ENCODED_LEN as u32,
-        crc32: CRC32.checksum(&encoded),
+        body_crc32: upload_body_crc32(&encoded),
     })
     .unwrap();
     let err = c
         .call(Request::UploadChunk {
+            upload_id: 5,
             offset: 64,
             data: heapless::Vec::from_slice(&encoded[64..128]).unwrap(),
         })

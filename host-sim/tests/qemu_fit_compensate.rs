@@ -12,7 +12,7 @@ use std::process::Command;
 
 const TABLE1: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
-    "/../../shared/data/jn06_a12124_coefficients_vs_temperature.csv"
+    "/../data/jn06_a12124_coefficients_vs_temperature.csv"
 );
 
 fn accomp(args: &[&str]) -> String {

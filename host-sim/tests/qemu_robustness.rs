@@ -10,7 +10,7 @@ use std::process::Command;
 use std::time::{Duration, Instant};
 
 use accomp::pipeline::{self, raw_from_physical, RawSample};
-use accomp::protocol::{DeviceMessage, ErrorCode, Request};
+use accomp::protocol::{upload_body_crc32, DeviceMessage, ErrorCode, Request};
 use accomp::table::{CalibrationTable, CRC32, ENCODED_LEN};
 use accomp::units::{Celsius, TiltArcsec, Volts};
 use accomp_host::device::{
@@ -122,20 +122,22 @@ fn corrupted_uploads_are_refused_and_the_good_table_keeps_compensating() {
         }
         temp += 4.0;
     }
-    // The upload's own CRC-32 (UploadBegin) is checked before the table is decoded.
+    // The upload's own checksum (UploadBegin) is checked before the table is decoded.
     c.call(Request::UploadBegin {
+        upload_id: 77,
         total_len: ENCODED_LEN as u32,
-        crc32: CRC32.checksum(&encoded) ^ 1,
+        body_crc32: upload_body_crc32(&encoded) ^ 1,
     })
     .unwrap();
     for (i, chunk) in encoded.chunks(64).enumerate() {
         c.call(Request::UploadChunk {
+            upload_id: 77,
             offset: (i * 64) as u32,
             data: heapless::Vec::from_slice(chunk).unwrap(),
         })
         .unwrap();
     }
-    let err = c.call(Request::UploadCommit).unwrap_err();
+    let err = c.call(Request::UploadCommit { upload_id: 77 }).unwrap_err();
     assert_eq!(err.device_code(), Some(ErrorCode::UploadCrcMismatch));
     assert_eq!(c.read_table().unwrap(), encoded.to_vec());
     drop(qemu);

@@ -1,4 +1,4 @@
-//! The STM32F405's internal flash as the calibration store's NOR flash (sectors 10 and 11).
+//! The STM32F405's internal flash as the calibration store's NOR flash (sectors 9, 10, 11).
 //!
 //! The HAL's `UnlockedFlash` implements `NorFlash` but borrows `LockedFlash` for as long as it
 //! lives, and the store must own its flash for the whole run. [`InternalFlash`] owns the
@@ -17,8 +17,8 @@ use accomp::storage::SlotLayout;
 /// The calibration flash of this board.
 pub type Flash = InternalFlash;
 
-/// Sectors 10 (0x080C_0000) and 11 (0x080E_0000); memory.x keeps the program below them.
-pub const SLOT_LAYOUT: SlotLayout = SlotLayout::STM32F405_SECTORS_10_11;
+/// Sectors 9 (0x080A_0000), 10 and 11; memory.x keeps the program below them.
+pub const SLOT_LAYOUT: SlotLayout = SlotLayout::STM32F405_SECTORS_9_11;
 
 /// Why a flash operation failed.
 #[derive(Debug, Clone, Copy)]

@@ -24,17 +24,17 @@ pub const BOARD: Board = Board::Qemu;
 pub const SYSTICK_HZ: u32 = 168_000_000;
 
 /// Bytes per calibration slot in RAM flash: one 1 KiB erase block holds the 444-byte slot image
-/// and its commit marker (docs/storage.md).
+/// and its commit marker (docs/storage.md); three slots.
 const SLOT_BYTES: usize = 1024;
 
 /// RAM standing in for flash (QEMU's STM32 flash model is not worth trusting, and a QEMU
 /// restart is a power-off anyway): two slots, 4-byte program unit like the F405 at x32.
-pub type RamCalibrationFlash = RamFlash<{ 2 * SLOT_BYTES }, SLOT_BYTES, 4>;
+pub type RamCalibrationFlash = RamFlash<{ 3 * SLOT_BYTES }, SLOT_BYTES, 4>;
 
 /// The calibration flash: a static RamFlash.
 pub type Flash = &'static mut RamCalibrationFlash;
 
-/// Slot A at 0, slot B at 1 KiB.
+/// Slot A at 0, slot B at 1 KiB, slot C at 2 KiB.
 pub const SLOT_LAYOUT: SlotLayout = SlotLayout::consecutive(SLOT_BYTES as u32);
 
 /// Exit codes seen by the host launcher (QEMU's own exit status).

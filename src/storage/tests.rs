@@ -443,7 +443,7 @@ fn cuts_for_geometry<const E: usize, const W: usize, const R: usize>(
 
 #[test]
 fn power_cut_at_every_step_of_a_commit_leaves_old_or_new_small_flash_byte_writes() {
-    let tried = cuts_for_geometry::<256, 1, 1>(1024, SMALL_LAYOUT);
+    let tried = cuts_for_geometry::<256, 1, 1>(1536, SMALL_LAYOUT);
     eprintln!("byte-write flash (ERASE 256, WRITE 1): {tried} cut points");
     assert!(tried > 5 * 4 * 440);
 }
@@ -451,7 +451,7 @@ fn power_cut_at_every_step_of_a_commit_leaves_old_or_new_small_flash_byte_writes
 #[test]
 fn power_cut_at_every_step_of_a_commit_leaves_old_or_new_wide_writes_many_blocks() {
     // 8 erase blocks per slot, 8-byte program words, 4-byte reads.
-    let tried = cuts_for_geometry::<64, 8, 4>(1024, SlotLayout::consecutive(512));
+    let tried = cuts_for_geometry::<64, 8, 4>(1536, SlotLayout::consecutive(512));
     eprintln!("wide-write flash (ERASE 64, WRITE 8, READ 4): {tried} cut points");
     assert!(tried > 0);
 }
@@ -459,7 +459,7 @@ fn power_cut_at_every_step_of_a_commit_leaves_old_or_new_wide_writes_many_blocks
 #[test]
 fn power_cut_at_every_step_of_a_commit_leaves_old_or_new_stm32f405_sectors() {
     // The board's geometry: 128 KiB sectors, x32 programming, slots in sectors 10 and 11.
-    let layout = SlotLayout::STM32F405_SECTORS_10_11;
+    let layout = SlotLayout::STM32F405_SECTORS_9_11;
     let (t1, t2, t3) = (table(1), table(2), table(3));
     let initial = flash_with::<{ 128 * 1024 }, 4, 1>(1024 * 1024, layout, &[t1, t2]);
     let tried = exhaustive_cuts(&initial, layout, Op::Commit(&t3), &t2, &t3);
@@ -470,7 +470,7 @@ fn power_cut_at_every_step_of_a_commit_leaves_old_or_new_stm32f405_sectors() {
 #[test]
 fn power_cut_at_every_step_of_a_prepared_commit_leaves_old_or_new() {
     let (t1, t2, t3) = (table(1), table(2), table(3));
-    let initial = flash_with::<256, 1, 1>(1024, SMALL_LAYOUT, &[t1, t2]);
+    let initial = flash_with::<256, 1, 1>(1536, SMALL_LAYOUT, &[t1, t2]);
     let tried = exhaustive_cuts(&initial, SMALL_LAYOUT, Op::PreparedCommit(&t3), &t2, &t3);
     eprintln!("prepared commit: {tried} cut points");
     assert!(tried > 0);
@@ -478,27 +478,25 @@ fn power_cut_at_every_step_of_a_prepared_commit_leaves_old_or_new() {
 
 #[test]
 fn prepared_commit_does_not_erase_again() {
-    let flash = flash_with::<256, 1, 1>(1024, SMALL_LAYOUT, &[table(1)]);
+    let flash = flash_with::<256, 1, 1>(1536, SMALL_LAYOUT, &[table(1)]);
     let mut s = store(flash, SMALL_LAYOUT);
     assert_eq!(s.prepare_commit(), Ok(Slot::B));
     s.flash.log.clear();
     s.commit(&table(2)).unwrap();
     assert!(!s.flash.log.iter().any(|a| matches!(a, Access::Erase(..))));
-    // The next commit was not prepared: it erases.
+    // The next commit was not prepared: it erases its target (C: A holds the rollback table).
     s.flash.log.clear();
     s.commit(&table(3)).unwrap();
-    assert!(s.flash.log.contains(&Access::Erase(0, 512)));
+    assert!(s.flash.log.contains(&Access::Erase(1024, 1536)));
     let (active, _) = active_after_reboot(s.into_flash(), SMALL_LAYOUT);
     assert_eq!(active, Some(table(3)));
 }
 
 #[test]
 fn an_erase_that_failed_is_redone_by_the_next_commit() {
-    let flash = flash_with::<256, 1, 1>(1024, SMALL_LAYOUT, &[table(1), table(2)]);
-    // The erase fails in its second block (a transient driver error: same store, no reboot),
-    // after a stale "prepared" mark from an earlier successful prepare.
+    let flash = flash_with::<256, 1, 1>(1536, SMALL_LAYOUT, &[table(1), table(2)]);
+    // The erase fails in its second block (a transient driver error: same store, no reboot).
     let mut s = store(flash, SMALL_LAYOUT);
-    assert_eq!(s.prepare_commit(), Ok(Slot::A));
     s.flash.budget = Some(1);
     assert_eq!(
         s.prepare_commit(),
@@ -506,9 +504,10 @@ fn an_erase_that_failed_is_redone_by_the_next_commit() {
     );
     s.flash.dead = false;
     s.flash.budget = None;
+    assert_eq!(s.spare_erased(), Ok(false));
     s.flash.log.clear();
     s.commit(&table(3)).unwrap();
-    assert!(s.flash.log.contains(&Access::Erase(0, 512)));
+    assert!(s.flash.log.contains(&Access::Erase(1024, 1536)));
     let (active, _) = active_after_reboot(s.into_flash(), SMALL_LAYOUT);
     assert_eq!(active, Some(table(3)));
 }
@@ -516,7 +515,7 @@ fn an_erase_that_failed_is_redone_by_the_next_commit() {
 #[test]
 fn power_cut_at_every_step_of_a_rollback_leaves_current_or_previous() {
     let (t1, t2) = (table(1), table(2));
-    let initial = flash_with::<256, 1, 1>(1024, SMALL_LAYOUT, &[t1, t2]);
+    let initial = flash_with::<256, 1, 1>(1536, SMALL_LAYOUT, &[t1, t2]);
     let tried = exhaustive_cuts(&initial, SMALL_LAYOUT, Op::Rollback, &t2, &t1);
     eprintln!("rollback: {tried} cut points");
     assert!(tried > 0);
@@ -525,7 +524,7 @@ fn power_cut_at_every_step_of_a_rollback_leaves_current_or_previous() {
 #[test]
 fn power_cut_at_every_step_across_sequence_wrap_leaves_old_or_new() {
     let (t1, t2) = (table(1), table(2));
-    let mut initial = Small::new(1024);
+    let mut initial = Small::new(1536);
     doc_write_slot(&mut initial.bytes, 0, 4, u32::MAX - 1, &table(7));
     doc_write_slot(&mut initial.bytes, 512, 4, u32::MAX, &t1);
     let tried = exhaustive_cuts(&initial, SMALL_LAYOUT, Op::Commit(&t2), &t1, &t2);
@@ -535,7 +534,7 @@ fn power_cut_at_every_step_across_sequence_wrap_leaves_old_or_new() {
     assert_eq!(
         r,
         Ok(SlotInfo {
-            slot: Slot::A,
+            slot: Slot::C,
             sequence: 0,
             table_id: crate::table::table_id(&t2)
         })
@@ -547,7 +546,7 @@ fn repeated_cuts_and_retries_never_lose_the_last_committed_table() {
     // A random walk: commits and rollbacks, each cut at a random step or not at all; the
     // active table after every reboot is the last one known active or the one attempted.
     let tables: Vec<_> = (1..=5).map(table).collect();
-    let mut flash = flash_with::<256, 1, 1>(1024, SMALL_LAYOUT, &[tables[0]]);
+    let mut flash = flash_with::<256, 1, 1>(1536, SMALL_LAYOUT, &[tables[0]]);
     let mut active = tables[0];
     let mut rng = Small::new(0).with_budget(0, Cut::RandomBits(42));
     let mut draw = |n: usize| (0..16).fold(0usize, |acc, _| acc * 2 + usize::from(rng.coin())) % n;
@@ -583,7 +582,7 @@ fn repeated_cuts_and_retries_never_lose_the_last_committed_table() {
 
 #[test]
 fn refused_table_touches_nothing() {
-    let flash = flash_with::<256, 1, 1>(1024, SMALL_LAYOUT, &[table(1), table(2)]);
+    let flash = flash_with::<256, 1, 1>(1536, SMALL_LAYOUT, &[table(1), table(2)]);
     let before = flash.bytes.clone();
     let mut flipped = table(3);
     flipped[100] ^= 0x10;
@@ -618,7 +617,7 @@ fn refused_table_touches_nothing() {
 #[test]
 fn a_cell_that_will_not_program_fails_verification_and_keeps_the_old_table() {
     let (t1, t2) = (table(1), table(2));
-    let mut flash = flash_with::<256, 1, 1>(1024, SMALL_LAYOUT, &[t1]);
+    let mut flash = flash_with::<256, 1, 1>(1536, SMALL_LAYOUT, &[t1]);
     // Slot B (the commit target), inside the table: bit 0 of a byte the table sets to 0.
     let t2_zero = t2.iter().position(|b| b & 1 == 0).unwrap();
     flash.stuck_at_one.push((512 + 16 + t2_zero, 0x01));
@@ -637,7 +636,7 @@ fn a_cell_that_will_not_program_fails_verification_and_keeps_the_old_table() {
 #[test]
 fn a_marker_that_does_not_program_fully_is_caught_after_the_write() {
     let (t1, t2) = (table(1), table(2));
-    let mut flash = flash_with::<256, 1, 1>(1024, SMALL_LAYOUT, &[t1]);
+    let mut flash = flash_with::<256, 1, 1>(1536, SMALL_LAYOUT, &[t1]);
     // Marker byte 0 is 0xA5: bit 1 is a zero bit of the marker; make it stick at 1.
     flash.stuck_at_one.push((512 + doc_marker_offset(4), 0x02));
     let (r, flash) = run(flash, SMALL_LAYOUT, Op::Commit(&t2));
@@ -650,18 +649,20 @@ fn a_marker_that_does_not_program_fully_is_caught_after_the_write() {
 
 #[test]
 fn factory_empty_flash_has_no_table() {
-    let mut s = store(Small::new(1024), SMALL_LAYOUT);
+    let mut s = store(Small::new(1536), SMALL_LAYOUT);
     assert_eq!(s.active(), None);
     assert_eq!(s.slot_state(Slot::A).unwrap(), SlotState::Blank);
     assert_eq!(s.slot_state(Slot::B).unwrap(), SlotState::Blank);
+    assert_eq!(s.slot_state(Slot::C).unwrap(), SlotState::Blank);
     assert!(matches!(s.load_active(), Err(StorageError::NoValidSlot)));
     assert_eq!(s.activate_previous(), Err(StorageError::NoValidSlot));
 }
 
 #[test]
-fn commits_alternate_slots_with_increasing_sequence_in_the_documented_layout() {
-    let mut s = store(SimFlash::<256, 1, 1>::new(1024), SMALL_LAYOUT);
-    for (n, (slot, base)) in [(Slot::A, 0), (Slot::B, 512), (Slot::A, 0)]
+fn commits_rotate_through_the_three_slots_with_increasing_sequence_in_the_documented_layout() {
+    let mut s = store(SimFlash::<256, 1, 1>::new(1536), SMALL_LAYOUT);
+    // Each commit goes to the spare: neither the active nor the rollback slot.
+    for (n, (slot, base)) in [(Slot::A, 0), (Slot::B, 512), (Slot::C, 1024), (Slot::A, 0)]
         .into_iter()
         .enumerate()
     {
@@ -685,7 +686,7 @@ fn commits_alternate_slots_with_increasing_sequence_in_the_documented_layout() {
 
 #[test]
 fn commit_erases_the_inactive_slot_and_programs_the_marker_last_after_read_back() {
-    let flash = flash_with::<256, 1, 1>(1024, SMALL_LAYOUT, &[table(1)]); // A active
+    let flash = flash_with::<256, 1, 1>(1536, SMALL_LAYOUT, &[table(1)]); // A active
     let mut s = store(flash, SMALL_LAYOUT);
     s.flash.log.clear();
     s.commit(&table(2)).unwrap();
@@ -722,7 +723,7 @@ fn commit_erases_the_inactive_slot_and_programs_the_marker_last_after_read_back(
 fn marker_sits_after_padding_to_the_write_size() {
     let t = table(1);
     let mut s = store(
-        SimFlash::<64, 16, 1>::new(1024),
+        SimFlash::<64, 16, 1>::new(1536),
         SlotLayout::consecutive(512),
     );
     s.commit(&t).unwrap();
@@ -753,7 +754,7 @@ fn boot_picks_the_newest_valid_slot_in_serial_arithmetic() {
         (0x7FFF_FFFF, 0x8000_0000, Slot::B),
     ];
     for (seq_a, seq_b, winner) in cases {
-        let mut f = Small::new(1024);
+        let mut f = Small::new(1536);
         doc_write_slot(&mut f.bytes, 0, 4, seq_a, &table(1));
         doc_write_slot(&mut f.bytes, 512, 4, seq_b, &table(2));
         let mut s = store(f, SMALL_LAYOUT);
@@ -776,7 +777,7 @@ fn every_partial_program_of_the_marker_is_invalid() {
         .filter(|(i, m)| DOC_MARKER[*i] & m == 0)
         .collect();
     assert_eq!(zero_bits.len(), 16);
-    let mut base = Small::new(1024);
+    let mut base = Small::new(1536);
     doc_write_slot(&mut base.bytes, 0, 4, 1, &table(1));
     let m = doc_marker_offset(4);
     let mut valid = 0;
@@ -800,7 +801,7 @@ fn every_partial_program_of_the_marker_is_invalid() {
 #[test]
 fn a_bit_flip_anywhere_in_one_slot_hands_over_to_the_other() {
     let (t1, t2) = (table(1), table(2));
-    let healthy = flash_with::<256, 1, 1>(1024, SMALL_LAYOUT, &[t1, t2]); // A: t1, B: t2 (newer)
+    let healthy = flash_with::<256, 1, 1>(1536, SMALL_LAYOUT, &[t1, t2]); // A: t1, B: t2 (newer)
     let m = doc_marker_offset(4);
     let covered: Vec<usize> = (0..16 + DOC_TABLE_LEN).chain(m..m + 4).collect();
     let mut flips = 0;
@@ -829,7 +830,7 @@ fn slot_faults_are_named() {
     let t = table(1);
     let m = doc_marker_offset(4);
     let fault = |edit: &dyn Fn(&mut Vec<u8>)| {
-        let mut f = Small::new(1024);
+        let mut f = Small::new(1536);
         doc_write_slot(&mut f.bytes, 0, 4, 1, &t);
         edit(&mut f.bytes);
         store(f, SMALL_LAYOUT).slot_state(Slot::A).unwrap()
@@ -853,7 +854,7 @@ fn slot_faults_are_named() {
     // A table with a bad inner value but a matching slot CRC: the table validator decides.
     let mut nan = paper_table();
     nan.rtd.cvd.r0 = f64::NAN;
-    let mut f = Small::new(1024);
+    let mut f = Small::new(1536);
     doc_write_slot(&mut f.bytes, 0, 4, 1, &nan.encode());
     assert!(matches!(
         store(f, SMALL_LAYOUT).slot_state(Slot::A).unwrap(),
@@ -864,28 +865,67 @@ fn slot_faults_are_named() {
 // ---- rollback -----------------------------------------------------------------------------
 
 #[test]
-fn rollback_reactivates_the_older_table_in_both_slots() {
+fn rollback_recommits_the_previous_table_into_the_spare_and_keeps_the_other_for_rollback() {
     let (t1, t2) = (table(1), table(2));
-    let flash = flash_with::<256, 1, 1>(1024, SMALL_LAYOUT, &[t1, t2]);
+    let flash = flash_with::<256, 1, 1>(1536, SMALL_LAYOUT, &[t1, t2]); // A: t1, B: t2
     let mut s = store(flash, SMALL_LAYOUT);
+    s.flash.log.clear();
     let info = s.activate_previous().unwrap();
-    assert_eq!(info.slot, Slot::B, "written over the newer slot");
+    assert_eq!(info.slot, Slot::C, "written into the spare");
     assert_eq!(info.sequence, 3);
+    assert!(
+        !s.flash
+            .log
+            .iter()
+            .any(|a| matches!(a, Access::Erase(o, _) | Access::Write(o, _) if *o < 1024)),
+        "the active and the rollback slot are never written"
+    );
+    // After a reboot: t1 active, t2 the rollback table; a second rollback returns to t2.
     let mut s = store(s.into_flash().reboot(), SMALL_LAYOUT);
     assert_eq!(s.load_active().unwrap().1.encode(), t1);
-    let SlotState::Valid(a) = s.slot_state(Slot::A).unwrap() else {
-        panic!("older slot untouched and valid");
-    };
-    assert_eq!(a.sequence, 1);
-    // A second rollback has nothing older to go to and writes nothing.
-    s.flash.steps = 0;
-    assert_eq!(s.activate_previous(), Ok(info));
-    assert_eq!(s.flash.steps, 0);
+    let v = s.valid_slots().unwrap();
+    assert_eq!(v.previous.map(|p| p.slot), Some(Slot::B));
+    let info = s.activate_previous().unwrap();
+    assert_eq!(info.slot, Slot::A, "the stale copy of t1 is the spare now");
+    let mut s = store(s.into_flash().reboot(), SMALL_LAYOUT);
+    assert_eq!(s.load_active().unwrap().1.encode(), t2);
+    assert_eq!(
+        s.valid_slots().unwrap().previous.map(|p| p.slot),
+        Some(Slot::C)
+    );
+}
+
+#[test]
+fn the_spare_erased_ahead_is_the_next_target_and_is_not_erased_again() {
+    let (t1, t2, t3) = (table(1), table(2), table(3));
+    let flash = flash_with::<256, 1, 1>(1536, SMALL_LAYOUT, &[t1, t2, t3]); // A t1, B t2, C t3
+    let mut s = store(flash, SMALL_LAYOUT);
+    assert_eq!(s.spare_erased(), Ok(false));
+    assert_eq!(
+        s.prepare_commit(),
+        Ok(Slot::A),
+        "t1 is neither active nor previous"
+    );
+    assert_eq!(s.spare_erased(), Ok(true));
+    s.flash.log.clear();
+    assert_eq!(s.prepare_commit(), Ok(Slot::A));
+    assert!(
+        s.flash.log.iter().all(|a| matches!(a, Access::Read(..))),
+        "no second erase"
+    );
+    // Erased ahead: still t3 active and t2 previous after a reboot.
+    let mut s = store(s.into_flash().reboot(), SMALL_LAYOUT);
+    let v = s.valid_slots().unwrap();
+    assert_eq!(
+        (v.newest.map(|i| i.slot), v.previous.map(|i| i.slot)),
+        (Some(Slot::C), Some(Slot::B))
+    );
+    assert_eq!(s.slot_state(Slot::A), Ok(SlotState::Blank));
 }
 
 #[test]
 fn rollback_without_a_previous_table_is_refused() {
-    let flash = flash_with::<256, 1, 1>(1024, SMALL_LAYOUT, &[table(1)]);
+    let flash = flash_with::<256, 1, 1>(1536, SMALL_LAYOUT, &[table(1)]);
     let mut s = store(flash, SMALL_LAYOUT);
     assert_eq!(s.activate_previous(), Err(StorageError::NoPreviousSlot));
 }
@@ -900,25 +940,31 @@ fn layouts_that_do_not_fit_the_flash_are_refused() {
         (SlotLayout::consecutive(256), LayoutError::SlotTooSmall),
         (
             SlotLayout {
-                slot_a_offset: 0,
-                slot_b_offset: 256,
+                slot_offsets: [0, 1024, 256],
                 slot_len: 512,
             },
             LayoutError::Overlap,
         ),
         (SlotLayout::consecutive(1024), LayoutError::OutOfBounds),
+        (
+            SlotLayout {
+                slot_offsets: [0, 512, 1536],
+                slot_len: 512,
+            },
+            LayoutError::OutOfBounds,
+        ),
     ];
     for (layout, expected) in cases {
         assert!(
             matches!(
-                CalibrationStore::new(Small::new(1024), layout),
+                CalibrationStore::new(Small::new(1536), layout),
                 Err(StorageError::Layout(e)) if e == expected
             ),
             "{layout:?}"
         );
     }
     assert!(matches!(
-        CalibrationStore::new(SimFlash::<256, 128, 1>::new(1024), SMALL_LAYOUT),
+        CalibrationStore::new(SimFlash::<256, 128, 1>::new(1536), SMALL_LAYOUT),
         Err(StorageError::Layout(LayoutError::AlignmentTooLarge))
     ));
 }
@@ -926,12 +972,12 @@ fn layouts_that_do_not_fit_the_flash_are_refused() {
 #[test]
 fn stm32f405_layout_fits_a_one_mebibyte_flash_with_128k_sectors() {
     let f = SimFlash::<{ 128 * 1024 }, 4, 1>::new(1024 * 1024);
-    let mut s = CalibrationStore::new(f, SlotLayout::STM32F405_SECTORS_10_11).unwrap();
+    let mut s = CalibrationStore::new(f, SlotLayout::STM32F405_SECTORS_9_11).unwrap();
     s.commit(&table(1)).unwrap();
     let bytes = &s.flash.bytes;
-    assert_eq!(&bytes[0xC_0000..0xC_0004], DOC_MAGIC);
+    assert_eq!(&bytes[0xA_0000..0xA_0004], DOC_MAGIC);
     assert!(
-        bytes[..0xC_0000].iter().all(|b| *b == 0xFF),
+        bytes[..0xA_0000].iter().all(|b| *b == 0xFF),
         "program area untouched"
     );
 }
@@ -939,7 +985,7 @@ fn stm32f405_layout_fits_a_one_mebibyte_flash_with_128k_sectors() {
 #[test]
 fn ram_flash_holds_tables_for_the_qemu_board() {
     let mut s = CalibrationStore::new(
-        RamFlash::<2048, 1024, 4>::new(),
+        RamFlash::<3072, 1024, 4>::new(),
         SlotLayout::consecutive(1024),
     )
     .unwrap();
@@ -948,7 +994,7 @@ fn ram_flash_holds_tables_for_the_qemu_board() {
     s.commit(&table(2)).unwrap();
     let f = s.into_flash();
     let mut s = CalibrationStore::new(
-        RamFlash::<2048, 1024, 4>::from_bytes(*f.as_bytes()),
+        RamFlash::<3072, 1024, 4>::from_bytes(*f.as_bytes()),
         SlotLayout::consecutive(1024),
     )
     .unwrap();

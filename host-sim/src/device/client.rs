@@ -6,10 +6,9 @@ use std::time::{Duration, Instant};
 
 use accomp::pipeline::{Frame, RawSample};
 use accomp::protocol::{
-    decode_message, encode_frame, DeviceInfo, DeviceMessage, ErrorCode, ErrorReply, FrameDecoder,
-    HostFrame, Request, Response, CHUNK_LEN, MAX_FRAME_LEN,
+    decode_message, encode_frame, upload_body_crc32, DeviceInfo, DeviceMessage, ErrorCode,
+    ErrorReply, FrameDecoder, HostFrame, Request, Response, CHUNK_LEN, MAX_FRAME_LEN,
 };
-use accomp::table::CRC32;
 
 use super::transport::Transport;
 
@@ -60,6 +59,9 @@ pub struct Client {
     transport: Box<dyn Transport>,
     decoder: FrameDecoder<MAX_FRAME_LEN>,
     next_id: u32,
+    /// Id of the next upload: random per client, so two hosts (or a restarted one) never
+    /// continue each other's upload.
+    next_upload_id: u32,
     /// Messages received while waiting for something else (ids answered later, READY …).
     inbox: VecDeque<DeviceMessage>,
     /// Frames from the device that failed CRC/COBS/decoding.
@@ -75,6 +77,7 @@ impl Client {
             transport,
             decoder: FrameDecoder::new(),
             next_id: 1,
+            next_upload_id: random_u32(),
             inbox: VecDeque::new(),
             bad_frames: 0,
             timeout: DEFAULT_TIMEOUT,
@@ -209,6 +212,13 @@ impl Client {
         }
     }
 
+    /// A fresh upload id (never 0, different from the previous one).
+    pub fn new_upload_id(&mut self) -> u32 {
+        let id = self.next_upload_id;
+        self.next_upload_id = self.next_upload_id.wrapping_add(1).max(1);
+        id.max(1)
+    }
+
     /// Uploads `bytes` in chunks and commits; `progress(sent, total)` after each chunk.
     /// Returns the id of the now active table.
     pub fn upload(
@@ -216,20 +226,23 @@ impl Client {
         bytes: &[u8],
         mut progress: impl FnMut(usize, usize),
     ) -> Result<u32, ClientError> {
+        let upload_id = self.new_upload_id();
         self.expect_ok(Request::UploadBegin {
+            upload_id,
             total_len: bytes.len() as u32,
-            crc32: CRC32.checksum(bytes),
+            body_crc32: upload_body_crc32(bytes),
         })?;
         for (i, chunk) in bytes.chunks(CHUNK_LEN).enumerate() {
             let data = heapless::Vec::from_slice(chunk)
                 .map_err(|_| ClientError::Unexpected("chunk too long".into()))?;
             self.expect_ok(Request::UploadChunk {
+                upload_id,
                 offset: (i * CHUNK_LEN) as u32,
                 data,
             })?;
             progress((i * CHUNK_LEN + chunk.len()).min(bytes.len()), bytes.len());
         }
-        match self.call(Request::UploadCommit)? {
+        match self.call(Request::UploadCommit { upload_id })? {
             Response::Committed { table_id } => Ok(table_id),
             other => Err(ClientError::Unexpected(format!("{other:?}"))),
         }
@@ -315,4 +328,12 @@ impl Client {
         }
         Ok(out.into_iter().flatten().collect())
     }
+}
+
+/// A random number from std's randomly keyed hasher (no extra dependency).
+fn random_u32() -> u32 {
+    use std::hash::{BuildHasher, Hasher};
+    let mut h = std::collections::hash_map::RandomState::new().build_hasher();
+    h.write_u32(std::process::id());
+    h.finish() as u32
 }
