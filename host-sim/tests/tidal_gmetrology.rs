@@ -16,7 +16,10 @@ const GMETROLOGY: &str = concat!(
 
 fn analysis() -> TidalAnalysis {
     let p = Path::new(GMETROLOGY);
-    assert!(p.exists(), "measured record {GMETROLOGY} missing: this test did not run");
+    assert!(
+        p.exists(),
+        "measured record {GMETROLOGY} missing: this test did not run"
+    );
     let (log, bad) = load(p, Format::Auto).expect("load");
     assert!(bad.is_empty());
     let ds = dataset_from_log(&log, &DatasetOptions::default()).expect("dataset");
@@ -42,7 +45,11 @@ fn gmetrology_wave_groups_delay_and_admittance_are_physically_sane() {
         let g = a.groups.iter().find(|g| g.name == name).expect(name);
         let d = g.amplitude_factor_rigid_earth;
         assert!((lo..hi).contains(&d.value), "{name}: δ {}", d.value);
-        assert!(d.sigma > 0.0 && d.sigma < sigma_max, "{name}: σ {}", d.sigma);
+        assert!(
+            d.sigma > 0.0 && d.sigma < sigma_max,
+            "{name}: σ {}",
+            d.sigma
+        );
         // Against the model's elastic tide: within the loading + calibration margin.
         let e = g.amplitude_factor_vs_elastic_model.value;
         assert!((0.95..1.06).contains(&e), "{name}: vs model {e}");
@@ -51,11 +58,19 @@ fn gmetrology_wave_groups_delay_and_admittance_are_physically_sane() {
     // One delay for all bands: determined to better than 30 s, consistent (χ²/dof < 3), and a
     // few minutes at most (the instrument's output filter, not a clock error of hours).
     let d = &a.delay;
-    assert!(d.delay_s.sigma > 0.0 && d.delay_s.sigma < 30.0, "{:?}", d.delay_s);
+    assert!(
+        d.delay_s.sigma > 0.0 && d.delay_s.sigma < 30.0,
+        "{:?}",
+        d.delay_s
+    );
     assert!(d.delay_s.value.abs() < 600.0, "{:?}", d.delay_s);
     assert!(d.chi2_per_dof < 3.0, "χ²/dof {}", d.chi2_per_dof);
     // Barometric admittance: gravity falls when pressure rises, typically −3 nm/s² per hPa.
-    let p = a.pressure_admittance.as_ref().expect("pressure channel").nm_s2_per_hpa;
+    let p = a
+        .pressure_admittance
+        .as_ref()
+        .expect("pressure channel")
+        .nm_s2_per_hpa;
     assert!((-8.0..0.0).contains(&p.value), "{p:?}");
     assert!(p.sigma > 0.0 && p.sigma < 3.0, "{p:?}");
 }
