@@ -222,27 +222,37 @@ mod app {
     }
 
     /// Feeds the independent watchdog only when, since the last check, acquisition produced a
-    /// reading (front-end) and the worker processed something (a heartbeat at least). A stuck
-    /// worker, a dead supervisor or a lock-up stops the feeding and the IWDG resets the MCU.
+    /// reading (front-end) and the worker processed something (an idle worker gets a heartbeat
+    /// to answer, so it feeds every other second). A stuck worker, a dead supervisor or a
+    /// lock-up stops the feeding and the IWDG (8 s) resets the MCU.
     #[task(priority = 1, local = [watchdog, watchdog_to_worker])]
     async fn watchdog(cx: watchdog::Context) {
         let mut acquisition = ACQ_PROGRESS.load(Ordering::Relaxed);
         let mut worker = WORKER_PROGRESS.load(Ordering::Relaxed);
+        let mut heartbeat_sent = false;
         loop {
-            let _ = cx.local.watchdog_to_worker.try_send(Inbound::Heartbeat);
             Mono::delay(WATCHDOG_CHECK_MS.millis()).await;
             let a = ACQ_PROGRESS.load(Ordering::Relaxed);
             let w = WORKER_PROGRESS.load(Ordering::Relaxed);
-            let acquisition_moved = !board::HAS_ADCS || a != acquisition;
-            if acquisition_moved && w != worker {
+            let acquisition_alive = !board::HAS_ADCS || a != acquisition;
+            let worker_alive = w != worker;
+            if acquisition_alive && worker_alive {
                 cx.local.watchdog.feed();
-            } else {
+            } else if !acquisition_alive || heartbeat_sent {
                 defmt::warn!(
                     "no progress (acquisition {}, worker {}): watchdog not fed",
-                    a != acquisition,
-                    w != worker
+                    acquisition_alive,
+                    worker_alive
                 );
             }
+            // An idle worker proves itself by answering a heartbeat before the next check (a
+            // busy one needs none: nothing extra in its queue while it streams).
+            heartbeat_sent = !worker_alive
+                && cx
+                    .local
+                    .watchdog_to_worker
+                    .try_send(Inbound::Heartbeat)
+                    .is_ok();
             acquisition = a;
             worker = w;
         }
