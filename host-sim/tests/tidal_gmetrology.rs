@@ -1,5 +1,6 @@
 //! Tidal analysis (wave groups, delay, pressure admittance) of the measured gMetrology spring
-//! gravimeter record (George-Gou/gMetrology, MIT; 33.98° N, 116.79° E, 51 days of 1-min data).
+//! gravimeter record in data/measured/ (George-Gou/gMetrology, MIT; 33.98° N, 116.79° E, 51 days
+//! of 1-min data).
 //! There is no truth for a real record: the test asserts that what comes out is physically sane
 //! (δ of a mid-latitude station plus loading and calibration, a delay of minutes at most that
 //! one value explains in all bands, a barometric admittance of the usual sign and size) and
@@ -11,7 +12,7 @@ use std::path::Path;
 
 const GMETROLOGY: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
-    "/../../shared/data/measured/gmetrology_relative_gravimeter_2021-06-08_51d.tsf"
+    "/../data/measured/gmetrology_relative_gravimeter_2021-06-08_51d.tsf"
 );
 
 fn analysis() -> TidalAnalysis {
