@@ -94,7 +94,7 @@ pub fn run_load(args: &LoadArgs) -> anyhow::Result<()> {
     let bytes = std::fs::read(&args.calibration)
         .with_context(|| format!("reading {}", args.calibration.display()))?;
     if !args.no_local_check {
-        crate::table_cli::decode_named(&bytes).context("table refused locally")?;
+        crate::calibration_file::decode_named(&bytes).context("table refused locally")?;
     }
     let mut conn = Connection::open(&args.target, args.firmware.as_deref())?;
     let id = conn.client.load(&bytes, |sent, total| {

@@ -1,24 +1,14 @@
 //! `accomp table show|verify <cal>`: what a calibration table file holds, and whether the
 //! firmware would accept it (the same `CalibrationTable::decode` the board runs).
 
+use crate::calibration_file::{decode_named, read_table};
 use accomp::poly::TempPoly;
-use accomp::table::{CalibrationTable, TableError, ENCODED_LEN};
+use accomp::table::{CalibrationTable, ENCODED_LEN};
 use accomp::units::{Celsius, RAD_PER_ARCMIN};
 use anyhow::{Context, Result};
 use serde::Serialize;
 use serde_json::Value;
-use std::path::{Path, PathBuf};
-
-/// Reads and decodes a table file; the error names the file and the validator's verdict.
-pub fn read_table(path: &Path) -> Result<CalibrationTable> {
-    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
-    decode_named(&bytes).with_context(|| format!("{} is refused", path.display()))
-}
-
-/// `CalibrationTable::decode` with its error turned into an `anyhow` error carrying the name.
-pub fn decode_named(bytes: &[u8]) -> Result<CalibrationTable> {
-    CalibrationTable::decode(bytes).map_err(|e: TableError| anyhow::anyhow!("{e} ({e:?})"))
-}
+use std::path::PathBuf;
 
 /// One temperature model as printed (in the unit the lab reads).
 #[derive(Serialize)]
