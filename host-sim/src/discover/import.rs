@@ -408,7 +408,9 @@ pub const ABSURD_SPREAD: f64 = 1.0e4;
 
 /// The memory the fit will use for `points` points, bytes (stated in the notes).
 pub fn memory_estimate_bytes(points: usize, rows: usize, columns: usize) -> usize {
-    points * BYTES_PER_POINT + rows * columns * 8
+    points
+        .saturating_mul(BYTES_PER_POINT)
+        .saturating_add(rows.saturating_mul(columns).saturating_mul(8))
 }
 
 /// Rows of `col` that are not measurements: non-finite, or further than [`ABSURD_SPREAD`] times
