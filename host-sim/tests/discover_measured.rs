@@ -4,9 +4,9 @@
 //! - gMetrology (MIT licence) ships in the repository's data/measured/ and always runs.
 //! - The AQG record has no licence, so it is never copied into the project: its test is
 //!   `#[ignore]`d with the reason (the default run lists it as *ignored*, never as passed) and
-//!   `cargo xtask test` runs it with `--ignored` when the record is present — at
-//!   `$ACCOMP_AQG_RECORD` or in the developers' `../shared/data/measured/` beside the clone. Run
-//!   by hand without the record, it fails and says so.
+//!   `cargo xtask test` runs it with `--ignored` when `$ACCOMP_AQG_RECORD` names the record
+//!   (obtained from NEWTON-g/AQG2MSEED, see data/README.md). Run by hand without it, it fails
+//!   and says so.
 
 use accomp_host::discover::import::{DatasetOptions, Format};
 use accomp_host::discover::{discover_path, select};
@@ -15,11 +15,6 @@ use std::path::{Path, PathBuf};
 const GMETROLOGY: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
     "/../data/measured/gmetrology_relative_gravimeter_2021-06-08_51d.tsf"
-);
-/// Where the developers' tree keeps the AQG record, beside the clone.
-const AQG_BESIDE_CLONE: &str = concat!(
-    env!("CARGO_MANIFEST_DIR"),
-    "/../../shared/data/measured/aqg_quantum_gravimeter_2020-07-31_12h.csv"
 );
 
 fn require(path: &Path) -> &Path {
@@ -31,11 +26,11 @@ fn require(path: &Path) -> &Path {
     path
 }
 
-/// The AQG record: `$ACCOMP_AQG_RECORD`, else the developers' tree beside the clone.
+/// The AQG record, named by `$ACCOMP_AQG_RECORD` (it is not in the repository).
 fn aqg_record() -> PathBuf {
     std::env::var_os("ACCOMP_AQG_RECORD")
         .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(AQG_BESIDE_CLONE))
+        .unwrap_or_else(|| PathBuf::from("$ACCOMP_AQG_RECORD is not set"))
 }
 
 fn tidal_factor(d: &accomp_host::discover::Discovery) -> Option<(f64, f64)> {
@@ -151,8 +146,8 @@ fn assert_noise_fitted(d: &accomp_host::discover::Discovery) {
 }
 
 #[test]
-#[ignore = "needs the unlicensed AQG record (not in the repository): set ACCOMP_AQG_RECORD or keep \
-            ../shared beside the clone; `cargo xtask test` runs it when present"]
+#[ignore = "needs the unlicensed AQG record (not in the repository): set ACCOMP_AQG_RECORD to its \
+            path; `cargo xtask test` runs it when set"]
 fn aqg_record_names_the_earth_tide() {
     let aqg = aqg_record();
     let (d, _) = discover_path(
