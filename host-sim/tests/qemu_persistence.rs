@@ -124,8 +124,12 @@ fn load_then_table_get_round_trip_across_two_qemu_runs_and_leave_no_temp_folder(
     let status = out.wait_with_output().expect("wait").status;
     assert!(status.success());
     assert!(qemu_dirs_of(pid).is_empty(), "{:?} left", qemu_dirs_of(pid));
-    // And this process's own launches (boot() above) too, once dropped.
-    assert!(qemu_dirs_of(std::process::id()).is_empty());
+    // And a launch in this process: its temporary folder goes with the Qemu.
+    let (q, _c) = Qemu::launch(&elf(), &QemuOptions::default()).expect("QEMU");
+    let dir = q.log_dir.clone();
+    assert!(dir.exists());
+    drop(q);
+    assert!(!dir.exists(), "{} left", dir.display());
     let _ = std::fs::remove_dir_all(&state);
     let _ = std::fs::remove_dir_all(&work);
 }
@@ -162,7 +166,29 @@ fn sigterm_stops_qemu_and_removes_its_temporary_folder() {
         std::thread::sleep(Duration::from_millis(50));
     }
     assert!(!qemu_dirs_of(pid).is_empty(), "QEMU never started");
-    std::thread::sleep(Duration::from_secs(3));
+    // Streaming (#15.8): rows are on disk while the run goes on.
+    let out_csv = work.join("out.csv");
+    let deadline = std::time::Instant::now() + Duration::from_secs(60);
+    let rows_on_disk = || {
+        std::fs::read_to_string(&out_csv)
+            .map(|t| {
+                t.lines()
+                    .filter(|l| l.starts_with(|c: char| c.is_ascii_digit()))
+                    .count()
+            })
+            .unwrap_or(0)
+    };
+    while rows_on_disk() < 10 && std::time::Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    assert!(
+        rows_on_disk() >= 10,
+        "no rows on disk while compensate runs"
+    );
+    assert!(
+        child.try_wait().unwrap().is_none(),
+        "compensate ended before the signal"
+    );
     let qemu_pids = children_of(pid);
     assert!(!qemu_pids.is_empty(), "no QEMU child");
     Command::new("kill")

@@ -118,21 +118,19 @@ static RUNNING: std::sync::Mutex<Vec<(u32, Option<PathBuf>)>> = std::sync::Mutex
 pub fn install_signal_cleanup() {
     static ONCE: std::sync::Once = std::sync::Once::new();
     ONCE.call_once(|| {
-        let _ = ctrlc::set_handler(|| {
-            cleanup_running();
-            eprintln!("\ninterrupted: QEMU stopped");
-            std::process::exit(130);
-        });
+        let _ = ctrlc::set_handler(cleanup_running);
     });
 }
 
-/// Kills the registered QEMUs and removes their temporary directories.
+/// Kills the registered QEMUs and removes their temporary directories. Holds the registry's
+/// lock throughout: a [`Qemu`] being dropped meanwhile (its connection just broke) waits in
+/// `unregister` instead of letting the process end before the clean-up is done.
 fn cleanup_running() {
-    let list = match RUNNING.lock() {
-        Ok(mut l) => std::mem::take(&mut *l),
-        Err(p) => std::mem::take(&mut *p.into_inner()),
+    let mut list = match RUNNING.lock() {
+        Ok(l) => l,
+        Err(p) => p.into_inner(),
     };
-    for (pid, dir) in list {
+    for (pid, dir) in list.drain(..) {
         // SIGKILL: the guest has nothing to flush (the flash file is written through).
         let _ = Command::new("kill").arg("-9").arg(pid.to_string()).status();
         wait_gone(pid);
@@ -140,6 +138,9 @@ fn cleanup_running() {
             let _ = fs::remove_dir_all(d);
         }
     }
+    eprintln!("\ninterrupted: QEMU stopped");
+    // Exit with the lock held, so no other thread gets past `unregister`.
+    std::process::exit(130);
 }
 
 /// Waits (briefly) until process `pid` is gone, so its files can be removed.
