@@ -276,14 +276,17 @@ pub fn process_prepared(
         }
     }
 
-    // RTD: ratiometric ohms → °C.
+    // RTD: ratiometric ohms → °C, with the compensation's temperature terms (cached per code).
+    let mut temperature = None;
     if driver_faults(raw.rtd_flags, &mut status) {
         status.set(Status::RTD_INVALID);
     } else {
-        match table.rtd(raw.rtd) {
+        let temp = table.temperature(raw.rtd);
+        match temp.rtd {
             Ok((ohms, t)) => {
                 frame.rtd_ohms = ohms;
                 frame.temperature_c = t;
+                temperature = Some(temp);
             }
             Err((ohms, fault)) => {
                 if let Some(ohms) = ohms {
@@ -338,12 +341,12 @@ pub fn process_prepared(
         status.set(Status::RTD_INVALID);
     }
     let (e, t) = (frame.output_v, frame.temperature_c);
-    if e.is_nan() || t.is_nan() {
+    let Some(temperature) = temperature.filter(|_| !(e.is_nan() || t.is_nan())) else {
         // Already flagged above; the compensated values stay NaN.
         frame.status = status;
         return frame;
-    }
-    match table.compensate(e, t, tilt_code) {
+    };
+    match table.compensate(raw.accel, e, &temperature, tilt_code) {
         Ok((a_i, lin, _)) if !(a_i.is_finite() && lin.is_finite()) => {
             status.set(Status::COMPENSATION_FAILED)
         }

@@ -13,8 +13,13 @@
 //! the M4F and on x86-64 alike and Rust never contracts to FMA, so the firmware and the host get
 //! the same bits from this code.
 
+use core::cell::Cell;
+
 use crate::adc::AdcError;
 use crate::compensation::ThermalCompensator;
+use crate::fixed::{
+    from_f32, from_f64, mul_code, sqrt_f32, to_f32, to_f64, CODE_FACTOR_BITS, G_BITS, VOLT_BITS,
+};
 use crate::model::CrossAxis;
 use crate::pipeline::{ACCEL_PGA_GAIN, ADS1262_VREF, TILT_PGA_GAIN};
 use crate::poly::{TempPoly, N_COEFFS};
@@ -149,6 +154,83 @@ struct FastThermal {
     /// 1/K1(T0) and K0(T0), for the a_i estimate of the K2 term only.
     inv_k1_t0: f32,
     k0_t0_g: f32,
+    /// The accelerometer channel's code → volts map, in fixed point and in f64.
+    accel: AccelFixed,
+}
+
+/// The accelerometer channel's code → volts map in fixed point: E = code·per_code − offset with
+/// E in [`VOLT_BITS`] and per_code in [`VOLT_BITS`] + [`CODE_FACTOR_BITS`] fraction bits.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct AccelFixed {
+    per_code: i64,
+    offset: i64,
+    /// The same map in f64, for the temperature terms (c0 and the per-code factor of c).
+    linear: Ads1262Linear,
+}
+
+impl AccelFixed {
+    fn new(linear: Ads1262Linear) -> Option<Self> {
+        Some(AccelFixed {
+            per_code: from_f64(linear.per_code, VOLT_BITS + CODE_FACTOR_BITS)?,
+            offset: from_f64(linear.offset, VOLT_BITS)?,
+            linear,
+        })
+    }
+
+    /// E in volts ([`VOLT_BITS`]); cannot overflow (|code·per_code| < 2^60, |offset| < 2^61).
+    #[inline]
+    fn volts(&self, code: i32) -> i64 {
+        mul_code(code, self.per_code) - self.offset
+    }
+}
+
+/// What the compensation needs that depends only on the temperature sample, evaluated once per
+/// RTD code ([`TemperatureCache`]) instead of once per accelerometer sample.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct ThermalTerms {
+    /// The temperature was outside the calibrated range (terms evaluated at the edge).
+    clamped: bool,
+    /// c for accelerometer code 0 without tilt: K0(T) + cross-axis terms + offset/K1(T), g,
+    /// [`G_BITS`].
+    c0_g: i64,
+    /// What c loses per accelerometer code: (volts per code)/K1(T), [`G_BITS`] +
+    /// [`CODE_FACTOR_BITS`]. c = c0 − code·this + sign·sin(φ − φ0).
+    c_per_code: i64,
+    /// K1(T), V/g: the tilt correction in volts for the linearized output.
+    k1_v_per_g: f64,
+    k1_v_per_g32: f32,
+    /// K2(T), g/g².
+    k2: f32,
+    /// K1(T0)·(K0' + δo'·a_p − δp'·a_o)(T0)·(T − T0): the E-independent part of ΔE, V,
+    /// [`VOLT_BITS`].
+    lin_offset_v: i64,
+    /// T − T0, °C.
+    dt: f32,
+}
+
+/// One RTD code's results: its conversion and the temperature terms of the compensation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Temperature {
+    /// The AD7124 code these results are for (the cache key).
+    code: u32,
+    /// (R in Ω, T in °C), or why there is no temperature (with the ohms when known).
+    pub(crate) rtd: Result<(f64, f64), (Option<f64>, RtdFault)>,
+    /// The mixed-precision path's terms; None for an all-f64 table, or when a term does not fit
+    /// the fixed-point range (that sample then takes the f64 path).
+    terms: Option<ThermalTerms>,
+}
+
+/// The last RTD code's [`Temperature`]. The RTD is read far less often than the accelerometer
+/// (and a slowly changing temperature repeats its code), so most samples find their terms here.
+/// Transparent: a hit gives exactly the values a recomputation would (the terms are a function
+/// of the table and the code only), hence it takes no part in equality.
+#[derive(Debug, Clone, Default)]
+struct TemperatureCache(Cell<Option<Temperature>>);
+
+impl PartialEq for TemperatureCache {
+    fn eq(&self, _: &Self) -> bool {
+        true
+    }
 }
 
 /// The RTD channel's table-only quantities: code thresholds and the CVD inverse's constants.
@@ -256,7 +338,7 @@ impl PreparedRtd {
             // Cannot happen for validated constants inside the open threshold (u ≥ −0.8).
             return Err((Some(ohms), RtdFault::Rtd(RtdError::InvalidConstants)));
         }
-        let root = 1.0 + libm::sqrtf(one_plus_u);
+        let root = 1.0 + sqrt_f32(one_plus_u);
         let delta = -u / (root * root);
         Ok((ohms, q_over_a + f64::from(q_over_a32 * delta)))
     }
@@ -363,6 +445,26 @@ impl PreparedTilt {
     }
 }
 
+/// Largest |φ − φ0| the tilt correction is computed for: 0.5 rad (28.6°), far beyond any
+/// tiltmeter's range; beyond it the sample is flagged COMPENSATION_FAILED.
+pub const MAX_TILT_RAD: f64 = 0.5;
+
+/// sin φ in f64 for |φ| ≤ [`MAX_TILT_RAD`], by its Taylor series to φ¹⁵ (the first omitted term
+/// is < 5e-20 relative at 0.5 rad): a few ulp, like `libm::sin`, whose range reduction for any
+/// argument would cost 4 KiB of flash on a path that only sees tilts of arcseconds. None beyond.
+fn tilt_sin(phi: f64) -> Option<f64> {
+    if phi.is_nan() || libm::fabs(phi) > MAX_TILT_RAD {
+        return None;
+    }
+    let p2 = phi * phi;
+    // φ·(1 − φ²/(2·3)·(1 − φ²/(4·5)·(1 − …))), innermost term φ²/(14·15).
+    let mut acc = 1.0;
+    for d in [210.0, 156.0, 110.0, 72.0, 42.0, 20.0, 6.0] {
+        acc = 1.0 - p2 / d * acc;
+    }
+    Some(phi * acc)
+}
+
 /// sin φ for |φ| ≤ [`MAX_F32_TILT_RAD`]: φ − φ³/6 (the φ⁵ term is < 1e-15 relative there).
 #[inline]
 fn small_sin(phi: f32) -> f32 {
@@ -380,7 +482,10 @@ fn root_series(w: f32) -> f32 {
 
 /// The calibration table prepared for the per-sample path. Built once when a table becomes
 /// active; [`crate::pipeline::process_prepared`] uses it for every sample.
-#[derive(Debug, Clone, Copy, PartialEq)]
+///
+/// It remembers the last RTD code's temperature terms (a `Cell`: it is `Send` but not `Sync`,
+/// each thread or task keeps its own).
+#[derive(Debug, Clone, PartialEq)]
 pub struct PreparedCalibration {
     accel: Ads1262Linear,
     tilt: PreparedTilt,
@@ -389,6 +494,7 @@ pub struct PreparedCalibration {
     cross: CrossAxis,
     fast: Option<FastThermal>,
     bounds: ErrorBounds,
+    cache: TemperatureCache,
 }
 
 /// What [`PreparedCalibration::compensate`] returns: (a_i in g, linearized E in V, clamped).
@@ -429,6 +535,7 @@ impl PreparedCalibration {
             cross,
             fast,
             bounds,
+            cache: TemperatureCache::default(),
         })
     }
 
@@ -452,7 +559,10 @@ impl PreparedCalibration {
         if ads1262_saturated(code) {
             return Err(AdcError::Saturated);
         }
-        Ok(f64::from(code) * self.accel.per_code - self.accel.offset)
+        Ok(match &self.fast {
+            Some(fast) => to_f64(fast.accel.volts(code), VOLT_BITS),
+            None => f64::from(code) * self.accel.per_code - self.accel.offset,
+        })
     }
 
     /// Tilt in arcseconds, or saturation.
@@ -464,19 +574,44 @@ impl PreparedCalibration {
         Ok(self.tilt.arcsec(code))
     }
 
-    /// RTD (ohms, °C) for a code; on failure the ohms when they are known.
-    #[inline]
+    /// RTD (ohms, °C) for a code; on failure the ohms when they are known. Not cached.
+    #[cfg(test)]
     pub(crate) fn rtd(&self, code: u32) -> Result<(f64, f64), (Option<f64>, RtdFault)> {
         self.rtd.convert(code)
     }
 
-    /// Tilt correction (eq. 5) and both compensations. `tilt_code` is None when the tilt channel
-    /// is invalid.
+    /// The RTD conversion and the compensation's temperature terms for an RTD code: from the
+    /// cache when the code is the previous one, else computed and remembered.
+    #[inline]
+    pub(crate) fn temperature(&self, code: u32) -> Temperature {
+        match self.cache.0.get() {
+            Some(hit) if hit.code == code => hit,
+            _ => {
+                let fresh = self.temperature_uncached(code);
+                self.cache.0.set(Some(fresh));
+                fresh
+            }
+        }
+    }
+
+    #[inline(never)]
+    fn temperature_uncached(&self, code: u32) -> Temperature {
+        let rtd = self.rtd.convert(code);
+        let terms = match (&self.fast, rtd) {
+            (Some(fast), Ok((_, t_c))) => fast.terms(t_c),
+            _ => None,
+        };
+        Temperature { code, rtd, terms }
+    }
+
+    /// Tilt correction (eq. 5) and both compensations for an accelerometer code (E = `e_v` volts)
+    /// at a valid temperature. `tilt_code` is None when the tilt channel is invalid.
     #[inline]
     pub(crate) fn compensate(
         &self,
+        accel_code: i32,
         e_v: f64,
-        t_c: f64,
+        temperature: &Temperature,
         tilt_code: Option<i32>,
     ) -> Result<Compensated, CompensateFault> {
         let phi = match (self.tilt.sign == 0.0, tilt_code) {
@@ -484,9 +619,12 @@ impl PreparedCalibration {
             (false, None) => return Err(CompensateFault::TiltNeeded),
             (false, Some(code)) => Some(code),
         };
-        match &self.fast {
-            Some(fast) => fast.compensate(e_v, t_c, phi, &self.tilt),
-            None => self.compensate_f64(e_v, t_c, phi),
+        let Ok((_, t_c)) = temperature.rtd else {
+            return Err(CompensateFault::Failed);
+        };
+        match (&self.fast, &temperature.terms) {
+            (Some(fast), Some(terms)) => fast.compensate(terms, accel_code, phi, &self.tilt),
+            _ => self.compensate_f64(e_v, t_c, phi),
         }
     }
 
@@ -504,7 +642,8 @@ impl PreparedCalibration {
                 let (k, _) = th
                     .coefficients_at(Celsius(t_c))
                     .map_err(|_| CompensateFault::Failed)?;
-                let d = k.scale_factor_v_per_g * libm::sin(self.tilt.phi_rad_f64(code));
+                let sin = tilt_sin(self.tilt.phi_rad_f64(code)).ok_or(CompensateFault::Failed)?;
+                let d = k.scale_factor_v_per_g * sin;
                 e_v - self.tilt.sign * d
             }
         };
@@ -558,11 +697,17 @@ impl FastThermal {
         let k1_err = f32_poly_bound(&k1, 2, dx) * c_max / k1_min;
         // Plain Horner: up to 9 roundings for c4, hence 10u = 1.25 × 8u.
         let k2_err = 1.25 * f32_poly_bound(&k2, 0, dx) * c_max * c_max;
-        // The series: g ≈ w/4 with w = 4K2c in f32 (K2 and c rounded, one product): 8u·|c·g|.
-        let root_err = 8.0 * U32 * c_max * k2_max * c_max;
-        // Tilt: K1·sin φ in f32, 6u relative (φ from the code 2u, sin 1u, K1 1u, product 1u,
-        // to f64 exact) of at most K1·MAX_F32_TILT_RAD; in g divide by K1.
+        // The series: g ≈ w/4 with w = 4K2c in f32 (K2 and c rounded, one product, the series)
+        // and c·g in f32 (one more rounding of c, one product): 10u·|c·g|; plus c's truncation
+        // to 2^-24 before its conversion to f32, which moves c·g by K2·c·2^-24.
+        let root_err = 10.0 * U32 * c_max * k2_max * c_max + c_max * k2_max * U32;
+        // Tilt: sign·sin φ in f32, ≤ 6u relative (φ from the code 2u, the series 2u) of at most
+        // MAX_F32_TILT_RAD, in g directly (c takes it without a division by K1).
         let tilt_err = 6.0 * U32 * f64::from(MAX_F32_TILT_RAD);
+        // Fixed point (crate::fixed): two f32 → fixed truncations (tilt, c·g) of 2^-40 each, the
+        // floor of code·(per code factor) and the rounding of c0 and of that factor (2^-48 and
+        // below): 3·2^-40 covers them.
+        let fixed_err = 3.0 / 1_099_511_627_776.0;
         // T: the RTD correction's f32 error, propagated through dB/dT and a·dK1/dT/K1.
         let t_err = 10.0 * U32 * libm::fabs(rtd.correction_c(libm::fmax(s.max.0, 0.0)));
         let slope = |p: &TempPoly| {
@@ -574,7 +719,7 @@ impl FastThermal {
                 / ts
         };
         let t_err_g = t_err * (slope(&bias) + c_max * slope(&k1) / k1_min);
-        let a_i_g = bias_err + k1_err + k2_err + root_err + tilt_err + t_err_g;
+        let a_i_g = bias_err + k1_err + k2_err + root_err + tilt_err + t_err_g + fixed_err;
 
         // Linearized: ΔE = dt·(s0 + E·s1 + s2·a²); s0·dt in f64, the rest in f32 with ≤ 6u
         // relative error; |dt| ≤ span, |E| ≤ the ADC's full scale.
@@ -594,11 +739,24 @@ impl FastThermal {
             libm::fabs(accel.per_code) * ADS1262_HALF_SCALE + libm::fabs(accel.offset),
         );
         let span = s.max.0 - s.min.0;
+        // E reaches f32 truncated to 2^-24 V (then rounded): through E·s1 and a_est² = (E/K1 − K0)².
+        let e32_err = U32
+            * span
+            * (libm::fabs(lin_gain) + 2.0 * libm::fabs(lin_k2) * c_max / libm::fabs(k1_t0));
+        // The tilt correction in volts: K1 (1u) times sign·sin φ (6u) in f32, then fixed.
+        let tilt_v_err = 7.0 * U32 * upper_bound_abs(&k1) * f64::from(MAX_F32_TILT_RAD);
         let linearized_v =
             6.0 * U32 * span * (e_max * libm::fabs(lin_gain) + libm::fabs(lin_k2) * c_max * c_max)
-                + t_err * libm::fabs(k1_t0 * slope(&bias) + e_max * libm::fabs(lin_gain));
+                + t_err * libm::fabs(k1_t0 * slope(&bias) + e_max * libm::fabs(lin_gain))
+                + e32_err
+                + tilt_v_err
+                + fixed_err;
 
+        let Some(accel_fixed) = AccelFixed::new(accel) else {
+            return (None, unusable_bounds());
+        };
         let fast = FastThermal {
+            accel: accel_fixed,
             t_min_c: s.min.0,
             t_max_c: s.max.0,
             center_c: tc,
@@ -624,16 +782,11 @@ impl FastThermal {
         (ok.then_some(fast), bounds)
     }
 
-    #[inline]
-    fn compensate(
-        &self,
-        e_v: f64,
-        t_c: f64,
-        tilt_code: Option<i32>,
-        tilt: &PreparedTilt,
-    ) -> Result<Compensated, CompensateFault> {
-        if !(e_v.is_finite() && t_c.is_finite()) {
-            return Err(CompensateFault::Failed);
+    /// The temperature terms at `t_c` (clamped to the calibrated range); None when a term does
+    /// not fit its fixed-point format (then the sample takes the f64 path).
+    fn terms(&self, t_c: f64) -> Option<ThermalTerms> {
+        if !t_c.is_finite() {
+            return None;
         }
         let (t, clamped) = if t_c < self.t_min_c {
             (self.t_min_c, true)
@@ -647,44 +800,102 @@ impl FastThermal {
         let k1 = self.k1_v_per_g.eval(t, x);
         let [k2_0, k2_1, k2_2, k2_3, k2_4] = self.k2;
         let k2 = (((k2_4 * x + k2_3) * x + k2_2) * x + k2_1) * x + k2_0;
+        let dt = t - self.t0_c;
+        let linear = &self.accel.linear;
+        // One division (≈ 200 instructions in software), two products.
+        let inv_k1 = 1.0 / k1;
+        Some(ThermalTerms {
+            clamped,
+            // c = K0 − E/K1 with E = code·per_code − offset.
+            c0_g: from_f64(bias + linear.offset * inv_k1, G_BITS)?,
+            c_per_code: from_f64(linear.per_code * inv_k1, G_BITS + CODE_FACTOR_BITS)?,
+            k1_v_per_g: k1,
+            k1_v_per_g32: k1 as f32,
+            k2,
+            lin_offset_v: from_f64(self.lin_offset_v_per_c * dt, VOLT_BITS)?,
+            dt: dt as f32,
+        })
+    }
 
-        // Equation (5): E − sign·K1(T)·sin(φ − φ0).
-        let e = match tilt_code {
-            None => e_v,
+    /// Both compensations of one accelerometer code with the temperature's terms. Fixed point
+    /// for the values (E, c, a_i, the linearized output), f32 for the corrections; no soft-float
+    /// operation unless the tilt or the root leaves the f32 series' range.
+    #[inline]
+    fn compensate(
+        &self,
+        terms: &ThermalTerms,
+        accel_code: i32,
+        tilt_code: Option<i32>,
+        tilt: &PreparedTilt,
+    ) -> Result<Compensated, CompensateFault> {
+        use CompensateFault::Failed;
+        let e = self.accel.volts(accel_code);
+
+        // Equation (5): E − sign·K1(T)·sin(φ − φ0). Divided by K1 the correction is sign·sin φ
+        // itself, so c takes it in g and the linearized output in volts.
+        let (tilt_g, tilt_v) = match tilt_code {
+            None => (Some(0), Some(0)),
             Some(code) => {
                 let phi = tilt.phi_rad(code);
-                // The sign (±1) is applied in f32, where it is exact and costs no soft-float call.
-                let signed_d = if phi.abs() <= MAX_F32_TILT_RAD {
-                    f64::from(tilt.sign32 * (k1 as f32 * small_sin(phi)))
+                if phi.abs() <= MAX_F32_TILT_RAD {
+                    // The sign (±1) is applied in f32, where it is exact.
+                    let s = tilt.sign32 * small_sin(phi);
+                    (
+                        from_f32(s, G_BITS),
+                        from_f32(terms.k1_v_per_g32 * s, VOLT_BITS),
+                    )
                 } else {
-                    tilt.sign * k1 * libm::sin(tilt.phi_rad_f64(code))
-                };
-                e_v - signed_d
+                    let Some(sin) = tilt_sin(tilt.phi_rad_f64(code)) else {
+                        return Err(Failed);
+                    };
+                    let s = tilt.sign * sin;
+                    (
+                        from_f64(s, G_BITS),
+                        from_f64(terms.k1_v_per_g * s, VOLT_BITS),
+                    )
+                }
             }
         };
+        let (Some(tilt_g), Some(tilt_v)) = (tilt_g, tilt_v) else {
+            return Err(Failed);
+        };
 
-        // Equation (1) inverted: a = −2c/(1 + √(1 − 4K2c)) = −c·(1 + g).
-        let c = bias - e / k1;
-        let c32 = c as f32;
-        let w = 4.0 * k2 * c32;
+        // Equation (1) inverted: a = −2c/(1 + √(1 − 4K2c)) = −c·(1 + g), c = K0 − E/K1.
+        let c = terms
+            .c0_g
+            .checked_sub(mul_code(accel_code, terms.c_per_code))
+            .and_then(|c| c.checked_add(tilt_g))
+            .ok_or(Failed)?;
+        let c32 = to_f32(c, G_BITS);
+        let w = 4.0 * terms.k2 * c32;
         let a_i = if w.abs() <= MAX_SERIES_W {
-            -c - c * f64::from(root_series(w))
+            let cg = from_f32(c32 * root_series(w), G_BITS).ok_or(Failed)?;
+            let a = c
+                .checked_neg()
+                .and_then(|a| a.checked_sub(cg))
+                .ok_or(Failed)?;
+            to_f64(a, G_BITS)
         } else {
-            let disc = 1.0 - 4.0 * f64::from(k2) * c;
+            let c = to_f64(c, G_BITS);
+            let disc = 1.0 - 4.0 * f64::from(terms.k2) * c;
             if disc.is_nan() || disc < 0.0 {
-                return Err(CompensateFault::Failed);
+                return Err(Failed);
             }
             -2.0 * c / (1.0 + libm::sqrt(disc))
         };
 
-        // Linearized (eq. 3/4): ΔE = dt·(s0 + E·s1 + s2·a²), a estimated at T0.
-        let dt = t - self.t0_c;
-        let dt32 = dt as f32;
-        let e32 = e as f32;
+        // Linearized (eq. 3/4): ΔE = dt·(s0 + E·s1 + s2·a²), a estimated at T0; dt·s0 is a
+        // temperature term.
+        let e = e.checked_sub(tilt_v).ok_or(Failed)?;
+        let e32 = to_f32(e, VOLT_BITS);
         let a_est = e32 * self.inv_k1_t0 - self.k0_t0_g;
-        let small = dt32 * (e32 * self.lin_gain_per_c + self.lin_k2_v_per_c * a_est * a_est);
-        let lin = e - (self.lin_offset_v_per_c * dt + f64::from(small));
-        finite((a_i, lin, clamped))
+        let small = terms.dt * (e32 * self.lin_gain_per_c + self.lin_k2_v_per_c * a_est * a_est);
+        let lin = e
+            .checked_sub(terms.lin_offset_v)
+            .zip(from_f32(small, VOLT_BITS))
+            .and_then(|(e, small)| e.checked_sub(small))
+            .ok_or(Failed)?;
+        finite((a_i, to_f64(lin, VOLT_BITS), terms.clamped))
     }
 }
 
@@ -713,6 +924,23 @@ mod tests {
                 "w={w}: {got:e} vs {exact:e}"
             );
         }
+    }
+
+    #[test]
+    fn the_tilt_sine_series_matches_libm_to_a_few_ulp_and_refuses_beyond_half_a_radian() {
+        let mut phi = -0.5;
+        while phi <= 0.5 {
+            let got = tilt_sin(phi).unwrap();
+            let want = libm::sin(phi);
+            assert!(
+                (got - want).abs() <= 4.0 * f64::EPSILON * want.abs(),
+                "{phi}"
+            );
+            phi += 0.000_731;
+        }
+        assert_eq!(tilt_sin(0.0), Some(0.0));
+        assert_eq!(tilt_sin(0.500_001), None);
+        assert_eq!(tilt_sin(f64::NAN), None);
     }
 
     #[test]
@@ -791,19 +1019,71 @@ mod tests {
         assert!(p.error_bounds().a_i_g > BUDGET_G);
     }
 
+    /// Every f64 of a frame as bits (NaN compares equal to itself), plus seq and status.
+    fn frame_bits(f: &crate::pipeline::Frame) -> [u64; 8] {
+        [
+            f.output_v.to_bits(),
+            f.temperature_c.to_bits(),
+            f.rtd_ohms.to_bits(),
+            f.tilt_arcsec.to_bits(),
+            f.a_i_exact_g.to_bits(),
+            f.output_linearized_v.to_bits(),
+            u64::from(f.status.0),
+            u64::from(f.seq),
+        ]
+    }
+
+    #[test]
+    fn a_cached_temperature_gives_the_same_bits_as_a_fresh_preparation() {
+        use crate::pipeline::{process_prepared, raw_from_physical};
+        use crate::units::{TiltArcsec, Volts};
+        let mut t = paper_table();
+        // ±250" at full scale, so that a tilt beyond the f32 range (103") is a valid code.
+        t.tilt.scale_arcsec_per_v = 100.0;
+        let warm = PreparedCalibration::new(&t).unwrap();
+        let cases = [
+            (1.3, 45.0, 2.0),
+            (-0.7, 45.0, 1.0),
+            (0.9, 52.5, -3.0),
+            (1.1, 45.0, 0.5),
+            (0.2, 70.0, 0.0),
+            (1.25, 20.0, 90.0),
+            (0.2, 70.0, 200.0),
+        ];
+        // Twice through: hits (same code as the previous sample) and misses alternate.
+        for (i, &(e, c, tilt)) in cases.iter().chain(cases.iter()).enumerate() {
+            let raw = raw_from_physical(&t, Volts(e), Celsius(c), TiltArcsec(tilt)).unwrap();
+            let cold = PreparedCalibration::new(&t).unwrap();
+            let from_warm = process_prepared(i as u32, 0, &raw, Some(&warm));
+            let from_cold = process_prepared(i as u32, 0, &raw, Some(&cold));
+            assert_eq!(frame_bits(&from_warm), frame_bits(&from_cold), "case {i}");
+            assert!(from_warm.a_i_exact_g.is_finite(), "case {i}");
+            assert_eq!(warm.cache.0.get().map(|c| c.code), Some(raw.rtd));
+        }
+    }
+
     #[test]
     fn the_f64_fallback_gives_the_reference_compensation() {
         let mut t = paper_table();
         t.thermal.models.bias_g.coeffs[4] = 5e-3;
         let p = PreparedCalibration::new(&t).unwrap();
-        let (a, lin, clamped) = p.compensate(1.3, 47.0, Some(0)).unwrap();
-        let e = crate::units::Volts(1.3);
+        let raw = crate::pipeline::raw_from_physical(
+            &t,
+            crate::units::Volts(1.3),
+            Celsius(47.0),
+            crate::units::TiltArcsec(0.0),
+        )
+        .unwrap();
+        let e = p.accel_volts(raw.accel).unwrap();
+        let temperature = p.temperature(raw.rtd);
+        let (_, t_c) = temperature.rtd.unwrap();
+        let (a, lin, clamped) = p.compensate(raw.accel, e, &temperature, Some(0)).unwrap();
         let tilt0 = p.tilt.phi_rad_f64(0);
-        let (k, _) = t.thermal.coefficients_at(Celsius(47.0)).unwrap();
-        let e_c = crate::units::Volts(e.0 - k.scale_factor_v_per_g * libm::sin(tilt0));
+        let (k, _) = t.thermal.coefficients_at(Celsius(t_c)).unwrap();
+        let e_c = crate::units::Volts(e - k.scale_factor_v_per_g * tilt_sin(tilt0).unwrap());
         let cross = t.orientation.cross;
-        let want = t.thermal.exact(e_c, Celsius(47.0), cross).unwrap();
-        let want_lin = t.thermal.linearized(e_c, Celsius(47.0), cross).unwrap();
+        let want = t.thermal.exact(e_c, Celsius(t_c), cross).unwrap();
+        let want_lin = t.thermal.linearized(e_c, Celsius(t_c), cross).unwrap();
         assert_eq!((a, lin, clamped), (want.input.0, want_lin.output.0, false));
     }
 }

@@ -113,6 +113,10 @@ pub enum Request {
         raw: RawSample,
         /// How many times, 1..=MAX_BENCH_COUNT.
         count: u32,
+        /// 0: the same sample every time, the steady state between RTD readings (temperature
+        /// terms cached). Non-zero: the RTD code alternates between `raw.rtd` and
+        /// `raw.rtd + rtd_step` (wrapping), a new temperature every sample (terms recomputed).
+        rtd_step: u32,
     },
 }
 

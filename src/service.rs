@@ -222,8 +222,13 @@ impl<F: NorFlash> Service<F> {
     pub fn handle(&mut self, frame: HostFrame, clock: &dyn Fn() -> u64) -> DeviceMessage {
         let id = frame.id;
         let now_us = clock();
-        if let Request::Bench { raw, count } = &frame.request {
-            return match self.bench(raw, *count, clock) {
+        if let Request::Bench {
+            raw,
+            count,
+            rtd_step,
+        } = &frame.request
+        {
+            return match self.bench(raw, *count, *rtd_step, clock) {
                 Ok(body) => DeviceMessage::Response { id, body },
                 Err(error) => DeviceMessage::Error { id, error },
             };
@@ -341,6 +346,7 @@ impl<F: NorFlash> Service<F> {
         &self,
         raw: &RawSample,
         count: u32,
+        rtd_step: u32,
         clock: &dyn Fn() -> u64,
     ) -> Result<Response, ErrorReply> {
         if count == 0 || count > MAX_BENCH_COUNT {
@@ -349,10 +355,17 @@ impl<F: NorFlash> Service<F> {
         let table = self.prepared.as_ref();
         let start = clock();
         let mut sum = 0.0;
+        let mut sample = *raw;
         for i in 0..count {
             // black_box: the same sample each time must still be computed each time.
-            let r = core::hint::black_box(raw);
+            let r = core::hint::black_box(&sample);
             sum += pipeline::process_prepared(i, start, r, table).a_i_exact_g;
+            // Alternates between two neighbouring codes (no drift out of range); 0 keeps it.
+            sample.rtd = if i % 2 == 0 {
+                raw.rtd.wrapping_add(rtd_step)
+            } else {
+                raw.rtd
+            };
         }
         let elapsed_us = clock().saturating_sub(start);
         Ok(Response::Bench {
@@ -785,7 +798,11 @@ mod tests {
         let m = s.handle(
             HostFrame {
                 id: 1,
-                request: Request::Bench { raw, count: 3 },
+                request: Request::Bench {
+                    raw,
+                    count: 3,
+                    rtd_step: 0,
+                },
             },
             &clock,
         );
@@ -808,7 +825,11 @@ mod tests {
         let m = s.handle(
             HostFrame {
                 id: 1,
-                request: Request::Bench { raw, count: 0 },
+                request: Request::Bench {
+                    raw,
+                    count: 0,
+                    rtd_step: 0,
+                },
             },
             &clock,
         );

@@ -628,6 +628,20 @@ impl TideSample {
     }
 }
 
+/// Gravity of the elastic model split by tidal band, nm/s² (same sign as
+/// [`TideSample::gravity_nm_s2`]).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct GravitySpecies {
+    /// Degree 2, order 0 (long-period, including the permanent tide).
+    pub long_period_nm_s2: f64,
+    /// Degree 2, order 1 (diurnal, K1 with its resonant factor).
+    pub diurnal_nm_s2: f64,
+    /// Degree 2, order 2 (semidiurnal).
+    pub semidiurnal_nm_s2: f64,
+    /// Degree 3, all orders (the Moon's; terdiurnal M3 and small parts of the other bands).
+    pub degree3_nm_s2: f64,
+}
+
 /// Radial, north and east gradient of one piece of the potential (m/s², up/north/east).
 #[derive(Clone, Copy, Default)]
 struct Gradient {
@@ -752,13 +766,28 @@ impl Station {
 
     /// Tide from given body positions and Greenwich sidereal time (the series path).
     pub fn tide_from_bodies(&self, bodies: &Bodies, gmst: f64) -> TideSample {
+        self.tide_parts(bodies, gmst).0
+    }
+
+    /// Gravity split by band at a Unix time: what the elastic model puts into each species.
+    /// The parts sum to [`TideSample::gravity_nm_s2`].
+    pub fn gravity_species_at_unix_seconds(&self, unix_s: f64) -> GravitySpecies {
+        let jd = julian_date_from_unix_seconds(unix_s);
+        self.tide_parts(&Bodies::at_julian_date_utc(jd), gmst_rad(jd))
+            .1
+    }
+
+    /// The tide and its gravity split by species.
+    fn tide_parts(&self, bodies: &Bodies, gmst: f64) -> (TideSample, GravitySpecies) {
         let lst = gmst + self.longitude_rad;
         let (s_lst, c_lst) = (sin(lst), cos(lst));
         let (s, c, r) = (self.sin_gc, self.cos_gc, self.radius_m);
         let f = &self.factors;
 
-        let mut g_up = 0.0; // δ-weighted upward gradient
-        let mut g_north = 0.0; // δ-weighted north gradient (enters gravity through the deviation)
+        // δ-weighted upward and north gradients per species: long-period, diurnal,
+        // semidiurnal, degree 3 (the north part enters gravity through the deviation).
+        let mut g_up = [0.0; 4];
+        let mut g_north = [0.0; 4];
         let mut t_up = 0.0; // γ-weighted
         let mut t_north = 0.0;
         let mut t_east = 0.0;
@@ -780,9 +809,12 @@ impl Station {
 
             let (g20, g21, g22) = degree2_gradients(s, c, p, q, w, k2);
             // Long-period band: the latitude-corrected δ·P20 replaces δ·(3s²−1) in the radial term.
-            let up20_delta = 0.5 * k2 * self.delta20_p20 * (3.0 * p * p - 1.0);
-            g_up += up20_delta + f.delta_21 * g21.up + f.delta_22 * g22.up;
-            g_north += f.delta_20 * g20.north + f.delta_21 * g21.north + f.delta_22 * g22.north;
+            g_up[0] += 0.5 * k2 * self.delta20_p20 * (3.0 * p * p - 1.0);
+            g_up[1] += f.delta_21 * g21.up;
+            g_up[2] += f.delta_22 * g22.up;
+            g_north[0] += f.delta_20 * g20.north;
+            g_north[1] += f.delta_21 * g21.north;
+            g_north[2] += f.delta_22 * g22.north;
             t_up += f.gamma_20 * g20.up + f.gamma_21 * g21.up + f.gamma_22 * g22.up;
             t_north += f.gamma_20 * g20.north + f.gamma_21 * g21.north + f.gamma_22 * g22.north;
             t_east += f.gamma_21 * g21.east + f.gamma_22 * g22.east;
@@ -798,8 +830,8 @@ impl Station {
                     north: k3 * dp3 * (c * p - s * q),
                     east: -k3 * dp3 * w,
                 };
-                g_up += f.delta_3 * g3.up;
-                g_north += f.delta_3 * g3.north;
+                g_up[3] += f.delta_3 * g3.up;
+                g_north[3] += f.delta_3 * g3.north;
                 t_up += f.gamma_3 * g3.up;
                 t_north += f.gamma_3 * g3.north;
                 t_east += f.gamma_3 * g3.east;
@@ -819,22 +851,35 @@ impl Station {
         };
         let dd = f.delta_k1 - f.delta_21;
         let dg = f.gamma_k1 - f.gamma_21;
-        g_up += dd * k1.up;
-        g_north += dd * k1.north;
+        g_up[1] += dd * k1.up;
+        g_north[1] += dd * k1.north;
         t_up += dg * k1.up;
         t_north += dg * k1.north;
         t_east += dg * k1.east;
 
-        // Radial/geocentric-north → ellipsoid normal/geodetic-north.
-        let up = self.cos_dev * g_up + self.sin_dev * g_north;
+        // Radial/geocentric-north → ellipsoid normal/geodetic-north; upward tidal acceleration
+        // lowers the gravity the station feels.
+        let band =
+            |i: usize| -(self.cos_dev * g_up[i] + self.sin_dev * g_north[i]) * NM_S2_PER_M_S2;
+        let species = GravitySpecies {
+            long_period_nm_s2: band(0),
+            diurnal_nm_s2: band(1),
+            semidiurnal_nm_s2: band(2),
+            degree3_nm_s2: band(3),
+        };
         let north = self.cos_dev * t_north - self.sin_dev * t_up;
         let to_mas = MAS_PER_RAD / self.gravity_m_s2;
-        TideSample {
-            // Upward tidal acceleration lowers the gravity the station feels.
-            gravity_nm_s2: -up * NM_S2_PER_M_S2,
-            tilt_north_mas: north * to_mas,
-            tilt_east_mas: t_east * to_mas,
-        }
+        (
+            TideSample {
+                gravity_nm_s2: species.long_period_nm_s2
+                    + species.diurnal_nm_s2
+                    + species.semidiurnal_nm_s2
+                    + species.degree3_nm_s2,
+                tilt_north_mas: north * to_mas,
+                tilt_east_mas: t_east * to_mas,
+            },
+            species,
+        )
     }
 
     /// Tide at `start_unix_s + i × interval_s`, i = 0, 1, …, without allocation.
@@ -955,6 +1000,9 @@ impl Iterator for TideSeries<'_> {
         Some((unix_s, self.station.tide_from_bodies(&bodies, gmst)))
     }
 }
+
+pub mod cte1973;
+pub mod harmonic;
 
 #[cfg(test)]
 mod tests;

@@ -1,26 +1,33 @@
 //! Firmware benchmark in QEMU (docs/benchmarks.md, "Firmware"): boots the ELF with
 //! `-icount shift=0` (1 instruction = 1 ns of virtual time), loads a table and asks the
-//! firmware to run the pipeline N times; prints instructions per sample.
+//! firmware to run the pipeline N times per case; prints instructions per sample.
+//!
+//! The last line, `instructions_per_sample <N>`, is the largest of the steady-state cases (the
+//! RTD code unchanged, so the temperature terms come from the cache: what every accelerometer
+//! sample between two RTD readings costs). The `new temperature every sample` case is printed
+//! too: the cost of a sample that brings a new RTD code.
 use accomp::protocol::{Request, Response};
 use accomp_host::device::{firmware_path, qemu::QemuOptions, Qemu};
 
 fn main() {
     let count: u32 = std::env::args()
         .nth(1)
-        .map(|s| s.parse().unwrap())
-        .unwrap_or(20_000);
+        .map(|s| s.parse().expect("count: a whole number"))
+        .unwrap_or(100_000);
     let table = accomp_host::device::paper_table();
     let bytes = table.encode();
     let opts = QemuOptions {
         icount_shift: Some(0),
         ..QemuOptions::default()
     };
-    let (q, mut c) = Qemu::launch(&firmware_path(None), &opts).unwrap();
+    let (q, mut c) = Qemu::launch(&firmware_path(None), &opts).expect("QEMU launch");
     c.timeout = std::time::Duration::from_secs(120);
-    c.load(&bytes, |_, _| {}).unwrap();
-    for (name, t, e, tilt) in [
-        ("in range, 50 °C", 50.0, 1.3, 2.0),
-        ("clamped, 70 °C", 70.0, -0.7, 0.0),
+    c.load(&bytes, |_, _| {}).expect("table upload");
+    let mut steady_max = 0.0f64;
+    for (name, t, e, tilt, rtd_step) in [
+        ("in range, 50 °C", 50.0, 1.3, 2.0, 0),
+        ("clamped, 70 °C", 70.0, -0.7, 0.0, 0),
+        ("new temperature every sample, 50 °C", 50.0, 1.3, 2.0, 1),
     ] {
         let raw = accomp::pipeline::raw_from_physical(
             &table,
@@ -28,16 +35,25 @@ fn main() {
             accomp::units::Celsius(t),
             accomp::units::TiltArcsec(tilt),
         )
-        .unwrap();
-        match c.call(Request::Bench { raw, count }).unwrap() {
+        .expect("codes for the case");
+        let request = Request::Bench {
+            raw,
+            count,
+            rtd_step,
+        };
+        match c.call(request).expect("Bench request") {
             Response::Bench {
                 count, elapsed_us, ..
-            } => println!(
-                "{name}: {count} samples in {elapsed_us} µs virtual = {:.0} instructions/sample",
-                elapsed_us as f64 * 1000.0 / f64::from(count)
-            ),
-            other => panic!("{other:?}"),
+            } => {
+                let per_sample = elapsed_us as f64 * 1000.0 / f64::from(count);
+                println!("{name}: {count} samples in {elapsed_us} µs virtual = {per_sample:.0} instructions/sample");
+                if rtd_step == 0 {
+                    steady_max = steady_max.max(per_sample);
+                }
+            }
+            other => panic!("unexpected reply {other:?}"),
         }
     }
     q.shutdown();
+    println!("instructions_per_sample {steady_max:.0}");
 }

@@ -59,6 +59,15 @@ fn gmetrology_record_names_the_earth_tide_with_a_gravimetric_factor_near_one() {
     .expect("discovery");
     eprintln!("{}", accomp_host::discover::report::text(&d));
     assert!(bad.is_empty(), "{bad:?}");
+    // The wave-group analysis runs inside discover and reaches the JSON (its figures are
+    // tested in tidal_gmetrology.rs).
+    let j = accomp_host::discover::report::json(&d);
+    let t = &j["tidal_analysis"];
+    assert_eq!(t["groups"].as_array().map(Vec::len), Some(10), "{t}");
+    assert!(t["groups"][6]["amplitude_factor_rigid_earth"]["value"].is_number());
+    assert!(t["groups"][6]["amplitude_factor_vs_elastic_model"]["sigma"].is_number());
+    assert!(t["delay"]["delay_s"]["value"].is_number());
+    assert!(t["pressure_admittance"]["nm_s2_per_hpa"]["sigma"].is_number());
     // The Beijing-time stamps were moved to UTC: the tide only fits with the right clock.
     let (f, _) = tidal_factor(&d).expect("tidal_gravity not named on the gMetrology record");
     // The tide model already carries the elastic factor δ ≈ 1.16; a spring gravimeter's

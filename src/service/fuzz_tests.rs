@@ -470,6 +470,8 @@ impl Harness {
             Op::Bench(count) => self.send(Request::Bench {
                 raw: self.raw,
                 count: *count,
+                // Both loop variants: the same sample, and the RTD code alternating.
+                rtd_step: *count % 2,
             }),
             Op::Garbage(body) => {
                 let msg = self.dev.handle_frame(Ok(body), &|| 5);

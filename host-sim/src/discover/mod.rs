@@ -17,6 +17,7 @@ pub mod noise;
 pub mod report;
 pub mod residual;
 pub mod select;
+pub mod tidal;
 
 use effects::{Context, Effect};
 use import::{Dataset, DatasetOptions, Format};
@@ -77,6 +78,8 @@ pub struct Discovery {
     pub adev_before: Vec<(f64, f64)>,
     /// ADEV of the final residual.
     pub adev_after: Vec<(f64, f64)>,
+    /// Wave-group tidal analysis of a gravity record, or why it was not run.
+    pub tidal: Result<tidal::TidalAnalysis, String>,
 }
 
 /// The shared series of the candidates.
@@ -114,6 +117,7 @@ pub fn discover(
     let trend = residual::trend(&ds, &sel.baseline_residual);
     let adev_before = residual::adev(&ds, &sel.baseline_residual);
     let adev_after = residual::adev(&ds, &sel.final_residual);
+    let tidal = tidal::for_discovery(&ds, &base.target, &base.columns, &ctx, &sel.accepted);
     Ok(Discovery {
         baseline_description: base.description.clone(),
         baseline_names: base.names.clone(),
@@ -126,6 +130,7 @@ pub fn discover(
         trend,
         adev_before,
         adev_after,
+        tidal,
         dataset: ds,
     })
 }

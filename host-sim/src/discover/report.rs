@@ -86,7 +86,8 @@ pub fn json(d: &Discovery) -> Value {
             "trend": d.trend,
             "adev_before": d.adev_before,
             "adev_after": d.adev_after,
-        }
+        },
+        "tidal_analysis": super::tidal::json_of(&d.tidal),
     })
 }
 
@@ -185,6 +186,7 @@ pub fn text(d: &Discovery) -> String {
     for ((t, a), (_, b)) in d.adev_before.iter().zip(&d.adev_after).step_by(3) {
         let _ = writeln!(o, "  ADEV({t:.0} s): {a:.3e} → {b:.3e} {unit}");
     }
+    o.push_str(&super::tidal::text_of(&d.tidal));
     o
 }
 

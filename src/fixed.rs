@@ -1,0 +1,265 @@
+//! Fixed-point and hardware-float helpers for the per-sample path (docs/numerics.md, "Per-sample
+//! arithmetic on the M4F").
+//!
+//! The Cortex-M4F has single-precision floating point in hardware but no double precision: every
+//! f64 operation is a software routine of 50–150 instructions. It does have single-cycle
+//! 32×32 → 64-bit integer multiplies and 64-bit adds in two instructions, so the quantities that
+//! need more than f32's 24 bits (E, c, a_i, the linearized output, all needed to ~1e-10
+//! relative) are carried as i64 with a fixed binary point, and the small corrections stay f32.
+//!
+//! Formats: volts with [`VOLT_BITS`] fraction bits (±128 V, 1.4e-17 V resolution), g with
+//! [`G_BITS`] (±32768 g, 3.6e-15 g). A per-code factor carries 32 more fraction bits than its
+//! product so that [`mul_code`] keeps ~2^-60 relative precision.
+//!
+//! Everything here is integer arithmetic or a correctly rounded IEEE-754 operation, so the host
+//! and the firmware compute the same bits.
+
+/// Fraction bits of a fixed-point voltage.
+pub(crate) const VOLT_BITS: u32 = 56;
+/// Fraction bits of a fixed-point acceleration in g.
+pub(crate) const G_BITS: u32 = 48;
+/// Extra fraction bits of a per-code factor over its product ([`mul_code`]).
+pub(crate) const CODE_FACTOR_BITS: u32 = 32;
+/// Fraction bits of the cheap f32 → fixed conversion: values below 2^-9 in magnitude convert
+/// with one VMUL + one VCVT, truncated to 2^-40 (9.1e-13).
+const F32_FRACTION_BITS: u32 = 40;
+
+/// 2^n as f64 (exact for 0 ≤ n ≤ 1023).
+#[inline]
+const fn pow2(n: u32) -> f64 {
+    f64::from_bits((1023 + n as u64) << 52)
+}
+
+/// `code · factor / 2^32`, rounded towards −∞: a 32-bit ADC code times a per-code factor with
+/// [`CODE_FACTOR_BITS`] extra fraction bits. Two 32×32 → 64 multiplies, no overflow for any
+/// code and factor (|result| < 2^62).
+#[inline]
+pub(crate) fn mul_code(code: i32, factor: i64) -> i64 {
+    // factor = hi·2^32 + lo with lo unsigned: code·factor / 2^32 = code·hi + code·lo / 2^32,
+    // and code·hi·2^32 is a multiple of 2^32, so only the second part needs the floor.
+    let hi = (factor >> 32) as i32;
+    let lo = factor as u32;
+    i64::from(code) * i64::from(hi) + ((i64::from(code) * i64::from(lo)) >> 32)
+}
+
+/// f64 → fixed with `bits` (≤ 96) fraction bits, rounded to nearest (ties away from zero, like
+/// `libm::round`); None when the value is not finite or |v|·2^bits ≥ 2^61 (so that four such
+/// values cannot overflow a sum; the caller then takes the f64 path). Done on the bit pattern:
+/// a soft-float multiply, round and conversion would cost ≈ 150 instructions on the M4F.
+#[inline]
+pub(crate) fn from_f64(v: f64, bits: u32) -> Option<i64> {
+    let pattern = v.to_bits();
+    let biased = ((pattern >> 52) & 0x7FF) as i32;
+    // |v|·2^bits = 1.m × 2^e (for normal v; zero and subnormals give e far below −1).
+    let e = biased - 1023 + bits as i32;
+    if e >= 61 {
+        return None; // also ±∞ and NaN (biased = 2047)
+    }
+    if e < -1 {
+        return Some(0); // below 1/2: rounds to 0
+    }
+    let mantissa = (pattern & ((1 << 52) - 1)) | (1 << 52);
+    let magnitude = if e >= 52 {
+        mantissa << (e - 52)
+    } else {
+        let shift = 52 - e; // 1..=53
+        (mantissa + (1 << (shift - 1))) >> shift
+    };
+    // magnitude < 2^61: the cast and the negation are exact.
+    let magnitude = magnitude as i64;
+    Some(if pattern >> 63 != 0 {
+        -magnitude
+    } else {
+        magnitude
+    })
+}
+
+/// f32 → fixed with `bits` (≥ 40) fraction bits, truncated towards zero to 2^-40 when |v| < 2^-9
+/// (the tilt correction, the root series' c·g, the linearized ΔE): one VMUL and one VCVT on the
+/// M4F; larger values through f64, rounded. None when not finite or out of [`from_f64`]'s range.
+#[inline]
+pub(crate) fn from_f32(v: f32, bits: u32) -> Option<i64> {
+    // Both powers of two are exact in f32; the comparison also refuses NaN.
+    let scaled = v * (pow2(F32_FRACTION_BITS) as f32);
+    if scaled.abs() < 2_147_483_648.0 {
+        Some(i64::from(scaled as i32) << (bits - F32_FRACTION_BITS))
+    } else {
+        from_f64(f64::from(v), bits)
+    }
+}
+
+/// Fixed (`bits` fraction bits) → f64, correctly rounded: one i64 → f64 conversion; the scale by
+/// 2^-bits goes straight into the exponent field (no soft-float multiply). Exact when
+/// |raw| < 2^53.
+#[inline]
+pub(crate) fn to_f64(raw: i64, bits: u32) -> f64 {
+    if raw == 0 {
+        return 0.0;
+    }
+    // |raw| ≥ 1: the exponent is ≥ 1023 and stays normal after subtracting `bits` ≤ 64.
+    let v = raw as f64;
+    f64::from_bits(v.to_bits() - (u64::from(bits) << 52))
+}
+
+/// Fixed (`bits` ≥ 24 fraction bits) → f32 to 2^-24 absolute (truncated towards −∞ first, then
+/// one VCVT): for values that only feed f32 corrections. ±∞ beyond ±128, which sends the
+/// callers to their f64 paths.
+#[inline]
+pub(crate) fn to_f32(raw: i64, bits: u32) -> f32 {
+    match i32::try_from(raw >> (bits - 24)) {
+        Ok(v) => v as f32 * (1.0 / 16_777_216.0),
+        Err(_) if raw > 0 => f32::INFINITY,
+        Err(_) => f32::NEG_INFINITY,
+    }
+}
+
+/// √x in single precision, correctly rounded (IEEE 754): the FPU's VSQRT on the M4F (`libm`'s
+/// `sqrtf` is a software routine there, and `core` has no `f32::sqrt`), `libm::sqrtf` (also
+/// correctly rounded, hence the same bits) elsewhere.
+#[inline]
+pub(crate) fn sqrt_f32(x: f32) -> f32 {
+    #[cfg(all(target_arch = "arm", target_abi = "eabihf"))]
+    {
+        let bits: u32;
+        // The `sreg` operand class needs the `vfp2` feature, which this target (single-precision
+        // FPU only) does not enable; the value goes through a core register and S15 instead.
+        // SAFETY: VMOV/VSQRT.F32 touch one core register in, one out and S15 (declared
+        // clobbered); no memory, no stack, no flags other than the FPSCR exception bits (which
+        // nothing here reads).
+        #[allow(unsafe_code)]
+        unsafe {
+            core::arch::asm!(
+                "vmov s15, {x}",
+                "vsqrt.f32 s15, s15",
+                "vmov {root}, s15",
+                x = in(reg) x.to_bits(),
+                root = lateout(reg) bits,
+                out("s15") _,
+                options(pure, nomem, nostack, preserves_flags),
+            );
+        }
+        f32::from_bits(bits)
+    }
+    #[cfg(not(all(target_arch = "arm", target_abi = "eabihf")))]
+    {
+        libm::sqrtf(x)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A small deterministic generator (xorshift64*), so the sweeps are reproducible.
+    fn numbers(seed: u64) -> impl Iterator<Item = u64> {
+        let mut s = seed;
+        core::iter::from_fn(move || {
+            s ^= s >> 12;
+            s ^= s << 25;
+            s ^= s >> 27;
+            Some(s.wrapping_mul(0x2545_F491_4F6C_DD1D))
+        })
+    }
+
+    #[test]
+    fn mul_code_is_the_floor_of_the_exact_96_bit_product() {
+        for (a, b) in numbers(7).zip(numbers(99)).take(200_000) {
+            let code = a as i32;
+            let factor = (b as i64) >> (b % 40);
+            let exact = (i128::from(code) * i128::from(factor)) >> 32;
+            assert_eq!(i128::from(mul_code(code, factor)), exact, "{code} {factor}");
+        }
+        for code in [i32::MIN, i32::MAX, -1, 0, 1] {
+            for factor in [i64::MIN, i64::MAX, -1, 0, 1, 1 << 32, -(1 << 32)] {
+                let exact = (i128::from(code) * i128::from(factor)) >> 32;
+                assert_eq!(i128::from(mul_code(code, factor)), exact);
+            }
+        }
+    }
+
+    #[test]
+    fn to_f64_rounds_like_the_exact_scaled_conversion() {
+        for a in numbers(3).take(200_000) {
+            let raw = (a as i64) >> (a % 63);
+            for bits in [G_BITS, VOLT_BITS] {
+                // i64 → f64 rounds once; the power-of-two scale is exact: the reference.
+                let want = raw as f64 * pow2(bits).recip();
+                assert_eq!(to_f64(raw, bits).to_bits(), want.to_bits(), "{raw}");
+            }
+        }
+        assert_eq!(to_f64(0, G_BITS).to_bits(), 0.0f64.to_bits());
+        assert_eq!(to_f64(i64::MIN, VOLT_BITS), -128.0);
+    }
+
+    #[test]
+    fn from_f32_truncates_to_2_pow_minus_40_on_both_paths() {
+        for a in numbers(11).take(100_000) {
+            let v = f32::from_bits((a as u32) & 0xBFFF_FFFF); // |v| < 2 (exponent bit 30 clear)
+            if !v.is_finite() {
+                continue;
+            }
+            for bits in [G_BITS, VOLT_BITS] {
+                let got = from_f32(v, bits).unwrap();
+                let err = to_f64(got, bits) - f64::from(v);
+                assert!(err.abs() < pow2(40).recip(), "{v:e}: {err:e}");
+            }
+        }
+        assert_eq!(from_f32(f32::NAN, G_BITS), None);
+        assert_eq!(from_f32(f32::INFINITY, G_BITS), None);
+        assert_eq!(from_f32(-1.5, G_BITS), Some(-3 << (G_BITS - 1)));
+    }
+
+    #[test]
+    fn from_f64_is_the_rounded_scaled_value() {
+        for a in numbers(23).take(200_000) {
+            // Magnitudes from 2^-70 to 2^20, both signs.
+            let exponent = (a % 91) as i32 - 70;
+            let v = f64::from_bits((a >> 12) | (((1023 + exponent) as u64) << 52));
+            let v = if a & 1 == 0 { v } else { -v };
+            for bits in [G_BITS, VOLT_BITS, G_BITS + CODE_FACTOR_BITS] {
+                let scaled = v * pow2(bits);
+                let want = (libm::fabs(scaled) < pow2(61)).then(|| libm::round(scaled) as i64);
+                assert_eq!(from_f64(v, bits), want, "{v:e} bits {bits}");
+            }
+        }
+        assert_eq!(from_f64(0.0, G_BITS), Some(0));
+        assert_eq!(from_f64(-0.0, G_BITS), Some(0));
+        assert_eq!(from_f64(f64::MIN_POSITIVE / 4.0, G_BITS), Some(0));
+    }
+
+    #[test]
+    fn from_f64_rounds_to_nearest_and_refuses_what_would_overflow_a_sum() {
+        assert_eq!(from_f64(1.5, G_BITS), Some(3 << (G_BITS - 1)));
+        assert_eq!(from_f64(pow2(G_BITS).recip() * 0.49, G_BITS), Some(0));
+        assert_eq!(from_f64(pow2(G_BITS).recip() * 0.51, G_BITS), Some(1));
+        assert_eq!(from_f64(8192.0, G_BITS), None);
+        assert!(from_f64(8191.0, G_BITS).is_some());
+        assert_eq!(from_f64(f64::NAN, G_BITS), None);
+        assert_eq!(from_f64(-f64::INFINITY, VOLT_BITS), None);
+    }
+
+    #[test]
+    fn to_f32_is_within_2_pow_minus_24_and_infinite_beyond_the_range() {
+        for a in numbers(5).take(100_000) {
+            let raw = (a as i64) >> (8 + a % 50);
+            let v = to_f32(raw, G_BITS);
+            let exact = to_f64(raw, G_BITS);
+            // Truncation (2^-24) plus the VCVT rounding (half an f32 ulp of v).
+            let bound = 2f64.powi(-24) + f64::from(v).abs() * 2f64.powi(-24);
+            assert!((f64::from(v) - exact).abs() <= bound, "{raw}");
+        }
+        assert_eq!(to_f32(200 << G_BITS, G_BITS), f32::INFINITY);
+        assert_eq!(to_f32(-200 << G_BITS, G_BITS), f32::NEG_INFINITY);
+    }
+
+    #[test]
+    fn sqrt_f32_is_the_correctly_rounded_root() {
+        for a in numbers(17).take(100_000) {
+            let x = f32::from_bits((a as u32) & 0x7FFF_FFFF);
+            if !x.is_finite() {
+                continue;
+            }
+            assert_eq!(sqrt_f32(x).to_bits(), x.sqrt().to_bits(), "{x:e}");
+        }
+    }
+}
