@@ -11,6 +11,7 @@ pub mod adc;
 pub mod compensation;
 pub mod drivers;
 mod fixed;
+pub mod frontend;
 pub mod model;
 pub mod pipeline;
 pub mod poly;

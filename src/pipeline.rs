@@ -7,28 +7,24 @@
 //! Sensor faults never produce a silent number: any value that cannot be trusted is NaN in the
 //! frame *and* the reason is set in [`Status`]. Values that depend on a NaN are NaN as well.
 //!
-//! The inverse conversions (physical value → raw code) live here too, next to the forward ones,
-//! so that the host can inject samples that the firmware converts back to the same physics.
+//! [`raw_from_physical`] builds the raw sample for physical values with the front-end's inverse
+//! conversions ([`crate::frontend`]), so that the host can inject samples that the firmware
+//! converts back to the same physics.
 
 use serde::{Deserialize, Serialize};
 
-use crate::adc::{Ad7124Code, AdcError, AdcScale, Ads1262Code, Coding};
+use crate::adc::{Ad7124Code, AdcError, Ads1262Code};
 use crate::prepared::{CompensateFault, PreparedCalibration, RtdFault};
 use crate::rtd::RtdError;
 use crate::table::CalibrationTable;
-use crate::units::{Celsius, Ohms, RtdOhms, TiltArcsec, Volts};
+use crate::units::{Celsius, TiltArcsec, Volts};
 
-/// ADS1262 reference voltage on the board (internal 2.5 V reference).
-pub const ADS1262_VREF: Volts = Volts(2.5);
-/// ADS1262 PGA gain of the accelerometer channel: E ≈ 1.33 V/g · 1.5 g stays inside ±2.5 V at
-/// gain 1, so the PGA is bypassed (board constant, not in the table).
-pub const ACCEL_PGA_GAIN: f64 = 1.0;
-/// ADS1262 PGA gain of the tiltmeter channel (its analog output is also volts-level).
-pub const TILT_PGA_GAIN: f64 = 1.0;
-/// Full-scale magnitude of a 32-bit two's-complement code (2^31).
-const ADS1262_HALF_SCALE: f64 = 2_147_483_648.0;
-/// Full scale of the 24-bit unipolar AD7124 code (2^24).
-const AD7124_FULL_SCALE: f64 = 16_777_216.0;
+// The front-end's scales and value → code conversions, re-exported for the callers that build
+// raw samples next to the pipeline (host injection, tests); they are defined once, in
+// `crate::frontend`.
+pub use crate::frontend::{
+    accel_scale, arcsec_to_ads1262, celsius_to_ad7124, ohms_to_ad7124, tilt_scale, volts_to_ads1262,
+};
 
 /// Per-channel fault bits reported by the drivers together with a conversion.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -158,35 +154,6 @@ pub struct Frame {
     pub output_linearized_v: f64,
     /// [`Status`] bits.
     pub status: Status,
-}
-
-/// ADC scale of the accelerometer channel, with the table's correction when there is one.
-pub fn accel_scale(table: Option<&CalibrationTable>) -> AdcScale {
-    let (gain_correction, offset) = match table {
-        Some(t) => (t.accel.adc_gain_correction, t.accel.adc_offset),
-        None => (1.0, Volts(0.0)),
-    };
-    ads1262_scale(ACCEL_PGA_GAIN, gain_correction, offset)
-}
-
-/// ADC scale of the tiltmeter channel.
-pub fn tilt_scale(table: &CalibrationTable) -> AdcScale {
-    ads1262_scale(
-        TILT_PGA_GAIN,
-        table.tilt.adc_gain_correction,
-        table.tilt.adc_offset,
-    )
-}
-
-fn ads1262_scale(pga_gain: f64, gain_correction: f64, offset: Volts) -> AdcScale {
-    AdcScale {
-        bits: 32,
-        coding: Coding::TwosComplement,
-        pga_gain,
-        vref: ADS1262_VREF,
-        gain_correction,
-        offset,
-    }
 }
 
 /// Flags a channel's driver faults; returns true when the code must not be used.
@@ -364,77 +331,13 @@ pub fn process_prepared(
     frame
 }
 
-/// Why a physical value cannot be turned into a code.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum InverseConversionError {
-    /// The value is NaN or infinite.
-    NonFinite,
-    /// The value is outside the converter's range (would saturate).
-    OutOfRange,
-}
-
-/// Volts at the ADS1262 input → code, the inverse of [`AdcScale::volts`] for two's complement.
-pub fn volts_to_ads1262(scale: &AdcScale, v: Volts) -> Result<Ads1262Code, InverseConversionError> {
-    if !v.0.is_finite() {
-        return Err(InverseConversionError::NonFinite);
-    }
-    let fraction = (v.0 + scale.offset.0) / scale.gain_correction * scale.pga_gain / scale.vref.0;
-    let code = libm::round(fraction * ADS1262_HALF_SCALE);
-    // The rails themselves read as saturated, so the last usable codes are one inside.
-    if !(code > -ADS1262_HALF_SCALE && code < ADS1262_HALF_SCALE - 1.0) {
-        return Err(InverseConversionError::OutOfRange);
-    }
-    Ok(Ads1262Code(code as i32))
-}
-
-/// RTD ohms → AD7124 ratiometric code (unipolar, the reference resistor sets full scale).
-pub fn ohms_to_ad7124(
-    scale: &AdcScale,
-    r: RtdOhms,
-    reference: Ohms,
-) -> Result<Ad7124Code, InverseConversionError> {
-    if !(r.0.is_finite() && reference.0.is_finite()) {
-        return Err(InverseConversionError::NonFinite);
-    }
-    let fraction = r.0 / reference.0 * scale.pga_gain / scale.gain_correction;
-    let code = libm::round(fraction * AD7124_FULL_SCALE);
-    if !(0.0..AD7124_FULL_SCALE - 1.0).contains(&code) {
-        return Err(InverseConversionError::OutOfRange);
-    }
-    Ok(Ad7124Code(code as u32))
-}
-
-/// Temperature → RTD ohms → AD7124 code with the table's RTD constants.
-pub fn celsius_to_ad7124(
-    table: &CalibrationTable,
-    t: Celsius,
-) -> Result<Ad7124Code, InverseConversionError> {
-    if !t.0.is_finite() {
-        return Err(InverseConversionError::NonFinite);
-    }
-    let r = table.rtd.cvd.resistance(t);
-    ohms_to_ad7124(&table.rtd_adc_scale(), r, table.rtd.reference_resistor)
-}
-
-/// Tilt → tiltmeter volts → ADS1262 code with the table's tilt scale.
-pub fn arcsec_to_ads1262(
-    table: &CalibrationTable,
-    tilt: TiltArcsec,
-) -> Result<Ads1262Code, InverseConversionError> {
-    if !tilt.0.is_finite() {
-        return Err(InverseConversionError::NonFinite);
-    }
-    let v = Volts(tilt.0 / table.tilt.scale_arcsec_per_v);
-    volts_to_ads1262(&tilt_scale(table), v)
-}
-
 /// Builds the raw sample the board would acquire for these physical values (host injection).
 pub fn raw_from_physical(
     table: &CalibrationTable,
     output: Volts,
     t: Celsius,
     tilt: TiltArcsec,
-) -> Result<RawSample, InverseConversionError> {
+) -> Result<RawSample, AdcError> {
     Ok(RawSample {
         accel: volts_to_ads1262(&accel_scale(Some(table)), output)?.0,
         rtd: celsius_to_ad7124(table, t)?.0,
@@ -464,13 +367,10 @@ mod tests {
             let back = s.volts(code.raw()).unwrap().0;
             assert!((back - v).abs() <= 0.5 * lsb, "{v} → {back}");
         }
-        assert_eq!(
-            volts_to_ads1262(&s, Volts(2.6)),
-            Err(InverseConversionError::OutOfRange)
-        );
+        assert_eq!(volts_to_ads1262(&s, Volts(2.6)), Err(AdcError::Saturated));
         assert_eq!(
             volts_to_ads1262(&s, Volts(f64::NAN)),
-            Err(InverseConversionError::NonFinite)
+            Err(AdcError::NonFiniteInput)
         );
     }
 
@@ -590,6 +490,47 @@ mod tests {
         assert_eq!(f.status, Status(Status::NO_CALIBRATION));
         assert!((f.output_v - 1.25).abs() < 1e-9);
         assert!(f.temperature_c.is_nan() && f.a_i_exact_g.is_nan() && f.tilt_arcsec.is_nan());
+    }
+
+    /// Every f64 of a frame as bits (NaN compares equal to itself), plus seq and status.
+    fn frame_bits(f: &Frame) -> [u64; 8] {
+        [
+            f.output_v.to_bits(),
+            f.temperature_c.to_bits(),
+            f.rtd_ohms.to_bits(),
+            f.tilt_arcsec.to_bits(),
+            f.a_i_exact_g.to_bits(),
+            f.output_linearized_v.to_bits(),
+            u64::from(f.status.0),
+            u64::from(f.seq),
+        ]
+    }
+
+    #[test]
+    fn a_cached_temperature_gives_the_same_bits_as_a_fresh_preparation() {
+        let mut t = paper_table();
+        // ±250" at full scale, so that a tilt beyond the f32 range (103") is a valid code.
+        t.tilt.scale_arcsec_per_v = 100.0;
+        let warm = crate::prepared::PreparedCalibration::new(&t).unwrap();
+        let cases = [
+            (1.3, 45.0, 2.0),
+            (-0.7, 45.0, 1.0),
+            (0.9, 52.5, -3.0),
+            (1.1, 45.0, 0.5),
+            (0.2, 70.0, 0.0),
+            (1.25, 20.0, 90.0),
+            (0.2, 70.0, 200.0),
+        ];
+        // Twice through: hits (same code as the previous sample) and misses alternate.
+        for (i, &(e, c, tilt)) in cases.iter().chain(cases.iter()).enumerate() {
+            let raw = raw_from_physical(&t, Volts(e), Celsius(c), TiltArcsec(tilt)).unwrap();
+            let cold = crate::prepared::PreparedCalibration::new(&t).unwrap();
+            let from_warm = process_prepared(i as u32, 0, &raw, Some(&warm));
+            let from_cold = process_prepared(i as u32, 0, &raw, Some(&cold));
+            assert_eq!(frame_bits(&from_warm), frame_bits(&from_cold), "case {i}");
+            assert!(from_warm.a_i_exact_g.is_finite(), "case {i}");
+            assert_eq!(warm.cached_rtd_code(), Some(raw.rtd));
+        }
     }
 
     #[test]

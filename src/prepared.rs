@@ -16,12 +16,15 @@
 use core::cell::Cell;
 
 use crate::adc::AdcError;
+use crate::adc::AdcScale;
 use crate::compensation::ThermalCompensator;
 use crate::fixed::{
     from_f32, from_f64, mul_code, sqrt_f32, to_f32, to_f64, CODE_FACTOR_BITS, G_BITS, VOLT_BITS,
 };
+use crate::frontend::{
+    accel_scale, rtd_scale, tilt_scale, AD7124_FULL_SCALE, AD7124_MAX_CODE, ADS1262_HALF_SCALE,
+};
 use crate::model::CrossAxis;
-use crate::pipeline::{ACCEL_PGA_GAIN, ADS1262_VREF, TILT_PGA_GAIN};
 use crate::poly::{TempPoly, N_COEFFS};
 use crate::rtd::{CallendarVanDusen, RtdError};
 use crate::table::{CalibrationTable, TableError, TiltAxis};
@@ -29,13 +32,6 @@ use crate::units::{Celsius, RtdOhms, RAD_PER_ARCSEC};
 
 /// Unit roundoff of f32 (round to nearest): 2^-24.
 const U32: f64 = 1.0 / 16_777_216.0;
-/// 2^31: the ADS1262's half scale.
-const ADS1262_HALF_SCALE: f64 = 2_147_483_648.0;
-/// 2^24: the AD7124's full scale.
-const AD7124_FULL_SCALE: f64 = 16_777_216.0;
-/// Largest AD7124 code (24 bits, all ones): reads as saturated.
-const AD7124_MAX_CODE: u32 = 0x00FF_FFFF;
-
 /// The precision budget of the compensated a_i against an f64 reference.
 pub const BUDGET_G: f64 = 1e-9;
 /// The precision budget of the linearized output against an f64 reference (≈ 2.3e-9 g). Looser
@@ -285,8 +281,9 @@ pub(crate) enum RtdFault {
 impl PreparedRtd {
     fn new(table: &CalibrationTable) -> Self {
         let cvd = table.rtd.cvd;
-        let ohms_per_code = table.rtd.reference_resistor.0 / AD7124_FULL_SCALE / table.rtd.pga_gain
-            * table.rtd.adc_gain_correction;
+        let scale = rtd_scale(table);
+        let ohms_per_code = table.rtd.reference_resistor.0 / AD7124_FULL_SCALE / scale.pga_gain
+            * scale.gain_correction;
         let (r_min, r_max) = cvd.resistance_limits();
         let ohms = |code: u32| f64::from(code) * ohms_per_code;
         PreparedRtd {
@@ -360,10 +357,13 @@ struct Ads1262Linear {
 }
 
 impl Ads1262Linear {
-    fn new(pga_gain: f64, gain_correction: f64, offset_v: f64, unit_per_v: f64) -> Self {
+    /// The map of a front-end scale ([`crate::frontend`]), in `unit_per_v` units per volt.
+    fn new(scale: &AdcScale, unit_per_v: f64) -> Self {
         Ads1262Linear {
-            per_code: ADS1262_VREF.0 / ADS1262_HALF_SCALE / pga_gain * gain_correction * unit_per_v,
-            offset: offset_v * unit_per_v,
+            per_code: scale.vref.0 / ADS1262_HALF_SCALE / scale.pga_gain
+                * scale.gain_correction
+                * unit_per_v,
+            offset: scale.offset.0 * unit_per_v,
         }
     }
 }
@@ -395,12 +395,7 @@ struct PreparedTilt {
 impl PreparedTilt {
     fn new(table: &CalibrationTable) -> Self {
         let t = &table.tilt;
-        let lin = Ads1262Linear::new(
-            TILT_PGA_GAIN,
-            t.adc_gain_correction,
-            t.adc_offset.0,
-            t.scale_arcsec_per_v,
-        );
+        let lin = Ads1262Linear::new(&tilt_scale(table), t.scale_arcsec_per_v);
         // φ − φ0 = code·k − offset − φ0 = k·(code − (offset + φ0)/k).
         let reference_code_f64 = (lin.offset + t.reference.0) / lin.per_code;
         let reference_code = libm::round(reference_code_f64).clamp(-4e18, 4e18) as i64;
@@ -515,12 +510,7 @@ impl PreparedCalibration {
         table.validate()?;
         let thermal = table.thermal;
         let cross = table.orientation.cross;
-        let accel = Ads1262Linear::new(
-            ACCEL_PGA_GAIN,
-            table.accel.adc_gain_correction,
-            table.accel.adc_offset.0,
-            1.0,
-        );
+        let accel = Ads1262Linear::new(&accel_scale(Some(table)), 1.0);
         let tilt = PreparedTilt::new(table);
         let rtd = PreparedRtd::new(table);
         let (fast, bounds) = FastThermal::new(&thermal, cross, &rtd, accel);
@@ -592,6 +582,12 @@ impl PreparedCalibration {
                 fresh
             }
         }
+    }
+
+    /// The RTD code whose terms are cached, if any (for the cache's tests).
+    #[cfg(test)]
+    pub(crate) fn cached_rtd_code(&self) -> Option<u32> {
+        self.cache.0.get().map(|t| t.code)
     }
 
     #[inline(never)]
@@ -911,6 +907,7 @@ fn unusable_bounds() -> ErrorBounds {
 mod tests {
     use super::*;
     use crate::table::tests::paper_table;
+    use crate::units::Volts;
 
     #[test]
     fn the_root_series_matches_the_closed_form_to_f32_precision() {
@@ -1019,68 +1016,24 @@ mod tests {
         assert!(p.error_bounds().a_i_g > BUDGET_G);
     }
 
-    /// Every f64 of a frame as bits (NaN compares equal to itself), plus seq and status.
-    fn frame_bits(f: &crate::pipeline::Frame) -> [u64; 8] {
-        [
-            f.output_v.to_bits(),
-            f.temperature_c.to_bits(),
-            f.rtd_ohms.to_bits(),
-            f.tilt_arcsec.to_bits(),
-            f.a_i_exact_g.to_bits(),
-            f.output_linearized_v.to_bits(),
-            u64::from(f.status.0),
-            u64::from(f.seq),
-        ]
-    }
-
-    #[test]
-    fn a_cached_temperature_gives_the_same_bits_as_a_fresh_preparation() {
-        use crate::pipeline::{process_prepared, raw_from_physical};
-        use crate::units::{TiltArcsec, Volts};
-        let mut t = paper_table();
-        // ±250" at full scale, so that a tilt beyond the f32 range (103") is a valid code.
-        t.tilt.scale_arcsec_per_v = 100.0;
-        let warm = PreparedCalibration::new(&t).unwrap();
-        let cases = [
-            (1.3, 45.0, 2.0),
-            (-0.7, 45.0, 1.0),
-            (0.9, 52.5, -3.0),
-            (1.1, 45.0, 0.5),
-            (0.2, 70.0, 0.0),
-            (1.25, 20.0, 90.0),
-            (0.2, 70.0, 200.0),
-        ];
-        // Twice through: hits (same code as the previous sample) and misses alternate.
-        for (i, &(e, c, tilt)) in cases.iter().chain(cases.iter()).enumerate() {
-            let raw = raw_from_physical(&t, Volts(e), Celsius(c), TiltArcsec(tilt)).unwrap();
-            let cold = PreparedCalibration::new(&t).unwrap();
-            let from_warm = process_prepared(i as u32, 0, &raw, Some(&warm));
-            let from_cold = process_prepared(i as u32, 0, &raw, Some(&cold));
-            assert_eq!(frame_bits(&from_warm), frame_bits(&from_cold), "case {i}");
-            assert!(from_warm.a_i_exact_g.is_finite(), "case {i}");
-            assert_eq!(warm.cache.0.get().map(|c| c.code), Some(raw.rtd));
-        }
-    }
-
     #[test]
     fn the_f64_fallback_gives_the_reference_compensation() {
         let mut t = paper_table();
         t.thermal.models.bias_g.coeffs[4] = 5e-3;
         let p = PreparedCalibration::new(&t).unwrap();
-        let raw = crate::pipeline::raw_from_physical(
-            &t,
-            crate::units::Volts(1.3),
-            Celsius(47.0),
-            crate::units::TiltArcsec(0.0),
-        )
-        .unwrap();
-        let e = p.accel_volts(raw.accel).unwrap();
-        let temperature = p.temperature(raw.rtd);
+        let accel = crate::frontend::volts_to_ads1262(&accel_scale(Some(&t)), Volts(1.3))
+            .unwrap()
+            .0;
+        let rtd = crate::frontend::celsius_to_ad7124(&t, Celsius(47.0))
+            .unwrap()
+            .0;
+        let e = p.accel_volts(accel).unwrap();
+        let temperature = p.temperature(rtd);
         let (_, t_c) = temperature.rtd.unwrap();
-        let (a, lin, clamped) = p.compensate(raw.accel, e, &temperature, Some(0)).unwrap();
+        let (a, lin, clamped) = p.compensate(accel, e, &temperature, Some(0)).unwrap();
         let tilt0 = p.tilt.phi_rad_f64(0);
         let (k, _) = t.thermal.coefficients_at(Celsius(t_c)).unwrap();
-        let e_c = crate::units::Volts(e - k.scale_factor_v_per_g * tilt_sin(tilt0).unwrap());
+        let e_c = Volts(e - k.scale_factor_v_per_g * tilt_sin(tilt0).unwrap());
         let cross = t.orientation.cross;
         let want = t.thermal.exact(e_c, Celsius(t_c), cross).unwrap();
         let want_lin = t.thermal.linearized(e_c, Celsius(t_c), cross).unwrap();

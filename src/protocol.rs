@@ -458,64 +458,21 @@ impl FrameError {
     }
 }
 
-/// COBS-encodes `src` into `dst` (no delimiter); returns the encoded length.
+/// COBS-encodes `src` into `dst` (no delimiter); returns the encoded length. The `cobs` crate
+/// (the one postcard's COBS flavour is built on); a `dst` too small is an error, not a panic.
 pub fn cobs_encode(src: &[u8], dst: &mut [u8]) -> Result<usize, FrameError> {
-    let mut code_at = 0usize;
-    let mut out = 1usize;
-    let mut run: u8 = 1;
-    for &b in src {
-        if b == 0 {
-            *dst.get_mut(code_at).ok_or(FrameError::BufferTooSmall)? = run;
-            code_at = out;
-            out += 1;
-            run = 1;
-        } else {
-            *dst.get_mut(out).ok_or(FrameError::BufferTooSmall)? = b;
-            out += 1;
-            run += 1;
-            if run == 0xFF {
-                *dst.get_mut(code_at).ok_or(FrameError::BufferTooSmall)? = run;
-                code_at = out;
-                out += 1;
-                run = 1;
-            }
-        }
-    }
-    *dst.get_mut(code_at).ok_or(FrameError::BufferTooSmall)? = run;
-    Ok(out)
+    cobs::try_encode(src, dst).map_err(|_| FrameError::BufferTooSmall)
 }
 
 /// COBS-decodes `buf` in place (no delimiter inside); returns the decoded length.
+///
+/// `cobs::decode_in_place` stops at the first 0x00; a frame handed over here has had its
+/// delimiter removed, so a 0x00 inside is a broken frame and refused rather than truncated.
 pub fn cobs_decode_in_place(buf: &mut [u8]) -> Result<usize, FrameError> {
-    let len = buf.len();
-    let mut read = 0usize;
-    let mut write = 0usize;
-    while read < len {
-        let code = *buf.get(read).ok_or(FrameError::Cobs)?;
-        if code == 0 {
-            return Err(FrameError::Cobs);
-        }
-        read += 1;
-        let n = usize::from(code) - 1;
-        if read + n > len {
-            return Err(FrameError::Cobs);
-        }
-        for _ in 0..n {
-            let b = *buf.get(read).ok_or(FrameError::Cobs)?;
-            if b == 0 {
-                return Err(FrameError::Cobs);
-            }
-            *buf.get_mut(write).ok_or(FrameError::Cobs)? = b;
-            write += 1;
-            read += 1;
-        }
-        // A code below 0xFF stands for a zero, except at the very end of the frame.
-        if code != 0xFF && read < len {
-            *buf.get_mut(write).ok_or(FrameError::Cobs)? = 0;
-            write += 1;
-        }
+    if buf.contains(&0) {
+        return Err(FrameError::Cobs);
     }
-    Ok(write)
+    cobs::decode_in_place(buf).map_err(|_| FrameError::Cobs)
 }
 
 /// Serializes `msg`, appends the CRC, COBS-encodes and appends the 0x00 delimiter into `out`.
@@ -693,10 +650,30 @@ mod tests {
         let long = [0x42u8; 254];
         let mut out = [0u8; 260];
         let n = cobs_encode(&long, &mut out).unwrap();
-        assert_eq!(out[0], 0xFF);
+        assert_eq!((out[0], n), (0xFF, 255));
         let mut back = out[..n].to_vec();
         let m = cobs_decode_in_place(&mut back).unwrap();
         assert_eq!(&back[..m], &long[..]);
+        // The hand-written encoder before the `cobs` crate closed such a block with a trailing
+        // 0x01: a peer still sending that form is decoded to the same bytes.
+        let mut old_form = out[..n].to_vec();
+        old_form.push(0x01);
+        let m = cobs_decode_in_place(&mut old_form).unwrap();
+        assert_eq!(&old_form[..m], &long[..]);
+        // A destination too small is an error, a 0x00 inside a frame is refused.
+        assert_eq!(
+            cobs_encode(&long, &mut [0u8; 200]),
+            Err(FrameError::BufferTooSmall)
+        );
+        assert_eq!(
+            cobs_decode_in_place(&mut [0x03, 0x11, 0x00, 0x01]),
+            Err(FrameError::Cobs)
+        );
+        // A code pointing past the end of the frame is refused.
+        assert_eq!(
+            cobs_decode_in_place(&mut [0x05, 0x11, 0x22]),
+            Err(FrameError::Cobs)
+        );
     }
 
     #[test]

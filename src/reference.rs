@@ -11,16 +11,12 @@ use crate::table::{
 };
 use crate::units::{Celsius, Gs, Ohms, TiltArcsec, Volts, RAD_PER_ARCMIN};
 
-/// Nominal values of the front-end board's channels (docs/drivers.md).
+/// Nominal values of the front-end board's channels: those of [`crate::frontend`], named here
+/// for the tables built from them.
 pub mod board {
-    /// Reference resistor of the ratiometric RTD measurement, Ω.
-    pub const RTD_REFERENCE_OHMS: f64 = 5110.0;
-    /// AD7124 PGA gain of the RTD channel.
-    pub const RTD_PGA_GAIN: f64 = 16.0;
-    /// Sense resistor of the torquer current, Ω.
-    pub const SENSE_RESISTOR_OHMS: f64 = 1000.0;
-    /// Tiltmeter sensitivity, arcsec per volt.
-    pub const TILT_SCALE_ARCSEC_PER_V: f64 = 10.0;
+    pub use crate::frontend::{
+        RTD_PGA_GAIN, RTD_REFERENCE_OHMS, SENSE_RESISTOR_OHMS, TILT_SCALE_ARCSEC_PER_V,
+    };
 }
 
 /// The calibrated range of Table 1, 30–65 °C, with its natural normalization.

@@ -6,7 +6,6 @@
 //! (magic, version, payload length), the payload, and a CRC-32/ISO-HDLC over everything before
 //! it. The CRC value doubles as the table id that the firmware reports.
 
-use crate::adc::AdcScale;
 use crate::compensation::{CoefficientModels, ThermalCompensator};
 use crate::model::CrossAxis;
 use crate::poly::{TempPoly, TemperatureScale, N_COEFFS};
@@ -640,18 +639,6 @@ impl CalibrationTable {
             }
         }
         Ok(())
-    }
-
-    /// The ADC scale of the RTD channel (AD7124, 24-bit unipolar, ratiometric).
-    pub fn rtd_adc_scale(&self) -> AdcScale {
-        AdcScale {
-            bits: 24,
-            coding: crate::adc::Coding::Unipolar,
-            pga_gain: self.rtd.pga_gain,
-            vref: Volts(1.0), // irrelevant for a ratiometric reading
-            gain_correction: self.rtd.adc_gain_correction,
-            offset: Volts(0.0),
-        }
     }
 }
 

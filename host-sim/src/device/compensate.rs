@@ -3,10 +3,9 @@
 
 use std::path::Path;
 
-use accomp::pipeline::{
-    self, accel_scale, arcsec_to_ads1262, celsius_to_ad7124, volts_to_ads1262, ChannelFlags, Frame,
-    InverseConversionError, RawSample,
-};
+use accomp::adc::AdcError;
+use accomp::frontend::{accel_scale, arcsec_to_ads1262, celsius_to_ad7124, volts_to_ads1262};
+use accomp::pipeline::{self, ChannelFlags, Frame, RawSample};
 use accomp::table::CalibrationTable;
 use accomp::units::{Celsius, TiltArcsec, Volts};
 
@@ -16,16 +15,12 @@ use super::{client::DEFAULT_WINDOW, Connection, Target};
 /// One channel's code for a physical value: a value the ADC could not represent becomes the
 /// rail code (what the chip would deliver, flagged saturated by the pipeline); a missing value
 /// (NaN) becomes a DRDY timeout on that channel.
-fn channel<T: Copy + Default>(
-    code: Result<T, InverseConversionError>,
-    rail: T,
-) -> (T, ChannelFlags) {
+fn channel<T: Copy + Default>(code: Result<T, AdcError>, rail: T) -> (T, ChannelFlags) {
     match code {
         Ok(c) => (c, ChannelFlags::default()),
-        Err(InverseConversionError::OutOfRange) => (rail, ChannelFlags::default()),
-        Err(InverseConversionError::NonFinite) => {
-            (T::default(), ChannelFlags(ChannelFlags::DRDY_TIMEOUT))
-        }
+        Err(AdcError::NonFiniteInput) => (T::default(), ChannelFlags(ChannelFlags::DRDY_TIMEOUT)),
+        // Beyond full scale (or a scale the table cannot have, refused by its validation).
+        Err(_) => (rail, ChannelFlags::default()),
     }
 }
 

@@ -509,26 +509,31 @@ pub fn analyse(
     let drift = spline_drift(&ds.t_s, &ds.segment_start, DRIFT_KNOT_S);
 
     // One fit per reference: the columns differ only by the δ per wave inside a group.
+    // Frisch–Waugh: the nuisance space (the discovery's columns and the drift, which overlap:
+    // an offset or a linear drift is also a sum of B-splines) is projected out by an
+    // orthonormal basis that drops dependent columns, and the tide and pressure columns are
+    // solved on what is left. Their covariance is then that of a small, well-conditioned
+    // system, whatever the nuisance columns' collinearity.
+    let mut nuis = super::baseline::Basis::new(&[]);
+    for c in nuisance.iter().chain(&drift) {
+        nuis.push(c.clone());
+    }
+    let y_perp = nuis.residual(target);
     let fit = |cs: &[[Vec<f64>; 2]]| {
-        let tide: Vec<[Vec<f64>; 2]> = cs.iter().map(|[c, s]| [scaled(c), scaled(s)]).collect();
-        let mut cols: Vec<&[f64]> = Vec::new();
-        for [c, s] in &tide {
-            cols.push(c);
-            cols.push(s);
+        let mut cols: Vec<Vec<f64>> = Vec::new();
+        for [c, s] in cs {
+            cols.push(nuis.residual(&scaled(c)));
+            cols.push(nuis.residual(&scaled(s)));
         }
         if let Some(p) = &pressure {
-            cols.push(p);
+            cols.push(nuis.residual(p));
         }
-        for c in nuisance.iter().chain(&drift) {
-            cols.push(c);
-        }
-        let (beta, cov) = lstsq(&cols, target);
-        let mut r = target.to_vec();
+        let refs: Vec<&[f64]> = cols.iter().map(Vec::as_slice).collect();
+        let (beta, cov) = lstsq(&refs, &y_perp);
+        let mut r = y_perp.clone();
         for (c, b) in cols.iter().zip(&beta) {
-            if *b != 0.0 {
-                for (ri, ci) in r.iter_mut().zip(c.iter()) {
-                    *ri -= b * ci;
-                }
+            for (ri, ci) in r.iter_mut().zip(c) {
+                *ri -= b * ci;
             }
         }
         (beta, cov, r)

@@ -8,7 +8,8 @@
 //! *nominal* scales (core `AdcScale`), exactly like the firmware, so every error above shows up
 //! in the measured columns.
 
-use accomp::adc::{AdcError, AdcScale, Coding};
+use accomp::adc::{AdcError, AdcScale};
+use accomp::frontend::{ad7124_rtd_scale, ads1262_scale_with_vref};
 use accomp::units::{Ohms, RtdOhms, Volts};
 use serde::{Deserialize, Serialize};
 
@@ -80,28 +81,15 @@ pub struct OhmsConversion {
     pub ohms: Option<RtdOhms>,
 }
 
-/// The nominal ADS1262 scale the board converts with.
+/// The nominal ADS1262 scale the board converts with (the core's front-end scale, with the
+/// scenario's reference voltage).
 pub fn ads1262_nominal(p: &Ads1262Params, pga_gain: f64) -> AdcScale {
-    AdcScale {
-        bits: 32,
-        coding: Coding::TwosComplement,
-        pga_gain,
-        vref: Volts(p.vref_v),
-        gain_correction: 1.0,
-        offset: Volts(0.0),
-    }
+    ads1262_scale_with_vref(pga_gain, Volts(p.vref_v), 1.0, Volts(0.0))
 }
 
-/// The nominal AD7124 scale the board converts with.
+/// The nominal AD7124 scale the board converts with (the core's ratiometric RTD scale).
 pub fn ad7124_nominal(p: &Ad7124Params) -> AdcScale {
-    AdcScale {
-        bits: 24,
-        coding: Coding::Unipolar,
-        pga_gain: p.pga_gain,
-        vref: Volts(1.0), // ratiometric: the reference voltage cancels
-        gain_correction: 1.0,
-        offset: Volts(0.0),
-    }
+    ad7124_rtd_scale(p.pga_gain, 1.0)
 }
 
 /// Converts a voltage on an ADS1262 input at board temperature `board_c`.

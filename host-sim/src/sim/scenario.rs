@@ -240,21 +240,24 @@ fn pt100() -> RtdParams {
     }
 }
 
+/// The board's converters: nominal values from the core's front-end module (`accomp::frontend`),
+/// imperfections (tempco, noise) of the simulated board.
 fn board() -> AdcParams {
+    use accomp::frontend as fe;
     AdcParams {
         ads1262: Ads1262Params {
-            vref_v: 2.5,
+            vref_v: fe::ADS1262_VREF.0,
             vref_tempco_ppm_per_c: 0.5,
             vref_calibrated_at_c: 20.0,
-            accel_pga_gain: 1.0,
-            tilt_pga_gain: 1.0,
+            accel_pga_gain: fe::ACCEL_PGA_GAIN,
+            tilt_pga_gain: fe::TILT_PGA_GAIN,
             noise_uv_rms: 0.3,
             gain_error_ppm: 0.0,
             offset_uv: 0.0,
         },
         ad7124: Ad7124Params {
-            pga_gain: 16.0,
-            reference_resistor_ohm: 5110.0,
+            pga_gain: fe::RTD_PGA_GAIN,
+            reference_resistor_ohm: fe::RTD_REFERENCE_OHMS,
             reference_resistor_error_ppm: 0.0,
             gain_error_ppm: 0.0,
         },

@@ -21,7 +21,7 @@ use embedded_hal::delay::DelayNs;
 use embedded_hal::digital::InputPin;
 use embedded_hal::spi::SpiDevice;
 
-use crate::adc::{Ad7124Code, AdcScale, Coding};
+use crate::adc::{Ad7124Code, AdcScale};
 use crate::drivers::{Error, CRC8_ATM};
 use crate::units::Volts;
 use registers::{adc_control, config, err, status, Reg};
@@ -187,18 +187,7 @@ impl Ad7124Config {
     /// offset binary, the PGA gain. `vref` is the reference voltage for volt conversions; the
     /// ratiometric RTD path ([`crate::adc::AdcScale::ratiometric_ohms`]) does not depend on it.
     pub fn scale(&self, vref: Volts) -> AdcScale {
-        AdcScale {
-            bits: 24,
-            coding: if self.bipolar {
-                Coding::OffsetBinary
-            } else {
-                Coding::Unipolar
-            },
-            pga_gain: self.gain.factor(),
-            vref,
-            gain_correction: 1.0,
-            offset: Volts(0.0),
-        }
+        crate::frontend::ad7124_scale(self.bipolar, self.gain.factor(), vref, 1.0)
     }
 
     fn validate(&self) -> bool {

@@ -15,7 +15,7 @@ use embedded_hal::delay::DelayNs;
 use embedded_hal::digital::InputPin;
 use embedded_hal::spi::SpiDevice;
 
-use crate::adc::{AdcScale, Ads1262Code, Coding};
+use crate::adc::{AdcScale, Ads1262Code};
 use crate::drivers::{Error, CRC8_ATM};
 use crate::units::Volts;
 use registers::{cmd, reg, status};
@@ -153,14 +153,7 @@ impl Ads1262Config {
             Pga::Enabled(g) => g.factor(),
             Pga::Bypassed => 1.0,
         };
-        AdcScale {
-            bits: 32,
-            coding: Coding::TwosComplement,
-            pga_gain,
-            vref,
-            gain_correction: 1.0,
-            offset: Volts(0.0),
-        }
+        crate::frontend::ads1262_scale_with_vref(pga_gain, vref, 1.0, Volts(0.0))
     }
 
     /// Refuse settings the chip would accept but that cannot work on purpose.
