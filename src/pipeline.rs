@@ -14,6 +14,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::adc::{Ad7124Code, AdcError, Ads1262Code};
+use crate::fixed;
 use crate::prepared::{CompensateFault, PreparedCalibration, RtdFault};
 use crate::rtd::RtdError;
 use crate::table::CalibrationTable;
@@ -282,7 +283,7 @@ pub fn process_prepared(
         status.set(Status::TILT_INVALID);
     } else {
         match table.tilt_arcsec(raw.tilt) {
-            Ok(v) if v.is_finite() => {
+            Ok(v) if fixed::is_finite(v) => {
                 frame.tilt_arcsec = v;
                 tilt_code = Some(raw.tilt);
             }
@@ -297,24 +298,25 @@ pub fn process_prepared(
     }
 
     // Same rule for E and T: a non-finite value is flagged invalid and stays NaN.
-    if !frame.output_v.is_finite() && !status.has(Status::OUTPUT_INVALID) {
+    // (Bit tests: `f64::is_finite`/`is_nan` are soft-float comparisons on the M4F.)
+    if !fixed::is_finite(frame.output_v) && !status.has(Status::OUTPUT_INVALID) {
         frame.output_v = f64::NAN;
         status.set(Status::OUTPUT_INVALID);
     }
-    if !frame.temperature_c.is_finite()
+    if !fixed::is_finite(frame.temperature_c)
         && !status.has(Status::RTD_OPEN | Status::RTD_SHORT | Status::RTD_INVALID)
     {
         frame.temperature_c = f64::NAN;
         status.set(Status::RTD_INVALID);
     }
     let (e, t) = (frame.output_v, frame.temperature_c);
-    let Some(temperature) = temperature.filter(|_| !(e.is_nan() || t.is_nan())) else {
+    let Some(temperature) = temperature.filter(|_| !(fixed::is_nan(e) || fixed::is_nan(t))) else {
         // Already flagged above; the compensated values stay NaN.
         frame.status = status;
         return frame;
     };
     match table.compensate(raw.accel, e, &temperature, tilt_code) {
-        Ok((a_i, lin, _)) if !(a_i.is_finite() && lin.is_finite()) => {
+        Ok((a_i, lin, _)) if !(fixed::is_finite(a_i) && fixed::is_finite(lin)) => {
             status.set(Status::COMPENSATION_FAILED)
         }
         Ok((a_i, lin, clamped)) => {

@@ -610,7 +610,8 @@ impl PreparedCalibration {
         temperature: &Temperature,
         tilt_code: Option<i32>,
     ) -> Result<Compensated, CompensateFault> {
-        let phi = match (self.tilt.sign == 0.0, tilt_code) {
+        // sign32: an f32 comparison is one FPU instruction, an f64 one a soft-float call.
+        let phi = match (self.tilt.sign32 == 0.0, tilt_code) {
             (true, _) => None,
             (false, None) => return Err(CompensateFault::TiltNeeded),
             (false, Some(code)) => Some(code),
@@ -654,7 +655,7 @@ impl PreparedCalibration {
 }
 
 fn finite(c: Compensated) -> Result<Compensated, CompensateFault> {
-    if c.0.is_finite() && c.1.is_finite() {
+    if crate::fixed::is_finite(c.0) && crate::fixed::is_finite(c.1) {
         Ok(c)
     } else {
         Err(CompensateFault::Failed)

@@ -38,9 +38,11 @@ pub enum RtdError {
     NoConvergence,
 }
 
-/// IEC 60751 span of validity.
-const T_MIN_C: f64 = -200.0;
-const T_MAX_C: f64 = 850.0;
+/// IEC 60751 span of validity, °C: the temperatures a platinum RTD reading can stand for (the
+/// fault thresholds below are set from it; `accomp fit` refuses calibration temperatures outside).
+pub const T_MIN_C: f64 = -200.0;
+/// Upper end of the IEC 60751 span, °C.
+pub const T_MAX_C: f64 = 850.0;
 
 impl CallendarVanDusen {
     /// IEC 60751 Pt100: A = 3.9083e-3, B = −5.775e-7, C = −4.183e-12.

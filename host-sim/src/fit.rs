@@ -3,7 +3,6 @@
 //! residual standard deviation, AICc, leave-one-out RMS and the F test, set beside the paper's
 //! printed models, and turned into a calibration table. Method and findings: docs/fitting.md.
 
-pub mod linalg;
 pub mod stats;
 
 use std::fmt::Write as _;
@@ -11,12 +10,15 @@ use std::path::{Path, PathBuf};
 
 use accomp::compensation::{CoefficientModels, ThermalCompensator};
 use accomp::poly::{TempPoly, TemperatureScale, MAX_ORDER};
+use accomp::rtd;
 use accomp::table::{CalibrationDate, CalibrationTable, TableError};
 use accomp::units::{Celsius, RAD_PER_ARCMIN};
 use serde::Serialize;
 use thiserror::Error;
 
-use linalg::{least_squares, LinalgError};
+use crate::log::reader::{ReadError, Records};
+
+use crate::numerics::linalg::{least_squares, LinalgError};
 use stats::{f_upper_tail, SpecialError};
 
 /// Name of the temperature column of the input table.
@@ -97,13 +99,40 @@ pub enum CsvError {
         /// The missing column.
         column: &'static str,
     },
-    /// A column name appears twice, or is empty.
-    #[error("line {line}: column name `{name}` is empty or repeated")]
-    BadColumnName {
+    /// The header is malformed (a name empty or repeated).
+    #[error("line {line}: header: {reason}")]
+    BadHeader {
         /// Header line number.
         line: usize,
-        /// The name.
-        name: String,
+        /// What is wrong with it.
+        reason: String,
+    },
+    /// The file breaks a rule of the project's CSV reader (repeated metadata key, comment after
+    /// the header, not UTF-8, bad quoting), see `log::reader`.
+    #[error("line {line}: {reason}")]
+    Format {
+        /// 1-based line.
+        line: usize,
+        /// What is wrong.
+        reason: String,
+    },
+    /// A file that cannot be read.
+    #[error("{0}")]
+    Io(String),
+    /// A calibration temperature no platinum RTD reading can stand for.
+    #[error(
+        "line {line}: temperature {value} °C is outside the RTD's range {min}…{max} °C \
+         (IEC 60751 span, the one the core's RTD conversion accepts: accomp::rtd::T_MIN_C/T_MAX_C)"
+    )]
+    TemperatureOutOfRange {
+        /// 1-based line.
+        line: usize,
+        /// The temperature.
+        value: f64,
+        /// Lower end, °C.
+        min: f64,
+        /// Upper end, °C.
+        max: f64,
     },
     /// Too few data rows to fit and compare even a constant (AICc needs n ≥ 3).
     #[error("{rows} data rows: at least 3 are needed")]
@@ -206,6 +235,9 @@ pub struct CoefficientTable {
     pub temperatures_c: Vec<f64>,
     /// Every other column, in header order.
     pub columns: Vec<Column>,
+    /// What the fit should be told about the input (e.g. a temperature given twice); printed on
+    /// stderr by `accomp fit`.
+    pub warnings: Vec<String>,
 }
 
 impl CoefficientTable {
@@ -226,16 +258,26 @@ impl CoefficientTable {
     }
 }
 
-/// Non-comment, non-blank lines with their 1-based line numbers.
-fn data_lines(text: &str) -> impl Iterator<Item = (usize, &str)> {
-    text.lines()
-        .enumerate()
-        .map(|(i, l)| (i + 1, l.trim()))
-        .filter(|(_, l)| !l.is_empty() && !l.starts_with('#'))
-}
-
-fn split_fields(line: &str) -> Vec<&str> {
-    line.split(',').map(str::trim).collect()
+impl From<ReadError> for CsvError {
+    fn from(e: ReadError) -> Self {
+        match e {
+            ReadError::NoHeader => CsvError::NoHeader,
+            ReadError::Io(e) => CsvError::Io(e.to_string()),
+            ReadError::BadHeader { line, reason } => CsvError::BadHeader { line, reason },
+            ReadError::FieldCount {
+                line,
+                expected,
+                found,
+            } => CsvError::Row {
+                line,
+                reason: RowError::FieldCount { expected, found },
+            },
+            other => CsvError::Format {
+                line: other.line().unwrap_or(0),
+                reason: other.what(),
+            },
+        }
+    }
 }
 
 fn parse_number(column: &str, text: &str) -> Result<f64, RowError> {
@@ -258,33 +300,24 @@ fn parse_number(column: &str, text: &str) -> Result<f64, RowError> {
     }
 }
 
-fn header(text: &str) -> Result<(usize, Vec<String>), CsvError> {
-    let (line, h) = data_lines(text).next().ok_or(CsvError::NoHeader)?;
-    let names: Vec<String> = split_fields(h).into_iter().map(str::to_owned).collect();
-    for (i, n) in names.iter().enumerate() {
-        if n.is_empty() || names[..i].contains(n) {
-            return Err(CsvError::BadColumnName {
-                line,
-                name: n.clone(),
-            });
-        }
-    }
-    Ok((line, names))
+/// The index of a required column, or the named error.
+fn find_column(records: &Records<&[u8]>, column: &'static str) -> Result<usize, CsvError> {
+    records.column(column).ok_or(CsvError::MissingColumn {
+        line: records.header_line(),
+        column,
+    })
 }
 
-/// Parses a coefficient table: `#` comments, a header with `temperature_c` and any number of
-/// coefficient columns (mapped to coefficients by name later), then one row per temperature.
+/// Parses a coefficient table (project CSV format, `log::reader`): a header with
+/// `temperature_c` and any number of coefficient columns (mapped to coefficients by name
+/// later), then one row per temperature. Temperatures outside the RTD's range are refused; a
+/// temperature given twice is kept (two measurements weigh twice) with a warning.
 pub fn parse_coefficient_table(text: &str) -> Result<CoefficientTable, CsvError> {
-    let (header_line, names) = header(text)?;
-    let t_index =
-        names
-            .iter()
-            .position(|n| n == TEMPERATURE_COLUMN)
-            .ok_or(CsvError::MissingColumn {
-                line: header_line,
-                column: TEMPERATURE_COLUMN,
-            })?;
+    let mut records = Records::from_text(text)?;
+    let names = records.header().to_vec();
+    let t_index = find_column(&records, TEMPERATURE_COLUMN)?;
     let mut temperatures_c = Vec::new();
+    let mut lines = Vec::new();
     let mut columns: Vec<Column> = names
         .iter()
         .enumerate()
@@ -294,22 +327,23 @@ pub fn parse_coefficient_table(text: &str) -> Result<CoefficientTable, CsvError>
             values: Vec::new(),
         })
         .collect();
-    for (line, row) in data_lines(text).skip(1) {
-        let fields = split_fields(row);
-        if fields.len() != names.len() {
-            return Err(CsvError::Row {
-                line,
-                reason: RowError::FieldCount {
-                    expected: names.len(),
-                    found: fields.len(),
-                },
-            });
-        }
+    while let Some(row) = records.next_row()? {
+        let line = row.line;
         let mut col = columns.iter_mut();
-        for (i, (name, text)) in names.iter().zip(&fields).enumerate() {
+        for (i, name) in names.iter().enumerate() {
+            let text = row.text(i)?;
             let v = parse_number(name, text).map_err(|reason| CsvError::Row { line, reason })?;
             if i == t_index {
+                if !(rtd::T_MIN_C..=rtd::T_MAX_C).contains(&v) {
+                    return Err(CsvError::TemperatureOutOfRange {
+                        line,
+                        value: v,
+                        min: rtd::T_MIN_C,
+                        max: rtd::T_MAX_C,
+                    });
+                }
                 temperatures_c.push(v);
+                lines.push(line);
             } else if let Some(c) = col.next() {
                 c.values.push(v);
             }
@@ -320,9 +354,21 @@ pub fn parse_coefficient_table(text: &str) -> Result<CoefficientTable, CsvError>
             rows: temperatures_c.len(),
         });
     }
+    let mut warnings = Vec::new();
+    for (i, t) in temperatures_c.iter().enumerate() {
+        let first = temperatures_c[..i].iter().position(|u| u == t);
+        if let Some(first) = first {
+            warnings.push(format!(
+                "line {}: temperature {t} °C repeats line {}: both rows are fitted (a repeated \
+                 measurement weighs twice); remove one if it is a copy",
+                lines[i], lines[first]
+            ));
+        }
+    }
     let table = CoefficientTable {
         temperatures_c,
         columns,
+        warnings,
     };
     table.scale()?;
     Ok(table)
@@ -343,64 +389,49 @@ pub struct PrintedModel {
 
 /// Parses the printed-models table (`coefficient,order,c0..c4,reported_std`).
 pub fn parse_printed_models(text: &str) -> Result<Vec<PrintedModel>, CsvError> {
-    let (header_line, names) = header(text)?;
-    let find = |column: &'static str| {
-        names
-            .iter()
-            .position(|n| n == column)
-            .ok_or(CsvError::MissingColumn {
-                line: header_line,
-                column,
-            })
-    };
-    let i_name = find("coefficient")?;
-    let i_order = find("order")?;
+    let mut records = Records::from_text(text)?;
+    let names = records.header().to_vec();
+    let i_name = find_column(&records, "coefficient")?;
+    let i_order = find_column(&records, "order")?;
     let i_c = [
-        find("c0")?,
-        find("c1")?,
-        find("c2")?,
-        find("c3")?,
-        find("c4")?,
+        find_column(&records, "c0")?,
+        find_column(&records, "c1")?,
+        find_column(&records, "c2")?,
+        find_column(&records, "c3")?,
+        find_column(&records, "c4")?,
     ];
-    let i_std = find("reported_std")?;
+    let i_std = find_column(&records, "reported_std")?;
     let mut out = Vec::new();
-    for (line, row) in data_lines(text).skip(1) {
-        let f = split_fields(row);
-        if f.len() != names.len() {
-            return Err(CsvError::Row {
-                line,
-                reason: RowError::FieldCount {
-                    expected: names.len(),
-                    found: f.len(),
-                },
-            });
-        }
+    while let Some(row) = records.next_row()? {
+        let line = row.line;
         let row_err = |reason| CsvError::Row { line, reason };
-        let order: usize = f[i_order]
+        let order_text = row.text(i_order)?;
+        let order: usize = order_text
             .parse()
             .ok()
             .filter(|o| *o <= MAX_ORDER)
             .ok_or_else(|| {
                 row_err(RowError::BadOrder {
-                    text: f[i_order].to_owned(),
+                    text: order_text.to_owned(),
                 })
             })?;
         let mut coeffs_celsius = [0.0; MAX_ORDER + 1];
         for (j, (c, idx)) in coeffs_celsius.iter_mut().zip(i_c).enumerate() {
-            let text = f[idx];
+            let text = row.text(idx)?;
             // Empty means "term absent" — but only above the stated order.
             if text.is_empty() && j > order {
                 continue;
             }
             *c = parse_number(&names[idx], text).map_err(row_err)?;
         }
-        let reported_std = if f[i_std].is_empty() {
+        let std_text = row.text(i_std)?;
+        let reported_std = if std_text.is_empty() {
             None
         } else {
-            Some(parse_number("reported_std", f[i_std]).map_err(row_err)?)
+            Some(parse_number("reported_std", std_text).map_err(row_err)?)
         };
         out.push(PrintedModel {
-            coefficient: f[i_name].to_owned(),
+            coefficient: row.text(i_name)?.to_owned(),
             order,
             coeffs_celsius,
             reported_std,
@@ -941,6 +972,9 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
         })?,
         None => Vec::new(),
     };
+    for w in &table.warnings {
+        eprintln!("warning: {}: {w}", args.input.display());
+    }
     let report = fit_table(&table, &printed, at)?;
     if args.json {
         println!("{}", serde_json::to_string(&report)?);
@@ -1141,7 +1175,7 @@ mod tests {
         assert!((e.residual_max - 0.1).abs() < 1e-12);
         assert_eq!(e.sensitivity_per_c, 0.5);
         // A missing coefficient at or below the stated order is an error, not a zero.
-        let bad = "coefficient,order,c0,c1,c2,c3,c4,reported_std\n# c\nk,2,1.0,,,,,\n";
+        let bad = "# c\ncoefficient,order,c0,c1,c2,c3,c4,reported_std\nk,2,1.0,,,,,\n";
         assert_eq!(
             parse_printed_models(bad),
             Err(CsvError::Row {
@@ -1205,8 +1239,44 @@ mod tests {
         let e = parse_coefficient_table("k0_g,k1\n1,2\n");
         assert!(matches!(e, Err(CsvError::MissingColumn { line: 1, .. })));
         let e = parse_coefficient_table("temperature_c,a,a\n1,2,3\n");
-        assert!(matches!(e, Err(CsvError::BadColumnName { .. })));
+        assert!(matches!(e, Err(CsvError::BadHeader { line: 1, .. })));
         assert_eq!(parse_coefficient_table("# only\n"), Err(CsvError::NoHeader));
+    }
+
+    #[test]
+    fn a_byte_order_mark_is_stripped_not_reported_as_a_missing_column() {
+        let t = parse_coefficient_table(&format!("\u{feff}{HEADER}30,1,2\n40,1,2\n50,1,2\n"));
+        assert_eq!(t.unwrap().temperatures_c, [30.0, 40.0, 50.0]);
+    }
+
+    #[test]
+    fn a_temperature_outside_the_rtd_range_is_refused_with_the_range_named() {
+        let e = parse_coefficient_table(&format!("{HEADER}30,1,2\n-300,1,2\n50,1,2\n"));
+        assert_eq!(
+            e,
+            Err(CsvError::TemperatureOutOfRange {
+                line: 4,
+                value: -300.0,
+                min: -200.0,
+                max: 850.0
+            })
+        );
+        let msg = e.unwrap_err().to_string();
+        assert!(msg.contains("IEC 60751") && msg.contains("-200"), "{msg}");
+    }
+
+    #[test]
+    fn a_repeated_temperature_is_fitted_with_a_warning_naming_both_lines() {
+        let t = parse_coefficient_table(&format!("{HEADER}30,1,2\n40,1,2\n30,1.1,2\n50,1,2\n"))
+            .unwrap();
+        assert_eq!(t.temperatures_c.len(), 4);
+        assert_eq!(t.warnings.len(), 1);
+        assert!(
+            t.warnings[0].contains("line 5") && t.warnings[0].contains("line 3"),
+            "{:?}",
+            t.warnings
+        );
+        assert!(table1().warnings.is_empty());
     }
 
     #[test]

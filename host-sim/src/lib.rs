@@ -7,6 +7,7 @@ pub mod device_cli;
 pub mod discover;
 pub mod fit;
 pub mod log;
+pub mod numerics;
 pub mod plot;
 pub mod sim;
 pub mod stability;

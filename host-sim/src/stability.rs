@@ -31,6 +31,7 @@ use std::path::PathBuf;
 
 use crate::allan::{AllanPoint, Phase, Statistic, TauSet};
 use crate::log::{unit_suffix, Log, LogError, TIME_COLUMN};
+use serde::Serialize;
 
 /// Metadata key of the accelerometer scale factor used to convert `_v` columns to g.
 pub const SCALE_FACTOR_KEY: &str = "scale_factor_v_per_g";
@@ -422,60 +423,107 @@ pub fn analyse(log: &Log, opts: &Options) -> Result<Report, StabilityError> {
     })
 }
 
-fn points_json(points: &[AllanPoint], key: &str) -> serde_json::Value {
-    points
-        .iter()
-        .map(|p| {
-            let mut o = serde_json::Map::new();
-            o.insert("tau_s".into(), p.tau_s.into());
-            o.insert(key.into(), p.dev.into());
-            o.insert("ci_low".into(), p.ci_low.into());
-            o.insert("ci_high".into(), p.ci_high.into());
-            o.insert("edf".into(), p.edf.into());
-            o.insert("n".into(), p.n_terms.into());
-            o.insert("alpha".into(), p.alpha_used.into());
-            o.insert(
-                "alpha_identified".into(),
-                p.alpha_identified.is_some().into(),
-            );
-            serde_json::Value::Object(o)
-        })
-        .collect()
+/// One Allan point as `accomp stability --json` prints it; the deviation is keyed by its
+/// statistic (`adev` or `mdev`).
+#[derive(Serialize)]
+struct PointJson {
+    tau_s: f64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    adev: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    mdev: Option<f64>,
+    ci_low: f64,
+    ci_high: f64,
+    edf: f64,
+    n: usize,
+    alpha: i32,
+    alpha_identified: bool,
+}
+
+impl PointJson {
+    fn list(points: &[AllanPoint], statistic: Statistic) -> Vec<Self> {
+        points
+            .iter()
+            .map(|p| PointJson {
+                tau_s: p.tau_s,
+                adev: (statistic == Statistic::Oadev).then_some(p.dev),
+                mdev: (statistic == Statistic::Mdev).then_some(p.dev),
+                ci_low: p.ci_low,
+                ci_high: p.ci_high,
+                edf: p.edf,
+                n: p.n_terms,
+                alpha: p.alpha_used,
+                alpha_identified: p.alpha_identified.is_some(),
+            })
+            .collect()
+    }
+}
+
+/// The regression as printed (without `n`, which is the column's).
+#[derive(Serialize)]
+struct RegressionJson {
+    intercept: f64,
+    slope_per_s: f64,
+    slope_se: f64,
+    residual_std: f64,
+}
+
+#[derive(Serialize)]
+struct ColumnJson<'a> {
+    name: &'a str,
+    unit: &'a str,
+    n: usize,
+    gaps: usize,
+    mean: Option<f64>,
+    std: Option<f64>,
+    regression: Option<RegressionJson>,
+    adev: Vec<PointJson>,
+    mdev: Vec<PointJson>,
+    allan_note: Option<&'a str>,
+}
+
+/// The object `accomp stability --json` prints.
+#[derive(Serialize)]
+struct ReportJson<'a> {
+    rows: usize,
+    tau0_s: Option<f64>,
+    grid_len: Option<usize>,
+    ci: &'static str,
+    columns: Vec<ColumnJson<'a>>,
 }
 
 impl Report {
-    /// The JSON object printed by `accomp stability --json`.
+    /// The JSON object printed by `accomp stability --json` (serde views of the report).
     pub fn to_json(&self) -> serde_json::Value {
-        let cols: Vec<serde_json::Value> = self
-            .columns
-            .iter()
-            .map(|c| {
-                serde_json::json!({
-                    "name": c.name,
-                    "unit": c.unit,
-                    "n": c.n,
-                    "gaps": c.gaps,
-                    "mean": c.mean,
-                    "std": c.std,
-                    "regression": c.regression.map(|r| serde_json::json!({
-                        "intercept": r.intercept,
-                        "slope_per_s": r.slope_per_s,
-                        "slope_se": r.slope_se,
-                        "residual_std": r.residual_std,
-                    })),
-                    "adev": points_json(&c.adev, "adev"),
-                    "mdev": points_json(&c.mdev, "mdev"),
-                    "allan_note": c.allan_note,
+        let view = ReportJson {
+            rows: self.rows,
+            tau0_s: self.tau0_s,
+            grid_len: self.grid_len,
+            ci: "68.27% chi-squared, EDF from SP1065 Table 5 simple formulas (OADEV), noise by lag-1 ACF",
+            columns: self
+                .columns
+                .iter()
+                .map(|c| ColumnJson {
+                    name: &c.name,
+                    unit: &c.unit,
+                    n: c.n,
+                    gaps: c.gaps,
+                    mean: c.mean,
+                    std: c.std,
+                    regression: c.regression.map(|r| RegressionJson {
+                        intercept: r.intercept,
+                        slope_per_s: r.slope_per_s,
+                        slope_se: r.slope_se,
+                        residual_std: r.residual_std,
+                    }),
+                    adev: PointJson::list(&c.adev, Statistic::Oadev),
+                    mdev: PointJson::list(&c.mdev, Statistic::Mdev),
+                    allan_note: c.allan_note.as_deref(),
                 })
-            })
-            .collect();
-        serde_json::json!({
-            "rows": self.rows,
-            "tau0_s": self.tau0_s,
-            "grid_len": self.grid_len,
-            "ci": "68.27% chi-squared, EDF from SP1065 Table 5 simple formulas (OADEV), noise by lag-1 ACF",
-            "columns": cols,
-        })
+                .collect(),
+        };
+        // Serializing plain structs of numbers and strings cannot fail.
+        serde_json::to_value(view).unwrap_or(serde_json::Value::Null)
     }
 
     /// The human-readable table.

@@ -5,7 +5,8 @@ use accomp::poly::TempPoly;
 use accomp::table::{CalibrationTable, TableError, ENCODED_LEN};
 use accomp::units::{Celsius, RAD_PER_ARCMIN};
 use anyhow::{Context, Result};
-use serde_json::{json, Value};
+use serde::Serialize;
+use serde_json::Value;
 use std::path::{Path, PathBuf};
 
 /// Reads and decodes a table file; the error names the file and the validator's verdict.
@@ -43,60 +44,151 @@ pub fn decode_named(bytes: &[u8]) -> Result<CalibrationTable> {
     CalibrationTable::decode(bytes).map_err(|e: TableError| anyhow::anyhow!("{e} ({e:?})"))
 }
 
-fn poly_json(p: &TempPoly, t: &CalibrationTable, unit_scale: f64) -> Value {
-    let s = &t.thermal.scale;
-    let scaled = p.scaled(unit_scale);
-    json!({
-        "order": p.order(),
-        "coeffs_x": scaled.coeffs[..=p.order()].to_vec(),
-        "monomial_celsius": scaled.to_monomial_celsius(s)[..=p.order()].to_vec(),
-        "at_reference": scaled.eval(s.x_unclamped(t.thermal.reference)),
-        "slope_per_c_at_reference":
-            scaled.derivative_x(s.x_unclamped(t.thermal.reference)) / s.half_span_c,
-    })
+/// One temperature model as printed (in the unit the lab reads).
+#[derive(Serialize)]
+struct PolyJson {
+    order: usize,
+    coeffs_x: Vec<f64>,
+    monomial_celsius: Vec<f64>,
+    at_reference: f64,
+    slope_per_c_at_reference: f64,
+}
+
+impl PolyJson {
+    fn new(p: &TempPoly, t: &CalibrationTable, unit_scale: f64) -> Self {
+        let s = &t.thermal.scale;
+        let scaled = p.scaled(unit_scale);
+        let x_ref = s.x_unclamped(t.thermal.reference);
+        PolyJson {
+            order: p.order(),
+            coeffs_x: scaled.coeffs[..=p.order()].to_vec(),
+            monomial_celsius: scaled.to_monomial_celsius(s)[..=p.order()].to_vec(),
+            at_reference: scaled.eval(x_ref),
+            slope_per_c_at_reference: scaled.derivative_x(x_ref) / s.half_span_c,
+        }
+    }
+}
+
+#[derive(Serialize)]
+struct NormalizationJson {
+    center_c: f64,
+    half_span_c: f64,
+}
+
+#[derive(Serialize)]
+struct TiltJson {
+    reference_arcsec: f64,
+    scale_arcsec_per_v: f64,
+    axis: String,
+    adc_gain_correction: f64,
+    adc_offset_v: f64,
+}
+
+#[derive(Serialize)]
+struct RtdJson {
+    r0_ohm: f64,
+    a: f64,
+    b: f64,
+    c: f64,
+    reference_resistor_ohm: f64,
+    adc_gain_correction: f64,
+    pga_gain: f64,
+}
+
+#[derive(Serialize)]
+struct AccelerometerChannelJson {
+    adc_gain_correction: f64,
+    adc_offset_v: f64,
+    sense_resistor_ohm: f64,
+}
+
+#[derive(Serialize)]
+struct OrientationJson {
+    a_p_g: f64,
+    a_o_g: f64,
+    nominal_input_g: f64,
+}
+
+/// What `accomp table show --json` prints.
+#[derive(Serialize)]
+struct TableJson<'a> {
+    id: String,
+    serial: &'a str,
+    date: String,
+    range_c: [f64; 2],
+    normalization: NormalizationJson,
+    reference_c: f64,
+    k0_g: PolyJson,
+    k1_v_per_g: PolyJson,
+    k2_g_per_g2: PolyJson,
+    delta_p_arcmin: PolyJson,
+    delta_o_arcmin: PolyJson,
+    tilt: TiltJson,
+    rtd: RtdJson,
+    accelerometer_channel: AccelerometerChannelJson,
+    orientation: OrientationJson,
+    encoded_len: usize,
+}
+
+/// `accomp table verify --json` (fields in the order printed).
+#[derive(Serialize)]
+struct VerifyJson {
+    #[serde(skip_serializing_if = "Option::is_none")]
+    error: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    id: Option<String>,
+    valid: bool,
 }
 
 /// The table as one JSON object (misalignments in arcmin, as the lab prints them).
 pub fn table_json(t: &CalibrationTable) -> Value {
     let m = &t.thermal.models;
     let s = &t.thermal.scale;
-    json!({
-        "id": format!("{:08x}", t.id()),
-        "serial": t.serial_str().unwrap_or("<invalid>"),
-        "date": format!("{:04}-{:02}-{:02}", t.date.year, t.date.month, t.date.day),
-        "range_c": [s.min.0, s.max.0],
-        "normalization": {"center_c": s.center.0, "half_span_c": s.half_span_c},
-        "reference_c": t.thermal.reference.0,
-        "k0_g": poly_json(&m.bias_g, t, 1.0),
-        "k1_v_per_g": poly_json(&m.scale_factor_v_per_g, t, 1.0),
-        "k2_g_per_g2": poly_json(&m.nonlinearity_g_per_g2, t, 1.0),
-        "delta_p_arcmin": poly_json(&m.misalignment_p_rad, t, 1.0 / RAD_PER_ARCMIN),
-        "delta_o_arcmin": poly_json(&m.misalignment_o_rad, t, 1.0 / RAD_PER_ARCMIN),
-        "tilt": {
-            "reference_arcsec": t.tilt.reference.0,
-            "scale_arcsec_per_v": t.tilt.scale_arcsec_per_v,
-            "axis": format!("{:?}", t.tilt.axis),
-            "adc_gain_correction": t.tilt.adc_gain_correction,
-            "adc_offset_v": t.tilt.adc_offset.0,
+    let view = TableJson {
+        id: format!("{:08x}", t.id()),
+        serial: t.serial_str().unwrap_or("<invalid>"),
+        date: format!("{:04}-{:02}-{:02}", t.date.year, t.date.month, t.date.day),
+        range_c: [s.min.0, s.max.0],
+        normalization: NormalizationJson {
+            center_c: s.center.0,
+            half_span_c: s.half_span_c,
         },
-        "rtd": {
-            "r0_ohm": t.rtd.cvd.r0, "a": t.rtd.cvd.a, "b": t.rtd.cvd.b, "c": t.rtd.cvd.c,
-            "reference_resistor_ohm": t.rtd.reference_resistor.0,
-            "adc_gain_correction": t.rtd.adc_gain_correction,
-            "pga_gain": t.rtd.pga_gain,
+        reference_c: t.thermal.reference.0,
+        k0_g: PolyJson::new(&m.bias_g, t, 1.0),
+        k1_v_per_g: PolyJson::new(&m.scale_factor_v_per_g, t, 1.0),
+        k2_g_per_g2: PolyJson::new(&m.nonlinearity_g_per_g2, t, 1.0),
+        delta_p_arcmin: PolyJson::new(&m.misalignment_p_rad, t, 1.0 / RAD_PER_ARCMIN),
+        delta_o_arcmin: PolyJson::new(&m.misalignment_o_rad, t, 1.0 / RAD_PER_ARCMIN),
+        tilt: TiltJson {
+            reference_arcsec: t.tilt.reference.0,
+            scale_arcsec_per_v: t.tilt.scale_arcsec_per_v,
+            axis: format!("{:?}", t.tilt.axis),
+            adc_gain_correction: t.tilt.adc_gain_correction,
+            adc_offset_v: t.tilt.adc_offset.0,
         },
-        "accelerometer_channel": {
-            "adc_gain_correction": t.accel.adc_gain_correction,
-            "adc_offset_v": t.accel.adc_offset.0,
-            "sense_resistor_ohm": t.accel.sense_resistor.0,
+        rtd: RtdJson {
+            r0_ohm: t.rtd.cvd.r0,
+            a: t.rtd.cvd.a,
+            b: t.rtd.cvd.b,
+            c: t.rtd.cvd.c,
+            reference_resistor_ohm: t.rtd.reference_resistor.0,
+            adc_gain_correction: t.rtd.adc_gain_correction,
+            pga_gain: t.rtd.pga_gain,
         },
-        "orientation": {
-            "a_p_g": t.orientation.cross.a_p.0,
-            "a_o_g": t.orientation.cross.a_o.0,
-            "nominal_input_g": t.orientation.nominal_input.0,
+        accelerometer_channel: AccelerometerChannelJson {
+            adc_gain_correction: t.accel.adc_gain_correction,
+            adc_offset_v: t.accel.adc_offset.0,
+            sense_resistor_ohm: t.accel.sense_resistor.0,
         },
-        "encoded_len": ENCODED_LEN,
-    })
+        orientation: OrientationJson {
+            a_p_g: t.orientation.cross.a_p.0,
+            a_o_g: t.orientation.cross.a_o.0,
+            nominal_input_g: t.orientation.nominal_input.0,
+        },
+        encoded_len: ENCODED_LEN,
+    };
+    // Plain structs of numbers and strings: serializing cannot fail.
+    serde_json::to_value(view).unwrap_or(Value::Null)
 }
 
 /// Human-readable description.
@@ -201,7 +293,10 @@ pub fn run(args: &TableArgs) -> Result<()> {
                 Ok(b) => b,
                 Err(e) => {
                     if *json {
-                        println!("{}", json!({"valid": false, "error": format!("{e:#}")}));
+                        println!(
+                            "{}",
+                            serde_json::json!({"valid": false, "error": format!("{e:#}")})
+                        );
                     }
                     return Err(e);
                 }
@@ -209,17 +304,24 @@ pub fn run(args: &TableArgs) -> Result<()> {
             match decode_named(&bytes) {
                 Ok(t) => {
                     if *json {
-                        println!(
-                            "{}",
-                            json!({"valid": true, "id": format!("{:08x}", t.id())})
-                        );
+                        let v = VerifyJson {
+                            valid: true,
+                            id: Some(format!("{:08x}", t.id())),
+                            error: None,
+                        };
+                        println!("{}", serde_json::to_string(&v)?);
                     } else {
                         println!("{}: valid, id {:08x}", path.display(), t.id());
                     }
                 }
                 Err(e) => {
                     if *json {
-                        println!("{}", json!({"valid": false, "error": e.to_string()}));
+                        let v = VerifyJson {
+                            valid: false,
+                            id: None,
+                            error: Some(e.to_string()),
+                        };
+                        println!("{}", serde_json::to_string(&v)?);
                     }
                     anyhow::bail!("{}: refused: {e}", path.display());
                 }

@@ -20,6 +20,9 @@ use accomp::model::{CrossAxis, StaticCoefficients};
 use accomp::units::{Gs, Radians, RAD_PER_ARCMIN, RAD_PER_ARCSEC};
 use serde::Serialize;
 
+use crate::log::reader::{ReadError, Records};
+use crate::numerics::linalg::{least_squares_with, RankTolerance};
+
 /// Standard gravity g_n (m/s²), the unit `local_gravity_m_s2` is divided by.
 pub const STANDARD_GRAVITY_M_S2: f64 = 9.80665;
 /// Default dividing-head index error (arcsec, 1σ): the paper's head indexes to 0.2".
@@ -192,11 +195,10 @@ pub struct TumbleLog {
 }
 
 impl TumbleLog {
-    /// The last value of a metadata key.
+    /// The value of a metadata key (keys are unique: the reader refuses a repeated one).
     pub fn meta(&self, key: &str) -> Option<&str> {
         self.metadata
             .iter()
-            .rev()
             .find(|(k, _)| k == key)
             .map(|(_, v)| v.as_str())
     }
@@ -216,73 +218,56 @@ fn parse_number(line: usize, column: &str, cell: &str) -> Result<f64, TumbleErro
     Ok(v)
 }
 
-/// Reads a tumble log: `# key: value` lines, one header row, then comma-separated rows.
-/// Required columns `angle_deg`, `output_v`; optional `temperature_c`, `time_s`, `test`; other
-/// columns are ignored.
+impl From<ReadError> for TumbleError {
+    fn from(e: ReadError) -> Self {
+        match e {
+            ReadError::NoHeader => TumbleError::NoHeader,
+            other => TumbleError::Malformed {
+                line: other.line().unwrap_or(0),
+                reason: other.what(),
+            },
+        }
+    }
+}
+
+/// Reads a tumble log through the project's CSV reader (`log::reader`: `# key: value` lines,
+/// one header row, then comma-separated rows). Required columns `angle_deg`, `output_v`;
+/// optional `temperature_c`, `time_s`, `test`; other columns are ignored.
 pub fn parse_log(text: &str) -> Result<TumbleLog, TumbleError> {
-    let mut metadata = Vec::new();
-    let mut header: Option<Vec<String>> = None;
+    let mut records = Records::from_text(text)?;
+    let find = |n: &'static str| records.column(n).ok_or(TumbleError::MissingColumn(n));
+    let (ia, io) = (find("angle_deg")?, find("output_v")?);
+    let (it, its, itest) = (
+        records.column("temperature_c"),
+        records.column("time_s"),
+        records.column("test"),
+    );
+    let metadata = records.take_meta();
     let mut rows = Vec::new();
-    let mut idx = (0usize, 0usize, None, None, None);
-    for (i, raw) in text.lines().enumerate() {
-        let line = i + 1;
-        let l = raw.trim();
-        if l.is_empty() {
-            continue;
-        }
-        if let Some(c) = l.strip_prefix('#') {
-            if header.is_none() {
-                if let Some((k, v)) = c.split_once(':') {
-                    metadata.push((k.trim().to_string(), v.trim().to_string()));
-                }
-            }
-            continue;
-        }
-        let cells: Vec<&str> = l.split(',').map(str::trim).collect();
-        let Some(h) = &header else {
-            let names: Vec<String> = cells.iter().map(|s| s.to_string()).collect();
-            let find = |n: &str| names.iter().position(|c| c == n);
-            idx = (
-                find("angle_deg").ok_or(TumbleError::MissingColumn("angle_deg"))?,
-                find("output_v").ok_or(TumbleError::MissingColumn("output_v"))?,
-                find("temperature_c"),
-                find("time_s"),
-                find("test"),
-            );
-            header = Some(names);
-            continue;
-        };
-        if cells.len() != h.len() {
-            return Err(TumbleError::Malformed {
-                line,
-                reason: format!("{} fields, the header has {}", cells.len(), h.len()),
-            });
-        }
-        let (ia, io, it, its, itest) = idx;
+    while let Some(row) = records.next_row()? {
+        let line = row.line;
+        let cell = |j: usize| row.text(j);
         let opt = |j: Option<usize>, name: &str| -> Result<Option<f64>, TumbleError> {
-            j.map(|j| parse_number(line, name, cells[j])).transpose()
+            j.map(|j| parse_number(line, name, cell(j)?)).transpose()
         };
         let test = match itest {
-            Some(j) if cells[j].is_empty() => {
+            Some(j) if cell(j)?.is_empty() => {
                 return Err(TumbleError::Malformed {
                     line,
                     reason: "empty `test` id".into(),
                 })
             }
-            Some(j) => Some(cells[j].to_string()),
+            Some(j) => Some(cell(j)?.to_string()),
             None => None,
         };
         rows.push(Row {
             line,
-            angle_deg: parse_number(line, "angle_deg", cells[ia])?,
-            output_v: parse_number(line, "output_v", cells[io])?,
+            angle_deg: parse_number(line, "angle_deg", cell(ia)?)?,
+            output_v: parse_number(line, "output_v", cell(io)?)?,
             temperature_c: opt(it, "temperature_c")?,
             time_s: opt(its, "time_s")?,
             test,
         });
-    }
-    if header.is_none() {
-        return Err(TumbleError::NoHeader);
     }
     if rows.is_empty() {
         return Err(TumbleError::Empty);
@@ -592,47 +577,6 @@ fn mean_sd(v: &[f64]) -> (f64, Option<f64>) {
     (m, Some((ss / (n - 1.0)).sqrt()))
 }
 
-/// Inverse of a small symmetric positive-definite matrix by Gauss–Jordan with partial pivoting;
-/// `None` when a pivot falls below 1e-10 of the largest diagonal (a singular design).
-fn invert(m: &[Vec<f64>]) -> Option<Vec<Vec<f64>>> {
-    let n = m.len();
-    let scale = m
-        .iter()
-        .enumerate()
-        .map(|(i, r)| r[i].abs())
-        .fold(0.0, f64::max);
-    let mut a: Vec<Vec<f64>> = m
-        .iter()
-        .enumerate()
-        .map(|(i, r)| {
-            let mut row = r.clone();
-            row.extend((0..n).map(|j| if i == j { 1.0 } else { 0.0 }));
-            row
-        })
-        .collect();
-    for col in 0..n {
-        let piv = (col..n).max_by(|&i, &j| a[i][col].abs().total_cmp(&a[j][col].abs()))?;
-        if a[piv][col].abs() <= 1e-10 * scale {
-            return None;
-        }
-        a.swap(col, piv);
-        let p = a[col][col];
-        for x in a[col].iter_mut() {
-            *x /= p;
-        }
-        let pivot_row = a[col].clone();
-        for (i, row) in a.iter_mut().enumerate() {
-            if i != col {
-                let f = row[col];
-                for (x, y) in row.iter_mut().zip(&pivot_row) {
-                    *x -= f * y;
-                }
-            }
-        }
-    }
-    Some(a.into_iter().map(|r| r[n..].to_vec()).collect())
-}
-
 /// Σ = A·diag(w)·Aᵀ for A (p × n).
 fn sandwich(a: &[Vec<f64>], w: &[f64]) -> Vec<Vec<f64>> {
     let p = a.len();
@@ -752,26 +696,14 @@ fn solve_test(id: &str, rows: &[&Row], p: &Params) -> Result<TestSolution, Tumbl
         })
         .collect();
     let y: Vec<f64> = stats.iter().map(|s| s.1).collect();
-    let xtx: Vec<Vec<f64>> = (0..unknowns)
-        .map(|i| {
-            (0..unknowns)
-                .map(|j| x.iter().map(|r| r[i] * r[j]).sum())
-                .collect()
-        })
-        .collect();
-    let inv = invert(&xtx).ok_or_else(|| TumbleError::Singular { test: id.into() })?;
-    // A = (XᵀX)⁻¹Xᵀ, c = A·y.
-    let a: Vec<Vec<f64>> = (0..unknowns)
-        .map(|i| {
-            (0..n)
-                .map(|k| (0..unknowns).map(|j| inv[i][j] * x[k][j]).sum())
-                .collect()
-        })
-        .collect();
-    let c: Vec<f64> = a
-        .iter()
-        .map(|ai| ai.iter().zip(&y).map(|(u, v)| u * v).sum())
-        .collect();
+    // Least squares by QR on the design itself (numerics::linalg), never on XᵀX. A pivot
+    // |R_kk| ≤ 1e-5·max‖x_j‖ (what a 1e-10 pivot of XᵀX was) is a singular design.
+    let ls = least_squares_with(&x, &y, RankTolerance::RelativeToColumnNorm(1e-5))
+        .map_err(|_| TumbleError::Singular { test: id.into() })?;
+    // (XᵀX)⁻¹ and the solution operator A = (XᵀX)⁻¹Xᵀ = R⁻¹Qᵀ (c = A·y).
+    let inv = ls.unscaled_covariance();
+    let a = ls.solution_operator();
+    let c = ls.coeffs;
     if !(c[1].is_finite() && c[1] > 1e-12) {
         return Err(TumbleError::BadScaleFactor {
             test: id.into(),

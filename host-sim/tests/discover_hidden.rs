@@ -31,7 +31,7 @@ enum Hidden {
     },
     ThermalHysteresis {
         half_width_g: f64,
-        window_s: f64,
+        play_half_width_c: f64,
     },
     Warmup {
         tau_s: f64,
@@ -127,9 +127,11 @@ fn draw(rng: &mut ChaCha8Rng) -> (Hidden, f64) {
         0 => Hidden::ThermalLag {
             tau_s: 10f64.powf(rng.random_range(2.8..3.5)),
         },
+        // A play of half-width 0.03–0.3 °C on the mount temperature (the controller's
+        // fluctuation is 0.165 °C rms): branches of the regulation's slow swings.
         1 => Hidden::ThermalHysteresis {
             half_width_g: 1.0,
-            window_s: 10f64.powf(rng.random_range(2.8..3.6)),
+            play_half_width_c: 10f64.powf(rng.random_range(-1.5..-0.5)),
         },
         2 => Hidden::Warmup {
             tau_s: 10f64.powf(rng.random_range(3.3..4.3)),
@@ -243,17 +245,16 @@ fn hidden_series_g(
         Hidden::None | Hidden::ThermalLag { .. } => vec![0.0; n],
         Hidden::ThermalHysteresis {
             half_width_g,
-            window_s,
+            play_half_width_c: r,
         } => {
-            // Heating branch +h, cooling −h: the sign of the true mount temperature's trend over
-            // ±window (a branch is a thermal swing of the mount, 10 min to 1 h here, not the
-            // controller's jitter from one sample to the next).
-            let w = (window_s / INTERVAL_S).round() as usize;
-            (0..n)
-                .map(|i| {
-                    let a = i.saturating_sub(w);
-                    let b = (i + w).min(n - 1);
-                    half_width_g * (mount[b] - mount[a]).signum()
+            // Heating branch +h, cooling −h: a play (backlash) of half-width r on the TRUE mount
+            // temperature, h·(T − p)/r (the tool sees only the RTD's reading of it).
+            let mut p = mount[0];
+            mount
+                .iter()
+                .map(|&x| {
+                    p = p.max(x - r).min(x + r);
+                    half_width_g * (x - p) / r
                 })
                 .collect()
         }
@@ -372,9 +373,9 @@ fn true_gain(h: &Hidden, ds: &accomp_host::discover::import::Dataset) -> f64 {
     let ctx = context(ds, &base);
     let (e, theta) = match h {
         Hidden::ThermalLag { tau_s } => (effects::Effect::ThermalLag, *tau_s),
-        Hidden::ThermalHysteresis { window_s, .. } => {
-            (effects::Effect::ThermalHysteresis, *window_s)
-        }
+        Hidden::ThermalHysteresis {
+            play_half_width_c, ..
+        } => (effects::Effect::ThermalHysteresis, *play_half_width_c),
         Hidden::Warmup { tau_s, .. } => (effects::Effect::Warmup, *tau_s),
         Hidden::AgingDrift { tau_s, .. } => (effects::Effect::AgingDrift, *tau_s),
         Hidden::Step { time_s, .. } => (effects::Effect::Step, *time_s),

@@ -84,7 +84,7 @@ fn round_trip(cfg: &TumbleSimConfig) -> Outcome {
             fit::fit_order(&col.name, &scale, temps, &col.values, 2, Celsius(50.0)).unwrap();
         // Prediction SE of the fitted polynomial at each table temperature: √h_ii · s, with
         // the leverage of the same design from fit's QR.
-        let ls = fit::linalg::least_squares(&design, &col.values).unwrap();
+        let ls = accomp_host::numerics::linalg::least_squares(&design, &col.values).unwrap();
         for (i, t) in temps.iter().enumerate() {
             let x = scale.x_unclamped(Celsius(*t));
             let fitted = order2.coeffs_x[0] + order2.coeffs_x[1] * x + order2.coeffs_x[2] * x * x;
@@ -101,7 +101,7 @@ fn round_trip(cfg: &TumbleSimConfig) -> Outcome {
             .map(|(r, s)| r.iter().map(|v| v / s).collect())
             .collect();
         let wy: Vec<f64> = col.values.iter().zip(&se).map(|(v, s)| v / s).collect();
-        let w = fit::linalg::least_squares(&wdesign, &wy).unwrap();
+        let w = accomp_host::numerics::linalg::least_squares(&wdesign, &wy).unwrap();
         for (i, t) in temps.iter().enumerate() {
             let x = scale.x_unclamped(Celsius(*t));
             let fitted = w.coeffs[0] + w.coeffs[1] * x + w.coeffs[2] * x * x;

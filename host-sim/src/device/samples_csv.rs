@@ -1,13 +1,14 @@
-//! Minimal reader of sample CSVs for `compensate`, and the writer of its output.
-//!
-//! Kept apart on purpose: the project's log reader (host-sim/src/log.rs, branch `stability`)
-//! will replace the reader once merged. Format: `# key: value` metadata lines, one header row,
-//! then rows; required columns `time_s, output_v, temperature_c`, optional `tilt_arcsec`.
+//! Sample CSVs for `compensate` (read through the project's CSV reader, `log::reader`), and the
+//! writer of its output. Format: `# key: value` metadata lines, one header row, then rows;
+//! required columns `time_s, output_v, temperature_c`, optional `tilt_arcsec`. Empty or NaN
+//! cells are missing values (NaN, which the pipeline flags).
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
 use accomp::pipeline::{Frame, Status};
+
+use crate::log::reader::{ReadError, Records};
 
 /// One input row.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -50,53 +51,50 @@ pub enum CsvError {
         /// The cell.
         cell: String,
     },
-    /// A row has fewer cells than the header.
-    #[error("line {0}: too few cells")]
-    ShortRow(usize),
+    /// The file breaks a rule of the project's CSV reader (field count, repeated metadata key,
+    /// comment after the header, not UTF-8, I/O).
+    #[error("line {line}: {reason}")]
+    Format {
+        /// Line number (0 when the error is not about a line).
+        line: usize,
+        /// What is wrong.
+        reason: String,
+    },
+}
+
+impl From<ReadError> for CsvError {
+    fn from(e: ReadError) -> Self {
+        match e {
+            ReadError::NoHeader => CsvError::NoHeader,
+            other => CsvError::Format {
+                line: other.line().unwrap_or(0),
+                reason: other.what(),
+            },
+        }
+    }
 }
 
 /// Parses the text of a sample file.
 pub fn parse(text: &str) -> Result<SampleFile, CsvError> {
-    let mut file = SampleFile::default();
-    let mut header: Option<Vec<String>> = None;
-    let mut cols = [0usize; 3];
-    let mut tilt_col = None;
-    for (i, line) in text.lines().enumerate() {
-        let line_no = i + 1;
-        let line = line.trim();
-        if line.is_empty() {
-            continue;
-        }
-        if let Some(meta) = line.strip_prefix('#') {
-            if let Some((k, v)) = meta.split_once(':') {
-                file.metadata
-                    .insert(k.trim().to_string(), v.trim().to_string());
-            }
-            continue;
-        }
-        let cells: Vec<&str> = line.split(',').map(str::trim).collect();
-        let Some(h) = &header else {
-            let names: Vec<String> = cells.iter().map(|c| c.to_string()).collect();
-            let find = |n: &'static str| {
-                names
-                    .iter()
-                    .position(|c| c == n)
-                    .ok_or(CsvError::MissingColumn(n))
-            };
-            cols = [find("time_s")?, find("output_v")?, find("temperature_c")?];
-            tilt_col = names.iter().position(|c| c == "tilt_arcsec");
-            header = Some(names);
-            continue;
-        };
+    let mut records = Records::from_text(text)?;
+    let find = |n: &'static str| records.column(n).ok_or(CsvError::MissingColumn(n));
+    let cols = [find("time_s")?, find("output_v")?, find("temperature_c")?];
+    let tilt_col = records.column("tilt_arcsec");
+    let header = records.header().to_vec();
+    let mut file = SampleFile {
+        metadata: records.take_meta().into_iter().collect(),
+        rows: Vec::new(),
+    };
+    while let Some(row) = records.next_row()? {
         let num = |c: usize| -> Result<f64, CsvError> {
-            let cell = cells.get(c).ok_or(CsvError::ShortRow(line_no))?;
+            let cell = row.text(c)?;
             // Empty or NaN cells are missing values: NaN, which the injection flags.
             if cell.is_empty() || cell.eq_ignore_ascii_case("nan") {
                 return Ok(f64::NAN);
             }
             cell.parse().map_err(|_| CsvError::BadNumber {
-                line: line_no,
-                column: h.get(c).cloned().unwrap_or_default(),
+                line: row.line,
+                column: header[c].clone(),
                 cell: cell.to_string(),
             })
         };
@@ -106,9 +104,6 @@ pub fn parse(text: &str) -> Result<SampleFile, CsvError> {
             temperature_c: num(cols[2])?,
             tilt_arcsec: tilt_col.map(num).transpose()?,
         });
-    }
-    if header.is_none() {
-        return Err(CsvError::NoHeader);
     }
     Ok(file)
 }
@@ -191,6 +186,11 @@ mod tests {
             CsvError::BadNumber { line: 2, .. }
         ));
         assert_eq!(parse("# only: meta\n").unwrap_err(), CsvError::NoHeader);
+        // A short row is refused with its line (it was read as missing values before).
+        assert!(matches!(
+            parse("time_s,output_v,temperature_c\n0,1,2\n1,2\n").unwrap_err(),
+            CsvError::Format { line: 3, .. }
+        ));
     }
 
     #[test]

@@ -11,7 +11,8 @@ use accomp::tide::Station;
 pub enum Effect {
     /// First-order lag between the RTD and the proof mass: column L_τ[T] − T.
     ThermalLag,
-    /// Different bias on heating and cooling branches: column sign(dT/dt) (smoothed).
+    /// Different bias on heating and cooling branches: column (T − p_r[T])/r of a play operator
+    /// of half-width r on the measured temperature (`hysteresis.rs`).
     ThermalHysteresis,
     /// Bias following the torquer power ∝ input² through the coil's thermal time constant: column
     /// L_τ[a²] − a² (the instantaneous part is the baseline's K2·a², per-position levels).
@@ -184,36 +185,6 @@ pub fn moving_average(v: &[f64], t: &[f64], seg_start: &[bool], half_window_s: f
         .collect()
 }
 
-/// Smoothed sign of dT/dt: centred difference over ±w seconds, zero inside a dead band of
-/// 1/4 of the rate's standard deviation (flat thermostat plateaus have no branch).
-fn rate_sign(temp: &[f64], t: &[f64], seg_start: &[bool], w_s: f64) -> Vec<f64> {
-    let n = temp.len();
-    let mut seg_id = vec![0usize; n];
-    for i in 1..n {
-        seg_id[i] = seg_id[i - 1] + usize::from(seg_start[i]);
-    }
-    let mut rate = vec![0.0; n];
-    let (mut lo, mut hi) = (0usize, 0usize);
-    for i in 0..n {
-        while t[i] - t[lo] > w_s || seg_id[lo] != seg_id[i] {
-            lo += 1;
-        }
-        if hi < i {
-            hi = i;
-        }
-        while hi + 1 < n && t[hi + 1] - t[i] <= w_s && seg_id[hi + 1] == seg_id[i] {
-            hi += 1;
-        }
-        if hi > lo {
-            rate[i] = (temp[hi] - temp[lo]) / (t[hi] - t[lo]);
-        }
-    }
-    let s = super::baseline::std(&rate);
-    rate.iter()
-        .map(|r| if r.abs() < 0.25 * s { 0.0 } else { r.signum() })
-        .collect()
-}
-
 /// The candidates applicable to a dataset, and the catalogue entries that are not, with why.
 pub fn candidates(
     ds: &Dataset,
@@ -227,7 +198,14 @@ pub fn candidates(
     let temp_varies = temp.is_some_and(|c| super::baseline::std(&c.values) > 1e-6);
     if temp_varies {
         yes.push(Effect::ThermalLag);
-        yes.push(Effect::ThermalHysteresis);
+        if temp.is_some_and(|c| super::hysteresis::width_range_c(&c.values).is_some()) {
+            yes.push(Effect::ThermalHysteresis);
+        } else {
+            say(
+                "thermal_hysteresis",
+                "the temperature never moves by more than a few times its reading noise",
+            );
+        }
     } else {
         say("thermal_lag", "no varying temperature channel");
         say("thermal_hysteresis", "no varying temperature channel");
@@ -305,9 +283,13 @@ pub fn grid(e: &Effect, ds: &Dataset) -> Vec<f64> {
         // The coil's time constant: from two samples to a fifth of the record (a longer lag is
         // a slow trend, not a response to the programme).
         Effect::SelfHeating => log_grid(2.0 * dt, span / 5.0, 24),
-        // 24 windows: the look-elsewhere charge 2 ln 24 stays below the BIC's ln n for any
-        // record this long, so a finer grid costs nothing and misses the branch length less.
-        Effect::ThermalHysteresis => log_grid(5.0 * dt, span / 20.0, 24),
+        // Play half-width in °C, from 3 × the temperature's reading noise to a quarter of its
+        // range (`hysteresis::width_range_c`); 24 points: the look-elsewhere charge 2 ln 24
+        // stays below the BIC's ln n for any record this long.
+        Effect::ThermalHysteresis => ds
+            .channel(ChannelKind::Temperature)
+            .and_then(|c| super::hysteresis::width_range_c(&c.values))
+            .map_or_else(Vec::new, |(lo, hi)| log_grid(lo, hi, 24)),
         Effect::Warmup => log_grid(3.0 * dt, span / 3.0, 24),
         Effect::AgingDrift => log_grid(span / 1000.0, span * 3.0, 24),
         Effect::AmbientCoupling(_) => {
@@ -337,7 +319,7 @@ pub fn columns(e: &Effect, ds: &Dataset, ctx: &Context, theta: f64) -> Vec<Vec<f
             })
             .unwrap_or_default(),
         Effect::ThermalHysteresis => temp()
-            .map(|tc| vec![rate_sign(&tc, t, seg, theta)])
+            .map(|tc| vec![super::hysteresis::branch(&tc, theta)])
             .unwrap_or_default(),
         // Torquer power ∝ I² ∝ a²: the coil temperature and with it the bias follow a² through a
         // first-order lag; the step part a² is collinear with K2·a² (the baseline's levels), so
@@ -448,7 +430,7 @@ pub fn parameters(
         Effect::ThermalLag => vec![("tau_s".into(), theta), ("coefficient".into(), p(b0, s0))],
         Effect::ThermalHysteresis => vec![
             ("half_width".into(), p(b0, s0)),
-            ("rate_window_s".into(), theta),
+            ("play_half_width_c".into(), theta),
         ],
         Effect::SelfHeating => vec![("tau_s".into(), theta), ("coefficient".into(), p(b0, s0))],
         Effect::Warmup => vec![("tau_s".into(), theta), ("amplitude".into(), p(b0, s0))],
@@ -570,26 +552,5 @@ mod tests {
         assert!((c[0][130] - want).abs() < 1e-12, "{}", c[0][130]);
         let (yes, _) = candidates(&ds, &Context::default(), false);
         assert!(yes.contains(&Effect::SelfHeating));
-    }
-
-    #[test]
-    fn rate_sign_is_positive_heating_negative_cooling_and_zero_on_a_plateau() {
-        let t: Vec<f64> = (0..300).map(f64::from).collect();
-        let temp: Vec<f64> = t
-            .iter()
-            .map(|&x| {
-                if x < 100.0 {
-                    x
-                } else if x < 200.0 {
-                    100.0
-                } else {
-                    300.0 - x
-                }
-            })
-            .collect();
-        let mut seg = vec![false; 300];
-        seg[0] = true;
-        let s = rate_sign(&temp, &t, &seg, 3.0);
-        assert_eq!((s[50], s[150], s[250]), (1.0, 0.0, -1.0));
     }
 }

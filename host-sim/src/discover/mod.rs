@@ -5,6 +5,8 @@
 //! - [`baseline`]: the calibration or static baseline and the (whitened) least squares.
 //! - [`residual`]: spectrum, correlations, trend/step, Allan deviation of the residual.
 //! - [`effects`]: the catalogue of named effects as design-matrix extensions.
+//! - [`hysteresis`]: play / Preisach operators of the thermal hysteresis.
+//! - [`shape`]: whether an accepted effect's shape describes the data (poor-fit check).
 //! - [`select`]: greedy selection with BIC (effective sample size) and blocked cross-validation.
 //! - [`report`]: text, JSON and the Markdown report with figures.
 //!
@@ -12,11 +14,13 @@
 
 pub mod baseline;
 pub mod effects;
+pub mod hysteresis;
 pub mod import;
 pub mod noise;
 pub mod report;
 pub mod residual;
 pub mod select;
+pub mod shape;
 pub mod tidal;
 
 use effects::{Context, Effect};
@@ -78,6 +82,8 @@ pub struct Discovery {
     pub adev_before: Vec<(f64, f64)>,
     /// ADEV of the final residual.
     pub adev_after: Vec<(f64, f64)>,
+    /// Shape checks of the accepted effects (a poor fit is said, see `shape`).
+    pub shape_checks: Vec<shape::ShapeCheck>,
     /// Wave-group tidal analysis of a gravity record, or why it was not run.
     pub tidal: Result<tidal::TidalAnalysis, String>,
 }
@@ -117,8 +123,21 @@ pub fn discover(
     let trend = residual::trend(&ds, &sel.baseline_residual);
     let adev_before = residual::adev(&ds, &sel.baseline_residual);
     let adev_after = residual::adev(&ds, &sel.final_residual);
+    let final_noise =
+        noise::NoiseModel::fit(&adev_after, ds.dt_s, ds.span_s()).unwrap_or_else(|| {
+            noise::NoiseModel::white(baseline::std(&sel.final_residual).powi(2).max(1e-300))
+        });
+    let shape_checks = shape::check(
+        &ds,
+        &ctx,
+        &sel.columns,
+        &base.target,
+        &sel.accepted,
+        &final_noise,
+    );
     let tidal = tidal::for_discovery(&ds, &base.target, &base.columns, &ctx, &sel.accepted);
     Ok(Discovery {
+        shape_checks,
         baseline_description: base.description.clone(),
         baseline_names: base.names.clone(),
         not_candidates,

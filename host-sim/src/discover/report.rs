@@ -73,6 +73,7 @@ pub fn json(d: &Discovery) -> Value {
         },
         "not_candidates": d.not_candidates.iter().map(|(n, w)| json!({"name": n, "why": w})).collect::<Vec<_>>(),
         "effects": effects,
+        "shape_checks": d.shape_checks,
         "final": {
             "residual_std": s.final_std,
             "residual_std_out_of_sample": s.final_cv.raw,
@@ -166,6 +167,21 @@ pub fn text(d: &Discovery) -> String {
             a.cv_before.raw,
             a.cv_after.raw,
             100.0 * a.gain_out_of_sample()
+        );
+    }
+    for c in &d.shape_checks {
+        let _ = writeln!(
+            o,
+            "  shape check {}: a second component at {:.5e} improves χ² by {:.1} (a new effect is charged {:.1}){}",
+            c.effect,
+            c.second_theta,
+            c.delta_chi2,
+            c.threshold,
+            if c.poor {
+                " — POOR FIT: the catalogue shape does not describe the data; the name is the closest cause"
+            } else {
+                ": shape adequate"
+            }
         );
     }
     let rest: Vec<String> = s

@@ -1,7 +1,11 @@
-//! Dense least squares by Householder QR, written out so that the fitting never forms the normal
-//! equations: QR works on the design matrix itself, so its error grows with cond(A), not
-//! cond(A)² — the difference between "fine" and "wrecked" for a 4th-order fit in raw °C.
+//! Dense least squares for the host tools, over nalgebra's Householder QR: the design matrix is
+//! factored itself, the normal equations are never formed, so the error grows with cond(A), not
+//! cond(A)² — the difference between "fine" and "wrecked" for a 4th-order fit in raw °C. One
+//! module for every fit on the host (`fit`, `tumble`; `discover` is to be ported onto it):
+//! solution, residuals, leverages, the unscaled covariance (RᵀR)⁻¹ and the solution operator
+//! R⁻¹Qᵀ (for propagating any noise covariance to the coefficients).
 
+use nalgebra::{DMatrix, DVector};
 use thiserror::Error;
 
 /// Why a least-squares problem cannot be solved.
@@ -26,6 +30,16 @@ pub enum LinalgError {
     NonFinite,
 }
 
+/// When a pivot |R_kk| counts as zero (column k adds nothing new).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum RankTolerance {
+    /// |R_kk| ≤ m·ε·max|a_ij|: rounding level, for well-scaled designs (the default).
+    Rounding,
+    /// |R_kk| ≤ rel·max_j ‖a_j‖₂: a design that is singular for the problem's purpose well above
+    /// rounding (e.g. rel = 1e-5 refuses what a 1e-10 pivot of AᵀA would).
+    RelativeToColumnNorm(f64),
+}
+
 /// The solution of min ‖A·c − y‖₂ together with what the statistics need.
 #[derive(Debug, Clone, PartialEq)]
 pub struct LeastSquares {
@@ -37,23 +51,50 @@ pub struct LeastSquares {
     pub rss: f64,
     /// The triangular factor R (n×n, row-major, lower part zero): AᵀA = RᵀR.
     pub r: Vec<Vec<f64>>,
-    /// Diagonal of the hat matrix H = A(AᵀA)⁻¹Aᵀ, h_ii = ‖R⁻ᵀ·a_i‖².
+    /// Diagonal of the hat matrix H = A(AᵀA)⁻¹Aᵀ = QQᵀ, h_ii = ‖row i of Q‖².
     pub leverage: Vec<f64>,
+    /// R⁻¹ (n×n).
+    r_inv: DMatrix<f64>,
+    /// The thin Q (m×n).
+    q: DMatrix<f64>,
 }
 
 impl LeastSquares {
-    /// diag((RᵀR)⁻¹) = diag((AᵀA)⁻¹), the unscaled coefficient variances, from R⁻¹ (triangular
-    /// back substitution; AᵀA itself is never formed).
+    /// diag((RᵀR)⁻¹) = diag((AᵀA)⁻¹), the unscaled coefficient variances (AᵀA never formed).
     pub fn unscaled_variances(&self) -> Vec<f64> {
-        let rinv = upper_inverse(&self.r);
-        rinv.iter()
+        self.r_inv
+            .row_iter()
             .map(|row| row.iter().map(|v| v * v).sum())
             .collect()
     }
+
+    /// (AᵀA)⁻¹ = R⁻¹R⁻ᵀ, row-major: times σ² it is the coefficients' covariance.
+    pub fn unscaled_covariance(&self) -> Vec<Vec<f64>> {
+        rows(&(&self.r_inv * self.r_inv.transpose()))
+    }
+
+    /// The solution operator A⁺ = R⁻¹Qᵀ (n×m, row-major): c = A⁺·y, so a noise covariance Σ of y
+    /// gives A⁺ Σ A⁺ᵀ for c.
+    pub fn solution_operator(&self) -> Vec<Vec<f64>> {
+        rows(&(&self.r_inv * self.q.transpose()))
+    }
+}
+
+fn rows(m: &DMatrix<f64>) -> Vec<Vec<f64>> {
+    m.row_iter().map(|r| r.iter().copied().collect()).collect()
 }
 
 /// Solves min ‖A·c − y‖₂ for a full-rank A (rows = observations) by Householder QR.
 pub fn least_squares(a: &[Vec<f64>], y: &[f64]) -> Result<LeastSquares, LinalgError> {
+    least_squares_with(a, y, RankTolerance::Rounding)
+}
+
+/// [`least_squares`] with an explicit rank tolerance.
+pub fn least_squares_with(
+    a: &[Vec<f64>],
+    y: &[f64],
+    tolerance: RankTolerance,
+) -> Result<LeastSquares, LinalgError> {
     let m = a.len();
     let n = a.first().map_or(0, Vec::len);
     if n == 0 || m < n || y.len() != m || a.iter().any(|row| row.len() != n) {
@@ -62,112 +103,45 @@ pub fn least_squares(a: &[Vec<f64>], y: &[f64]) -> Result<LeastSquares, LinalgEr
     if a.iter().flatten().chain(y).any(|v| !v.is_finite()) {
         return Err(LinalgError::NonFinite);
     }
-    // Column-major working copy (Householder acts on columns): the top n rows become R.
-    let mut cols: Vec<Vec<f64>> = (0..n)
-        .map(|j| a.iter().map(|row| row[j]).collect())
-        .collect();
-    let mut qty = y.to_vec();
-    let scale = a
-        .iter()
-        .flatten()
-        .fold(0.0_f64, |acc, v| acc.max(v.abs()))
-        .max(f64::MIN_POSITIVE);
-    for k in 0..n {
-        let x = &cols[k][k..];
-        let norm = x.iter().map(|v| v * v).sum::<f64>().sqrt();
-        // A pivot below m·ε of the matrix scale means column k adds nothing new.
-        if norm <= (m as f64) * f64::EPSILON * scale {
-            return Err(LinalgError::RankDeficient { column: k });
+    let am = DMatrix::from_fn(m, n, |i, j| a[i][j]);
+    let zero_pivot = match tolerance {
+        RankTolerance::Rounding => (m as f64) * f64::EPSILON * am.amax().max(f64::MIN_POSITIVE),
+        RankTolerance::RelativeToColumnNorm(rel) => {
+            rel * am
+                .column_iter()
+                .map(|c| c.norm())
+                .fold(0.0, f64::max)
+                .max(f64::MIN_POSITIVE)
         }
-        // Reflect onto −sign(x0)·‖x‖ e1 so that v0 = x0 − α never cancels.
-        let alpha = if x[0] >= 0.0 { -norm } else { norm };
-        let mut v = x.to_vec();
-        v[0] -= alpha;
-        let vtv: f64 = v.iter().map(|x| x * x).sum();
-        let reflect = |target: &mut [f64]| {
-            let dot: f64 = v.iter().zip(target.iter()).map(|(vi, ti)| vi * ti).sum();
-            let f = 2.0 * dot / vtv;
-            for (ti, vi) in target.iter_mut().zip(&v) {
-                *ti -= f * vi;
-            }
-        };
-        for col in cols.iter_mut().skip(k) {
-            reflect(&mut col[k..]);
-        }
-        reflect(&mut qty[k..]);
+    };
+    let qr = am.clone().qr();
+    let r = qr.r();
+    if let Some(column) = (0..n).find(|&k| r[(k, k)].abs() <= zero_pivot) {
+        return Err(LinalgError::RankDeficient { column });
     }
-    let r: Vec<Vec<f64>> = (0..n)
-        .map(|i| {
-            (0..n)
-                .map(|j| if j >= i { cols[j][i] } else { 0.0 })
-                .collect()
-        })
-        .collect();
-    let coeffs = back_substitute(&r, &qty[..n]);
-    let residuals: Vec<f64> = a
-        .iter()
-        .zip(y)
-        .map(|(row, yi)| {
-            yi - row
-                .iter()
-                .zip(&coeffs)
-                .map(|(aij, cj)| aij * cj)
-                .sum::<f64>()
-        })
-        .collect();
+    let q = qr.q();
+    let r_inv = r
+        .solve_upper_triangular(&DMatrix::identity(n, n))
+        .ok_or(LinalgError::RankDeficient { column: n - 1 })?;
+    let yv = DVector::from_column_slice(y);
+    let coeffs_v = r
+        .solve_upper_triangular(&(q.transpose() * &yv))
+        .ok_or(LinalgError::RankDeficient { column: n - 1 })?;
+    let residuals: Vec<f64> = (yv - &am * &coeffs_v).iter().copied().collect();
     let rss = residuals.iter().map(|e| e * e).sum();
-    let leverage = a
-        .iter()
-        .map(|row| {
-            forward_substitute_transposed(&r, row)
-                .iter()
-                .map(|z| z * z)
-                .sum()
-        })
+    let leverage = q
+        .row_iter()
+        .map(|row| row.iter().map(|v| v * v).sum())
         .collect();
     Ok(LeastSquares {
-        coeffs,
+        coeffs: coeffs_v.iter().copied().collect(),
         residuals,
         rss,
-        r,
+        r: rows(&r),
         leverage,
+        r_inv,
+        q,
     })
-}
-
-/// Solves R·x = b for upper-triangular R with a non-zero diagonal.
-fn back_substitute(r: &[Vec<f64>], b: &[f64]) -> Vec<f64> {
-    let n = b.len();
-    let mut x = vec![0.0; n];
-    for i in (0..n).rev() {
-        let s: f64 = ((i + 1)..n).map(|j| r[i][j] * x[j]).sum();
-        x[i] = (b[i] - s) / r[i][i];
-    }
-    x
-}
-
-/// Solves Rᵀ·z = b for upper-triangular R (forward substitution on the transpose).
-fn forward_substitute_transposed(r: &[Vec<f64>], b: &[f64]) -> Vec<f64> {
-    let n = b.len();
-    let mut z = vec![0.0; n];
-    for i in 0..n {
-        let s: f64 = (0..i).map(|j| r[j][i] * z[j]).sum();
-        z[i] = (b[i] - s) / r[i][i];
-    }
-    z
-}
-
-/// R⁻¹ of an upper-triangular R, solved column by column, returned row-major.
-fn upper_inverse(r: &[Vec<f64>]) -> Vec<Vec<f64>> {
-    let n = r.len();
-    let cols: Vec<Vec<f64>> = (0..n)
-        .map(|c| {
-            let e: Vec<f64> = (0..n).map(|i| if i == c { 1.0 } else { 0.0 }).collect();
-            back_substitute(r, &e)
-        })
-        .collect();
-    (0..n)
-        .map(|i| cols.iter().map(|c| c[i]).collect())
-        .collect()
 }
 
 #[cfg(test)]
@@ -240,6 +214,42 @@ mod tests {
         for (h, ti) in ls.leverage.iter().zip(t) {
             assert!((h - (1.0 / n + (ti - mean).powi(2) / sxx)).abs() < 1e-14);
         }
+    }
+
+    #[test]
+    fn covariance_and_solution_operator_agree_with_the_solution() {
+        let t = [1.0, 2.0, 4.0, 7.0, 11.0];
+        let y = [0.1, 0.3, 0.2, 0.6, 0.9];
+        let ls = least_squares(&vandermonde(&t, 1), &y).unwrap();
+        // c = A⁺·y.
+        let op = ls.solution_operator();
+        for (row, c) in op.iter().zip(&ls.coeffs) {
+            let cy: f64 = row.iter().zip(&y).map(|(a, b)| a * b).sum();
+            assert!((cy - c).abs() < 1e-14, "{cy} vs {c}");
+        }
+        // A⁺A⁺ᵀ = (AᵀA)⁻¹, whose diagonal is the variances.
+        let cov = ls.unscaled_covariance();
+        for i in 0..2 {
+            for j in 0..2 {
+                let s: f64 = op[i].iter().zip(&op[j]).map(|(a, b)| a * b).sum();
+                assert!((s - cov[i][j]).abs() < 1e-13, "{s} vs {}", cov[i][j]);
+            }
+            assert!((cov[i][i] - ls.unscaled_variances()[i]).abs() < 1e-15);
+        }
+    }
+
+    #[test]
+    fn a_relative_tolerance_refuses_a_nearly_dependent_column() {
+        let a = vec![vec![1.0, 1.0], vec![1.0, 1.0 + 1e-9], vec![1.0, 1.0]];
+        assert!(least_squares(&a, &[1.0, 2.0, 3.0]).is_ok());
+        assert_eq!(
+            least_squares_with(
+                &a,
+                &[1.0, 2.0, 3.0],
+                RankTolerance::RelativeToColumnNorm(1e-5)
+            ),
+            Err(LinalgError::RankDeficient { column: 1 })
+        );
     }
 
     #[test]

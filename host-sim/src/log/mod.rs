@@ -41,6 +41,9 @@ use std::fs::File;
 use std::io::{BufRead, BufReader, BufWriter, Read, Write};
 use std::path::Path;
 
+pub mod reader;
+use reader::{ReadError, Records};
+
 /// Name of the required time column (seconds since `start_utc`).
 pub const TIME_COLUMN: &str = "time_s";
 
@@ -92,6 +95,23 @@ pub enum LogError {
     /// A log being built has columns of different lengths or a bad name.
     #[error("log construction: {0}")]
     Shape(String),
+}
+
+impl From<ReadError> for LogError {
+    /// The reader's errors in the log's terms: I/O stays I/O, a file without a header is
+    /// [`LogError::MissingHeader`], header faults are [`LogError::BadHeader`], everything
+    /// about a line is a [`LogError::BadRow`] with that line.
+    fn from(e: ReadError) -> Self {
+        match e {
+            ReadError::Io(e) => LogError::Io(e),
+            ReadError::NoHeader => LogError::MissingHeader,
+            ReadError::BadHeader { line, reason } => LogError::BadHeader { line, reason },
+            other => LogError::BadRow {
+                line: other.line().unwrap_or(0),
+                reason: other.what(),
+            },
+        }
+    }
 }
 
 /// A text column (e.g. `status`): values interned, one index per row.
@@ -362,66 +382,20 @@ impl Log {
         Self::read(s.as_bytes())
     }
 
-    /// Reads a log from any buffered reader. Streams line by line (one reused buffer), parsing
-    /// fields in place: no per-row allocation for numeric columns.
-    pub fn read<R: BufRead>(mut r: R) -> Result<Self, LogError> {
-        let mut buf: Vec<u8> = Vec::with_capacity(256);
-        let mut line_no = 0usize;
-        let mut meta: Vec<(String, String)> = Vec::new();
-
-        // Metadata and header.
-        let header = loop {
-            buf.clear();
-            if r.read_until(b'\n', &mut buf)? == 0 {
-                return Err(LogError::MissingHeader);
-            }
-            line_no += 1;
-            let line = trim_eol(&buf);
-            if line.iter().all(|b| b.is_ascii_whitespace()) {
-                continue;
-            }
-            let text = std::str::from_utf8(line).map_err(|_| LogError::BadRow {
-                line: line_no,
-                reason: "not UTF-8".into(),
-            })?;
-            if let Some(c) = text.strip_prefix('#') {
-                if let Some((k, v)) = c.split_once(':') {
-                    let k = k.trim();
-                    if !k.is_empty() {
-                        let v = v.trim().to_owned();
-                        match meta.iter_mut().find(|(mk, _)| mk == k) {
-                            Some((_, mv)) => *mv = v,
-                            None => meta.push((k.to_owned(), v)),
-                        }
-                    }
-                }
-                continue;
-            }
-            break text.to_owned();
-        };
-        let header_line = line_no;
-        let names: Vec<String> = header.split(',').map(|s| s.trim().to_owned()).collect();
-        for (i, n) in names.iter().enumerate() {
-            if n.is_empty() {
-                return Err(LogError::BadHeader {
-                    line: header_line,
-                    reason: format!("column {} has an empty name", i + 1),
-                });
-            }
-            if names[..i].contains(n) {
-                return Err(LogError::BadHeader {
-                    line: header_line,
-                    reason: format!("duplicate column {n:?}"),
-                });
-            }
-        }
-        let time_idx = names
-            .iter()
-            .position(|n| n == TIME_COLUMN)
+    /// Reads a log from any buffered reader, through the project's one CSV reader
+    /// ([`reader::Records`]: metadata, BOM, header and field-count rules, line numbers). Numeric
+    /// fields are parsed in place from the record's bytes: no per-row allocation.
+    pub fn read<R: BufRead>(r: R) -> Result<Self, LogError> {
+        let mut records = Records::new(r)?;
+        let header_line = records.header_line();
+        let names: Vec<String> = records.header().to_vec();
+        let time_idx = records
+            .column(TIME_COLUMN)
             .ok_or(LogError::MissingTime { line: header_line })?;
         if names.len() < 2 {
             return Err(LogError::NoOutputColumn { line: header_line });
         }
+        let meta = records.take_meta();
 
         let ncols = names.len();
         let is_text: Vec<bool> = names.iter().map(|n| is_text_column_name(n)).collect();
@@ -431,37 +405,20 @@ impl Log {
         let mut rows = 0usize;
         let mut last_t = f64::NEG_INFINITY;
 
-        loop {
-            buf.clear();
-            if r.read_until(b'\n', &mut buf)? == 0 {
-                break;
-            }
-            line_no += 1;
-            let line = trim_eol(&buf);
-            if line.is_empty() || line.iter().all(|b| b.is_ascii_whitespace()) {
-                continue;
-            }
+        while let Some(row) = records.next_row()? {
             let bad = |reason: String| LogError::BadRow {
-                line: line_no,
+                line: row.line,
                 reason,
             };
-            if line.first() == Some(&b'#') {
-                return Err(bad("comment line after the header".into()));
-            }
-            let mut fields = line.split(|&b| b == b',');
             for col in 0..ncols {
-                let Some(field) = fields.next() else {
-                    return Err(bad(format!(
-                        "wrong column count: {col} fields, header has {ncols}"
-                    )));
-                };
-                let field = trim_spaces(field);
                 if is_text[col] {
-                    let s = std::str::from_utf8(field)
+                    let s = row
+                        .text(col)
                         .map_err(|_| bad(format!("column {:?}: not UTF-8", names[col])))?;
                     text[col].push(s, &mut text_index[col]);
                     continue;
                 }
+                let field = row.bytes(col);
                 let v = match parse_field(field) {
                     Some(v) => v,
                     None => {
@@ -484,12 +441,6 @@ impl Log {
                     last_t = v;
                 }
                 numeric[col].push(v);
-            }
-            if fields.next().is_some() {
-                let n = ncols + 1 + fields.count();
-                return Err(bad(format!(
-                    "wrong column count: {n} fields, header has {ncols}"
-                )));
             }
             rows += 1;
         }
@@ -561,29 +512,6 @@ impl fmt::Display for Log {
             self.names.join(", ")
         )
     }
-}
-
-fn trim_eol(b: &[u8]) -> &[u8] {
-    let b = b.strip_suffix(b"\n").unwrap_or(b);
-    b.strip_suffix(b"\r").unwrap_or(b)
-}
-
-fn trim_spaces(mut b: &[u8]) -> &[u8] {
-    while let [first, rest @ ..] = b {
-        if *first == b' ' || *first == b'\t' {
-            b = rest;
-        } else {
-            break;
-        }
-    }
-    while let [rest @ .., last] = b {
-        if *last == b' ' || *last == b'\t' {
-            b = rest;
-        } else {
-            break;
-        }
-    }
-    b
 }
 
 /// Parses one numeric field: empty or NaN → NaN (a gap); infinities and junk → `None`.

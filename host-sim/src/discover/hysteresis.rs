@@ -1,0 +1,275 @@
+//! Thermal hysteresis as a play (backlash) operator on the measured temperature.
+//!
+//! Physics: stress in the flexure, its epoxy joints and the coil former relaxes by stick–slip, so
+//! the bias on a heating branch differs from the bias on a cooling branch at the same
+//! temperature. The standard phenomenological description of rate-independent hysteresis is the
+//! Preisach / Prandtl–Ishlinskii model: a non-negative superposition of play operators
+//!
+//! ```text
+//! bias(t) = Σ_r w_r · p_r[T](t),   p_r[T](t) = min(T + r, max(T − r, p_r(t⁻)))   (w_r ≥ 0)
+//! ```
+//!
+//! A play of half-width r follows T at distance r once T has moved 2r since its last reversal
+//! and stands still in between. Written as T − p_r = r·h_r with h_r ∈ [−1, 1], the model is
+//! (Σ w_r)·T − Σ w_r·r·h_r: the first part is a linear temperature coefficient (the baseline's
+//! polynomial absorbs it), the second the branch term. One play gives the column h_r: +1 on a
+//! heating branch, −1 on a cooling one, a linear change over the 2r of temperature after each
+//! reversal; its coefficient is the **branch half-width** (heating bias − cooling bias = 2 × it).
+//!
+//! Why it is identifiable where the former sign-of-rate column was not: the play ignores any
+//! temperature excursion smaller than 2r. Controller jitter and the RTD's reading noise (mK)
+//! reverse the *rate* every few samples, so a sign(dT/dt) column turns them into a telegraph
+//! signal that is not in the data; the play stays on its branch through them, so the measured
+//! temperature's reading noise is not propagated (no errors-in-variables bias, as long as r is
+//! above the reading noise — the grid starts there). Against `thermal_lag` (L_τ[T] − T ≈ −τ dT/dt)
+//! it differs by its amplitude: the lag error scales with the rate, the branch term does not
+//! (slow and fast cycles give the same offset) and it saturates after 2r.
+//!
+//! Fitting: the width r is the effect's nonlinear parameter (log grid between the reading noise
+//! and a quarter of the temperature range, look-elsewhere charged like any grid), the
+//! half-width a linear coefficient. A Preisach distribution of widths is fitted by one play at
+//! the width that explains most of it; [`preisach_nnls`] fits the non-negative weights of a
+//! set of widths when a distribution is wanted (plays of nearby widths are nearly collinear, so
+//! the selection does not charge the BIC for several).
+
+/// Play (backlash) operator of half-width `r` on `u`, started at `u[0]` (the virgin state: no
+/// branch yet). The state is carried across gaps: hysteresis is a memory of the material, not
+/// of the recorder.
+pub fn play(u: &[f64], r: f64) -> Vec<f64> {
+    let mut out = Vec::with_capacity(u.len());
+    let mut p = match u.first() {
+        Some(&x) => x,
+        None => return out,
+    };
+    for &x in u {
+        p = p.max(x - r).min(x + r);
+        out.push(p);
+    }
+    out
+}
+
+/// The branch column (T − p_r[T])/r ∈ [−1, 1]: +1 on a heating branch, −1 on a cooling branch.
+pub fn branch(temp_c: &[f64], r_c: f64) -> Vec<f64> {
+    if r_c.is_nan() || r_c <= 0.0 || r_c.is_infinite() {
+        return vec![0.0; temp_c.len()];
+    }
+    play(temp_c, r_c)
+        .iter()
+        .zip(temp_c)
+        .map(|(p, t)| (t - p) / r_c)
+        .collect()
+}
+
+/// Reading-noise level of a temperature channel, °C: the median absolute first difference
+/// divided by 0.6745·√2 (robust: a slow temperature programme moves little between samples,
+/// the reading noise does every sample).
+pub fn reading_noise_c(temp_c: &[f64]) -> f64 {
+    let mut d: Vec<f64> = temp_c.windows(2).map(|w| (w[1] - w[0]).abs()).collect();
+    if d.is_empty() {
+        return 0.0;
+    }
+    let mid = d.len() / 2;
+    let (_, m, _) = d.select_nth_unstable_by(mid, f64::total_cmp);
+    *m / (0.6745 * std::f64::consts::SQRT_2)
+}
+
+/// Search range of the play half-width, °C: from 3 × the reading noise (a play narrower than
+/// that chatters on noise) to a quarter of the 1–99 % temperature range (a wider play hardly
+/// ever leaves its dead band). `None` when the temperature never moves by more than its noise.
+pub fn width_range_c(temp_c: &[f64]) -> Option<(f64, f64)> {
+    if temp_c.len() < 4 {
+        return None;
+    }
+    let mut s = temp_c.to_vec();
+    s.sort_by(f64::total_cmp);
+    let q = |p: f64| s[((s.len() - 1) as f64 * p).round() as usize];
+    let range = q(0.99) - q(0.01);
+    let lo = (3.0 * reading_noise_c(temp_c)).max(1e-4 * range.max(1e-9));
+    let hi = range / 4.0;
+    (hi > 1.5 * lo).then_some((lo, hi))
+}
+
+/// Non-negative least squares (Lawson–Hanson active set) of `y ≈ Σ w_j·cols[j]`, w ≥ 0.
+/// Small problems only (a handful of columns; normal equations).
+pub fn nnls(cols: &[Vec<f64>], y: &[f64]) -> Vec<f64> {
+    let k = cols.len();
+    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+    let ata: Vec<Vec<f64>> = cols
+        .iter()
+        .map(|a| cols.iter().map(|b| dot(a, b)).collect())
+        .collect();
+    let aty: Vec<f64> = cols.iter().map(|a| dot(a, y)).collect();
+    let mut w = vec![0.0; k];
+    let mut passive = vec![false; k];
+    // Unconstrained solution restricted to the passive set (Cholesky-free Gauss elimination).
+    let solve = |passive: &[bool]| -> Vec<f64> {
+        let idx: Vec<usize> = (0..k).filter(|&j| passive[j]).collect();
+        let m = idx.len();
+        let mut a: Vec<Vec<f64>> = idx
+            .iter()
+            .map(|&i| {
+                let mut row: Vec<f64> = idx.iter().map(|&j| ata[i][j]).collect();
+                row.push(aty[i]);
+                row
+            })
+            .collect();
+        for c in 0..m {
+            let piv = (c..m)
+                .max_by(|&p, &q| a[p][c].abs().total_cmp(&a[q][c].abs()))
+                .unwrap_or(c);
+            a.swap(c, piv);
+            let d = a[c][c];
+            if d.abs() < 1e-300 {
+                continue;
+            }
+            let pivot_row = a[c].clone();
+            for (r, row) in a.iter_mut().enumerate() {
+                if r != c {
+                    let f = row[c] / d;
+                    for (x, p) in row.iter_mut().zip(&pivot_row).skip(c) {
+                        *x -= f * p;
+                    }
+                }
+            }
+        }
+        let mut z = vec![0.0; k];
+        for (row, &i) in idx.iter().enumerate() {
+            let d = a[row][row];
+            z[i] = if d.abs() < 1e-300 { 0.0 } else { a[row][m] / d };
+        }
+        z
+    };
+    for _ in 0..(3 * k + 3) {
+        // Gradient of ½‖y − Aw‖²: Aᵀy − AᵀAw.
+        let grad: Vec<f64> = (0..k)
+            .map(|i| aty[i] - (0..k).map(|j| ata[i][j] * w[j]).sum::<f64>())
+            .collect();
+        let scale = grad.iter().fold(0.0_f64, |m, g| m.max(g.abs())).max(1e-300);
+        let Some(j) = (0..k)
+            .filter(|&j| !passive[j] && grad[j] > 1e-12 * scale)
+            .max_by(|&a, &b| grad[a].total_cmp(&grad[b]))
+        else {
+            break;
+        };
+        passive[j] = true;
+        loop {
+            let z = solve(&passive);
+            if (0..k).all(|i| !passive[i] || z[i] > 0.0) {
+                w = z;
+                break;
+            }
+            // Step back to the boundary and drop the variables that reach zero.
+            let alpha = (0..k)
+                .filter(|&i| passive[i] && z[i] <= 0.0)
+                .map(|i| w[i] / (w[i] - z[i]))
+                .fold(1.0_f64, f64::min);
+            for i in 0..k {
+                w[i] += alpha * (z[i] - w[i]);
+                if passive[i] && w[i] <= 1e-15 * scale {
+                    passive[i] = false;
+                    w[i] = 0.0;
+                }
+            }
+            if !passive.iter().any(|&p| p) {
+                break;
+            }
+        }
+    }
+    w
+}
+
+/// Preisach (Prandtl–Ishlinskii) branch weights: the non-negative half-widths of plays of the
+/// given widths that best explain `y` (already free of the temperature polynomial and the
+/// rest of the model). Returns one branch half-width per width, in the unit of `y`.
+pub fn preisach_nnls(temp_c: &[f64], widths_c: &[f64], y: &[f64]) -> Vec<f64> {
+    let cols: Vec<Vec<f64>> = widths_c.iter().map(|&r| branch(temp_c, r)).collect();
+    nnls(&cols, y)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_play_stands_still_until_the_input_has_reversed_by_twice_its_half_width() {
+        // Up 0 → 2, down to 0.5, up to 1.0.
+        let mut u: Vec<f64> = (0..=20).map(|i| 0.1 * f64::from(i)).collect();
+        u.extend((1..=15).map(|i| 2.0 - 0.1 * f64::from(i)));
+        u.extend((1..=5).map(|i| 0.5 + 0.1 * f64::from(i)));
+        let h = branch(&u, 0.4);
+        // Heating: after 0.8 °C of rise the play is on the branch, T − p = +r.
+        assert!((h[20] - 1.0).abs() < 1e-12, "{}", h[20]);
+        // 0.4 °C after the reversal at 2.0 it is half-way across: (T − p)/r = (1.6 − 1.6)/0.4 = 0.
+        assert!(h[24].abs() < 1e-9, "{}", h[24]);
+        // 0.8 °C after the reversal it is on the cooling branch.
+        assert!((h[28] + 1.0).abs() < 1e-9, "{}", h[28]);
+        // A 0.5 °C rise after the minimum at 0.5 does not reach the heating branch (needs 0.8).
+        assert!(h[40] < 1.0 - 0.2, "{}", h[40]);
+        assert!(h.iter().all(|x| x.abs() <= 1.0 + 1e-12));
+    }
+
+    #[test]
+    fn a_play_wider_than_the_reading_noise_ignores_it() {
+        // A plateau with ±3 mK noise (deterministic pseudo-noise) after a heating ramp.
+        let mut u: Vec<f64> = (0..100).map(|i| 0.01 * f64::from(i)).collect();
+        let plateau = u[99];
+        u.extend((0..500).map(|i| plateau + 0.003 * (f64::from(i) * 2.399).sin()));
+        let h = branch(&u, 0.02);
+        assert!(h[100..].iter().all(|&x| x > 0.6), "the branch is kept");
+        let s = reading_noise_c(&u[100..]);
+        // The estimate is tuned for Gaussian noise; this sine is not: same order is what counts.
+        assert!(s > 0.001 && s < 0.006, "{s}");
+    }
+
+    #[test]
+    fn nnls_recovers_non_negative_weights_and_clips_negative_ones() {
+        let n = 400;
+        let a: Vec<f64> = (0..n).map(|i| (f64::from(i) * 0.05).sin()).collect();
+        let b: Vec<f64> = (0..n).map(|i| (f64::from(i) * 0.013).cos()).collect();
+        let c: Vec<f64> = (0..n).map(|i| f64::from(i % 7) - 3.0).collect();
+        let y: Vec<f64> = (0..n as usize)
+            .map(|i| 2.0 * a[i] + 0.5 * b[i] - 1.0 * c[i])
+            .collect();
+        let w = nnls(&[a.clone(), b.clone(), c.clone()], &y);
+        // c's true weight is negative: it is set to 0 and the others fitted without it.
+        assert_eq!(w[2], 0.0);
+        assert!(
+            (w[0] - 2.0).abs() < 0.1 && (w[1] - 0.5).abs() < 0.1,
+            "{w:?}"
+        );
+        let y2: Vec<f64> = (0..n as usize).map(|i| 2.0 * a[i] + 0.5 * b[i]).collect();
+        let w2 = nnls(&[a, b, c], &y2);
+        assert!(
+            (w2[0] - 2.0).abs() < 1e-9 && (w2[1] - 0.5).abs() < 1e-9 && w2[2].abs() < 1e-9,
+            "{w2:?}"
+        );
+    }
+
+    #[test]
+    fn preisach_weights_of_a_two_width_distribution_are_found() {
+        // Triangle cycles of ±0.5 °C with mK noise: a Preisach of widths 0.05 and 0.2 °C.
+        let temp: Vec<f64> = (0..4000)
+            .map(|i| {
+                let ph = (f64::from(i) / 200.0).fract();
+                let tri = if ph < 0.5 {
+                    4.0 * ph - 1.0
+                } else {
+                    3.0 - 4.0 * ph
+                };
+                0.5 * tri + 0.002 * (f64::from(i) * 1.7).sin()
+            })
+            .collect();
+        let y: Vec<f64> = branch(&temp, 0.05)
+            .iter()
+            .zip(branch(&temp, 0.2))
+            .map(|(a, b)| 3.0 * a + 1.0 * b)
+            .collect();
+        let w = preisach_nnls(&temp, &[0.02, 0.05, 0.1, 0.2, 0.3], &y);
+        assert!(
+            (w[1] - 3.0).abs() < 1e-6 && (w[3] - 1.0).abs() < 1e-6,
+            "{w:?}"
+        );
+        assert!(w[0].abs() + w[2].abs() + w[4].abs() < 1e-6, "{w:?}");
+        assert!(width_range_c(&temp).is_some());
+    }
+}

@@ -1,0 +1,4 @@
+//! The host's numeric toolkit: one place for the linear algebra, the descriptive statistics and
+//! the distribution functions every analysis uses (docs/numerics.md, "Host numerics").
+
+pub mod linalg;

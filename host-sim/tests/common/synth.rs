@@ -1,0 +1,450 @@
+//! Independent log generator for the non-circular hidden-effect tests
+//! (`discover_hidden_shapes.rs`, `discover_hidden_null.rs`).
+//!
+//! Written without the station simulator and without the detector's assumptions:
+//! - flicker noise is **1/f by spectral synthesis** (Gaussian Fourier coefficients of a one-sided
+//!   PSD h/f on a grid twice the record, one FFT; written here, not `sim/noise.rs`'s sum of
+//!   AR(1) terms, which is also the detector's noise family);
+//! - white noise and a random walk from a Box–Muller Gaussian of our own;
+//! - the channels a real station logs, each with its own reading noise: an RTD reading the
+//!   mounting block with a fixed offset and mK white noise, thermostat excursions (door-like
+//!   bumps that decay over an hour), a slow set-point wander, an optional ±0.5 °C cycling
+//!   programme; two tiltmeter axes (slow foundation tilt + reading noise); a barometer (weather
+//!   + reading noise).
+//!
+//! The output is in g (`output_g`), a 1 g record (`input_g = 1`), no site or start time (no
+//! tide: the record stands for one whose tide has been removed).
+
+#![allow(dead_code)]
+
+use accomp_host::log::Log;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+/// Standard normal deviate (Box–Muller).
+pub fn gauss(rng: &mut ChaCha8Rng) -> f64 {
+    let u1: f64 = rng.random::<f64>().max(1e-300);
+    let u2: f64 = rng.random::<f64>();
+    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+}
+
+/// In-place radix-2 complex FFT (forward, e^{−2πi kn/N}); `re.len()` a power of two.
+pub fn fft(re: &mut [f64], im: &mut [f64]) {
+    let n = re.len();
+    assert!(n.is_power_of_two() && im.len() == n);
+    let mut j = 0usize;
+    for i in 1..n {
+        let mut bit = n >> 1;
+        while j & bit != 0 {
+            j ^= bit;
+            bit >>= 1;
+        }
+        j |= bit;
+        if i < j {
+            re.swap(i, j);
+            im.swap(i, j);
+        }
+    }
+    let mut len = 2;
+    while len <= n {
+        let ang = -std::f64::consts::TAU / len as f64;
+        for start in (0..n).step_by(len) {
+            for k in 0..len / 2 {
+                let (s, c) = (ang * k as f64).sin_cos();
+                let (a, b) = (start + k, start + k + len / 2);
+                let tr = re[b] * c - im[b] * s;
+                let ti = re[b] * s + im[b] * c;
+                re[b] = re[a] - tr;
+                im[b] = im[a] - ti;
+                re[a] += tr;
+                im[a] += ti;
+            }
+        }
+        len <<= 1;
+    }
+}
+
+/// Gaussian noise with one-sided PSD `psd(f)` (unit²/Hz), `n` samples every `dt_s`, by spectral
+/// synthesis on a grid of N ≥ 2n (so the record is not periodic): x_j = Σ_k √(S(f_k)Δf)·
+/// (a_k cos 2πf_k t_j + b_k sin 2πf_k t_j), a, b standard normal, f_k = k/(N·dt), k = 1…N/2.
+pub fn spectral_noise(
+    n: usize,
+    dt_s: f64,
+    psd: impl Fn(f64) -> f64,
+    rng: &mut ChaCha8Rng,
+) -> Vec<f64> {
+    let big = (2 * n).next_power_of_two();
+    let df = 1.0 / (big as f64 * dt_s);
+    let mut re = vec![0.0; big];
+    let mut im = vec![0.0; big];
+    for k in 1..=big / 2 {
+        let amp = (psd(k as f64 * df) * df).sqrt();
+        re[k] = amp * gauss(rng);
+        im[k] = -amp * gauss(rng);
+    }
+    // Real part of Σ c_k e^{+2πi kj/N} = forward FFT of the conjugate, conjugated.
+    for v in im.iter_mut() {
+        *v = -*v;
+    }
+    fft(&mut re, &mut im);
+    re.truncate(n);
+    re
+}
+
+/// 1/f (flicker) noise of Allan-deviation floor `floor`: S(f) = h/f with h = floor²/(2 ln 2).
+pub fn flicker(n: usize, dt_s: f64, floor: f64, rng: &mut ChaCha8Rng) -> Vec<f64> {
+    let h = floor * floor / (2.0 * std::f64::consts::LN_2);
+    spectral_noise(n, dt_s, |f| h / f, rng)
+}
+
+/// Sensor noise: white of Allan deviation `white_1s` at 1 s, 1/f flicker of floor `flicker_floor`,
+/// random walk `rw_per_sqrt_s` (all in the output unit).
+pub fn sensor_noise(
+    n: usize,
+    dt_s: f64,
+    white_1s: f64,
+    flicker_floor: f64,
+    rw_per_sqrt_s: f64,
+    rng: &mut ChaCha8Rng,
+) -> Vec<f64> {
+    let fl = flicker(n, dt_s, flicker_floor, rng);
+    let mut walk = 0.0;
+    let sw = white_1s / dt_s.sqrt();
+    let sr = rw_per_sqrt_s * dt_s.sqrt();
+    fl.iter()
+        .map(|f| {
+            walk += sr * gauss(rng);
+            f + walk + sw * gauss(rng)
+        })
+        .collect()
+}
+
+/// First-order low pass (exact for a held input), started at the first value.
+pub fn low_pass(u: &[f64], dt_s: f64, tau_s: f64) -> Vec<f64> {
+    let a = (-dt_s / tau_s).exp();
+    let mut x = u.first().copied().unwrap_or(0.0);
+    u.iter()
+        .map(|v| {
+            x = a * x + (1.0 - a) * v;
+            x
+        })
+        .collect()
+}
+
+/// How the mounting block's temperature is driven.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Thermal {
+    /// A regulated thermostat: controller noise, set-point wander, excursions.
+    Regulated,
+    /// The same plus a cycling programme: rounded triangle of ±`amplitude_c` with `period_s`.
+    Cycling {
+        /// Half the peak-to-peak swing, °C.
+        amplitude_c: f64,
+        /// Period, s.
+        period_s: f64,
+    },
+}
+
+/// A generated station record: time, true and measured channels.
+#[derive(Debug, Clone)]
+pub struct Station {
+    /// Sample interval, s.
+    pub dt_s: f64,
+    /// Time, s.
+    pub t_s: Vec<f64>,
+    /// True mounting-block temperature, °C.
+    pub temp_true_c: Vec<f64>,
+    /// The RTD's reading of it: + fixed offset + reading noise, °C.
+    pub temp_meas_c: Vec<f64>,
+    /// True tilts (x, y), arcsec.
+    pub tilt_true_arcsec: (Vec<f64>, Vec<f64>),
+    /// Tiltmeter readings, arcsec.
+    pub tilt_meas_arcsec: (Vec<f64>, Vec<f64>),
+    /// True pressure, hPa.
+    pub pressure_true_hpa: Vec<f64>,
+    /// Barometer reading, hPa.
+    pub pressure_meas_hpa: Vec<f64>,
+    /// The RTD's reading noise (°C rms) and offset (°C), for the record.
+    pub rtd_noise_c: f64,
+    /// RTD offset.
+    pub rtd_offset_c: f64,
+}
+
+/// Generates the station channels for `n` samples every `dt_s`.
+pub fn station(n: usize, dt_s: f64, thermal: Thermal, rng: &mut ChaCha8Rng) -> Station {
+    let t_s: Vec<f64> = (0..n).map(|i| i as f64 * dt_s).collect();
+    let span = n as f64 * dt_s;
+    // Controller: AR(1), 2–8 mK rms, 2–10 min correlation.
+    let c_std = rng.random_range(0.002..0.008);
+    let c_tau = rng.random_range(120.0..600.0);
+    let a = (-dt_s / c_tau).exp();
+    let mut c = c_std * gauss(rng);
+    // Set-point wander: 5–20 mK per √day.
+    let wander = rng.random_range(0.005..0.02) * (dt_s / 86_400.0).sqrt();
+    let mut w = 0.0;
+    // Excursions: Poisson, 0.5–2 per day, ±(20–150) mK, decaying over 20–90 min.
+    let rate = rng.random_range(0.5..2.0) / 86_400.0;
+    let mut bumps: Vec<(f64, f64, f64)> = Vec::new();
+    let mut tb = 0.0;
+    loop {
+        tb += -(rng.random::<f64>().max(1e-12)).ln() / rate;
+        if tb >= span {
+            break;
+        }
+        let sgn = if rng.random::<bool>() { 1.0 } else { -1.0 };
+        bumps.push((
+            tb,
+            sgn * rng.random_range(0.02..0.15),
+            rng.random_range(1200.0..5400.0),
+        ));
+    }
+    let phase = rng.random_range(0.0..1.0);
+    let setpoint = rng.random_range(40.0..60.0);
+    let temp_true_c: Vec<f64> = t_s
+        .iter()
+        .map(|&t| {
+            c = a * c + (1.0 - a * a).sqrt() * c_std * gauss(rng);
+            w += wander * gauss(rng);
+            let ex: f64 = bumps
+                .iter()
+                .filter(|b| t >= b.0)
+                .map(|b| {
+                    // Rises over 5 min, decays with its time constant.
+                    let x = t - b.0;
+                    b.1 * (1.0 - (-x / 300.0).exp()) * (-x / b.2).exp()
+                })
+                .sum();
+            let prog = match thermal {
+                Thermal::Regulated => 0.0,
+                Thermal::Cycling {
+                    amplitude_c,
+                    period_s,
+                } => {
+                    // A triangle's rounded version: the thermostat ramps at a constant rate
+                    // and turns over a few minutes (first five odd harmonics).
+                    let x = std::f64::consts::TAU * (t / period_s + phase);
+                    let tri: f64 = [1.0, 3.0, 5.0, 7.0, 9.0]
+                        .iter()
+                        .enumerate()
+                        .map(|(k, m)| {
+                            let s = if k % 2 == 0 { 1.0 } else { -1.0 };
+                            s * (m * x).sin() / (m * m)
+                        })
+                        .sum();
+                    amplitude_c * tri * 8.0 / (std::f64::consts::PI.powi(2)) / 0.9986
+                }
+            };
+            setpoint + c + w + ex + prog
+        })
+        .collect();
+    // RTD: fixed offset ±50 mK (calibration), white reading noise 1–5 mK, 0.1 mK resolution.
+    let rtd_offset_c = rng.random_range(-0.05..0.05);
+    let rtd_noise_c = rng.random_range(0.001..0.005);
+    let temp_meas_c = temp_true_c
+        .iter()
+        .map(|x| ((x + rtd_offset_c + rtd_noise_c * gauss(rng)) * 1e4).round() / 1e4)
+        .collect();
+    // Foundation tilt: slow (AR(1) over 6 h) 0.5″ plus a diurnal 0.2″; tiltmeter noise 0.02″.
+    let tilt = |rng: &mut ChaCha8Rng| {
+        let a = (-dt_s / 21_600.0).exp();
+        let mut x = 0.5 * gauss(rng);
+        let ph = rng.random_range(0.0..std::f64::consts::TAU);
+        let truth: Vec<f64> = t_s
+            .iter()
+            .map(|&t| {
+                x = a * x + (1.0 - a * a).sqrt() * 0.5 * gauss(rng);
+                x + 0.2 * (std::f64::consts::TAU * t / 86_400.0 + ph).sin()
+            })
+            .collect();
+        let meas = truth.iter().map(|v| v + 0.02 * gauss(rng)).collect();
+        (truth, meas)
+    };
+    let (tx, mx) = tilt(rng);
+    let (ty, my) = tilt(rng);
+    // Weather: AR(1) of 5 hPa over 2 days around 1010 hPa; barometer noise 0.02 hPa.
+    let ap = (-dt_s / 172_800.0).exp();
+    let mut p = 5.0 * gauss(rng);
+    let pressure_true_hpa: Vec<f64> = t_s
+        .iter()
+        .map(|_| {
+            p = ap * p + (1.0 - ap * ap).sqrt() * 5.0 * gauss(rng);
+            1010.0 + p
+        })
+        .collect();
+    let pressure_meas_hpa = pressure_true_hpa
+        .iter()
+        .map(|v| v + 0.02 * gauss(rng))
+        .collect();
+    Station {
+        dt_s,
+        t_s,
+        temp_true_c,
+        temp_meas_c,
+        tilt_true_arcsec: (tx, ty),
+        tilt_meas_arcsec: (mx, my),
+        pressure_true_hpa,
+        pressure_meas_hpa,
+        rtd_noise_c,
+        rtd_offset_c,
+    }
+}
+
+/// Sensor noise levels of the generated accelerometer (g): white 2 µg at 1 s, 1/f floor
+/// 0.3–1 µg, random walk 2–8 ng/√s (navigation grade).
+#[derive(Debug, Clone, Copy)]
+pub struct SensorNoise {
+    /// White, Allan deviation at 1 s.
+    pub white_1s: f64,
+    /// Flicker floor.
+    pub flicker_floor: f64,
+    /// Random walk per √s.
+    pub rw_per_sqrt_s: f64,
+}
+
+/// Draws the sensor's noise levels.
+pub fn draw_noise(rng: &mut ChaCha8Rng) -> SensorNoise {
+    SensorNoise {
+        white_1s: 2.0e-6,
+        flicker_floor: rng.random_range(0.3e-6..1.0e-6),
+        rw_per_sqrt_s: rng.random_range(2.0e-9..8.0e-9),
+    }
+}
+
+/// The accelerometer's output in g at 1 g: 1 + bias polynomial of the true temperature
+/// (1–10 µg/°C, a few 0.1 µg/°C²) + the 1 g tilt term (cos θ − 1) + `extra_g` + noise.
+pub fn output_g(
+    st: &Station,
+    noise: &SensorNoise,
+    extra_g: &[f64],
+    rng: &mut ChaCha8Rng,
+) -> Vec<f64> {
+    let n = st.t_s.len();
+    let e = sensor_noise(
+        n,
+        st.dt_s,
+        noise.white_1s,
+        noise.flicker_floor,
+        noise.rw_per_sqrt_s,
+        rng,
+    );
+    let t_ref = st.temp_true_c[0];
+    let k1 = rng.random_range(1.0e-6..10.0e-6) * if rng.random::<bool>() { 1.0 } else { -1.0 };
+    let k2 = rng.random_range(-0.5e-6..0.5e-6);
+    let rad = std::f64::consts::PI / (180.0 * 3600.0);
+    (0..n)
+        .map(|i| {
+            let d = st.temp_true_c[i] - t_ref;
+            let th =
+                (st.tilt_true_arcsec.0[i].powi(2) + st.tilt_true_arcsec.1[i].powi(2)).sqrt() * rad;
+            1.0 + 3.0e-5 + k1 * d + k2 * d * d + (th.cos() - 1.0) + extra_g[i] + e[i]
+        })
+        .collect()
+}
+
+/// The record as the board would log it (measured channels only).
+pub fn log_of(st: &Station, output_g: Vec<f64>) -> Log {
+    let mut log = Log::with_time(st.t_s.clone()).expect("time");
+    log.set_meta("input_g", "1").expect("meta");
+    for (name, v) in [
+        ("output_g", output_g),
+        ("temperature_c", st.temp_meas_c.clone()),
+        ("tilt_x_arcsec", st.tilt_meas_arcsec.0.clone()),
+        ("tilt_y_arcsec", st.tilt_meas_arcsec.1.clone()),
+        ("pressure_hpa", st.pressure_meas_hpa.clone()),
+    ] {
+        log.push_column(name, v).expect("column");
+    }
+    log
+}
+
+/// A fresh generator from a seed.
+pub fn rng(seed: u64) -> ChaCha8Rng {
+    ChaCha8Rng::seed_from_u64(seed)
+}
+
+/// Wilson score interval (95 %, z = 1.96) of `k` successes in `n` trials.
+pub fn wilson(k: usize, n: usize) -> (f64, f64) {
+    if n == 0 {
+        return (0.0, 1.0);
+    }
+    let z = 1.959_964_f64;
+    let (k, n) = (k as f64, n as f64);
+    let p = k / n;
+    let den = 1.0 + z * z / n;
+    let c = (p + z * z / (2.0 * n)) / den;
+    let h = z * (p * (1.0 - p) / n + z * z / (4.0 * n * n)).sqrt() / den;
+    ((c - h).max(0.0), (c + h).min(1.0))
+}
+
+/// One-sided exact (Clopper–Pearson) upper bound at confidence 1 − `alpha` of a rate with `k`
+/// events in `n` trials (bisection on the binomial CDF).
+pub fn binomial_upper(k: usize, n: usize, alpha: f64) -> f64 {
+    let cdf = |p: f64| {
+        // P(X ≤ k | n, p)
+        let mut term = (1.0 - p).powi(n as i32);
+        let mut s = term;
+        for i in 0..k {
+            term *= (n - i) as f64 / (i + 1) as f64 * p / (1.0 - p).max(1e-300);
+            s += term;
+        }
+        s
+    };
+    let (mut lo, mut hi) = (k as f64 / n.max(1) as f64, 1.0);
+    for _ in 0..60 {
+        let m = 0.5 * (lo + hi);
+        if cdf(m) > alpha {
+            lo = m;
+        } else {
+            hi = m;
+        }
+    }
+    hi
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn spectral_flicker_has_a_flat_allan_deviation_at_its_floor() {
+        // Overlapping ADEV at τ = 16 and 256 samples, averaged over draws: flat, ≈ the floor.
+        let (n, dt, floor) = (8192usize, 1.0, 1.0);
+        let mut r = rng(7);
+        let adev = |x: &[f64], m: usize| {
+            let c: Vec<f64> = std::iter::once(0.0)
+                .chain(x.iter().scan(0.0, |s, v| {
+                    *s += v;
+                    Some(*s)
+                }))
+                .collect();
+            let k = x.len() + 1 - 2 * m;
+            let s: f64 = (0..k)
+                .map(|i| {
+                    let d = (c[i + 2 * m] - 2.0 * c[i + m] + c[i]) / m as f64;
+                    d * d
+                })
+                .sum();
+            (s / (2.0 * k as f64)).sqrt()
+        };
+        let (mut a16, mut a256) = (0.0, 0.0);
+        for _ in 0..8 {
+            let x = flicker(n, dt, floor, &mut r);
+            a16 += adev(&x, 16) / 8.0;
+            a256 += adev(&x, 256) / 8.0;
+        }
+        assert!((a16 - floor).abs() < 0.2, "{a16}");
+        assert!((a256 - floor).abs() < 0.3, "{a256}");
+    }
+
+    #[test]
+    fn wilson_and_clopper_pearson_bounds_match_tabulated_values() {
+        let (lo, hi) = wilson(8, 10);
+        assert!(
+            (lo - 0.490).abs() < 2e-3 && (hi - 0.943).abs() < 2e-3,
+            "{lo} {hi}"
+        );
+        // 0 events in 59 trials: the 95 % upper bound is 1 − 0.05^(1/59) = 4.95 %.
+        let u = binomial_upper(0, 59, 0.05);
+        assert!((u - (1.0 - 0.05_f64.powf(1.0 / 59.0))).abs() < 1e-6, "{u}");
+    }
+}
