@@ -7,6 +7,7 @@
 // One exception, allowed where it is: the VSQRT instruction in `fixed::sqrt_f32`.
 #![deny(unsafe_code)]
 
+pub mod acquisition;
 pub mod adc;
 pub mod compensation;
 pub mod drivers;

@@ -1,8 +1,16 @@
 //! Firmware entry point for the STM32F405 compensation front-end (RTIC 2).
 //!
-//! Thin on purpose: the board module sets up clocks, UART and acquisition; the core's
-//! [`accomp::service::Service`] answers requests and runs the per-sample pipeline. This file only
-//! moves bytes and samples between them.
+//! Thin on purpose: the board module sets up clocks, UART, acquisition and the watchdog; the
+//! core's [`accomp::acquisition`] sequences the converters and [`accomp::service::Service`]
+//! answers requests and runs the per-sample pipeline. This file only moves bytes, readings and
+//! samples between them, at these priorities:
+//!
+//! | priority | task | may do |
+//! |---|---|---|
+//! | 3 | `drdy` (EXTI4) | timestamp, read one conversion, switch the mux: bounded SPI, no wait |
+//! | 2 | `uart_rx` (USART1) | drain the receiver into the frame decoder |
+//! | 2 | `ads_supervisor`, `rtd_task` | one tick of a sequencer each: bounded SPI, no wait |
+//! | 1 | `worker`, `watchdog` | pipeline, protocol, flash; progress checks and IWDG feeding |
 //!
 //! On the host this file compiles to an empty program so that `cargo test` at the root can build
 //! the workspace; the firmware exists only for `target_os = "none"`.
@@ -20,16 +28,18 @@ mod board;
 rtic_monotonics::systick_monotonic!(Mono, 1_000);
 
 #[cfg(target_os = "none")]
-#[rtic::app(device = stm32f4xx_hal::pac, peripherals = true, dispatchers = [SPI2, SPI3])]
+#[rtic::app(device = stm32f4xx_hal::pac, peripherals = true, dispatchers = [SPI3, UART4])]
 mod app {
     use core::sync::atomic::{AtomicU32, Ordering};
 
-    use accomp::pipeline::RawSample;
+    use accomp::acquisition::{AdsReading, RtdReading, SampleAssembler};
+    use accomp::drivers::ads1262::DataRate;
     use accomp::protocol::{
         encode_frame, DeviceMessage, FrameDecoder, FrameError, MAX_FRAME_LEN, PROTOCOL_VERSION,
     };
     use accomp::service::{BootTable, Service};
     use heapless::Vec;
+    use rtic_monotonics::fugit::ExtU64 as _;
     use rtic_monotonics::Timebase as _;
     use rtic_sync::channel::{Receiver, Sender};
     use rtic_sync::make_channel;
@@ -37,21 +47,45 @@ mod app {
     use crate::board;
     use crate::Mono;
 
-    /// Frames and samples waiting for the worker. Bounded: when full, frames are dropped and
-    /// counted (the host sees the count in Info and resends), never queued without limit.
+    /// Frames, readings and heartbeats waiting for the worker. Bounded: when full, frames are
+    /// dropped and counted (the host sees the count in Info and resends), readings are lost
+    /// (the frame sequence shows the gap), never queued without limit.
     const INBOUND_CAPACITY: usize = 16;
 
-    /// A received frame body, or why the receiver refused it; or an acquired sample.
+    /// How often the ADS1262 supervisor checks for a missing DRDY (and drives re-init steps).
+    const ADS_TICK_MS: u64 = 20;
+    /// How often the watchdog task checks progress (the IWDG itself allows 8 s).
+    const WATCHDOG_CHECK_MS: u64 = 1_000;
+    /// An RTD reading further than this from a pair's timestamp is not joined to it.
+    const RTD_MAX_AGE_US: u64 = 1_000_000;
+
+    /// Work for the worker, in arrival order.
     pub enum Inbound {
+        /// A received frame body, or why the receiver refused it.
         Frame(Result<Vec<u8, MAX_FRAME_LEN>, FrameError>),
-        Sample(RawSample),
+        /// An accelerometer + tilt pair (or a timeout reading) from the ADS1262 sequencer.
+        Ads(AdsReading),
+        /// An RTD reading from the AD7124 task.
+        Rtd(RtdReading),
+        /// Proof of life requested by the watchdog task.
+        Heartbeat,
     }
 
     /// Frames lost because the inbound queue was full (added to the service's counter).
     static QUEUE_DROPS: AtomicU32 = AtomicU32::new(0);
+    /// Readings produced by the ADS1262 sequencer (DRDY or timeout): acquisition progress.
+    static ACQ_PROGRESS: AtomicU32 = AtomicU32::new(0);
+    /// Items the worker has processed: worker progress.
+    static WORKER_PROGRESS: AtomicU32 = AtomicU32::new(0);
+    /// Data rate asked for by SetRate, for the supervisor to apply (0: nothing new).
+    static REQUESTED_RATE: AtomicU32 = AtomicU32::new(0);
 
     #[shared]
-    struct Shared {}
+    struct Shared {
+        /// Read by the DRDY interrupt (priority 3) and the supervisor (priority 2, short locks:
+        /// a few SPI transactions, never a wait).
+        ads: board::AdsAcquisition,
+    }
 
     #[local]
     struct Local {
@@ -59,9 +93,15 @@ mod app {
         tx: board::UartTx,
         decoder: FrameDecoder<MAX_FRAME_LEN>,
         rx_to_worker: Sender<'static, Inbound, INBOUND_CAPACITY>,
-        acquisition: board::Acquisition,
-        acq_to_worker: Sender<'static, Inbound, INBOUND_CAPACITY>,
+        drdy_pin: board::DrdyPin,
+        drdy_to_worker: Sender<'static, Inbound, INBOUND_CAPACITY>,
+        supervisor_to_worker: Sender<'static, Inbound, INBOUND_CAPACITY>,
+        rtd: board::RtdAcquisition,
+        rtd_to_worker: Sender<'static, Inbound, INBOUND_CAPACITY>,
+        watchdog: board::Watchdog,
+        watchdog_to_worker: Sender<'static, Inbound, INBOUND_CAPACITY>,
         service: Service<board::Flash>,
+        assembler: SampleAssembler,
     }
 
     #[init]
@@ -69,7 +109,13 @@ mod app {
         let parts = board::init(cx.device);
         Mono::start(cx.core.SYST, board::SYSTICK_HZ);
         // Boot restores the newest valid calibration slot (none: samples flag NO_CALIBRATION).
-        let service = Service::new(board::BOARD, parts.flash, board::SLOT_LAYOUT);
+        let mut service = Service::new(board::BOARD, parts.flash, board::SLOT_LAYOUT);
+        service.set_boot_report(parts.boot);
+        defmt::info!(
+            "reset cause {=u8:#x}, clock fallback {}",
+            parts.boot.reset_cause,
+            parts.boot.clock_fallback
+        );
         match service.boot_table() {
             BootTable::Restored {
                 sequence,
@@ -83,20 +129,29 @@ mod app {
             BootTable::StorageFault => defmt::error!("calibration store unreadable"),
         }
         let (rx_to_worker, inbound) = make_channel!(Inbound, INBOUND_CAPACITY);
-        if worker::spawn(inbound).is_err() {
+        if worker::spawn(inbound).is_err() || watchdog::spawn().is_err() {
+            board::fatal(board::Fatal::Spawn);
+        }
+        if board::HAS_ADCS && (ads_supervisor::spawn().is_err() || rtd_task::spawn().is_err()) {
             board::fatal(board::Fatal::Spawn);
         }
         defmt::info!("accomp-fw {} up", env!("CARGO_PKG_VERSION"));
         (
-            Shared {},
+            Shared { ads: parts.ads },
             Local {
                 rx: parts.rx,
                 tx: parts.tx,
                 decoder: FrameDecoder::new(),
-                acquisition: parts.acquisition,
-                acq_to_worker: rx_to_worker.clone(),
+                drdy_pin: parts.drdy,
+                drdy_to_worker: rx_to_worker.clone(),
+                supervisor_to_worker: rx_to_worker.clone(),
+                rtd: parts.rtd,
+                rtd_to_worker: rx_to_worker.clone(),
+                watchdog: parts.watchdog,
+                watchdog_to_worker: rx_to_worker.clone(),
                 rx_to_worker,
                 service,
+                assembler: SampleAssembler::new(RTD_MAX_AGE_US),
             },
         )
     }
@@ -116,17 +171,95 @@ mod app {
         }
     }
 
-    /// One conversion set per DRDY edge of the ADS1262 (the QEMU board never enables EXTI4).
-    #[task(binds = EXTI4, priority = 3, local = [acquisition, acq_to_worker])]
-    fn drdy(cx: drdy::Context) {
-        if let Some(raw) = cx.local.acquisition.on_drdy() {
-            // A full queue loses this sample; the frame's seq gap shows it on the host.
-            let _ = cx.local.acq_to_worker.try_send(Inbound::Sample(raw));
+    /// ADS1262 DRDY fell: timestamp it, read the conversion and switch the mux (a few SPI
+    /// transactions at 5.25 MHz, no waiting), hand a finished pair to the worker. The QEMU board
+    /// never enables EXTI4.
+    #[task(binds = EXTI4, priority = 3, shared = [ads], local = [drdy_pin, drdy_to_worker])]
+    fn drdy(mut cx: drdy::Context) {
+        let now = now_us();
+        board::acknowledge_drdy(cx.local.drdy_pin);
+        ACQ_PROGRESS.fetch_add(1, Ordering::Relaxed);
+        if let Some(reading) = cx.shared.ads.lock(|ads| ads.on_drdy(now)) {
+            // A full queue loses this reading; the frame's seq gap shows it on the host.
+            let _ = cx.local.drdy_to_worker.try_send(Inbound::Ads(reading));
+        }
+    }
+
+    /// Watches for a missing DRDY (timeout readings at the pair rate, stepped re-init) and
+    /// applies SetRate. Same priority as the UART receiver, never above it, and never waits.
+    #[task(priority = 2, shared = [ads], local = [supervisor_to_worker])]
+    async fn ads_supervisor(mut cx: ads_supervisor::Context) {
+        loop {
+            Mono::delay(ADS_TICK_MS.millis()).await;
+            let now = now_us();
+            let rate = DataRate::from_sps(REQUESTED_RATE.swap(0, Ordering::Relaxed));
+            let reading = cx.shared.ads.lock(|ads| {
+                if let Some(rate) = rate {
+                    ads.request_rate(rate);
+                }
+                ads.on_tick(now)
+            });
+            if let Some(reading) = reading {
+                ACQ_PROGRESS.fetch_add(1, Ordering::Relaxed);
+                let _ = cx
+                    .local
+                    .supervisor_to_worker
+                    .try_send(Inbound::Ads(reading));
+            }
+        }
+    }
+
+    /// Reads the AD7124 at its own data rate: one STATUS poll per tick, the result if ready.
+    #[task(priority = 2, local = [rtd, rtd_to_worker])]
+    async fn rtd_task(cx: rtd_task::Context) {
+        let period_us = cx.local.rtd.period_us();
+        loop {
+            Mono::delay(period_us.micros()).await;
+            if let Some(reading) = cx.local.rtd.on_tick(now_us()) {
+                let _ = cx.local.rtd_to_worker.try_send(Inbound::Rtd(reading));
+            }
+        }
+    }
+
+    /// Feeds the independent watchdog only when, since the last check, acquisition produced a
+    /// reading (front-end) and the worker processed something (an idle worker gets a heartbeat
+    /// to answer, so it feeds every other second). A stuck worker, a dead supervisor or a
+    /// lock-up stops the feeding and the IWDG (8 s) resets the MCU.
+    #[task(priority = 1, local = [watchdog, watchdog_to_worker])]
+    async fn watchdog(cx: watchdog::Context) {
+        let mut acquisition = ACQ_PROGRESS.load(Ordering::Relaxed);
+        let mut worker = WORKER_PROGRESS.load(Ordering::Relaxed);
+        let mut heartbeat_sent = false;
+        loop {
+            Mono::delay(WATCHDOG_CHECK_MS.millis()).await;
+            let a = ACQ_PROGRESS.load(Ordering::Relaxed);
+            let w = WORKER_PROGRESS.load(Ordering::Relaxed);
+            let acquisition_alive = !board::HAS_ADCS || a != acquisition;
+            let worker_alive = w != worker;
+            if acquisition_alive && worker_alive {
+                cx.local.watchdog.feed();
+            } else if !acquisition_alive || heartbeat_sent {
+                defmt::warn!(
+                    "no progress (acquisition {}, worker {}): watchdog not fed",
+                    acquisition_alive,
+                    worker_alive
+                );
+            }
+            // An idle worker proves itself by answering a heartbeat before the next check (a
+            // busy one needs none: nothing extra in its queue while it streams).
+            heartbeat_sent = !worker_alive
+                && cx
+                    .local
+                    .watchdog_to_worker
+                    .try_send(Inbound::Heartbeat)
+                    .is_ok();
+            acquisition = a;
+            worker = w;
         }
     }
 
     /// Answers requests and runs samples through the pipeline, one at a time, in order.
-    #[task(priority = 1, local = [tx, service])]
+    #[task(priority = 1, local = [tx, service, assembler])]
     async fn worker(
         cx: worker::Context,
         mut inbound: Receiver<'static, Inbound, INBOUND_CAPACITY>,
@@ -136,7 +269,9 @@ mod app {
             protocol: PROTOCOL_VERSION,
         };
         send(cx.local.tx, &ready);
+        let mut rate_hz = cx.local.service.rate_hz();
         while let Ok(item) = inbound.recv().await {
+            WORKER_PROGRESS.fetch_add(1, Ordering::Relaxed);
             let service = &mut *cx.local.service;
             for _ in 0..QUEUE_DROPS.swap(0, Ordering::Relaxed) {
                 service.count_dropped();
@@ -145,10 +280,23 @@ mod app {
                 Inbound::Frame(frame) => {
                     service.handle_frame(frame.as_deref().map_err(|e| *e), &now_us)
                 }
-                Inbound::Sample(raw) => service
-                    .streaming()
-                    .then(|| service.sample(0, &raw, now_us())),
+                Inbound::Ads(reading) => {
+                    let raw = cx.local.assembler.assemble(&reading);
+                    // Timestamped at the DRDY edge, not now.
+                    service
+                        .streaming()
+                        .then(|| service.sample(0, &raw, reading.time_us))
+                }
+                Inbound::Rtd(reading) => {
+                    cx.local.assembler.rtd(reading);
+                    None
+                }
+                Inbound::Heartbeat => None,
             };
+            if service.rate_hz() != rate_hz {
+                rate_hz = service.rate_hz();
+                REQUESTED_RATE.store(rate_hz, Ordering::Relaxed);
+            }
             if let Some(msg) = reply {
                 send(cx.local.tx, &msg);
             }

@@ -38,6 +38,14 @@ impl ChannelFlags {
     pub const DRDY_TIMEOUT: u8 = 1 << 1;
     /// The ADC itself reported an over-range (ADS1262 status byte, AD7124 error register).
     pub const SATURATION: u8 = 1 << 2;
+    /// The converter reset itself since it was configured (brown-out, glitch): its settings were
+    /// lost, the conversion is not the configured one; the sequencer re-initialises it.
+    pub const RESET: u8 = 1 << 3;
+    /// The converter did not answer (MISO idle: all ones or all zeros).
+    pub const NOT_RESPONDING: u8 = 1 << 4;
+    /// The AD7124 reports no reference (REF_DET): no excitation current flows, i.e. the RTD loop
+    /// (or the reference resistor) is open.
+    pub const OPEN_CIRCUIT: u8 = 1 << 5;
 
     /// True when any bit in `mask` is set.
     #[inline]
@@ -106,9 +114,13 @@ impl Status {
     pub const OUTPUT_INVALID: u16 = 1 << 9;
     /// The RTD conversion failed for another reason (non-finite, invalid constants).
     pub const RTD_INVALID: u16 = 1 << 10;
+    /// A converter reset itself mid-run (configuration lost); the acquisition re-initialised it.
+    pub const ADC_RESET: u16 = 1 << 11;
+    /// A converter did not answer on the bus (MISO idle high or low).
+    pub const ADC_NOT_RESPONDING: u16 = 1 << 12;
 
     /// Names of the bits, in bit order, for logs and CSV output.
-    pub const NAMES: [(u16, &'static str); 11] = [
+    pub const NAMES: [(u16, &'static str); 13] = [
         (Self::RTD_OPEN, "RTD_OPEN"),
         (Self::RTD_SHORT, "RTD_SHORT"),
         (Self::ADC_SATURATED, "ADC_SATURATED"),
@@ -120,6 +132,8 @@ impl Status {
         (Self::TILT_INVALID, "TILT_INVALID"),
         (Self::OUTPUT_INVALID, "OUTPUT_INVALID"),
         (Self::RTD_INVALID, "RTD_INVALID"),
+        (Self::ADC_RESET, "ADC_RESET"),
+        (Self::ADC_NOT_RESPONDING, "ADC_NOT_RESPONDING"),
     ];
 
     /// True when any bit in `mask` is set.
@@ -167,6 +181,17 @@ fn driver_faults(flags: ChannelFlags, status: &mut Status) -> bool {
     }
     if flags.has(ChannelFlags::SATURATION) {
         status.set(Status::ADC_SATURATED);
+    }
+    if flags.has(ChannelFlags::RESET) {
+        status.set(Status::ADC_RESET);
+    }
+    if flags.has(ChannelFlags::NOT_RESPONDING) {
+        status.set(Status::ADC_NOT_RESPONDING);
+    }
+    if flags.has(ChannelFlags::OPEN_CIRCUIT) {
+        // Only the RTD channel reports it (AD7124 REF_DET); on another channel it still names
+        // an open input rather than vanishing.
+        status.set(Status::RTD_OPEN);
     }
     flags.0 != 0
 }

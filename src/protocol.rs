@@ -17,7 +17,7 @@ use crate::pipeline::{Frame, RawSample};
 use crate::table::{Coefficient, Field, TableError};
 
 /// Protocol version reported by Info; bumped on any incompatible message change.
-pub const PROTOCOL_VERSION: u16 = 2;
+pub const PROTOCOL_VERSION: u16 = 3;
 /// Largest data chunk of an upload or read-back.
 pub const CHUNK_LEN: usize = 64;
 /// Largest postcard message body (before CRC and COBS).
@@ -96,9 +96,9 @@ pub enum Request {
     StreamStart,
     /// Stop streaming acquired samples.
     StreamStop,
-    /// Set the acquisition rate in samples per second.
+    /// Set the ADS1262 data rate in samples per second (one of [`SET_RATES_SPS`]).
     SetRate {
-        /// Samples per second, 1..=MAX_RATE_HZ.
+        /// Samples per second.
         hz: u32,
     },
     /// Process this raw sample as if acquired now (QEMU board); answered with a Sample.
@@ -129,8 +129,13 @@ pub fn upload_body_crc32(bytes: &[u8]) -> u32 {
 /// Largest Bench count (keeps the device answering within a few seconds on the board).
 pub const MAX_BENCH_COUNT: u32 = 100_000;
 
-/// Highest acquisition rate accepted by SetRate (the ADS1262 at 7200 SPS with two channels).
-pub const MAX_RATE_HZ: u32 = 3600;
+/// The ADS1262 data rates SetRate accepts, in samples per second (MODE2.DR). Each frame needs
+/// one settled conversion per channel, 4 periods each with sinc4: frames come at rate / 8. The
+/// top rate keeps the frames (50/s, ≈ 70 bytes each) inside 115200 Bd with room for replies.
+pub const SET_RATES_SPS: [u32; 7] = [5, 10, 20, 50, 60, 100, 400];
+
+/// Highest rate SetRate accepts (InvalidRate's detail).
+pub const MAX_RATE_HZ: u32 = 400;
 
 /// Device → host messages.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -220,8 +225,39 @@ pub struct DeviceInfo {
     pub samples: u32,
     /// Streaming of acquired samples on.
     pub streaming: bool,
-    /// Acquisition rate in samples per second.
+    /// ADS1262 data rate in samples per second (SetRate; one frame per 8 conversions with
+    /// sinc4, see docs/protocol.md).
     pub rate_hz: u32,
+    /// Why the MCU last reset, and which clock it runs on.
+    pub boot: BootReport,
+}
+
+/// Reset cause and clock source, read once at boot.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct BootReport {
+    /// RCC_CSR[31:25] of the boot (RM0090 "RCC clock control & status register"): bit 0 BOR,
+    /// 1 PIN (reset pin), 2 POR/PDR, 3 SFT (software: a panic, a fatal start-up error), 4 IWDG
+    /// (watchdog: acquisition or the worker stopped), 5 WWDG, 6 LPWR. 0 = unknown (QEMU).
+    pub reset_cause: u8,
+    /// The crystal did not start within 100 ms: the PLL runs from the HSI (±1 %).
+    pub clock_fallback: bool,
+}
+
+impl BootReport {
+    /// Brown-out reset.
+    pub const BOR: u8 = 1 << 0;
+    /// Reset pin (includes every other reset on the F4).
+    pub const PIN: u8 = 1 << 1;
+    /// Power-on / power-down reset.
+    pub const POR: u8 = 1 << 2;
+    /// Software reset: panic or fatal start-up error.
+    pub const SOFTWARE: u8 = 1 << 3;
+    /// Independent watchdog.
+    pub const IWDG: u8 = 1 << 4;
+    /// Window watchdog.
+    pub const WWDG: u8 = 1 << 5;
+    /// Low-power reset.
+    pub const LOW_POWER: u8 = 1 << 6;
 }
 
 /// A failure: a stable numeric code plus one number of detail (documented per code).
@@ -302,7 +338,7 @@ pub enum ErrorCode {
     Busy = 50,
     /// The request does not exist on this board (InjectSample on the front-end). Detail: 0.
     NotSupported = 51,
-    /// SetRate outside 1..=MAX_RATE_HZ. Detail: MAX_RATE_HZ.
+    /// SetRate with a rate not in [`SET_RATES_SPS`]. Detail: MAX_RATE_HZ.
     InvalidRate = 52,
     /// Bench count outside 1..=MAX_BENCH_COUNT. Detail: MAX_BENCH_COUNT.
     InvalidCount = 53,
@@ -757,6 +793,10 @@ mod tests {
                 samples: u32::MAX,
                 streaming: true,
                 rate_hz: u32::MAX,
+                boot: BootReport {
+                    reset_cause: u8::MAX,
+                    clock_fallback: true,
+                },
             }),
         };
         assert!(encode_frame(&info, &mut out).is_ok());

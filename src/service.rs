@@ -18,9 +18,9 @@
 use crate::pipeline::{self, RawSample};
 use crate::prepared::PreparedCalibration;
 use crate::protocol::{
-    decode_message, peek_request_id, upload_body_crc32, Board, DeviceInfo, DeviceMessage,
-    ErrorCode, ErrorReply, FrameError, HostFrame, Request, Response, CHUNK_LEN, MAX_BENCH_COUNT,
-    MAX_RATE_HZ, PROTOCOL_VERSION,
+    decode_message, peek_request_id, upload_body_crc32, Board, BootReport, DeviceInfo,
+    DeviceMessage, ErrorCode, ErrorReply, FrameError, HostFrame, Request, Response, CHUNK_LEN,
+    MAX_BENCH_COUNT, MAX_RATE_HZ, PROTOCOL_VERSION, SET_RATES_SPS,
 };
 use crate::storage::{CalibrationStore, SlotLayout, StorageError, ValidSlots};
 use crate::table::{CalibrationTable, ENCODED_LEN};
@@ -74,6 +74,7 @@ pub struct Service<F> {
     /// None when the store could not be opened at boot (layout does not fit the flash).
     store: Option<CalibrationStore<F>>,
     boot: BootTable,
+    boot_report: BootReport,
     /// The spare slot may not be erased yet: [`Service::erase_ahead`] has work to do.
     erase_pending: bool,
 }
@@ -120,6 +121,7 @@ impl<F: NorFlash> Service<F> {
             rate_hz: DEFAULT_RATE_HZ,
             store: None,
             boot: BootTable::StorageFault,
+            boot_report: BootReport::default(),
             erase_pending: false,
         };
         if let Ok(mut store) = CalibrationStore::new(flash, layout) {
@@ -148,6 +150,11 @@ impl<F: NorFlash> Service<F> {
             sequence: newest.sequence,
             with_previous: self.previous.is_some(),
         })
+    }
+
+    /// The board's reset cause and clock source, reported in Info.
+    pub fn set_boot_report(&mut self, report: BootReport) {
+        self.boot_report = report;
     }
 
     /// What the store gave at boot.
@@ -331,7 +338,7 @@ impl<F: NorFlash> Service<F> {
                 Ok(Response::Ok)
             }
             Request::SetRate { hz } => {
-                if hz == 0 || hz > MAX_RATE_HZ {
+                if !SET_RATES_SPS.contains(&hz) {
                     return Err(ErrorCode::InvalidRate.reply(MAX_RATE_HZ));
                 }
                 self.rate_hz = hz;
@@ -484,6 +491,7 @@ impl<F: NorFlash> Service<F> {
             samples: self.seq,
             streaming: self.streaming,
             rate_hz: self.rate_hz,
+            boot: self.boot_report,
         }
     }
 }
@@ -853,6 +861,21 @@ mod tests {
         );
         req(&mut s, Request::SetRate { hz: 100 });
         assert_eq!(s.rate_hz(), 100);
+        // Only the ADS1262's listed data rates: 15 SPS is no MODE2.DR setting, 1200 is one the
+        // link cannot carry.
+        for hz in [15, 1200, 3600] {
+            assert_eq!(
+                error_code(&req(&mut s, Request::SetRate { hz })),
+                Some((ErrorCode::InvalidRate as u16, MAX_RATE_HZ)),
+                "{hz}"
+            );
+        }
+        assert_eq!(s.rate_hz(), 100);
+        for hz in crate::protocol::SET_RATES_SPS {
+            req(&mut s, Request::SetRate { hz });
+            assert_eq!(s.rate_hz(), hz);
+            assert!(crate::drivers::ads1262::DataRate::from_sps(hz).is_some());
+        }
     }
 
     #[test]

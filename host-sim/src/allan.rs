@@ -955,7 +955,7 @@ fn erfc(x: f64) -> f64 {
 }
 
 /// ln Γ, shared with the fitting statistics (one Lanczos implementation in the crate).
-pub use crate::fit::stats::ln_gamma;
+pub use crate::numerics::distributions::ln_gamma;
 
 /// Regularized lower incomplete gamma P(a, x): series for x < a + 1, Lentz continued fraction
 /// for the complement otherwise.

@@ -69,9 +69,9 @@ pub fn run_compensate(args: &CompensateArgs) -> anyhow::Result<()> {
 
 /// Runs `accomp load`.
 pub fn run_load(args: &LoadArgs) -> anyhow::Result<()> {
-    let bytes = crate::table_cli::read_table_bytes(&args.calibration)?;
+    let bytes = crate::calibration_file::read_table_bytes(&args.calibration)?;
     if !args.no_local_check {
-        crate::table_cli::decode_named(&bytes).context("table refused locally")?;
+        crate::calibration_file::decode_named(&bytes).context("table refused locally")?;
     }
     let mut conn = Connection::open(&args.target, args.firmware.as_deref())?;
     let id = conn.client.load(&bytes, |sent, total| {

@@ -3,8 +3,6 @@
 //! residual standard deviation, AICc, leave-one-out RMS and the F test, set beside the paper's
 //! printed models, and turned into a calibration table. Method and findings: docs/fitting.md.
 
-pub mod stats;
-
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -18,8 +16,8 @@ use thiserror::Error;
 
 use crate::log::reader::{ReadError, Records};
 
+use crate::numerics::distributions::{f_upper_tail, SpecialError};
 use crate::numerics::linalg::{least_squares, LinalgError};
-use stats::{f_upper_tail, SpecialError};
 
 /// Name of the temperature column of the input table.
 pub const TEMPERATURE_COLUMN: &str = "temperature_c";
@@ -761,44 +759,30 @@ pub fn calibration_table(
 /// Parses `YYYY-MM-DD`.
 pub fn parse_date(text: &str) -> Result<CalibrationDate, BuildError> {
     let err = || BuildError::Date(text.to_owned());
-    let mut parts = text.split('-');
-    let (Some(y), Some(m), Some(d), None) =
-        (parts.next(), parts.next(), parts.next(), parts.next())
-    else {
-        return Err(err());
-    };
-    Ok(CalibrationDate {
-        year: y.parse().map_err(|_| err())?,
-        month: m.parse().map_err(|_| err())?,
-        day: d.parse().map_err(|_| err())?,
+    // jiff parses the ISO 8601 date and refuses days that do not exist (2017-02-29).
+    let date: jiff::civil::Date = text.trim().parse().map_err(|_| err())?;
+    calibration_date(date).ok_or_else(err)
+}
+
+/// A jiff date as the table stores it (years 0..=65535).
+fn calibration_date(date: jiff::civil::Date) -> Option<CalibrationDate> {
+    Some(CalibrationDate {
+        year: u16::try_from(date.year()).ok()?,
+        month: u8::try_from(date.month()).ok()?,
+        day: u8::try_from(date.day()).ok()?,
     })
 }
 
-/// Today's UTC date from the system clock (days since 1970 → civil date, proleptic Gregorian).
+/// Today's UTC date from the system clock.
 pub fn today_utc() -> CalibrationDate {
-    let secs = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_secs());
-    civil_from_days((secs / 86_400) as i64)
-}
-
-/// Days since 1970-01-01 → (year, month, day), via 400-year eras of 146 097 days starting on
-/// 0000-03-01 (so that the leap day is the last day of the era's year).
-fn civil_from_days(days: i64) -> CalibrationDate {
-    let z = days + 719_468; // days from 0000-03-01 to 1970-01-01
-    let era = z.div_euclid(146_097);
-    let doe = z.rem_euclid(146_097); // day of era, 0..146096
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365; // year of era
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100); // day of (March-based) year
-    let mp = (5 * doy + 2) / 153; // March = 0
-    let day = doy - (153 * mp + 2) / 5 + 1;
-    let month = if mp < 10 { mp + 3 } else { mp - 9 };
-    let year = yoe + era * 400 + i64::from(month <= 2);
-    CalibrationDate {
-        year: u16::try_from(year).unwrap_or(0),
-        month: month as u8,
-        day: day as u8,
-    }
+    let today = jiff::Timestamp::now()
+        .to_zoned_datetime(jiff::tz::TimeZone::UTC)
+        .date();
+    calibration_date(today).unwrap_or(CalibrationDate {
+        year: 1970,
+        month: 1,
+        day: 1,
+    })
 }
 
 fn unit_of(column: &str) -> &str {
@@ -1347,19 +1331,19 @@ mod tests {
     }
 
     #[test]
-    fn civil_dates_from_day_counts() {
-        // Day counts from Python's datetime: 2024-01-01 → 19723, 2000-02-29 → 11016,
-        // 2100-03-01 → 47541 (2100 is not a leap year).
-        let d = |y, m, dd| CalibrationDate {
-            year: y,
-            month: m,
-            day: dd,
-        };
-        assert_eq!(civil_from_days(0), d(1970, 1, 1));
-        assert_eq!(civil_from_days(19_723), d(2024, 1, 1));
-        assert_eq!(civil_from_days(11_016), d(2000, 2, 29));
-        assert_eq!(civil_from_days(47_541), d(2100, 3, 1));
+    fn calibration_dates_are_real_iso_days() {
+        let d = |year, month, day| CalibrationDate { year, month, day };
         assert_eq!(parse_date("2017-04-01").unwrap(), d(2017, 4, 1));
-        assert!(parse_date("2017-04").is_err());
+        assert_eq!(parse_date("2000-02-29").unwrap(), d(2000, 2, 29));
+        for bad in [
+            "2017-02-29",
+            "2017-13-01",
+            "17-4-1",
+            "2017/04/01",
+            "-0001-01-01",
+        ] {
+            assert!(parse_date(bad).is_err(), "{bad}");
+        }
+        assert!(today_utc().year >= 2024);
     }
 }

@@ -1,6 +1,7 @@
 //! Host-side library behind the `accomp` CLI: fitting, simulation, analysis, firmware client.
 
 pub mod allan;
+pub mod calibration_file;
 pub mod demo;
 pub mod device;
 pub mod device_cli;

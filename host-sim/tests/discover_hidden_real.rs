@@ -77,7 +77,7 @@ struct Residual {
 fn residual_after_tide() -> Residual {
     let (log, _) = import::load(&record(), Format::Auto).expect("record");
     let opts = DatasetOptions {
-        max_points: usize::MAX,
+        max_points: accomp_host::discover::import::MAX_MAX_POINTS,
         ..DatasetOptions::default()
     };
     let ds = import::dataset_from_log(&log, &opts).expect("dataset");

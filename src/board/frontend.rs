@@ -1,45 +1,54 @@
-//! The real front-end board: HSE 8 MHz → PLL 168 MHz, USART1 (PA9/PA10) to the lab PC, SPI1
-//! shared by the ADS1262 and the AD7124-4, ADS1262 DRDY on PC4 (EXTI4), defmt over RTT,
-//! panic-probe. Pin map in docs/drivers.md ("Front-end board wiring"); not verified on hardware.
+//! The real front-end board: HSE 8 MHz → PLL 168 MHz (HSI fallback after a 100 ms crystal
+//! timeout), USART1 (PA9/PA10) to the lab PC, the ADS1262 alone on SPI1 in mode 1, the AD7124-4
+//! alone on SPI2 in mode 3, ADS1262 DRDY on PC4 (EXTI4), the independent watchdog, defmt over
+//! RTT, and a panic or HardFault that resets the MCU. Pin map in docs/drivers.md ("Front-end
+//! board wiring"); not verified on hardware.
 //!
-//! Acquisition is driven by the ADS1262's DRDY: one edge per settled conversion of the selected
-//! input. The EXTI handler reads it, switches the mux to the other input (START1 restarts the
-//! conversion, so the next edge is a settled conversion of that input), and after the tilt
-//! conversion reads the AD7124's RTD result (polled over the shared bus, bounded) and hands the
-//! complete [`RawSample`] to the worker. Driver errors become the pipeline's channel flags, so a
-//! fault never turns into a silent number.
+//! The acquisition sequencing itself is the core's [`accomp::acquisition`] (tested on the host
+//! against chip models); this file only builds the buses, pins and clocks it runs on.
 
-use core::cell::RefCell;
-
-use critical_section::Mutex;
+use cortex_m_rt::{exception, ExceptionFrame};
 use defmt_rtt as _;
 use embedded_hal::delay::DelayNs;
-use embedded_hal_bus::spi::CriticalSectionDevice;
-use panic_probe as _;
+use embedded_hal_bus::spi::ExclusiveDevice;
 use stm32f4xx_hal::{
-    gpio::{Edge, Input, Output, PushPull, PA4, PB0, PC4},
+    gpio::{Edge, Input, Output, PushPull, PA4, PB12, PC4},
     pac,
     prelude::*,
     rcc::Config,
     serial::{self, Serial},
-    spi::{Mode, Phase, Polarity, Spi},
+    spi::Spi,
+    watchdog::IndependentWatchdog,
 };
 
 use super::{Fatal, Parts};
+use accomp::acquisition::{board as bus, AdsSequencer, InterruptDrdy, RtdSequencer};
 use accomp::drivers::ad7124::{Ad7124, Ad7124Config};
-use accomp::drivers::ads1262::{Ads1262, Ads1262Config, Channel};
-use accomp::drivers::Error as DriverError;
-use accomp::pipeline::{ChannelFlags, RawSample};
-use accomp::protocol::Board;
+use accomp::drivers::ads1262::{Ads1262, Ads1262Config};
+use accomp::protocol::{Board, BootReport};
 
 /// Board reported in READY and Info.
 pub const BOARD: Board = Board::Frontend;
 
-/// Core clock after the PLL; SysTick runs from it.
+/// This board has converters: the acquisition tasks run.
+pub const HAS_ADCS: bool = true;
+
+/// Core clock after the PLL (crystal or HSI); SysTick runs from it.
 pub const SYSTICK_HZ: u32 = 168_000_000;
 
+/// How long the crystal gets to start (ST's HAL uses the same HSE_STARTUP_TIMEOUT, 100 ms).
+const HSE_TIMEOUT_MS: u32 = 100;
+
+/// Independent watchdog period. Longer than the slowest thing the firmware may legitimately do
+/// without progress: a 128 KiB flash sector erase stalls the CPU up to 4 s (STM32F405
+/// datasheet DS8626, t_ERASE128KB max at x8, the parallelism the flash driver uses), and a DRDY
+/// timeout plus re-init takes < 2 s at 5 SPS.
+/// The LSI (17–47 kHz) makes the real period 5.6–15 s.
+pub const WATCHDOG_MS: u32 = 8_000;
+
 /// Busy-wait delay from the core clock (SysTick belongs to the RTIC monotonic). Waits at least
-/// the requested time; only used for the drivers' reset waits and the CS set-up of the bus.
+/// the requested time. The drivers take one, but the sequencers never ask it for the reset
+/// waits (they step over ticks instead); only the SPI devices' CS set-up could use it.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct CycleDelay;
 
@@ -50,134 +59,84 @@ impl DelayNs for CycleDelay {
     }
 }
 
-/// The drivers' DRDY input when the firmware does not poll a pin: the ADS1262's DRDY is the
-/// EXTI4 interrupt, and the AD7124's DOUT/RDY is the shared MISO line, so its driver polls
-/// STATUS instead. Reads as "not ready": a polled wait on it times out (DRDY_TIMEOUT), it never
-/// pretends data is there.
-#[derive(Debug, Clone, Copy, Default)]
-pub struct NoDrdyPin;
+type AdsDevice = ExclusiveDevice<Spi<pac::SPI1>, PA4<Output<PushPull>>, CycleDelay>;
+type RtdDevice = ExclusiveDevice<Spi<pac::SPI2>, PB12<Output<PushPull>>, CycleDelay>;
 
-impl embedded_hal::digital::ErrorType for NoDrdyPin {
-    type Error = core::convert::Infallible;
+/// The ADS1262 sequencer (shared by the DRDY interrupt and its supervisor task).
+pub type AdsAcquisition = AdsSequencer<AdsDevice, InterruptDrdy, CycleDelay>;
+/// The AD7124-4 sequencer (owned by the RTD task).
+pub type RtdAcquisition = RtdSequencer<RtdDevice, InterruptDrdy, CycleDelay>;
+
+/// The ADS1262 DRDY input (PC4, EXTI4, falling edge).
+pub type DrdyPin = PC4<Input>;
+
+/// Clears the EXTI4 pending bit (first thing in the DRDY handler).
+pub fn acknowledge_drdy(pin: &mut DrdyPin) {
+    pin.clear_interrupt_pending_bit();
 }
 
-impl embedded_hal::digital::InputPin for NoDrdyPin {
-    fn is_high(&mut self) -> Result<bool, Self::Error> {
-        Ok(true)
-    }
-    fn is_low(&mut self) -> Result<bool, Self::Error> {
-        Ok(false)
+/// The independent watchdog, started in [`init`].
+pub struct Watchdog(IndependentWatchdog);
+
+impl Watchdog {
+    /// Reload the counter (only the watchdog task calls this, and only after progress).
+    pub fn feed(&mut self) {
+        self.0.feed();
     }
 }
 
-type Bus = Spi<pac::SPI1>;
-type AdsDevice = CriticalSectionDevice<'static, Bus, PA4<Output<PushPull>>, CycleDelay>;
-type RtdDevice = CriticalSectionDevice<'static, Bus, PB0<Output<PushPull>>, CycleDelay>;
+/// Reset flags (RCC_CSR[31:25]), then clear them so the next boot reports its own cause.
+fn take_reset_cause(rcc: &pac::RCC) -> u8 {
+    let csr = rcc.csr().read().bits();
+    rcc.csr().modify(|_, w| w.rmvf().set_bit());
+    (csr >> 25) as u8
+}
 
-/// The pipeline's channel flags for a driver error: which one tells the host why the value is
-/// missing. Every error sets at least one flag.
-fn flags_for<S, P>(e: &DriverError<S, P>) -> ChannelFlags {
-    let bit = match e {
-        // The bytes arrived but cannot be trusted.
-        DriverError::Checksum { .. } | DriverError::CrcMismatch { .. } | DriverError::Spi(_) => {
-            ChannelFlags::CHECKSUM
+/// Start the crystal and wait for HSERDY at most [`HSE_TIMEOUT_MS`]; on timeout switch it off
+/// again (the PLL then runs from the 16 MHz HSI: same 168 MHz, ±1 % instead of crystal
+/// accuracy, which the UART tolerates; Info reports it).
+fn start_crystal(rcc: &pac::RCC) -> bool {
+    rcc.cr().modify(|_, w| w.hseon().set_bit());
+    for _ in 0..HSE_TIMEOUT_MS {
+        if rcc.cr().read().hserdy().bit_is_set() {
+            return true;
         }
-        // The converter itself says the input is out of range or the conversion failed.
-        DriverError::AdcError(_) => ChannelFlags::SATURATION,
-        // No fresh, valid conversion: timeout, stale data, a reset that lost the configuration,
-        // or a chip that does not answer as configured.
-        DriverError::DrdyTimeout
-        | DriverError::StaleData
-        | DriverError::UnexpectedReset
-        | DriverError::Pin(_)
-        | DriverError::InvalidConfig
-        | DriverError::DeviceId { .. }
-        | DriverError::NotResponding { .. }
-        | DriverError::ReadBack { .. } => ChannelFlags::DRDY_TIMEOUT,
-    };
-    ChannelFlags(bit)
-}
-
-/// DRDY pin plus the two converters on the shared SPI1.
-pub struct Acquisition {
-    drdy: PC4<Input>,
-    ads: Ads1262<AdsDevice, NoDrdyPin, CycleDelay>,
-    rtd: Ad7124<RtdDevice, NoDrdyPin, CycleDelay>,
-    /// The accelerometer conversion waiting for the tilt conversion of the same sample.
-    accel: Option<(i32, ChannelFlags)>,
-}
-
-impl Acquisition {
-    /// Called from the DRDY interrupt: acknowledges it, reads the conversion DRDY announced and
-    /// moves the sequence on; returns a sample when accelerometer, tilt and RTD are all read.
-    pub fn on_drdy(&mut self) -> Option<RawSample> {
-        self.drdy.clear_interrupt_pending_bit();
-        let selected = self.ads.selected();
-        let (code, flags) = match self.ads.read_conversion() {
-            Ok(s) => {
-                let alarm = s.status.is_some_and(|st| st.any_alarm());
-                let flags = if alarm { ChannelFlags::SATURATION } else { 0 };
-                (s.code.0, ChannelFlags(flags))
-            }
-            Err(e) => {
-                if matches!(e, DriverError::UnexpectedReset) {
-                    // The chip lost its configuration: configure it again (≈ 10 ms, rare).
-                    if let Err(e) = self.ads.init() {
-                        defmt::error!("ADS1262 re-init failed: {}", defmt::Debug2Format(&e));
-                    }
-                }
-                (0, flags_for(&e))
-            }
-        };
-        match selected {
-            Some(Channel::Accelerometer) => {
-                self.accel = Some((code, flags));
-                self.switch_to(Channel::Tiltmeter);
-                None
-            }
-            Some(Channel::Tiltmeter) => {
-                // Without the accelerometer half (a failed switch lost it) the sample says so.
-                let (accel, accel_flags) = self
-                    .accel
-                    .take()
-                    .unwrap_or((0, ChannelFlags(ChannelFlags::DRDY_TIMEOUT)));
-                let (rtd, rtd_flags) = match self.rtd.read_rtd_polled() {
-                    Ok(c) => (c.0, ChannelFlags::default()),
-                    Err(e) => (0, flags_for(&e)),
-                };
-                self.switch_to(Channel::Accelerometer);
-                Some(RawSample {
-                    accel,
-                    rtd,
-                    tilt: code,
-                    accel_flags,
-                    rtd_flags,
-                    tilt_flags: flags,
-                })
-            }
-            None => {
-                // After a failed switch the driver does not know the mux: start a new sample.
-                self.accel = None;
-                self.switch_to(Channel::Accelerometer);
-                None
-            }
-        }
+        // The core still runs on the 16 MHz HSI here: 16 000 cycles = 1 ms.
+        cortex_m::asm::delay(16_000);
     }
-
-    fn switch_to(&mut self, channel: Channel) {
-        if let Err(e) = self.ads.select_channel(channel) {
-            // The driver forgets the selection; the next DRDY restarts the sequence.
-            defmt::warn!("ADS1262 mux switch failed: {}", defmt::Debug2Format(&e));
-        }
-    }
+    rcc.cr().modify(|_, w| w.hseon().clear_bit());
+    false
 }
 
-/// HSE 8 MHz crystal, PLL to 168 MHz, USART1 115200 8N1, SPI1 mode 1 at 4 MHz (both ADCs
-/// accept CPOL=0/CPHA=1), CS PA4 (ADS1262) and PB0 (AD7124), DRDY falling edge on PC4.
+/// Clocks (crystal or HSI fallback), USART1 115200 8N1, SPI1 (ADS1262, mode 1) and SPI2
+/// (AD7124, mode 3) at the frequencies of [`accomp::acquisition::board`], the two sequencers
+/// (they initialise their converters from their first tick), DRDY falling edge on PC4, and the
+/// watchdog started last.
 pub fn init(mut dp: pac::Peripherals) -> Parts {
+    let reset_cause = take_reset_cause(&dp.RCC);
+    let crystal = start_crystal(&dp.RCC);
+    let config = if crystal {
+        Config::hse(8.MHz())
+    } else {
+        Config::hsi()
+    };
     let mut rcc = dp
         .RCC
-        .freeze(Config::hse(8.MHz()).sysclk(168.MHz()).pclk1(42.MHz()));
+        .freeze(config.sysclk(168.MHz()).pclk1(42.MHz()).pclk2(84.MHz()));
+    if !crystal {
+        defmt::error!(
+            "HSE did not start in {} ms: running from HSI",
+            HSE_TIMEOUT_MS
+        );
+    }
+    if rcc.clocks.pclk2().raw() != bus::APB2_HZ || rcc.clocks.pclk1().raw() != bus::APB1_HZ {
+        // The SPI prescalers below are exact only at these clocks.
+        defmt::error!(
+            "APB clocks {} / {} Hz differ from the SPI plan",
+            rcc.clocks.pclk2().raw(),
+            rcc.clocks.pclk1().raw()
+        );
+    }
     let mut syscfg = dp.SYSCFG.constrain(&mut rcc);
     let gpioa = dp.GPIOA.split(&mut rcc);
     let gpiob = dp.GPIOB.split(&mut rcc);
@@ -195,74 +154,85 @@ pub fn init(mut dp: pac::Peripherals) -> Parts {
     let (tx, mut rx) = serial.split();
     rx.listen();
 
-    let mode = Mode {
-        polarity: Polarity::IdleLow,
-        phase: Phase::CaptureOnSecondTransition,
-    };
-    let spi = dp.SPI1.spi(
+    // One bus per converter, each in its datasheet's mode: no mode switching, no sharing, no
+    // lock between the DRDY interrupt and the RTD task.
+    let spi1 = dp.SPI1.spi(
         (Some(gpioa.pa5), Some(gpioa.pa6), Some(gpioa.pa7)),
-        mode,
-        4.MHz(),
+        bus::ADS1262_BUS.mode,
+        bus::ADS1262_BUS.sclk_hz.Hz(),
         &mut rcc,
     );
-    // The bus lives for the whole program; both devices borrow it through a critical-section
-    // mutex (what makes the devices Send for RTIC). Only the EXTI4 task uses them, so the
-    // critical sections are short and never contended.
-    let Some(bus) = cortex_m::singleton!(: Mutex<RefCell<Bus>> = Mutex::new(RefCell::new(spi)))
-    else {
-        fatal(Fatal::Spi)
-    };
-    let bus: &'static Mutex<RefCell<Bus>> = bus;
-    let cs_ads = gpioa.pa4.into_push_pull_output();
-    let cs_rtd = gpiob.pb0.into_push_pull_output();
-    // Both CS pins are driven high here (GPIO writes are infallible): neither chip listens
-    // until selected.
-    let Ok(ads_dev) = CriticalSectionDevice::new(bus, cs_ads, CycleDelay);
-    let Ok(rtd_dev) = CriticalSectionDevice::new(bus, cs_rtd, CycleDelay);
+    let spi2 = dp.SPI2.spi(
+        (Some(gpiob.pb13), Some(gpiob.pb14), Some(gpiob.pb15)),
+        bus::AD7124_BUS.mode,
+        bus::AD7124_BUS.sclk_hz.Hz(),
+        &mut rcc,
+    );
+    // CS pins are driven high here (GPIO writes are infallible).
+    let Ok(ads_dev) = ExclusiveDevice::new(spi1, gpioa.pa4.into_push_pull_output(), CycleDelay);
+    let Ok(rtd_dev) = ExclusiveDevice::new(spi2, gpiob.pb12.into_push_pull_output(), CycleDelay);
 
-    let mut ads = Ads1262::new(
+    // Neither converter is touched here: each sequencer initialises its chip in steps from its
+    // first tick (reset, then the configuration on a later tick), so nothing waits at boot
+    // either, and a chip that fails to start is retried while the frames say why.
+    let ads = AdsSequencer::new(Ads1262::new(
         ads_dev,
-        NoDrdyPin,
+        InterruptDrdy,
         CycleDelay,
         Ads1262Config::board_default(),
-    );
-    let mut rtd = Ad7124::new(
+    ));
+    let rtd = RtdSequencer::new(Ad7124::new(
         rtd_dev,
-        NoDrdyPin,
+        InterruptDrdy,
         CycleDelay,
         Ad7124Config::board_default(),
-    );
-    // A converter that fails to start is reported and left alone: the ADS1262 then never raises
-    // DRDY (no frames at all), the AD7124 makes every RTD reading fail (RTD_INVALID frames).
-    match rtd.init() {
-        Ok(info) => defmt::info!("AD7124 rev {}", info.silicon_revision),
-        Err(e) => defmt::error!("AD7124 init failed: {}", defmt::Debug2Format(&e)),
-    }
-    match ads.init() {
-        Ok(info) => defmt::info!("ADS1262 rev {}", info.revision),
-        Err(e) => defmt::error!("ADS1262 init failed: {}", defmt::Debug2Format(&e)),
-    }
+    ));
 
     let mut drdy = gpioc.pc4.into_pull_up_input();
     drdy.make_interrupt_source(&mut syscfg);
     drdy.trigger_on_edge(&mut dp.EXTI, Edge::Falling);
     drdy.enable_interrupt(&mut dp.EXTI);
 
+    let mut watchdog = IndependentWatchdog::new(dp.IWDG);
+    watchdog.stop_on_debug(&dp.DBGMCU, true);
+    watchdog.start(WATCHDOG_MS.millis());
+
     Parts {
         rx,
         tx,
-        acquisition: Acquisition {
-            drdy,
-            ads,
-            rtd,
-            accel: None,
-        },
+        ads,
+        rtd,
+        drdy,
+        watchdog: Watchdog(watchdog),
         flash: super::Flash::new(dp.FLASH),
+        boot: BootReport {
+            reset_cause,
+            clock_fallback: !crystal,
+        },
     }
 }
 
 /// Logs the failure and resets: on the bench a reboot is the only way back.
 pub fn fatal(reason: Fatal) -> ! {
     defmt::error!("fatal: {}", reason);
+    cortex_m::peripheral::SCB::sys_reset()
+}
+
+/// A panic resets the MCU (the watchdog would too, 8 s later); the next boot reports
+/// SFTRSTF in Info's reset cause.
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    cortex_m::interrupt::disable();
+    if let Some(loc) = info.location() {
+        defmt::error!("panic at {}:{}", loc.file(), loc.line());
+    } else {
+        defmt::error!("panic");
+    }
+    cortex_m::peripheral::SCB::sys_reset()
+}
+
+#[exception]
+unsafe fn HardFault(frame: &ExceptionFrame) -> ! {
+    defmt::error!("HardFault at pc={=u32:#x}", frame.pc());
     cortex_m::peripheral::SCB::sys_reset()
 }

@@ -1,7 +1,9 @@
 //! Board support: everything that differs between QEMU's netduinoplus2 and the real front-end.
 //!
-//! Each board provides: `BOARD`, `SYSTICK_HZ`, `UartRx`/`UartTx`, `init` (clocks, UART with
-//! the RX interrupt enabled, acquisition), `fatal` (no way back), and the logger/panic plumbing.
+//! Each board provides: `BOARD`, `SYSTICK_HZ`, `HAS_ADCS`, `UartRx`/`UartTx`, the acquisition
+//! types (`AdsAcquisition`, `RtdAcquisition`, `DrdyPin`, `acknowledge_drdy`), `Watchdog`, `init`
+//! (clocks, UART with the RX interrupt enabled, acquisition, watchdog), `fatal` (no way back),
+//! and the logger/panic plumbing (a panic never ends in a HardFault loop).
 //! The shared UART helpers are here because both boards use the HAL's USART1.
 
 use stm32f4xx_hal::prelude::*;
@@ -29,9 +31,18 @@ pub type UartTx = stm32f4xx_hal::serial::Tx<stm32f4xx_hal::pac::USART1>;
 pub struct Parts {
     pub rx: UartRx,
     pub tx: UartTx,
-    pub acquisition: Acquisition,
+    /// ADS1262 sequencer (accelerometer + tilt), booted.
+    pub ads: AdsAcquisition,
+    /// AD7124 sequencer (RTD), booted.
+    pub rtd: RtdAcquisition,
+    /// The ADS1262 DRDY interrupt pin.
+    pub drdy: DrdyPin,
+    /// The independent watchdog, running (QEMU: none).
+    pub watchdog: Watchdog,
     /// The NOR flash holding the two calibration slots ([`SLOT_LAYOUT`]).
     pub flash: Flash,
+    /// Reset cause and clock source, for Info.
+    pub boot: accomp::protocol::BootReport,
 }
 
 /// Unrecoverable start-up failures, each with its own exit code under QEMU.
@@ -44,9 +55,6 @@ pub enum Fatal {
     /// The calibration flash could not be set up (QEMU: its RAM flash singleton was taken).
     #[cfg(feature = "board-qemu")]
     Flash = 5,
-    /// The shared SPI bus could not be set up (front-end board only).
-    #[cfg(feature = "board-frontend")]
-    Spi = 6,
 }
 
 /// Next received byte, or None when the receive register is empty. Line errors (overrun,

@@ -17,7 +17,9 @@ use stm32f4xx_hal::{
 };
 
 use super::{Fatal, Parts};
-use accomp::protocol::Board;
+use accomp::acquisition::{AdsReading, RtdReading};
+use accomp::drivers::ads1262::DataRate;
+use accomp::protocol::{Board, BootReport};
 use accomp::storage::{RamFlash, RamFlashError, SlotLayout};
 use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
 use semihosting::io::{Read as _, Seek as _, SeekFrom, Write as _};
@@ -222,19 +224,66 @@ pub fn init(dp: pac::Peripherals) -> Parts {
     Parts {
         rx,
         tx,
-        acquisition: Acquisition,
+        ads: AdsAcquisition,
+        rtd: RtdAcquisition,
+        drdy: DrdyPin,
+        watchdog: Watchdog,
         flash,
+        // QEMU models no RCC: no reset flags, and the HSI is what this board runs on by design.
+        boot: BootReport {
+            reset_cause: 0,
+            clock_fallback: false,
+        },
     }
 }
 
-/// No ADCs in QEMU: samples arrive as InjectSample frames, and EXTI4 is never enabled.
-pub struct Acquisition;
+/// No ADCs in QEMU: samples arrive as InjectSample frames; EXTI4 is never enabled and the
+/// acquisition tasks are not spawned.
+pub const HAS_ADCS: bool = false;
 
-impl Acquisition {
-    /// Never called on this board (its interrupt is not enabled).
-    pub fn on_drdy(&mut self) -> Option<accomp::pipeline::RawSample> {
+/// Stand-in for the ADS1262 sequencer (never called on this board).
+pub struct AdsAcquisition;
+
+impl AdsAcquisition {
+    /// Never called (EXTI4 is not enabled).
+    pub fn on_drdy(&mut self, _now_us: u64) -> Option<AdsReading> {
         None
     }
+    /// Never called (the supervisor is not spawned).
+    pub fn on_tick(&mut self, _now_us: u64) -> Option<AdsReading> {
+        None
+    }
+    /// Nothing to reprogram.
+    pub fn request_rate(&mut self, _rate: DataRate) {}
+}
+
+/// Stand-in for the AD7124 sequencer.
+pub struct RtdAcquisition;
+
+impl RtdAcquisition {
+    /// Never called (the RTD task is not spawned).
+    pub fn on_tick(&mut self, _now_us: u64) -> Option<RtdReading> {
+        None
+    }
+    /// The RTD task's period if it ran.
+    pub fn period_us(&self) -> u64 {
+        100_000
+    }
+}
+
+/// No DRDY pin.
+pub struct DrdyPin;
+
+/// Nothing to acknowledge.
+pub fn acknowledge_drdy(_pin: &mut DrdyPin) {}
+
+/// QEMU's netduinoplus2 has no IWDG model: feeding is a no-op (the watchdog task still checks
+/// worker progress the same way).
+pub struct Watchdog;
+
+impl Watchdog {
+    /// No-op.
+    pub fn feed(&mut self) {}
 }
 
 /// Ends the QEMU run with the failure's code.

@@ -90,6 +90,27 @@ pub enum Error<SpiE, PinE> {
     AdcError(ad7124::ErrorFlags),
 }
 
+impl<SpiE, PinE> Error<SpiE, PinE> {
+    /// The variant's name, for firmware logs: defmt prints it without pulling in `core::fmt`
+    /// (whose Debug machinery would cost the front-end build ~3.5 KiB of flash).
+    pub const fn name(&self) -> &'static str {
+        match self {
+            Error::Spi(_) => "Spi",
+            Error::Pin(_) => "Pin",
+            Error::DrdyTimeout => "DrdyTimeout",
+            Error::Checksum { .. } => "Checksum",
+            Error::CrcMismatch { .. } => "CrcMismatch",
+            Error::InvalidConfig => "InvalidConfig",
+            Error::DeviceId { .. } => "DeviceId",
+            Error::NotResponding { .. } => "NotResponding",
+            Error::ReadBack { .. } => "ReadBack",
+            Error::StaleData => "StaleData",
+            Error::UnexpectedReset => "UnexpectedReset",
+            Error::AdcError(_) => "AdcError",
+        }
+    }
+}
+
 /// CRC-8 with polynomial x^8 + x^2 + x + 1 (0x07), initial value 0, no reflection, no final XOR
 /// (the CRC-8/SMBUS parameter set): the AD7124 SPI CRC and the ADS1262 CRC mode both use it.
 pub(crate) const CRC8_ATM: crc::Crc<u8> = crc::Crc::<u8>::new(&crc::CRC_8_SMBUS);

@@ -310,23 +310,18 @@ fn test() -> Result<()> {
 
 /// The AQG gravimeter record has no licence, so it is not in the repository and its discovery
 /// test is `#[ignore]`d (listed as ignored above). It runs here when the record is present: at
-/// `$ACCOMP_AQG_RECORD`, or in the developers' `../shared/data/measured/` beside the clone.
+/// the path `$ACCOMP_AQG_RECORD` names (data/README.md says where to get it).
 /// Otherwise this says plainly that it did not run.
 fn aqg_record_test() -> Result<()> {
     const FILE: &str = "aqg_quantum_gravimeter_2020-07-31_12h.csv";
     let record = env::var_os("ACCOMP_AQG_RECORD")
         .map(PathBuf::from)
-        .or_else(|| {
-            root()
-                .parent()
-                .map(|p| p.join("shared/data/measured").join(FILE))
-        })
         .filter(|p| p.is_file());
     let Some(record) = record else {
         eprintln!(
             "\n==> SKIPPED (did not run): discover_measured::aqg_record_names_the_earth_tide — \
              the AQG record {FILE} is not in the repository (no licence) and was not found at \
-             $ACCOMP_AQG_RECORD or ../shared/data/measured/"
+             $ACCOMP_AQG_RECORD (set it to the record's path)"
         );
         return Ok(());
     };

@@ -148,7 +148,7 @@ pub fn run_to_file(
 ) -> anyhow::Result<()> {
     use anyhow::Context as _;
     use std::io::Write as _;
-    let table = crate::table_cli::read_table_bytes(calibration)?;
+    let table = crate::calibration_file::read_table_bytes(calibration)?;
     let text =
         std::fs::read_to_string(input).with_context(|| format!("reading {}", input.display()))?;
     let file = super::samples_csv::parse(&text)?;

@@ -167,6 +167,33 @@ impl Basis {
         r
     }
 
+    /// Unscaled covariance (XᵀX)⁻¹ of the input columns' coefficients (dependent columns: row
+    /// and column 0); multiply by the residual variance for the covariance of the fit.
+    pub fn covariance(&self) -> Vec<Vec<f64>> {
+        let k = self.q.len();
+        let rr = |i: usize, j: usize| if i <= j { self.r[j][i] } else { 0.0 };
+        let mut rinv = vec![vec![0.0; k]; k];
+        #[allow(clippy::needless_range_loop)] // triangular solve: indices are the algorithm
+        for c in 0..k {
+            for i in (0..=c).rev() {
+                let s: f64 = (i + 1..=c).map(|j| rr(i, j) * rinv[j][c]).sum();
+                rinv[i][c] = (if i == c { 1.0 } else { 0.0 } - s) / rr(i, i);
+            }
+        }
+        let m = self.kept.len();
+        let mut cov = vec![vec![0.0; m]; m];
+        for (a, ka) in self.kept.iter().enumerate() {
+            for (b, kb) in self.kept.iter().enumerate() {
+                if let (Some(i), Some(j)) = (ka, kb) {
+                    // (R⁻¹R⁻ᵀ)[i][j] = Σ_c R⁻¹[i][c]·R⁻¹[j][c], in scaled coordinates.
+                    let v: f64 = (0..k).map(|c| rinv[*i][c] * rinv[*j][c]).sum();
+                    cov[a][b] = v / (self.scale[a] * self.scale[b]);
+                }
+            }
+        }
+        cov
+    }
+
     /// Coefficients of the input columns and their unscaled standard errors (sqrt of the
     /// diagonal of (XᵀX)⁻¹), dependent columns 0 ± ∞.
     pub fn solve(&self, y: &[f64]) -> (Vec<f64>, Vec<f64>) {
@@ -639,6 +666,7 @@ mod tests {
             site: None,
             dt_s: 10.0,
             notes: Vec::new(),
+            warnings: Vec::new(),
         };
         (ds, a, temp)
     }

@@ -542,6 +542,7 @@ mod tests {
             site: None,
             dt_s: 10.0,
             notes: Vec::new(),
+            warnings: Vec::new(),
         };
         let c = columns(&Effect::SelfHeating, &ds, &Context::default(), 300.0);
         // Settled before the move; after it the coil cools as e^{−(t − 990)/τ}: the filter holds

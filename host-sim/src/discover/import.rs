@@ -293,6 +293,9 @@ pub struct Dataset {
     pub dt_s: f64,
     /// Rows read, rows dropped for NaN, bins used: what happened on the way.
     pub notes: Vec<String>,
+    /// What the user must not miss about the input (empty channels, absurd values, gaps that
+    /// coarsen the bins, too few points): printed first, and in the JSON `warnings`.
+    pub warnings: Vec<String>,
 }
 
 /// Output units per g for a column unit suffix, when the suffix says it.
@@ -386,6 +389,52 @@ pub struct DatasetOptions {
     pub unit_per_g_from_calibration: Option<f64>,
 }
 
+/// `--max-points` below this is refused: the selection's blocked cross-validation cuts the
+/// record into 100 blocks and the noise model's flicker needs several points per decade.
+pub const MIN_MAX_POINTS: usize = 1_000;
+/// `--max-points` above this is refused: the fit keeps ≈ [`BYTES_PER_POINT`] per point
+/// (design columns, their whitened copies, the Kalman gains of the noise model and of each
+/// cross-validation fold), so 2 M points is ≈ 3 GB.
+pub const MAX_MAX_POINTS: usize = 2_000_000;
+/// Working memory of the fit per point, bytes (measured order of magnitude, see above).
+pub const BYTES_PER_POINT: usize = 1_500;
+/// Fewer points than this after binning are refused: 100 cross-validation blocks of at least
+/// one point, and a baseline of up to ~10 columns.
+pub const MIN_POINTS: usize = 100;
+/// A value further than this many times the central 98 % range of its column from the
+/// column's median is not a measurement (1e300, a stuck converter's full scale); its row is
+/// dropped with a warning.
+pub const ABSURD_SPREAD: f64 = 1.0e4;
+
+/// The memory the fit will use for `points` points, bytes (stated in the notes).
+pub fn memory_estimate_bytes(points: usize, rows: usize, columns: usize) -> usize {
+    points
+        .saturating_mul(BYTES_PER_POINT)
+        .saturating_add(rows.saturating_mul(columns).saturating_mul(8))
+}
+
+/// Rows of `col` that are not measurements: non-finite, or further than [`ABSURD_SPREAD`] times
+/// the central 98 % range (at least 1e-9 of the median's magnitude) from the median.
+fn absurd_rows(col: &[f64]) -> Vec<usize> {
+    let mut v: Vec<f64> = col.iter().copied().filter(|x| x.is_finite()).collect();
+    if v.is_empty() {
+        return Vec::new();
+    }
+    v.sort_by(f64::total_cmp);
+    let q = |p: f64| v[((v.len() - 1) as f64 * p).round() as usize];
+    let med = q(0.5);
+    let spread = (q(0.99) - q(0.01))
+        .max(1e-9 * med.abs())
+        .max(f64::MIN_POSITIVE);
+    col.iter()
+        .enumerate()
+        .filter(|(_, x)| {
+            x.is_infinite() || (x.is_finite() && (*x - med).abs() > ABSURD_SPREAD * spread)
+        })
+        .map(|(i, _)| i)
+        .collect()
+}
+
 impl Default for DatasetOptions {
     fn default() -> Self {
         Self {
@@ -399,6 +448,17 @@ impl Default for DatasetOptions {
 /// Reduces a log to a dataset: picks the output and channels, drops rows with gaps (counted),
 /// bins to at most `max_points`, marks segments.
 pub fn dataset_from_log(log: &Log, opts: &DatasetOptions) -> Result<Dataset, ImportError> {
+    if !(MIN_MAX_POINTS..=MAX_MAX_POINTS).contains(&opts.max_points) {
+        return Err(ImportError::Shape(format!(
+            "--max-points {} is outside {MIN_MAX_POINTS}..={MAX_MAX_POINTS} (the fit keeps \
+             ≈ {BYTES_PER_POINT} bytes per point: {} MB at {}; fewer than {MIN_MAX_POINTS} \
+             cannot hold the cross-validation's blocks and the noise model)",
+            opts.max_points,
+            memory_estimate_bytes(opts.max_points, 0, 0) / 1_000_000,
+            opts.max_points
+        )));
+    }
+    let mut warnings = Vec::new();
     let out_name = output_column(log, opts.output.as_deref())
         .ok_or_else(|| ImportError::Shape("no output column (output*, gravity*, a_i*)".into()))?;
     let y_raw = log
@@ -439,31 +499,75 @@ pub fn dataset_from_log(log: &Log, opts: &DatasetOptions) -> Result<Dataset, Imp
         let finite = col.iter().filter(|v| v.is_finite()).count();
         // A channel mostly empty would cost most rows; it is left out and said so.
         if finite * 10 < col.len() * 9 {
+            warnings.push(if finite == 0 {
+                format!(
+                    "channel {n} is empty (all {} values NaN): left out of the model",
+                    col.len()
+                )
+            } else {
+                format!(
+                    "channel {n} has only {finite} finite values of {}: left out of the model",
+                    col.len()
+                )
+            });
             continue;
         }
         chans.push((n.clone(), kind, f, col));
     }
     let t = log.time_s();
+    // Values that are not measurements (±inf, 1e300) are dropped with a warning: one of them
+    // makes every sum of squares infinite.
+    let mut absurd = vec![false; t.len()];
+    for (name, col) in std::iter::once((&out_name, y_raw)).chain(chans.iter().map(|c| (&c.0, c.3)))
+    {
+        let rows = absurd_rows(col);
+        if let Some(&first) = rows.first() {
+            warnings.push(format!(
+                "{} value(s) of {name} are not measurements (non-finite or absurdly far from \
+                 the rest, e.g. {:e} at data row {}): their rows are dropped",
+                rows.len(),
+                col[first],
+                first + 1
+            ));
+        }
+        for i in rows {
+            absurd[i] = true;
+        }
+    }
     let keep: Vec<usize> = (0..t.len())
-        .filter(|&i| y_raw[i].is_finite() && chans.iter().all(|c| c.3[i].is_finite()))
+        .filter(|&i| !absurd[i] && y_raw[i].is_finite() && chans.iter().all(|c| c.3[i].is_finite()))
         .collect();
     let mut notes = vec![format!(
         "{} rows read, {} dropped for a gap (NaN) in the output or a channel",
         t.len(),
         t.len() - keep.len()
     )];
-    if keep.len() < 20 {
+    if keep.len() < MIN_POINTS {
         return Err(ImportError::Shape(format!(
-            "only {} usable rows",
+            "only {} usable rows: the models need at least {MIN_POINTS}",
             keep.len()
         )));
     }
     let mut dts: Vec<f64> = keep.windows(2).map(|w| t[w[1]] - t[w[0]]).collect();
     dts.sort_by(f64::total_cmp);
     let median_dt = dts[dts.len() / 2];
-    let span = t[keep[keep.len() - 1]] - t[keep[0]];
+    // The bin width comes from the time the record covers, not its span: a long gap (a year
+    // between two sessions) would otherwise coarsen every bin of the data there is.
+    let gap_limit = 2.5 * median_dt;
+    let covered: f64 = dts.iter().map(|d| d.min(gap_limit)).sum();
+    let longest_gap = dts.last().copied().unwrap_or(0.0);
+    if longest_gap > covered.max(gap_limit) {
+        warnings.push(format!(
+            "a gap of {:.3e} s ({:.1} days) is longer than all the data together ({:.1} days): \
+             the two sides are fitted as one record with separate segments; a drift or a slow \
+             effect across the gap is extrapolated over it",
+            longest_gap,
+            longest_gap / 86_400.0,
+            covered / 86_400.0
+        ));
+    }
     let bin = if keep.len() > opts.max_points {
-        (span / opts.max_points as f64).max(median_dt)
+        (covered / opts.max_points as f64).max(median_dt)
     } else {
         0.0
     };
@@ -516,6 +620,20 @@ pub fn dataset_from_log(log: &Log, opts: &DatasetOptions) -> Result<Dataset, Imp
         }
     }
     let dt = if bin > 0.0 { bin } else { median_dt };
+    if ts.len() < MIN_POINTS {
+        return Err(ImportError::Shape(format!(
+            "only {} points after binning: the models need at least {MIN_POINTS}",
+            ts.len()
+        )));
+    }
+    let out_std = super::baseline::std(&ys);
+    let out_mean = ys.iter().sum::<f64>() / ys.len() as f64;
+    if out_std.is_nan() || out_std <= 1e-12 * out_mean.abs() {
+        return Err(ImportError::Shape(format!(
+            "the output {out_name} is constant ({out_mean:e}, standard deviation {out_std:e}): \
+             there is nothing to discover"
+        )));
+    }
     let segment_start: Vec<bool> = (0..ts.len())
         .map(|k| k == 0 || ts[k] - ts[k - 1] > 2.5 * dt)
         .collect();
@@ -530,6 +648,14 @@ pub fn dataset_from_log(log: &Log, opts: &DatasetOptions) -> Result<Dataset, Imp
             ", unbinned"
         },
         n_seg
+    ));
+    notes.push(format!(
+        "memory estimate {} MB ({} points × {BYTES_PER_POINT} B for the fit + {} rows × {} \
+         columns read)",
+        memory_estimate_bytes(ts.len(), t.len(), names.len()) / 1_000_000 + 1,
+        ts.len(),
+        t.len(),
+        names.len()
     ));
     let channels: Vec<Channel> = chans
         .iter()
@@ -563,6 +689,7 @@ pub fn dataset_from_log(log: &Log, opts: &DatasetOptions) -> Result<Dataset, Imp
         site,
         dt_s: dt,
         notes,
+        warnings,
     })
 }
 
@@ -625,24 +752,28 @@ mod tests {
 
     #[test]
     fn an_input_g_column_is_the_input_channel_and_bins_never_straddle_a_head_move() {
-        // 100 rows at 1 s, the head at +1 g for 35 s, then 0 g.
-        let mut log = Log::with_time((0..100).map(f64::from).collect()).unwrap();
+        // 2000 rows at 1 s, the head at +1 g for 701 s, then 0 g.
+        let mut log = Log::with_time((0..2000).map(f64::from).collect()).unwrap();
         log.set_meta("input_g", "1").unwrap();
-        log.push_column("output_v", vec![0.5; 100]).unwrap();
-        let a: Vec<f64> = (0..100).map(|i| if i < 35 { 1.0 } else { 0.0 }).collect();
+        log.push_column(
+            "output_v",
+            (0..2000).map(|i| 0.5 + 1e-3 * f64::from(i % 7)).collect(),
+        )
+        .unwrap();
+        let a: Vec<f64> = (0..2000).map(|i| if i < 701 { 1.0 } else { 0.0 }).collect();
         log.push_column("input_g", a).unwrap();
         let opts = DatasetOptions {
-            max_points: 10,
+            max_points: 1000,
             ..DatasetOptions::default()
         };
         let ds = dataset_from_log(&log, &opts).unwrap();
         let input = ds.changing_input().unwrap();
         assert!(input.iter().all(|&v| v == 1.0 || v == 0.0), "{input:?}");
-        // Bins of 99 s / 10 = 9.9 s: 11 by time (the last holds t = 99 s), and the one over
-        // 29.7–39.6 s split at the move.
-        assert_eq!(ds.len(), 12);
-        assert_eq!(ds.input_at(3), Some(1.0));
-        assert_eq!(ds.input_at(4), Some(0.0));
+        // Bins of 1999 s / 1000 = 1.999 s: 1001 by time (the last holds t = 1999 s), and the
+        // one over 699.65–701.65 s split at the move (t = 700 at 1 g, t = 701 at 0 g).
+        assert_eq!(ds.len(), 1002);
+        assert_eq!(ds.input_at(350), Some(1.0));
+        assert_eq!(ds.input_at(351), Some(0.0));
     }
 
     #[test]
@@ -663,19 +794,19 @@ mod tests {
         ds_rows[0] = 21.0;
         log.push_column("temperature_c", ds_rows).unwrap();
         let ds = dataset_from_log(&log, &DatasetOptions::default());
-        // Fewer than 20 rows is refused outright.
+        // Fewer than MIN_POINTS rows is refused outright.
         assert!(ds.is_err());
-        let t: Vec<f64> = (0..40)
-            .map(|i| if i < 20 { i as f64 } else { i as f64 + 50.0 })
+        let t: Vec<f64> = (0..200)
+            .map(|i| if i < 100 { i as f64 } else { i as f64 + 50.0 })
             .collect();
         let mut log = Log::with_time(t).unwrap();
-        let mut y = vec![1.0; 40];
+        let mut y: Vec<f64> = (0..200).map(|i| f64::from(i % 5)).collect();
         y[5] = f64::NAN;
         log.push_column("output_g", y).unwrap();
         let ds = dataset_from_log(&log, &DatasetOptions::default()).unwrap();
-        assert_eq!(ds.len(), 39);
+        assert_eq!(ds.len(), 199);
         assert_eq!(ds.segment_start.iter().filter(|&&s| s).count(), 2);
-        assert!(ds.segment_start[19]);
+        assert!(ds.segment_start[99]);
         assert_eq!(ds.unit_per_g, Some(1.0));
     }
 }

@@ -82,6 +82,11 @@ pub struct Discovery {
     pub adev_before: Vec<(f64, f64)>,
     /// ADEV of the final residual.
     pub adev_after: Vec<(f64, f64)>,
+    /// Reading noise of each measured regressor channel (errors in variables).
+    pub channel_noise: Vec<residual::ChannelNoise>,
+    /// Warnings about the input and the run (also in the selection's own `warnings`); printed
+    /// first in the text output and listed in the JSON `warnings`.
+    pub warnings: Vec<String>,
     /// Shape checks of the accepted effects (a poor fit is said, see `shape`).
     pub shape_checks: Vec<shape::ShapeCheck>,
     /// Wave-group tidal analysis of a gravity record, or why it was not run.
@@ -149,6 +154,8 @@ pub fn discover(
         trend,
         adev_before,
         adev_after,
+        warnings: ds.warnings.clone(),
+        channel_noise: residual::channel_noise(&ds),
         tidal,
         dataset: ds,
     })

@@ -137,6 +137,373 @@ impl NoiseModel {
     }
 }
 
+/// How a noise model was obtained (reported in the JSON `noise.method` and the text).
+pub const METHOD_KALMAN_ML: &str = "kalman_innovations_ml";
+/// The fallback when the likelihood fit failed (always announced as a warning).
+pub const METHOD_WHITE_FALLBACK: &str = "white_fallback";
+
+/// Lower bound of the flicker and random-walk levels relative to the white level (ln units):
+/// a component this small is "off" (its contribution is far below the white noise on any
+/// time scale the record resolves).
+const LN_RATIO_MIN: f64 = -30.0;
+/// Upper bound (the white part is then negligible; kept finite for the numerics).
+const LN_RATIO_MAX: f64 = 25.0;
+
+/// A noise model fitted by maximum likelihood, with how it went.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NoiseFit {
+    /// The model.
+    pub model: NoiseModel,
+    /// [`METHOD_KALMAN_ML`] or [`METHOD_WHITE_FALLBACK`].
+    pub method: &'static str,
+    /// −2 ln L of the residual under the model (constant dropped).
+    pub neg2_loglik: f64,
+    /// Likelihood evaluations used.
+    pub evaluations: usize,
+    /// Why the likelihood fit failed (then `model` is a white fallback).
+    pub failure: Option<String>,
+}
+
+/// −2 ln L (constant 2π dropped) of `x` on the rows `idx` (increasing) under `model`:
+/// Σ e²/S + Σ ln S over the Kalman innovations e with variances S. One pass, O(n·k²), nothing
+/// stored; irregular spacing and gaps are propagated over at their true length.
+pub fn neg2_loglik(model: &NoiseModel, t_s: &[f64], idx: &[usize], x: &[f64]) -> f64 {
+    let (q, ld) = innovation_sums(model, t_s, idx, x);
+    q + ld
+}
+
+/// (Σ e²/S, Σ ln S) of the Kalman innovations.
+fn innovation_sums(model: &NoiseModel, t_s: &[f64], idx: &[usize], x: &[f64]) -> (f64, f64) {
+    let nf = model.flicker.len();
+    let k = nf + 1;
+    let r_var = model.white_var.max(1e-300);
+    let mut p = vec![0.0; k * k];
+    for (j, &(_, v)) in model.flicker.iter().enumerate() {
+        p[j * k + j] = v;
+    }
+    let mut state = vec![0.0; k];
+    let (mut a, mut q, mut ph) = (vec![1.0; k], vec![0.0; k], vec![0.0; k]);
+    let mut prev_t: Option<f64> = None;
+    let (mut chi2, mut log_det) = (0.0, 0.0);
+    for &i in idx {
+        let dt = prev_t.map_or(0.0, |pt| (t_s[i] - pt).max(0.0));
+        prev_t = Some(t_s[i]);
+        predict_covariance(model, dt, &mut a, &mut q, &mut p);
+        let mut pred = 0.0;
+        for (s, f) in state.iter_mut().zip(&a) {
+            *s *= f;
+            pred += *s;
+        }
+        for r in 0..k {
+            ph[r] = p[r * k..(r + 1) * k].iter().sum();
+        }
+        let s = ph.iter().sum::<f64>() + r_var;
+        let e = x[i] - pred;
+        for (st, h) in state.iter_mut().zip(&ph) {
+            *st += h / s * e;
+        }
+        for r in 0..k {
+            let f = ph[r] / s;
+            for c in 0..k {
+                p[r * k + c] -= f * ph[c];
+            }
+        }
+        chi2 += e * e / s;
+        log_det += s.ln();
+    }
+    (chi2, log_det)
+}
+
+/// Range of the flicker slope β (component variance ∝ (τ_c/τ_mid)^β): 0 is a flat Allan
+/// deviation (1/f), negative values put the variance into the fast components (a low-passed
+/// white noise, as a gravimeter's output filter makes), positive into the slow ones.
+pub const FLICKER_SLOPE_RANGE: (f64, f64) = (-2.0, 1.0);
+/// Upper bound of ln(shortest flicker correlation time / spacing): the comb may start up to
+/// 100 spacings (an instrument's output filter of a few samples is the usual case).
+const LN_T_MIN_MAX: f64 = 4.605_170_185_988_091;
+/// Dimensions of the likelihood search: ln(f/w), ln(q·dt/w), β, ln(t_min/dt).
+const D: usize = 4;
+type P = [f64; D];
+
+impl NoiseModel {
+    /// The model with white variance `w` (per point), flicker level `f` (variance of the OU
+    /// component at the middle correlation time) and slope `beta` (component variances
+    /// f·(τ_c/τ_mid)^β), random-walk diffusion `q` (unit²/s); flicker times for `dt_s`/`span_s`.
+    pub fn from_levels(w: f64, f: f64, beta: f64, q: f64, dt_s: f64, span_s: f64) -> Self {
+        Self::from_levels_from(w, f, beta, q, dt_s, dt_s, span_s)
+    }
+
+    /// [`NoiseModel::from_levels`] with the shortest flicker correlation time `t_min_s`.
+    pub fn from_levels_from(
+        w: f64,
+        f: f64,
+        beta: f64,
+        q: f64,
+        t_min_s: f64,
+        dt_s: f64,
+        span_s: f64,
+    ) -> Self {
+        let times = flicker_times(t_min_s, span_s);
+        let mid = match (times.first(), times.last()) {
+            (Some(a), Some(b)) => (a * b).sqrt(),
+            _ => 1.0,
+        };
+        NoiseModel {
+            white_var: w,
+            flicker: if f > 0.0 {
+                times
+                    .iter()
+                    .map(|&t| (t, f * (t / mid).powf(beta)))
+                    .collect()
+            } else {
+                Vec::new()
+            },
+            rw_per_s: q,
+            h: [w * dt_s, f, q / 3.0],
+        }
+    }
+
+    /// Slope β of the flicker components' variances (0 when flat or absent).
+    pub fn flicker_slope(&self) -> f64 {
+        match (self.flicker.first(), self.flicker.last()) {
+            (Some(a), Some(b)) if self.flicker.len() > 1 && a.1 > 0.0 && b.1 > 0.0 => {
+                (b.1 / a.1).ln() / (b.0 / a.0).ln()
+            }
+            _ => 0.0,
+        }
+    }
+
+    /// Allan deviation of the flicker part at the geometric middle of its correlation times
+    /// (its floor when flat), output unit.
+    pub fn flicker_floor(&self) -> f64 {
+        let (Some(a), Some(b)) = (self.flicker.first(), self.flicker.last()) else {
+            return 0.0;
+        };
+        let tau = (a.0 * b.0).sqrt();
+        self.flicker
+            .iter()
+            .map(|&(t, v)| v * ou_avar(tau, t))
+            .sum::<f64>()
+            .sqrt()
+    }
+
+    /// Fits the noise levels of the residual `x` on rows `idx` by maximum likelihood of its
+    /// Kalman innovations (the exact Gaussian likelihood of the state-space model, irregular
+    /// spacing and gaps included — no Allan deviation, no grid).
+    ///
+    /// The overall scale is concentrated out analytically (for levels c·(w, f, q),
+    /// −2 ln L = Σe²/(cS) + Σ ln S + n ln c is least at c = Σ(e²/S)/n), so the search is over
+    /// ln(f/w) and ln(q·dt/w) in [−30, 25] and the flicker slope β in
+    /// [`FLICKER_SLOPE_RANGE`]: a start grid (or the given `start` models: the previous round's,
+    /// an Allan fit), then Nelder–Mead; `max_evals` bounds the work.
+    #[allow(clippy::needless_range_loop)] // Nelder–Mead: indices over the D coordinates
+    pub fn fit_ml(
+        t_s: &[f64],
+        idx: &[usize],
+        x: &[f64],
+        dt_s: f64,
+        span_s: f64,
+        start: &[&NoiseModel],
+        max_evals: usize,
+    ) -> NoiseFit {
+        let n = idx.len();
+        let values: Vec<f64> = idx.iter().map(|&i| x[i]).collect();
+        let fail = |why: String| {
+            let var = if n > 1 {
+                super::baseline::std(&values).powi(2)
+            } else {
+                0.0
+            };
+            NoiseFit {
+                model: NoiseModel::white(if var.is_finite() {
+                    var.max(1e-300)
+                } else {
+                    1.0
+                }),
+                method: METHOD_WHITE_FALLBACK,
+                neg2_loglik: f64::NAN,
+                evaluations: 0,
+                failure: Some(why),
+            }
+        };
+        if n < 8 {
+            return fail(format!("only {n} points: too few to fit a noise model"));
+        }
+        if values.iter().any(|v| !v.is_finite()) {
+            return fail("the residual has non-finite values".into());
+        }
+        let var = super::baseline::std(&values).powi(2);
+        if !(var > 0.0 && var.is_finite()) {
+            return fail(format!(
+                "the residual's variance is {var:e}: nothing to model"
+            ));
+        }
+        let dt = dt_s.max(1e-9);
+        let (b_lo, b_hi) = FLICKER_SLOPE_RANGE;
+        let lo = [LN_RATIO_MIN, LN_RATIO_MIN, b_lo, 0.0];
+        let hi = [LN_RATIO_MAX, LN_RATIO_MAX, b_hi, LN_T_MIN_MAX];
+        let clamp = |p: P| {
+            let mut o = p;
+            for d in 0..D {
+                o[d] = p[d].clamp(lo[d], hi[d]);
+            }
+            o
+        };
+        let model_at = |p: P, w: f64| {
+            let p = clamp(p);
+            let f = if p[0] <= LN_RATIO_MIN + 0.5 {
+                0.0
+            } else {
+                w * p[0].exp()
+            };
+            let q = if p[1] <= LN_RATIO_MIN + 0.5 {
+                0.0
+            } else {
+                w * p[1].exp() / dt
+            };
+            NoiseModel::from_levels_from(w, f, p[2], q, dt * p[3].exp(), dt, span_s)
+        };
+        let mut evals = 0usize;
+        // Concentrated −2 ln L at p = (ln f/w, ln q·dt/w, β), and the scale c.
+        let eval = |p: P, evals: &mut usize| -> (f64, f64) {
+            *evals += 1;
+            let m = model_at(p, var);
+            let (q, ld) = innovation_sums(&m, t_s, idx, x);
+            let c = q / n as f64;
+            let v = n as f64 * (1.0 + c.ln()) + ld;
+            (if v.is_finite() { v } else { f64::INFINITY }, c)
+        };
+        let to_p = |m: &NoiseModel| -> Option<P> {
+            let w = m.white_var;
+            if w.is_nan() || w <= 0.0 {
+                return None;
+            }
+            let q = if m.rw_per_s > 0.0 {
+                (m.rw_per_s * dt / w).ln()
+            } else {
+                LN_RATIO_MIN
+            };
+            let (Some(a), Some(b)) = (m.flicker.first(), m.flicker.last()) else {
+                return Some(clamp([LN_RATIO_MIN, q, 0.0, 0.0]));
+            };
+            let beta = m.flicker_slope();
+            let mid = (a.0 * b.0).sqrt();
+            let f = a.1 / (a.0 / mid).powf(beta);
+            Some(clamp([(f / w).ln(), q, beta, (a.0 / dt).ln()]))
+        };
+        let mut starts: Vec<P> = start.iter().filter_map(|m| to_p(m)).collect();
+        let warm = !starts.is_empty();
+        if !warm {
+            for a in [-12.0, -5.0, 1.0] {
+                for b in [-16.0, -8.0, 0.0] {
+                    starts.push([a, b, 0.0, 0.0]);
+                }
+            }
+            // A low-passed white noise (a filtered instrument output): one strong fast
+            // component at a few spacings.
+            for a in [0.0, 4.0] {
+                for tm in [1.0, 2.5] {
+                    starts.push([a, -16.0, -2.0, tm]);
+                }
+            }
+        }
+        let mut best: Option<(P, f64)> = None;
+        for s in &starts {
+            let (v, _) = eval(*s, &mut evals);
+            if best.is_none_or(|(_, bv)| v < bv) {
+                best = Some((*s, v));
+            }
+        }
+        let Some((x0, f0)) = best else {
+            return fail("no starting point".into());
+        };
+        if !f0.is_finite() {
+            return fail("the likelihood is not finite at any starting point".into());
+        }
+        // Nelder–Mead in D dimensions.
+        let steps: P = if warm {
+            [0.7, 0.7, 0.25, 0.3]
+        } else {
+            [2.0, 2.0, 0.5, 0.7]
+        };
+        let mut simplex = vec![(x0, f0)];
+        for d in 0..D {
+            let mut p = x0;
+            p[d] += if p[d] + steps[d] > hi[d] {
+                -steps[d]
+            } else {
+                steps[d]
+            };
+            let v = eval(p, &mut evals).0;
+            simplex.push((p, v));
+        }
+        while evals < max_evals {
+            simplex.sort_by(|a, b| a.1.total_cmp(&b.1));
+            let spread = (simplex[D].1 - simplex[0].1).abs();
+            let size = (1..=D)
+                .flat_map(|i| (0..D).map(move |d| (i, d)))
+                .map(|(i, d)| (simplex[i].0[d] - simplex[0].0[d]).abs())
+                .fold(0.0, f64::max);
+            if spread < 0.05 && size < 0.05 {
+                break;
+            }
+            let mut c = [0.0; D];
+            for v in &simplex[..D] {
+                for d in 0..D {
+                    c[d] += v.0[d] / D as f64;
+                }
+            }
+            let w = simplex[D];
+            let along = |t: f64| {
+                let mut p = [0.0; D];
+                for d in 0..D {
+                    p[d] = c[d] + t * (w.0[d] - c[d]);
+                }
+                clamp(p)
+            };
+            let r = along(-1.0);
+            let fr = eval(r, &mut evals).0;
+            if fr < simplex[0].1 {
+                let e = along(-2.0);
+                let fe = eval(e, &mut evals).0;
+                simplex[D] = if fe < fr { (e, fe) } else { (r, fr) };
+            } else if fr < simplex[D - 1].1 {
+                simplex[D] = (r, fr);
+            } else {
+                let k = along(if fr < w.1 { -0.5 } else { 0.5 });
+                let fk = eval(k, &mut evals).0;
+                if fk < w.1.min(fr) {
+                    simplex[D] = (k, fk);
+                } else {
+                    let b = simplex[0].0;
+                    for s in simplex.iter_mut().skip(1) {
+                        for d in 0..D {
+                            s.0[d] = 0.5 * (s.0[d] + b[d]);
+                        }
+                        s.1 = eval(s.0, &mut evals).0;
+                    }
+                }
+            }
+        }
+        simplex.sort_by(|a, b| a.1.total_cmp(&b.1));
+        let (p, v) = simplex[0];
+        let (_, c) = eval(p, &mut evals);
+        let w = var * c;
+        if !(w > 0.0 && w.is_finite() && v.is_finite()) {
+            return fail(format!(
+                "the likelihood search ended at a non-finite point ({v:e})"
+            ));
+        }
+        NoiseFit {
+            model: model_at(p, w),
+            method: METHOD_KALMAN_ML,
+            neg2_loglik: v,
+            evaluations: evals,
+            failure: None,
+        }
+    }
+}
+
 /// Gaussian elimination with partial pivoting on the leading k×k block.
 #[allow(clippy::needless_range_loop)] // elimination: indices are the algorithm
 fn solve_small(a: &[[f64; 3]; 3], b: &[f64; 3], k: usize) -> Option<[f64; 3]> {
@@ -340,6 +707,67 @@ pub fn held_out_chi2(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A deterministic standard normal sequence (Box–Muller on a 64-bit LCG).
+    fn normals(n: usize, mut seed: u64) -> Vec<f64> {
+        let mut u = move || {
+            seed = seed
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            ((seed >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+        };
+        (0..n)
+            .map(|_| (-2.0 * u().ln()).sqrt() * (2.0 * std::f64::consts::PI * u()).cos())
+            .collect()
+    }
+
+    #[test]
+    fn likelihood_fit_recovers_white_and_random_walk_levels_on_an_irregular_record() {
+        // White σ = 1 and a random walk of 0.01²/s, sampled at alternating 60/90 s (the binned
+        // records that the Allan-deviation fit could not place on a grid).
+        let n = 4000;
+        let mut t = Vec::with_capacity(n);
+        let mut now = 0.0;
+        for i in 0..n {
+            t.push(now);
+            now += if i % 2 == 0 { 60.0 } else { 90.0 };
+        }
+        let (w, rw) = (normals(n, 1), normals(n, 2));
+        let q: f64 = 1e-4;
+        let mut walk = 0.0;
+        let x: Vec<f64> = (0..n)
+            .map(|i| {
+                if i > 0 {
+                    walk += (q * (t[i] - t[i - 1])).sqrt() * rw[i];
+                }
+                walk + w[i]
+            })
+            .collect();
+        let idx: Vec<usize> = (0..n).collect();
+        let f = NoiseModel::fit_ml(&t, &idx, &x, 75.0, t[n - 1], &[], 110);
+        assert_eq!(f.method, METHOD_KALMAN_ML, "{:?}", f.failure);
+        let m = &f.model;
+        assert!((m.white_var.sqrt() - 1.0).abs() < 0.1, "{m:?}");
+        assert!((m.rw_per_s / q - 1.0).abs() < 0.5, "{m:?}");
+        // The flicker part is negligible against both on every time scale of the record.
+        assert!(m.flicker_floor() < 0.3, "{m:?}");
+    }
+
+    #[test]
+    fn likelihood_fit_of_a_residual_with_no_variance_fails_loudly() {
+        let t: Vec<f64> = (0..100).map(f64::from).collect();
+        let f = NoiseModel::fit_ml(
+            &t,
+            &(0..100).collect::<Vec<_>>(),
+            &[3.0; 100],
+            1.0,
+            99.0,
+            &[],
+            50,
+        );
+        assert_eq!(f.method, METHOD_WHITE_FALLBACK);
+        assert!(f.failure.is_some());
+    }
 
     #[test]
     fn held_out_rows_of_a_random_walk_are_predicted_by_the_last_observed_value() {

@@ -38,10 +38,13 @@ pub fn json(d: &Discovery) -> Value {
         .iter()
         .map(|a| {
             let (p, sig) = params_json(&a.params);
+            let (p0, sig0) = params_json(&a.params_at_acceptance);
             let mut o = json!({
                 "name": a.effect.name(),
                 "parameters": p,
                 "uncertainties": sig,
+                "parameters_at_acceptance": p0,
+                "uncertainties_at_acceptance": sig0,
                 "residual_std_before": a.std_before,
                 "residual_std_after": a.std_after,
                 "residual_std_out_of_sample_before": a.cv_before.raw,
@@ -49,6 +52,11 @@ pub fn json(d: &Discovery) -> Value {
                 "prediction_z_out_of_sample_before": a.cv_before.prediction_z,
                 "prediction_z_out_of_sample_after": a.cv_after.prediction_z,
                 "gain_out_of_sample": a.gain_out_of_sample(),
+                "residual_std_forward_before": a.forward_before.raw,
+                "residual_std_forward_after": a.forward_after.raw,
+                "prediction_z_forward_before": a.forward_before.prediction_z,
+                "prediction_z_forward_after": a.forward_after.prediction_z,
+                "gain_forward": a.gain_forward(),
                 "delta_bic": a.delta_bic,
             });
             if let Some(c) = a.effect.channel() {
@@ -58,7 +66,10 @@ pub fn json(d: &Discovery) -> Value {
         })
         .collect();
     let g = |x: f64| u.map(|u| x / u);
+    let mut warnings = d.warnings.clone();
+    warnings.extend(s.warnings.iter().cloned());
     json!({
+        "warnings": warnings,
         "output": d.dataset.output_name,
         "output_unit": d.dataset.output_unit,
         "output_unit_per_g": u,
@@ -69,16 +80,31 @@ pub fn json(d: &Discovery) -> Value {
             "residual_std": s.baseline_std,
             "residual_std_out_of_sample": s.baseline_cv.raw,
             "prediction_z_out_of_sample": s.baseline_cv.prediction_z,
+            "residual_std_forward": s.baseline_forward.raw,
+            "prediction_z_forward": s.baseline_forward.prediction_z,
             "residual_std_g": g(s.baseline_std),
+            "noise": noise_json(&s.baseline_noise, d.dataset.dt_s),
         },
         "not_candidates": d.not_candidates.iter().map(|(n, w)| json!({"name": n, "why": w})).collect::<Vec<_>>(),
         "effects": effects,
+        "channel_noise": d.channel_noise,
+        "joint_fit": s.joint.as_ref().map(|j| json!({
+            "coefficients": j.names,
+            "covariance": j.covariance,
+            "note": "parameters of `effects` come from this fit; the covariance is of the effects' linear coefficients (output units), conditional on the nonlinear parameters, whose uncertainties come from the likelihood profile",
+        })),
+        "refused": s.refused.iter().map(|(n, w)| json!({"name": n, "why": w})).collect::<Vec<_>>(),
+        "forward_splits": super::select::FORWARD_SPLITS,
         "shape_checks": d.shape_checks,
         "final": {
             "residual_std": s.final_std,
             "residual_std_out_of_sample": s.final_cv.raw,
             "prediction_z_out_of_sample": s.final_cv.prediction_z,
+            "residual_std_forward": s.final_forward.raw,
+            "prediction_z_forward": s.final_forward.prediction_z,
+            "gain_forward": 1.0 - s.final_forward.raw / s.baseline_forward.raw,
             "residual_std_g": g(s.final_std),
+            "noise": noise_json(&s.final_noise, d.dataset.dt_s),
         },
         "analysis": {
             "lines_before": d.spectrum_before.lines.iter().take(8).collect::<Vec<_>>(),
@@ -90,6 +116,35 @@ pub fn json(d: &Discovery) -> Value {
         },
         "tidal_analysis": super::tidal::json_of(&d.tidal),
     })
+}
+
+/// The noise model as reported: `white` the standard deviation of one point at the record's
+/// spacing `dt_s`, `flicker` the flat Allan-deviation floor of the flicker part, `random_walk`
+/// the diffusion in unit/√s; all in the output unit.
+fn noise_json(f: &super::noise::NoiseFit, dt_s: f64) -> Value {
+    json!({
+        "white": f.model.white_var.sqrt(),
+        "flicker": f.model.flicker_floor(),
+        "random_walk": f.model.rw_per_s.sqrt(),
+        "flicker_slope": f.model.flicker_slope(),
+        "flicker_shortest_s": f.model.flicker.first().map(|c| c.0),
+        "method": f.method,
+        "spacing_s": dt_s,
+        "neg2_log_likelihood": finite(f.neg2_loglik),
+        "likelihood_evaluations": f.evaluations,
+        "failure": f.failure,
+    })
+}
+
+fn noise_text(f: &super::noise::NoiseFit, unit: &str) -> String {
+    format!(
+        "white {:.3e} {unit} per point, flicker {:.3e} {unit} (slope {:+.2}), random walk {:.3e} {unit}/√s ({})",
+        f.model.white_var.sqrt(),
+        f.model.flicker_floor(),
+        f.model.flicker_slope(),
+        f.model.rw_per_s.sqrt(),
+        f.method
+    )
 }
 
 const SECONDS_PER_DAY: f64 = 86_400.0;
@@ -108,12 +163,23 @@ pub fn text(d: &Discovery) -> String {
     for n in &d.dataset.notes {
         let _ = writeln!(o, "  {n}");
     }
+    for w in d.warnings.iter().chain(&s.warnings) {
+        let _ = writeln!(o, "WARNING: {w}");
+    }
     let _ = writeln!(o, "baseline: {}", d.baseline_description);
     let _ = writeln!(
         o,
         "  residual std {:.6e} {unit}, out of sample {:.6e} {unit}",
         s.baseline_std, s.baseline_cv.raw
     );
+    let _ = writeln!(o, "  noise: {}", noise_text(&s.baseline_noise, unit));
+    for c in &d.channel_noise {
+        let _ = writeln!(
+            o,
+            "  channel_noise: {} reads with {:.3e} {} noise per point (channel std {:.3e})",
+            c.channel, c.noise, c.unit, c.std
+        );
+    }
     let _ = writeln!(o, "what the baseline gets wrong:");
     let _ = writeln!(
         o,
@@ -156,7 +222,7 @@ pub fn text(d: &Discovery) -> String {
             .collect();
         let _ = writeln!(
             o,
-            "  {}. {}{}: {}\n     ΔBIC {:.1}; std {:.4e} → {:.4e} {unit}; out of sample {:.4e} → {:.4e}; gain {:.1} %",
+            "  {}. {}{}: {}\n     ΔBIC {:.1}; std {:.4e} → {:.4e} {unit}; out of sample {:.4e} → {:.4e}; gain {:.1} %; forward gain {:.1} %",
             i + 1,
             a.effect.name(),
             a.effect.channel().map(|c| format!(" ({c})")).unwrap_or_default(),
@@ -166,8 +232,12 @@ pub fn text(d: &Discovery) -> String {
             a.std_after,
             a.cv_before.raw,
             a.cv_after.raw,
-            100.0 * a.gain_out_of_sample()
+            100.0 * a.gain_out_of_sample(),
+            100.0 * a.gain_forward()
         );
+    }
+    for (n, why) in &s.refused {
+        let _ = writeln!(o, "  refused: {n}: {why}");
     }
     for c in &d.shape_checks {
         let _ = writeln!(
@@ -199,6 +269,7 @@ pub fn text(d: &Discovery) -> String {
         "final: residual std {:.6e} {unit}, out of sample {:.6e} {unit}",
         s.final_std, s.final_cv.raw
     );
+    let _ = writeln!(o, "  noise: {}", noise_text(&s.final_noise, unit));
     for ((t, a), (_, b)) in d.adev_before.iter().zip(&d.adev_after).step_by(3) {
         let _ = writeln!(o, "  ADEV({t:.0} s): {a:.3e} → {b:.3e} {unit}");
     }

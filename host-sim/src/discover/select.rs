@@ -20,8 +20,9 @@
 
 use super::baseline::{ar1, gls, raw_residual, std, Basis, Rows};
 use super::effects::{self, columns, Context, Effect, Param};
+
 use super::import::Dataset;
-use super::noise::{held_out_chi2, NoiseModel};
+use super::noise::{held_out_chi2, NoiseFit, NoiseModel};
 use super::residual;
 
 /// Selection settings.
@@ -103,8 +104,10 @@ pub struct Accepted {
     pub effect: Effect,
     /// Its nonlinear parameter (NaN if none).
     pub theta: Param,
-    /// Named parameters with uncertainties.
+    /// Named parameters with uncertainties, from the final joint fit of all accepted effects.
     pub params: Vec<(String, Param)>,
+    /// The same from the round it was accepted in (the model then had fewer effects).
+    pub params_at_acceptance: Vec<(String, Param)>,
     /// ΔBIC at acceptance.
     pub delta_bic: f64,
     /// In-sample residual std before/after, output unit.
@@ -115,12 +118,21 @@ pub struct Accepted {
     pub cv_before: CvScore,
     /// After.
     pub cv_after: CvScore,
+    /// Forward-chaining scores before/after (fit on the first part, predict the rest).
+    pub forward_before: CvScore,
+    /// After.
+    pub forward_after: CvScore,
 }
 
 impl Accepted {
     /// Relative reduction of the cross-validated residual std (held-out blocks).
     pub fn gain_out_of_sample(&self) -> f64 {
         1.0 - self.cv_after.raw / self.cv_before.raw
+    }
+    /// Relative reduction of the forward-predicted residual std (later parts of the record
+    /// predicted from fits to the earlier parts).
+    pub fn gain_forward(&self) -> f64 {
+        1.0 - self.forward_after.raw / self.forward_before.raw
     }
 }
 
@@ -139,6 +151,9 @@ pub struct Scored {
     pub delta_bic: f64,
     /// Its penalty part (parameters and look-elsewhere).
     pub penalty: f64,
+    /// The nonlinear parameter ended at the first or last point of its search grid: the fit
+    /// wants a value the search did not allow, so the value is not a finding.
+    pub at_edge: bool,
 }
 
 /// The current model in the whitened domain, ready to score extensions quickly.
@@ -146,7 +161,7 @@ struct Current<'a> {
     ds: &'a Dataset,
     rows: Rows,
     phi: f64,
-    noise: NoiseModel,
+    noise: NoiseFit,
     basis: Basis,
     r_w: Vec<f64>,
     rss: f64,
@@ -210,25 +225,30 @@ fn golden<F: Fn(f64) -> f64>(f: F, mut a: f64, mut b: f64, iters: usize) -> f64 
 
 /// Best nonlinear parameter of a gridded effect: grid, then golden section in log θ between
 /// the neighbours of the best grid point.
-fn best_theta(cur: &Current, e: &Effect, ctx: &Context) -> Option<(f64, f64)> {
+fn best_theta(cur: &Current, e: &Effect, ctx: &Context) -> Option<(f64, f64, bool)> {
     let g = effects::grid(e, cur.ds);
     let eval = |th: f64| cur.rss_with(&columns(e, cur.ds, ctx, th));
     let vals: Vec<f64> = g.iter().map(|&th| eval(th)).collect();
     let (ib, _) = vals.iter().enumerate().min_by(|a, b| a.1.total_cmp(b.1))?;
+    // The first or last grid point: the likelihood still falls towards a value outside the
+    // search range. A zero lag (`ambient_coupling`'s first point) is a physical bound, not a
+    // search limit.
+    let at_edge = g.len() > 1 && (ib + 1 == g.len() || (ib == 0 && g[0] > 0.0));
     if e == &Effect::ThermalHysteresis {
-        return Some((g[ib], vals[ib]));
+        return Some((g[ib], vals[ib], at_edge));
     }
     let lo = g[ib.saturating_sub(1)];
     let hi = g[(ib + 1).min(g.len() - 1)];
     if lo <= 0.0 || hi <= lo {
-        return Some((g[ib], vals[ib]));
+        return Some((g[ib], vals[ib], at_edge));
     }
     let x = golden(|lx| eval(lx.exp()), lo.ln(), hi.ln(), 18).exp();
     let fx = eval(x);
+    // Refined towards the outer end of an edge interval: still at the edge.
     Some(if fx < vals[ib] {
-        (x, fx)
+        (x, fx, at_edge)
     } else {
-        (g[ib], vals[ib])
+        (g[ib], vals[ib], at_edge)
     })
 }
 
@@ -365,35 +385,99 @@ pub struct Selection {
     pub final_cv: CvScore,
     /// Candidate scores of the last round (name, ΔBIC), for the report.
     pub last_round: Vec<(String, f64)>,
+    /// Noise model of the baseline residual (maximum likelihood).
+    pub baseline_noise: NoiseFit,
+    /// Noise model of the final residual.
+    pub final_noise: NoiseFit,
+    /// What the user must know about this selection (failed noise fits).
+    pub warnings: Vec<String>,
+    /// Candidates that passed the BIC but were not accepted, with why (edge of the search
+    /// range, physically implausible, a step below the noise, no forward-prediction gain).
+    pub refused: Vec<(String, String)>,
+    /// The final joint fit of all accepted effects (parameters in `accepted` come from it).
+    pub joint: Option<JointFit>,
+    /// Forward-chaining score of the baseline.
+    pub baseline_forward: CvScore,
+    /// Of the final model.
+    pub final_forward: CvScore,
 }
 
-/// Noise model of a residual from its Allan deviation (white fallback).
-fn noise_of(ds: &Dataset, r: &[f64]) -> NoiseModel {
-    let pts = residual::adev(ds, r);
-    NoiseModel::fit(&pts, ds.dt_s, ds.span_s())
-        .unwrap_or_else(|| NoiseModel::white(std(r).powi(2).max(1e-300)))
+/// Likelihood evaluations of a cold noise fit (start grid + Nelder–Mead).
+const ML_EVALS_COLD: usize = 110;
+/// Likelihood evaluations of a warm-started noise fit (previous model as the start).
+const ML_EVALS_WARM: usize = 36;
+
+/// Noise model of a residual by maximum likelihood of its Kalman innovations, started from
+/// `warm` (and from the Allan-deviation fit when the record's time grid allows one).
+fn noise_of(ds: &Dataset, r: &[f64], warm: Option<&NoiseModel>) -> NoiseFit {
+    let idx: Vec<usize> = (0..r.len()).collect();
+    match warm {
+        Some(m) => NoiseModel::fit_ml(&ds.t_s, &idx, r, ds.dt_s, ds.span_s(), &[m], ML_EVALS_WARM),
+        None => {
+            let adev_start = NoiseModel::fit(&residual::adev(ds, r), ds.dt_s, ds.span_s());
+            let cold =
+                NoiseModel::fit_ml(&ds.t_s, &idx, r, ds.dt_s, ds.span_s(), &[], ML_EVALS_COLD);
+            match adev_start {
+                Some(a) if cold.failure.is_none() => {
+                    // The Allan fit is a second start; keep the more likely of the two.
+                    let alt = NoiseModel::fit_ml(
+                        &ds.t_s,
+                        &idx,
+                        r,
+                        ds.dt_s,
+                        ds.span_s(),
+                        &[&a],
+                        ML_EVALS_WARM,
+                    );
+                    if alt.failure.is_none() && alt.neg2_loglik < cold.neg2_loglik {
+                        NoiseFit {
+                            evaluations: alt.evaluations + cold.evaluations,
+                            ..alt
+                        }
+                    } else {
+                        cold
+                    }
+                }
+                _ => cold,
+            }
+        }
+    }
 }
 
-/// Fits the model (columns) with the noise model of its own residual: ordinary least squares
-/// → Allan fit → GLS → Allan fit again (or the given noise model).
+/// How `fit_state` gets its noise model.
+#[derive(Clone, Copy)]
+enum NoiseChoice<'m> {
+    /// Held fixed.
+    Fixed(&'m NoiseFit),
+    /// Fitted by maximum likelihood (warm-started from the given model if any).
+    Fit(Option<&'m NoiseModel>),
+}
+
+/// Fits the model (columns) with the noise model of its own residual: least squares → noise
+/// likelihood fit → GLS → noise fit again (warm) → GLS; or with a fixed noise model.
 fn fit_state<'a>(
     ds: &'a Dataset,
     cols: &[Vec<f64>],
     y: &[f64],
-    noise_hint: Option<&NoiseModel>,
+    choice: NoiseChoice,
 ) -> (Current<'a>, Vec<f64>, Vec<f64>) {
-    let noise = match noise_hint {
-        Some(m) => m.clone(),
-        None => {
-            let all = Rows::new(&ds.segment_start, None);
-            let ols = gls(cols, y, 0.0, &all);
-            let m1 = noise_of(ds, &raw_residual(cols, &ols.beta, y));
-            let rows1 = Rows::with_noise(&m1, &ds.t_s, None);
+    let noise = match choice {
+        NoiseChoice::Fixed(m) => m.clone(),
+        NoiseChoice::Fit(warm) => {
+            let first = match warm {
+                Some(m) => m.clone(),
+                None => {
+                    let all = Rows::new(&ds.segment_start, None);
+                    let ols = gls(cols, y, 0.0, &all);
+                    noise_of(ds, &raw_residual(cols, &ols.beta, y), None).model
+                }
+            };
+            let rows1 = Rows::with_noise(&first, &ds.t_s, None);
             let f1 = gls(cols, y, 0.0, &rows1);
-            noise_of(ds, &raw_residual(cols, &f1.beta, y))
+            noise_of(ds, &raw_residual(cols, &f1.beta, y), Some(&first))
         }
     };
-    let all = Rows::with_noise(&noise, &ds.t_s, None);
+    let all = Rows::with_noise(&noise.model, &ds.t_s, None);
     let phi = 0.0;
     let fit = gls(cols, y, phi, &all);
     let raw = raw_residual(cols, &fit.beta, y);
@@ -437,24 +521,30 @@ fn score_all(
         if !e.repeatable() && done.contains(e) {
             continue;
         }
-        let (theta, rss, k_nl) = match e {
+        let (theta, rss, k_nl, at_edge) = match e {
             Effect::Step => match best_step(cur, ctx) {
-                Some((th, r)) => (th, r, nl_penalty(m_rows)),
+                Some((th, r)) => (th, r, nl_penalty(m_rows), false),
                 None => continue,
             },
             Effect::Periodic => match best_periodic(cur, ctx, tides) {
                 // Independent frequencies up to the periodogram's Nyquist (≤ 4096 bins).
-                Some((p, r)) => (p, r, nl_penalty(m_rows.min(4096.0) / 2.0)),
+                Some((p, r)) => (p, r, nl_penalty(m_rows.min(4096.0) / 2.0), false),
                 None => continue,
             },
             _ if !effects::grid(e, cur.ds).is_empty() => match best_theta(cur, e, ctx) {
-                Some((th, r)) => (th, r, nl_penalty(effects::grid(e, cur.ds).len() as f64)),
+                Some((th, r, edge)) => (
+                    th,
+                    r,
+                    nl_penalty(effects::grid(e, cur.ds).len() as f64),
+                    edge,
+                ),
                 None => continue,
             },
             _ => (
                 f64::NAN,
                 cur.rss_with(&columns(e, cur.ds, ctx, f64::NAN)),
                 0.0,
+                false,
             ),
         };
         let cols = columns(e, cur.ds, ctx, theta);
@@ -470,6 +560,7 @@ fn score_all(
             rss,
             delta_bic,
             penalty,
+            at_edge,
         });
     }
     out.sort_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic));
@@ -519,15 +610,18 @@ pub fn select(
         .iter()
         .any(|e| matches!(e, Effect::TidalGravity | Effect::TidalTilt));
     let mut cols = base_cols.to_vec();
-    let (cur0, base_raw, _) = fit_state(ds, &cols, target, None);
-    let baseline_cv = cross_validate(ds, &cols, target, &cur0.noise, cfg);
+    let (cur0, base_raw, _) = fit_state(ds, &cols, target, NoiseChoice::Fit(None));
+    let baseline_cv = cross_validate(ds, &cols, target, &cur0.noise.model, cfg);
     let baseline_std = std(&base_raw);
     let mut accepted: Vec<Accepted> = Vec::new();
     let mut done: Vec<Effect> = Vec::new();
     let mut last_round = Vec::new();
     let mut cur_std = baseline_std;
+    let mut warm = cur0.noise.model.clone();
+    let mut refused: Vec<(String, String)> = Vec::new();
     while accepted.len() < cfg.max_effects {
-        let (cur, _, _) = fit_state(ds, &cols, target, None);
+        let (cur, cur_raw, _) = fit_state(ds, &cols, target, NoiseChoice::Fit(Some(&warm)));
+        warm = cur.noise.model.clone();
         let scored = score_all(&cur, cands, ctx, &done, tides);
         // The ranking above holds the noise model fixed; an effect present in the residual
         // also inflates the fitted noise (its Allan variance), which hides it. The best few are
@@ -540,7 +634,8 @@ pub fn select(
             .map(|s| {
                 let mut trial = cols.clone();
                 trial.extend(s.cols.iter().cloned());
-                let (c1, _, _) = fit_state(ds, &trial, target, None);
+                let (c1, _, _) =
+                    fit_state(ds, &trial, target, NoiseChoice::Fit(Some(&cur.noise.model)));
                 let d = c1.neg2_loglik() - base_ll;
                 Scored {
                     delta_bic: d + s.penalty,
@@ -555,29 +650,77 @@ pub fn select(
             .map(|s| (s.effect.name().to_owned(), s.delta_bic))
             .collect();
         let mut took = None;
+        let mut before_scores: Option<(CvScore, CvScore)> = None;
         for s in rescored
             .iter()
             .filter(|s| s.delta_bic < -cfg.bic_margin)
             .take(3)
         {
-            let before = cross_validate(ds, &cols, target, &cur.noise, cfg);
+            if s.at_edge {
+                refuse(
+                    &mut refused,
+                    s.effect.name(),
+                    format!(
+                        "ΔBIC {:.1}, but its nonlinear parameter ended at the edge of the search \
+                         range ({:.4e}): the fit wants a value outside it, so it is not a \
+                         finding{}",
+                        s.delta_bic,
+                        s.theta,
+                        edge_hint(&s.effect, s.theta, ds)
+                    ),
+                );
+                continue;
+            }
+            if let Some(why) = implausible(ds, &cur, &cols, target, &cur_raw, s) {
+                refuse(
+                    &mut refused,
+                    s.effect.name(),
+                    format!("ΔBIC {:.1}, but {why}", s.delta_bic),
+                );
+                continue;
+            }
+            let (before, fwd_before) = *before_scores.get_or_insert_with(|| {
+                (
+                    cross_validate(ds, &cols, target, &cur.noise.model, cfg),
+                    forward_validate(ds, &cols, target, &cur.noise.model),
+                )
+            });
             let mut trial = cols.clone();
             trial.extend(s.cols.iter().cloned());
-            let after = cross_validate(ds, &trial, target, &cur.noise, cfg);
-            if after.prediction_z < before.prediction_z * (1.0 - cfg.min_gain)
-                && after.raw < before.raw
+            let after = cross_validate(ds, &trial, target, &cur.noise.model, cfg);
+            if !(after.prediction_z < before.prediction_z * (1.0 - cfg.min_gain)
+                && after.raw < before.raw)
             {
-                took = Some((s.clone(), before, after));
-                break;
+                continue;
             }
+            let fwd_after = forward_validate(ds, &trial, target, &cur.noise.model);
+            // An effect with no support in any training part (a step after the last split)
+            // leaves the forward score exactly unchanged: forward chaining cannot judge it.
+            let untestable = (fwd_after.prediction_z - fwd_before.prediction_z).abs()
+                <= 1e-12 * fwd_before.prediction_z;
+            if !(fwd_after.prediction_z < fwd_before.prediction_z || untestable) {
+                refuse(
+                    &mut refused,
+                    s.effect.name(),
+                    format!(
+                        "ΔBIC {:.1} and the blocked cross-validation improved, but fitted on the \
+                         first part of the record it does not improve the prediction of the \
+                         rest (forward prediction z {:.4} → {:.4})",
+                        s.delta_bic, fwd_before.prediction_z, fwd_after.prediction_z
+                    ),
+                );
+                continue;
+            }
+            took = Some((s.clone(), before, after, fwd_before, fwd_after));
+            break;
         }
-        let Some((s, before, after)) = took else {
+        let Some((s, before, after, fwd_before, fwd_after)) = took else {
             break;
         };
         let sigma_theta = theta_sigma(&cur, &s, ctx, cur.basis.q.len());
         let k0 = cols.len();
         cols.extend(s.cols.iter().cloned());
-        let (cur1, raw1, beta1) = fit_state(ds, &cols, target, Some(&cur.noise));
+        let (cur1, raw1, beta1) = fit_state(ds, &cols, target, NoiseChoice::Fixed(&cur.noise));
         let fit = gls(&cols, target, 0.0, &cur1.rows);
         // Standard errors inflated for the correlation the whitening left.
         let n = cur1.r_w.len() as f64;
@@ -606,18 +749,31 @@ pub fn select(
                 value: s.theta,
                 sigma: sigma_theta,
             },
+            params_at_acceptance: params.clone(),
             params,
             delta_bic: s.delta_bic,
             std_before: cur_std,
             std_after,
             cv_before: before,
             cv_after: after,
+            forward_before: fwd_before,
+            forward_after: fwd_after,
         });
         cur_std = std_after;
         done.push(s.effect);
     }
-    let (cur_f, final_raw, beta) = fit_state(ds, &cols, target, None);
-    let final_cv = cross_validate(ds, &cols, target, &cur0.noise, cfg);
+    let (cur_f, _, _) = fit_state(ds, &cols, target, NoiseChoice::Fit(Some(&warm)));
+    let joint = (!accepted.is_empty())
+        .then(|| joint_fit(ds, target, base_cols, &mut accepted, ctx, &cur_f.noise));
+    if let Some(j) = &joint {
+        cols = base_cols.to_vec();
+        for c in &j.effect_columns {
+            cols.extend(c.iter().cloned());
+        }
+    }
+    let (cur_f, final_raw, beta) = fit_state(ds, &cols, target, NoiseChoice::Fixed(&cur_f.noise));
+    let final_cv = cross_validate(ds, &cols, target, &cur0.noise.model, cfg);
+    let final_forward = forward_validate(ds, &cols, target, &cur0.noise.model);
     Selection {
         accepted,
         columns: cols,
@@ -630,7 +786,313 @@ pub fn select(
         final_residual: final_raw,
         final_cv,
         last_round,
+        warnings: noise_warnings(&cur0.noise, &cur_f.noise),
+        refused,
+        joint,
+        baseline_forward: forward_validate(ds, base_cols, target, &cur0.noise.model),
+        final_forward,
+        baseline_noise: cur0.noise,
+        final_noise: cur_f.noise,
     }
+}
+
+/// The final joint fit: every accepted effect refitted together with the baseline, nonlinear
+/// parameters included (one coordinate sweep: each θ re-optimised with all other columns in
+/// the model), under the final noise model.
+#[derive(Debug, Clone)]
+pub struct JointFit {
+    /// Names of the effects' linear coefficients, in order (`<index>:<effect>:c<j>`).
+    pub names: Vec<String>,
+    /// Their covariance (output units², conditional on the nonlinear parameters, whose own
+    /// uncertainties come from the profile curvature), scaled by the whitened residual variance.
+    pub covariance: Vec<Vec<f64>>,
+    /// Columns of each effect at its jointly fitted θ.
+    pub effect_columns: Vec<Vec<Vec<f64>>>,
+}
+
+/// Joint refit of the accepted effects; replaces each one's `params` and `theta` by the joint
+/// values (the acceptance round's stay in `params_at_acceptance`).
+fn joint_fit(
+    ds: &Dataset,
+    target: &[f64],
+    base_cols: &[Vec<f64>],
+    accepted: &mut [Accepted],
+    ctx: &Context,
+    noise: &NoiseFit,
+) -> JointFit {
+    let mut thetas: Vec<f64> = accepted.iter().map(|a| a.theta.value).collect();
+    let mut ecols: Vec<Vec<Vec<f64>>> = accepted
+        .iter()
+        .zip(&thetas)
+        .map(|(a, &th)| columns(&a.effect, ds, ctx, th))
+        .collect();
+    let others = |ecols: &[Vec<Vec<f64>>], skip: usize| {
+        let mut c = base_cols.to_vec();
+        for (j, e) in ecols.iter().enumerate() {
+            if j != skip {
+                c.extend(e.iter().cloned());
+            }
+        }
+        c
+    };
+    let mut sigmas = vec![f64::NAN; accepted.len()];
+    for i in 0..accepted.len() {
+        let th = thetas[i];
+        if !th.is_finite() {
+            continue;
+        }
+        let e = accepted[i].effect.clone();
+        let (cur, _, _) = fit_state(ds, &others(&ecols, i), target, NoiseChoice::Fixed(noise));
+        let eval = |x: f64| cur.rss_with(&columns(&e, ds, ctx, x));
+        let g = effects::grid(&e, ds);
+        let (lo, hi, h) = match e {
+            Effect::Step => (th - 3.0 * ds.dt_s, th + 3.0 * ds.dt_s, ds.dt_s),
+            Effect::Periodic => {
+                let span = ds.span_s().max(ds.dt_s);
+                let f = 1.0 / th;
+                (
+                    1.0 / (f + 0.5 / span),
+                    1.0 / (f - 0.5 / span).max(0.5 / span),
+                    0.02 * th,
+                )
+            }
+            _ => {
+                let (gmin, gmax) = (
+                    g.iter()
+                        .copied()
+                        .filter(|v| *v > 0.0)
+                        .fold(f64::INFINITY, f64::min),
+                    g.iter().copied().fold(0.0, f64::max),
+                );
+                ((th / 1.5).max(gmin), (th * 1.5).min(gmax), 0.02 * th)
+            }
+        };
+        let best = if matches!(e, Effect::ThermalHysteresis) || hi <= lo || hi.is_nan() || lo <= 0.0
+        {
+            th
+        } else {
+            let x = golden(|lx| eval(lx.exp()), lo.ln(), hi.ln(), 16).exp();
+            if eval(x) < eval(th) {
+                x
+            } else {
+                th
+            }
+        };
+        thetas[i] = best;
+        ecols[i] = columns(&e, ds, ctx, best);
+        // σ_θ from the RSS profile's curvature, with the others in the model.
+        let (r0, rp, rm) = (eval(best), eval(best + h), eval((best - h).max(h * 0.01)));
+        let curv = (rp + rm - 2.0 * r0) / (h * h);
+        let n = cur.r_w.len() as f64;
+        let s2 = r0 / (n - (cur.basis.q.len() + ecols[i].len()) as f64).max(1.0);
+        sigmas[i] = if curv > 0.0 {
+            (2.0 * s2 / curv).sqrt()
+        } else {
+            f64::NAN
+        };
+    }
+    let all = others(&ecols, usize::MAX);
+    let rows = Rows::with_noise(&noise.model, &ds.t_s, None);
+    let fit = gls(&all, target, 0.0, &rows);
+    let wc: Vec<Vec<f64>> = all.iter().map(|c| rows.whiten(c, 0.0)).collect();
+    let basis = Basis::new(&wc);
+    // Standard errors inflated for the correlation the whitening left, as in each round.
+    let r_w = basis.residual(&rows.whiten(target, 0.0));
+    let mut seg = vec![false; r_w.len()];
+    if let Some(f) = seg.first_mut() {
+        *f = true;
+    }
+    let rho = ar1(&r_w, &seg).min(0.99);
+    let infl2 = (1.0 + rho) / (1.0 - rho);
+    let s2 = infl2 * fit.rss_w / (fit.n_w.saturating_sub(fit.k).max(1)) as f64;
+    let cov_all = basis.covariance();
+    let se: Vec<f64> = fit.se.iter().map(|v| v * infl2.sqrt()).collect();
+    let k0 = base_cols.len();
+    let mut names = Vec::new();
+    let mut at = k0;
+    for (i, a) in accepted.iter_mut().enumerate() {
+        let m = ecols[i].len();
+        for j in 0..m {
+            names.push(format!("{i}:{}:c{j}", a.effect.name()));
+        }
+        a.theta = Param {
+            value: thetas[i],
+            sigma: sigmas[i],
+        };
+        a.params = effects::parameters(
+            &a.effect,
+            ds,
+            a.theta,
+            &fit.beta[at..at + m],
+            &se[at..at + m],
+        );
+        at += m;
+    }
+    let covariance = (k0..all.len())
+        .map(|r| (k0..all.len()).map(|c| cov_all[r][c] * s2).collect())
+        .collect();
+    JointFit {
+        names,
+        covariance,
+        effect_columns: ecols,
+    }
+}
+
+/// Records why a candidate was refused (one entry per effect name, the latest reason).
+fn refuse(list: &mut Vec<(String, String)>, name: &str, why: String) {
+    list.retain(|(n, _)| n != name);
+    list.push((name.to_owned(), why));
+}
+
+/// What a parameter at the edge of its range usually means.
+fn edge_hint(e: &Effect, theta: f64, ds: &Dataset) -> String {
+    let lower = effects::grid(e, ds)
+        .first()
+        .is_some_and(|g| theta <= *g * 1.0001);
+    match e {
+        Effect::ThermalLag | Effect::AmbientCoupling(_) if lower => {
+            "; the shortest lag improving the fit is the signature of the channel's own \
+             reading noise (errors in variables: smoothing a noisy regressor always helps), \
+             see channel_noise"
+                .into()
+        }
+        _ if !lower => "; the upper end: a slow trend the record is too short to resolve".into(),
+        _ => String::new(),
+    }
+}
+
+/// Times at which the record is cut for forward-chaining validation (fractions of the span).
+pub const FORWARD_SPLITS: [f64; 5] = [0.5, 0.6, 0.7, 0.8, 0.9];
+
+/// Forward-chaining validation: for each split, the model (columns fixed) is fitted on the
+/// rows before it and the rows after it are predicted — the noise model's Kalman filter
+/// carries the training residual's state forward, its predicted variance growing with the
+/// distance — and scored like [`cross_validate`]: raw residual RMS over the predicted rows and
+/// RMS of the normalised prediction errors.
+pub fn forward_validate(ds: &Dataset, cols: &[Vec<f64>], y: &[f64], noise: &NoiseModel) -> CvScore {
+    let n = y.len();
+    let t0 = ds.t_s.first().copied().unwrap_or(0.0);
+    let span = ds.span_s();
+    let (mut s_raw, mut n_raw, mut s_z, mut n_z) = (0.0, 0usize, 0.0, 0usize);
+    for f in FORWARD_SPLITS {
+        let cut = t0 + f * span;
+        let train: Vec<bool> = ds.t_s.iter().map(|&t| t < cut).collect();
+        let rows = Rows::with_noise(noise, &ds.t_s, Some(&train));
+        if rows.idx.len() < cols.len() + 2 || rows.idx.len() >= n {
+            continue;
+        }
+        let fit = gls(cols, y, 0.0, &rows);
+        let r = raw_residual(cols, &fit.beta, y);
+        for (ri, _) in r.iter().zip(&train).filter(|(_, t)| !**t) {
+            s_raw += ri * ri;
+            n_raw += 1;
+        }
+        let (chi2, m) = held_out_chi2(noise, &ds.t_s, &train, &r);
+        s_z += chi2;
+        n_z += m;
+    }
+    CvScore {
+        raw: (s_raw / n_raw.max(1) as f64).sqrt(),
+        prediction_z: (s_z / n_z.max(1) as f64).sqrt(),
+    }
+}
+
+/// Half-windows (points) over which a step's local jump is measured.
+const JUMP_WINDOWS: [usize; 3] = [4, 16, 64];
+
+/// Why a candidate that passed the BIC is not physical, if it is not: parameters outside their
+/// plausible range, or a step whose local jump in the data is below the record's noise.
+fn implausible(
+    ds: &Dataset,
+    cur: &Current,
+    cols: &[Vec<f64>],
+    target: &[f64],
+    cur_raw: &[f64],
+    s: &Scored,
+) -> Option<String> {
+    let mut trial = cols.to_vec();
+    trial.extend(s.cols.iter().cloned());
+    let fit = gls(&trial, target, 0.0, &cur.rows);
+    let k0 = cols.len();
+    let params = effects::parameters(
+        &s.effect,
+        ds,
+        Param {
+            value: s.theta,
+            sigma: f64::NAN,
+        },
+        &fit.beta[k0..],
+        &fit.se[k0..],
+    );
+    let get = |k: &str| params.iter().find(|(n, _)| n == k).map(|(_, p)| p.value);
+    match s.effect {
+        Effect::TiltCoupling => get("gain")
+            .filter(|g| g.is_nan() || g.abs() > TILT_GAIN_MAX)
+            .map(|g| {
+                format!(
+                    "its gain {g:.3e} is not a tiltmeter gain error (plausible within \
+                     ±{TILT_GAIN_MAX}): the tilt column is fitting something else"
+                )
+            }),
+        Effect::Step => {
+            let size = fit.beta.get(k0).copied().unwrap_or(0.0);
+            let (j_best, ratio) = local_jump(ds, cur_raw, s.theta, size, &cur.noise.model)?;
+            (ratio < 1.0).then(|| {
+                format!(
+                    "the record's local jump at t = {:.0} s is {j_best:.3e} against a fitted size \
+                     {size:.3e}: below the noise of a jump there ({:.2} σ at best over ±{:?} \
+                     points) — a smooth change cut into a step is not a step",
+                    s.theta, ratio, JUMP_WINDOWS
+                )
+            })
+        }
+        _ => None,
+    }
+}
+
+/// A tiltmeter gain error beyond ±100 % is not a gain error.
+pub const TILT_GAIN_MAX: f64 = 1.0;
+/// The residual's local jump at `time_s` (mean over w points after minus w before, for each
+/// w in [`JUMP_WINDOWS`]) in the direction of `size`, and the best jump's ratio to its noise
+/// σ_J = √(2·σ²_Allan(w·dt)) under the noise model. `None` when no window fits in the record.
+fn local_jump(
+    ds: &Dataset,
+    raw: &[f64],
+    time_s: f64,
+    size: f64,
+    noise: &NoiseModel,
+) -> Option<(f64, f64)> {
+    let j = ds.t_s.iter().position(|&t| t > time_s)?;
+    let mut best: Option<(f64, f64)> = None;
+    for w in JUMP_WINDOWS {
+        if j < w || j + w > raw.len() {
+            continue;
+        }
+        let before = raw[j - w..j].iter().sum::<f64>() / w as f64;
+        let after = raw[j..j + w].iter().sum::<f64>() / w as f64;
+        let jump = after - before;
+        let sigma = (2.0 * noise.avar(w as f64 * ds.dt_s)).sqrt();
+        let ratio = jump * size.signum() / sigma.max(f64::MIN_POSITIVE);
+        if best.is_none_or(|(_, r)| ratio > r) {
+            best = Some((jump, ratio));
+        }
+    }
+    best
+}
+
+/// Loud statements for noise fits that failed (the selection then ran on white noise).
+fn noise_warnings(base: &NoiseFit, fin: &NoiseFit) -> Vec<String> {
+    let mut w = Vec::new();
+    for (which, f) in [("baseline", base), ("final", fin)] {
+        if let Some(why) = &f.failure {
+            w.push(format!(
+                "the {which} residual's noise model could not be fitted ({why}): white noise of \
+                 the residual's variance was used instead, so the selection's likelihood and \
+                 uncertainties treat correlated noise as independent"
+            ));
+        }
+    }
+    w
 }
 
 /// Out-of-sample gain of the baseline extended by given effects at fixed nonlinear parameters
@@ -643,10 +1105,10 @@ pub fn gain_with(
     extra: &[Vec<f64>],
     cfg: &Config,
 ) -> f64 {
-    let (cur0, _, _) = fit_state(ds, base_cols, target, None);
-    let before = cross_validate(ds, base_cols, target, &cur0.noise, cfg);
+    let (cur0, _, _) = fit_state(ds, base_cols, target, NoiseChoice::Fit(None));
+    let before = cross_validate(ds, base_cols, target, &cur0.noise.model, cfg);
     let mut cols = base_cols.to_vec();
     cols.extend(extra.iter().cloned());
-    let after = cross_validate(ds, &cols, target, &cur0.noise, cfg);
+    let after = cross_validate(ds, &cols, target, &cur0.noise.model, cfg);
     1.0 - after.raw / before.raw
 }

@@ -135,3 +135,87 @@ pub fn check(
     }
     out
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::discover::effects::Param;
+    use crate::discover::select::CvScore;
+
+    fn dataset(y: Vec<f64>) -> Dataset {
+        let n = y.len();
+        let mut seg = vec![false; n];
+        seg[0] = true;
+        Dataset {
+            t_s: (0..n).map(|i| 10.0 * i as f64).collect(),
+            y,
+            segment_start: seg,
+            channels: Vec::new(),
+            output_name: "output_g".into(),
+            output_unit: "g".into(),
+            unit_per_g: Some(1.0),
+            input_g: Some(1.0),
+            start_unix_s: None,
+            site: None,
+            dt_s: 10.0,
+            notes: Vec::new(),
+            warnings: Vec::new(),
+        }
+    }
+
+    /// The check of a step accepted at `theta` on `y` (white noise of the pseudo-noise's
+    /// variance): is it called poor?
+    fn step_is_poor(y: Vec<f64>, theta: f64, noise_std: f64) -> bool {
+        let ds = dataset(y);
+        let ctx = Context::default();
+        let mut cols = vec![vec![1.0; ds.len()]];
+        cols.extend(columns(&Effect::Step, &ds, &ctx, theta));
+        let cv = CvScore {
+            raw: 1.0,
+            prediction_z: 1.0,
+        };
+        let acc = Accepted {
+            effect: Effect::Step,
+            theta: Param {
+                value: theta,
+                sigma: f64::NAN,
+            },
+            params: Vec::new(),
+            params_at_acceptance: Vec::new(),
+            delta_bic: -100.0,
+            std_before: 1.0,
+            std_after: 1.0,
+            cv_before: cv,
+            cv_after: cv,
+            forward_before: cv,
+            forward_after: cv,
+        };
+        let c = check(
+            &ds,
+            &ctx,
+            &cols,
+            &ds.y,
+            &[acc],
+            &NoiseModel::white(noise_std * noise_std),
+        );
+        assert_eq!(c.len(), 1);
+        c[0].poor
+    }
+
+    #[test]
+    fn a_ramp_fitted_as_a_step_is_poor_and_a_step_is_not() {
+        let n = 600;
+        // Deterministic pseudo-noise of std ≈ 0.07 (irrational frequencies, no step-like part).
+        let e = |i: usize| 0.1 * ((i as f64 * 2.399_963).sin() * (i as f64 * 0.618).cos());
+        let sd = 0.1 * 0.5;
+        // A unit change spread over 40 samples (400 s) around t = 3000 s.
+        let ramp: Vec<f64> = (0..n)
+            .map(|i| ((10.0 * i as f64 - 2800.0) / 400.0).clamp(0.0, 1.0) + e(i))
+            .collect();
+        assert!(step_is_poor(ramp, 2995.0, sd));
+        let step: Vec<f64> = (0..n)
+            .map(|i| f64::from(10.0 * i as f64 >= 2995.0) + e(i))
+            .collect();
+        assert!(!step_is_poor(step, 2995.0, sd));
+    }
+}

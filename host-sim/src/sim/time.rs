@@ -1,8 +1,46 @@
 //! UTC instants as seconds since the Unix epoch, parsed from and printed as ISO 8601
 //! (`YYYY-MM-DDTHH:MM:SS[.fff]Z`). Leap seconds are ignored (POSIX time), which is far below what
-//! a daily tide or thermal cycle can notice.
+//! a daily tide or thermal cycle can notice. The calendar (which days exist, day counts) is
+//! jiff's; only the f64 seconds are ours, because the simulator and the analyses count time in
+//! f64 seconds.
 
 use std::fmt;
+
+use jiff::civil::{Date, DateTime};
+use jiff::tz::TimeZone;
+use jiff::Timestamp;
+
+/// POSIX seconds of a civil UTC date and time (whole seconds), `None` for a day or time that
+/// does not exist or a year outside jiff's −9999..=9999.
+pub fn posix_seconds(y: i64, mo: i64, d: i64, h: i64, mi: i64, s: i64) -> Option<i64> {
+    let small = |v: i64| i8::try_from(v).ok();
+    let dt = DateTime::new(
+        i16::try_from(y).ok()?,
+        small(mo)?,
+        small(d)?,
+        small(h)?,
+        small(mi)?,
+        small(s)?,
+        0,
+    )
+    .ok()?;
+    Some(
+        dt.to_zoned_datetime(TimeZone::UTC)
+            .ok()?
+            .timestamp()
+            .as_second(),
+    )
+}
+
+/// The civil UTC date of POSIX second `s` (`None` outside jiff's years −9999..=9999).
+pub fn utc_date(s: i64) -> Option<Date> {
+    Some(
+        Timestamp::from_second(s)
+            .ok()?
+            .to_zoned_datetime(TimeZone::UTC)
+            .date(),
+    )
+}
 
 /// A UTC instant, seconds since 1970-01-01T00:00:00Z (POSIX, no leap seconds).
 #[derive(Debug, Clone, Copy, PartialEq, PartialOrd)]
@@ -13,7 +51,8 @@ pub struct Utc(pub f64);
 #[error("not an ISO 8601 UTC time (YYYY-MM-DDTHH:MM:SSZ): {0:?}")]
 pub struct UtcParseError(pub String);
 
-/// Days since 1970-01-01 of a proleptic Gregorian date (H. Hinnant's days_from_civil).
+/// Days since 1970-01-01 of a proleptic Gregorian date (H. Hinnant's days_from_civil). Kept for
+/// `discover::import` until it moves to [`posix_seconds`]/[`utc_date`] (jiff); no new callers.
 pub(crate) fn days_from_civil(y: i64, m: i64, d: i64) -> i64 {
     let y = if m <= 2 { y - 1 } else { y };
     let era = y.div_euclid(400);
@@ -60,24 +99,12 @@ impl Utc {
         let mut tp = time.split(':');
         let (h, mi) = (num(tp.next())?, num(tp.next())?);
         let sec: f64 = tp.next().ok_or_else(err)?.parse().map_err(|_| err())?;
-        let month_len = [31, 28, 31, 30, 31, 30, 31, 31, 30, 31, 30, 31];
-        let leap = (y % 4 == 0 && y % 100 != 0) || y % 400 == 0;
-        let max_day = match mo {
-            2 if leap => 29,
-            1..=12 => month_len[(mo - 1) as usize],
-            _ => return Err(err()),
-        };
-        if dp.next().is_some()
-            || tp.next().is_some()
-            || !(1..=max_day).contains(&d)
-            || !(0..24).contains(&h)
-            || !(0..60).contains(&mi)
-            || !(0.0..60.0).contains(&sec)
-        {
+        if dp.next().is_some() || tp.next().is_some() || !(0.0..60.0).contains(&sec) {
             return Err(err());
         }
-        let days = days_from_civil(y, mo, d);
-        Ok(Utc((days * 86_400 + h * 3600 + mi * 60) as f64 + sec))
+        // jiff decides whether the day and the clock time exist.
+        let whole = posix_seconds(y, mo, d, h, mi, 0).ok_or_else(err)?;
+        Ok(Utc(whole as f64 + sec))
     }
 
     /// The instant `dt_s` seconds later.
@@ -97,7 +124,15 @@ impl fmt::Display for Utc {
         let ms = (self.0 * 1000.0).round() as i64;
         let days = ms.div_euclid(86_400_000);
         let rem = ms.rem_euclid(86_400_000);
-        let (y, m, d) = civil_from_days(days);
+        let (y, m, d) = match utc_date(days * 86_400) {
+            Some(date) => (
+                i64::from(date.year()),
+                i64::from(date.month()),
+                i64::from(date.day()),
+            ),
+            // Beyond jiff's years: the day count's own civil date (never met by a real log).
+            None => civil_from_days(days),
+        };
         let (h, mi, s, frac) = (
             rem / 3_600_000,
             rem / 60_000 % 60,

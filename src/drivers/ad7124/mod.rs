@@ -19,7 +19,7 @@ mod tests;
 
 use embedded_hal::delay::DelayNs;
 use embedded_hal::digital::InputPin;
-use embedded_hal::spi::SpiDevice;
+use embedded_hal::spi::{Mode, SpiDevice, MODE_3};
 
 use crate::adc::{Ad7124Code, AdcScale};
 use crate::drivers::{Error, CRC8_ATM};
@@ -32,6 +32,16 @@ pub type DriverError<SPI, DRDY> = Error<
     <SPI as embedded_hal::spi::ErrorType>::Error,
     <DRDY as embedded_hal::digital::ErrorType>::Error,
 >;
+
+/// SPI mode the AD7124-4 requires: CPOL = 1, CPHA = 1. Datasheet Rev. B, "Timing
+/// Characteristics" (Figures 2 and 3, read and write cycle timing): SCLK idles high, DOUT/RDY
+/// changes on the falling edge and DIN is sampled on the rising edge. Mode 1 (idle low) would
+/// put the first data bit one edge off: ID and read-back fail.
+pub const SPI_MODE: Mode = MODE_3;
+
+/// Fastest SCLK the AD7124-4 accepts, in hertz: t3/t4 (SCLK high and low pulse widths) ≥ 100 ns
+/// in the Rev. B timing table, i.e. 5 MHz.
+pub const MAX_SCLK_HZ: u32 = 5_000_000;
 
 /// Wait after the 64-ones reset before the first access, in microseconds. ADI's reference code
 /// waits 4 ms (the datasheet's power-up/reset time is shorter; the margin costs nothing once).
@@ -311,19 +321,56 @@ where
 
     /// Serial reset: 64 consecutive ones on DIN, then the reset wait. CRC is off afterwards.
     pub fn reset(&mut self) -> Result<(), DriverError<SPI, DRDY>> {
-        self.crc_active = false;
-        self.spi.write(&[0xFF; 8]).map_err(Error::Spi)?;
+        self.begin_reset()?;
         self.delay.delay_us(RESET_WAIT_US);
         Ok(())
     }
 
+    /// The 64 ones of [`Ad7124::reset`] without the wait: the caller leaves the part alone for
+    /// [`RESET_WAIT_US`] before [`Ad7124::configure`] (interrupt-driven re-initialisation).
+    pub fn begin_reset(&mut self) -> Result<(), DriverError<SPI, DRDY>> {
+        self.crc_active = false;
+        self.spi.write(&[0xFF; 8]).map_err(Error::Spi)
+    }
+
     /// Reset, check the ID, write and read back every configuration register, and start
-    /// continuous conversion.
+    /// continuous conversion. Blocks [`RESET_WAIT_US`]; see [`Ad7124::configure`].
     pub fn init(&mut self) -> Result<DeviceInfo, DriverError<SPI, DRDY>> {
         if !self.config.validate() {
             return Err(Error::InvalidConfig);
         }
         self.reset()?;
+        self.configure()
+    }
+
+    /// ADC_CONTROL as configured (what [`Ad7124::read_control_unchecked`] shows while the part
+    /// keeps its configuration; 0x0000 after a reset).
+    pub const fn configured_control(&self) -> u32 {
+        self.config.adc_control()
+    }
+
+    /// Read ADC_CONTROL without a CRC byte whatever the CRC state: how to ask a part whose CRC
+    /// state is unknown (after a reset its CRC is off, so every CRC-checked read fails) whether
+    /// it still holds its configuration. With CRC on, the part's CRC byte is simply not clocked;
+    /// CS rising ends the frame.
+    pub fn read_control_unchecked(&mut self) -> Result<u32, DriverError<SPI, DRDY>> {
+        let comms =
+            registers::COMMS_READ | (registers::ADC_CONTROL.addr & registers::COMMS_ADDR_MASK);
+        let mut buf = [comms, 0, 0];
+        self.spi.transfer_in_place(&mut buf).map_err(Error::Spi)?;
+        let [_, hi, lo] = buf;
+        if hi == 0xFF && lo == 0xFF {
+            return Err(Error::NotResponding { found: 0xFF });
+        }
+        Ok(u32::from(u16::from_be_bytes([hi, lo])))
+    }
+
+    /// Second half of [`Ad7124::init`], [`RESET_WAIT_US`] after [`Ad7124::begin_reset`].
+    pub fn configure(&mut self) -> Result<DeviceInfo, DriverError<SPI, DRDY>> {
+        if !self.config.validate() {
+            return Err(Error::InvalidConfig);
+        }
+        self.crc_active = false;
         let id = self.read_register(registers::ID)? as u8;
         if id == 0x00 || id == 0xFF {
             return Err(Error::NotResponding { found: id });
@@ -433,6 +480,11 @@ where
             *first = comms;
         }
         self.spi.transfer_in_place(buf).map_err(Error::Spi)?;
+        // An idle MISO (pulled high) reads all ones: no AD7124 register or STATUS byte can be
+        // all ones (STATUS bit 5 and the top bits of ERROR are always 0), so name it.
+        if buf.get(1..).is_some_and(|b| b.iter().all(|x| *x == 0xFF)) {
+            return Err(Error::NotResponding { found: 0xFF });
+        }
         let (data, crc) = buf
             .get(1..)
             .and_then(|b| b.split_at_checked(out.len()))

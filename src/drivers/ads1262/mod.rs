@@ -13,7 +13,7 @@ mod tests;
 
 use embedded_hal::delay::DelayNs;
 use embedded_hal::digital::InputPin;
-use embedded_hal::spi::SpiDevice;
+use embedded_hal::spi::{Mode, SpiDevice, MODE_1};
 
 use crate::adc::{AdcScale, Ads1262Code};
 use crate::drivers::{Error, CRC8_ATM};
@@ -35,6 +35,15 @@ pub type DriverError<SPI, DRDY> = Error<
 /// 7.3728 MHz oscillator); we wait 10 ms after the command too, since init runs once and a short
 /// wait would make the ID read race the internal reset.
 pub const RESET_WAIT_US: u32 = 10_000;
+
+/// SPI mode the ADS1262 requires: CPOL = 0, CPHA = 1 (SBAS661C, "Serial Interface" and the
+/// serial-interface timing figure: SCLK idles low, DIN is latched and DOUT updated so that data
+/// are valid on the SCLK falling edge).
+pub const SPI_MODE: Mode = MODE_1;
+
+/// Fastest SCLK the ADS1262 accepts, in hertz: tc(SC) ≥ 125 ns in SBAS661C "Timing
+/// Requirements: Serial Interface" (8 MHz). The board runs it well below (docs/drivers.md).
+pub const MAX_SCLK_HZ: u32 = 8_000_000;
 
 /// One of the two signals the board feeds to the ADS1262.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -335,18 +344,42 @@ where
     }
 
     /// Reset, identify, configure (with read-back) and start ADC1 on the accelerometer channel.
+    /// Blocks [`RESET_WAIT_US`] in the middle; interrupt-driven code uses
+    /// [`Ads1262::begin_reset`] and, [`RESET_WAIT_US`] later, [`Ads1262::configure`] instead.
     pub fn init(&mut self) -> Result<DeviceInfo, DriverError<SPI, DRDY>> {
+        self.begin_reset()?;
+        self.delay.delay_us(RESET_WAIT_US);
+        self.configure()
+    }
+
+    /// First half of [`Ads1262::init`]: check the configuration and send RESET. The device must
+    /// be left alone for [`RESET_WAIT_US`] before [`Ads1262::configure`].
+    pub fn begin_reset(&mut self) -> Result<(), DriverError<SPI, DRDY>> {
         if !self.config.validate() {
             return Err(Error::InvalidConfig);
         }
         self.selected = None;
-        self.command(cmd::RESET)?;
-        self.delay.delay_us(RESET_WAIT_US);
+        self.command(cmd::RESET)
+    }
 
-        // ID and POWER in one RREG: POWER must show the RESET flag the command just set.
+    /// ID and POWER in one RREG (diagnosis: POWER.RESET = 1 means the device reset since it
+    /// was configured; an idle bus reads all ones or all zeros).
+    pub fn read_id_power(&mut self) -> Result<(u8, u8), DriverError<SPI, DRDY>> {
         let mut id_power = [0u8; 2];
         self.read_registers(reg::ID, &mut id_power)?;
         let [id, power] = id_power;
+        Ok((id, power))
+    }
+
+    /// Second half of [`Ads1262::init`], after the reset wait: identify, write and verify the
+    /// configuration, start ADC1 on the accelerometer channel.
+    pub fn configure(&mut self) -> Result<DeviceInfo, DriverError<SPI, DRDY>> {
+        if !self.config.validate() {
+            return Err(Error::InvalidConfig);
+        }
+        self.selected = None;
+        // ID and POWER in one RREG: POWER must show the RESET flag the command just set.
+        let (id, power) = self.read_id_power()?;
         if id == 0xFF || (id == 0x00 && power == 0x00) {
             return Err(Error::NotResponding { found: id });
         }
@@ -379,6 +412,20 @@ where
             part,
             revision: id & 0x1F,
         })
+    }
+
+    /// Change the output data rate (MODE2.DR). Takes effect at the next channel selection,
+    /// which then rewrites MODE2 with the new rate (and restarts the conversion).
+    pub fn set_data_rate(&mut self, rate: DataRate) -> Result<(), DriverError<SPI, DRDY>> {
+        let mut next = self.config;
+        next.data_rate = rate;
+        if !next.validate() {
+            return Err(Error::InvalidConfig);
+        }
+        self.config = next;
+        // Forgetting the selection makes the next select write MODE2 and INPMUX together.
+        self.selected = None;
+        Ok(())
     }
 
     /// Start (or restart) ADC1 conversions (START1).
@@ -546,6 +593,14 @@ fn parse_frame<SpiE, PinE>(
     has_status: bool,
     integrity: Integrity,
 ) -> Result<Sample, Error<SpiE, PinE>> {
+    // Every byte 0xFF (MISO pulled high, chip unpowered) or 0x00 (MISO stuck low) can never be
+    // a valid frame: such a status byte would claim a reset (0xFF) or no data (0x00), and the
+    // checksum of four equal bytes is never that byte. Name it instead of calling it corrupt.
+    if let Some(&first) = bytes.first() {
+        if (first == 0xFF || first == 0x00) && bytes.iter().all(|b| *b == first) {
+            return Err(Error::NotResponding { found: first });
+        }
+    }
     let (status, rest) = if has_status {
         let (s, rest) = bytes.split_first().ok_or(Error::InvalidConfig)?;
         (Some(Status(*s)), rest)

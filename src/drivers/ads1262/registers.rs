@@ -93,6 +93,18 @@ pub enum Filter {
 }
 
 impl Filter {
+    /// Conversion periods before the first settled result after a (re)start: the sinc order
+    /// (SBAS661C "Conversion Latency"; FIR settles in one cycle). The data-sheet latency adds a
+    /// small fixed delay on top, which callers allow for in their margins.
+    pub const fn settling_conversions(self) -> u32 {
+        match self {
+            Filter::Sinc1 | Filter::Fir => 1,
+            Filter::Sinc2 => 2,
+            Filter::Sinc3 => 3,
+            Filter::Sinc4 => 4,
+        }
+    }
+
     pub(crate) const fn bits(self) -> u8 {
         match self {
             Filter::Sinc1 => 0b000,
@@ -129,6 +141,50 @@ pub enum DataRate {
 impl DataRate {
     pub(crate) const fn bits(self) -> u8 {
         self as u8
+    }
+
+    /// The rate for a whole number of samples per second, for the protocol's SetRate (2.5 and
+    /// 16.6 SPS have no integer value and are not offered).
+    pub const fn from_sps(sps: u32) -> Option<DataRate> {
+        Some(match sps {
+            5 => DataRate::Sps5,
+            10 => DataRate::Sps10,
+            20 => DataRate::Sps20,
+            50 => DataRate::Sps50,
+            60 => DataRate::Sps60,
+            100 => DataRate::Sps100,
+            400 => DataRate::Sps400,
+            1200 => DataRate::Sps1200,
+            2400 => DataRate::Sps2400,
+            4800 => DataRate::Sps4800,
+            7200 => DataRate::Sps7200,
+            14400 => DataRate::Sps14400,
+            19200 => DataRate::Sps19200,
+            38400 => DataRate::Sps38400,
+            _ => return None,
+        })
+    }
+
+    /// Nominal conversion period in microseconds (1 / data rate).
+    pub const fn period_us(self) -> u32 {
+        match self {
+            DataRate::Sps2_5 => 400_000,
+            DataRate::Sps5 => 200_000,
+            DataRate::Sps10 => 100_000,
+            DataRate::Sps16_6 => 60_000,
+            DataRate::Sps20 => 50_000,
+            DataRate::Sps50 => 20_000,
+            DataRate::Sps60 => 16_667,
+            DataRate::Sps100 => 10_000,
+            DataRate::Sps400 => 2_500,
+            DataRate::Sps1200 => 834,
+            DataRate::Sps2400 => 417,
+            DataRate::Sps4800 => 209,
+            DataRate::Sps7200 => 139,
+            DataRate::Sps14400 => 70,
+            DataRate::Sps19200 => 53,
+            DataRate::Sps38400 => 27,
+        }
     }
 
     /// Whether the FIR filter is defined at this rate (SBAS661C: 2.5, 5, 10, 20 SPS only).

@@ -85,6 +85,7 @@ fn synthetic_every(dt: f64, days: f64, truth: &Truth, seed: u64) -> Dataset {
         site: Some(SITE),
         dt_s: dt,
         notes: Vec::new(),
+        warnings: Vec::new(),
     }
 }
 
