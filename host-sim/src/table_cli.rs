@@ -5,7 +5,7 @@ use crate::calibration_file::{decode_named, read_table, read_table_bytes};
 use accomp::poly::TempPoly;
 use accomp::table::{CalibrationTable, ENCODED_LEN};
 use accomp::units::{Celsius, RAD_PER_ARCMIN};
-use anyhow::{Context, Result};
+use anyhow::Result;
 use serde::Serialize;
 use serde_json::Value;
 use std::path::PathBuf;

@@ -123,8 +123,9 @@ pub fn install_signal_cleanup() {
 }
 
 /// Kills the registered QEMUs and removes their temporary directories. Holds the registry's
-/// lock throughout: a [`Qemu`] being dropped meanwhile (its connection just broke) waits in
-/// `unregister` instead of letting the process end before the clean-up is done.
+/// lock throughout and exits with it: a [`Qemu`] being stopped meanwhile (its connection just
+/// broke) either finished its own clean-up before (`Qemu::stop` holds the lock too) or waits
+/// for the lock until the process ends.
 fn cleanup_running() {
     let mut list = match RUNNING.lock() {
         Ok(l) => l,
@@ -139,7 +140,7 @@ fn cleanup_running() {
         }
     }
     eprintln!("\ninterrupted: QEMU stopped");
-    // Exit with the lock held, so no other thread gets past `unregister`.
+    // Exit with the lock held, so no `Qemu::stop` starts a clean-up the exit would cut short.
     std::process::exit(130);
 }
 
@@ -165,12 +166,6 @@ fn wait_gone(pid: u32) {
 fn register(pid: u32, dir: Option<PathBuf>) {
     if let Ok(mut l) = RUNNING.lock() {
         l.push((pid, dir));
-    }
-}
-
-fn unregister(pid: u32) {
-    if let Ok(mut l) = RUNNING.lock() {
-        l.retain(|(p, _)| *p != pid);
     }
 }
 
@@ -370,15 +365,32 @@ impl Qemu {
         None
     }
 
+    /// Kills QEMU, reaps it and removes its temporary directory, all under the registry lock,
+    /// and only then unregisters it. The SIGINT/SIGTERM handler takes the same lock: it either
+    /// finds this QEMU still registered and stops it itself, or waits until this is done. (When
+    /// the entry was dropped first and the folder removed after, a signal whose handler ran in
+    /// between exited the process with the folder still there: the signal itself interrupts the
+    /// UART read, so the main thread drops its `Qemu` just as the handler runs.)
     fn stop(&mut self) -> Option<i32> {
-        unregister(self.child.id());
-        if let Some(s) = self.exited() {
-            return s.code();
+        let mut list = match RUNNING.lock() {
+            Ok(l) => l,
+            Err(p) => p.into_inner(),
+        };
+        let code = match self.exited() {
+            Some(s) => s.code(),
+            None => {
+                // The guest has nothing to flush (the flash file is written through): killing
+                // the emulator is a clean stop, and exactly a power cut.
+                let _ = self.child.kill();
+                self.child.wait().ok().and_then(|s| s.code())
+            }
+        };
+        if self.temporary_log_dir && std::env::var_os("ACCOMP_KEEP_QEMU_LOGS").is_none() {
+            let _ = fs::remove_dir_all(&self.log_dir);
         }
-        // The guest has nothing to flush (the flash file is written through): killing the
-        // emulator is a clean stop, and exactly a power cut.
-        let _ = self.child.kill();
-        self.child.wait().ok().and_then(|s| s.code())
+        let pid = self.child.id();
+        list.retain(|(p, _)| *p != pid);
+        code
     }
 }
 
@@ -393,8 +405,5 @@ fn rand_suffix() -> u64 {
 impl Drop for Qemu {
     fn drop(&mut self) {
         self.stop();
-        if self.temporary_log_dir && std::env::var_os("ACCOMP_KEEP_QEMU_LOGS").is_none() {
-            let _ = fs::remove_dir_all(&self.log_dir);
-        }
     }
 }

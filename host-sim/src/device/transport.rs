@@ -30,12 +30,16 @@ impl TcpTransport {
     }
 }
 
+/// A read that returned nothing for a benign reason is "no bytes yet": the poll timeout, or a
+/// signal (a socket with SO_RCVTIMEO is never restarted after a signal handler, SA_RESTART or
+/// not — signal(7) — so Ctrl-C or SIGTERM would otherwise surface as an I/O error while the
+/// signal handler is still cleaning up).
 fn timeout_is_empty(r: io::Result<usize>) -> io::Result<usize> {
     match r {
         Err(e)
             if matches!(
                 e.kind(),
-                io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut
+                io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut | io::ErrorKind::Interrupted
             ) =>
         {
             Ok(0)
