@@ -298,7 +298,7 @@ fn factor_words(f: f64) -> String {
 }
 
 fn round2(f: f64) -> String {
-    if f >= 10.0 {
+    if f >= 9.95 {
         format!("{f:.0}")
     } else {
         format!("{f:.1}")
@@ -380,7 +380,11 @@ mod tests {
             "{}",
             sentence(&out[0])
         );
-        assert!(sentence(&out[1]).contains("overestimates by ×10"));
+        let s1 = sentence(&out[1]);
+        assert!(
+            s1.contains("overestimates") && s1.ends_with("at 8 s by ×10"),
+            "{s1}"
+        );
         assert!((fraction(&s) - 5.0 / 8.0).abs() < 1e-12);
     }
 }
