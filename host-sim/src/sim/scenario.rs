@@ -85,7 +85,16 @@ pub enum ScenarioError {
     /// Neither a file nor a preset of that name.
     #[error("no scenario file or preset named {0:?} (presets: {presets})", presets = PRESETS.join(", "))]
     Unknown(String),
+    /// The file exists but is not UTF-8 text (a scenario is TOML).
+    #[error("scenario file {0:?} is not UTF-8 text (a scenario is a TOML file)")]
+    NotUtf8(String),
+    /// The file exists but could not be read, or is larger than a scenario can be.
+    #[error("scenario file {0:?}: {1}")]
+    Unreadable(String, String),
 }
+
+/// Largest scenario file read (a complete scenario is about 3 KB of TOML).
+pub const MAX_SCENARIO_BYTES: u64 = 1 << 20;
 
 /// Names of the built-in presets.
 pub const PRESETS: [&str; 2] = ["paper-1g", "paper-0g"];
@@ -213,10 +222,26 @@ pub fn load(arg: &str) -> Result<Scenario, ScenarioError> {
     if let Some(s) = Scenario::preset(arg) {
         return Ok(s);
     }
-    match std::fs::read_to_string(arg) {
-        Ok(text) => Scenario::from_toml(&text),
-        Err(_) => Err(ScenarioError::Unknown(arg.to_string())),
+    use std::io::Read as _;
+    let file = match std::fs::File::open(arg) {
+        Ok(f) => f,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            return Err(ScenarioError::Unknown(arg.to_string()))
+        }
+        Err(e) => return Err(ScenarioError::Unreadable(arg.to_string(), e.to_string())),
+    };
+    let mut bytes = Vec::new();
+    file.take(MAX_SCENARIO_BYTES + 1)
+        .read_to_end(&mut bytes)
+        .map_err(|e| ScenarioError::Unreadable(arg.to_string(), e.to_string()))?;
+    if bytes.len() as u64 > MAX_SCENARIO_BYTES {
+        return Err(ScenarioError::Unreadable(
+            arg.to_string(),
+            format!("larger than {MAX_SCENARIO_BYTES} bytes, not a scenario"),
+        ));
     }
+    let text = String::from_utf8(bytes).map_err(|_| ScenarioError::NotUtf8(arg.to_string()))?;
+    Scenario::from_toml(&text)
 }
 
 fn beijing() -> Site {
