@@ -184,10 +184,7 @@ impl ScenarioEffect {
     /// Checks the ranges; the message names the entry (`effects[i] (kind)`) and the field.
     pub fn validate(&self, index: usize) -> Result<(), String> {
         let at = |field: &str, why: &str| {
-            Err(format!(
-                "effects[{index}] ({}): {field} {why}",
-                self.name()
-            ))
+            Err(format!("effects[{index}] ({}): {field} {why}", self.name()))
         };
         let finite = |v: f64| v.is_finite();
         let positive = |v: f64| v.is_finite() && v > 0.0;
@@ -254,7 +251,10 @@ impl ScenarioEffect {
                         );
                     }
                     if !(finite(g.factor) && finite(g.phase_deg)) {
-                        return at("groups", &format!("{}: factor and phase must be finite", g.name));
+                        return at(
+                            "groups",
+                            &format!("{}: factor and phase must be finite", g.name),
+                        );
                     }
                 }
             }
@@ -331,7 +331,10 @@ impl ScenarioEffect {
 }
 
 fn group_names() -> Vec<&'static str> {
-    crate::discover::tidal::GROUPS.iter().map(|g| g.name).collect()
+    crate::discover::tidal::GROUPS
+        .iter()
+        .map(|g| g.name)
+        .collect()
 }
 
 /// The frequency band (cpd) of a group name; merged names (`A+B`) take the union.
@@ -387,9 +390,13 @@ pub struct Drive<'a> {
 #[derive(Debug, Clone)]
 enum State {
     /// Last filter output and time (first-order lag with the actual spacing).
-    Lag { x: Option<(f64, f64)> },
+    Lag {
+        x: Option<(f64, f64)>,
+    },
     /// Play operator output.
-    Play { p: Option<f64> },
+    Play {
+        p: Option<f64>,
+    },
     /// Index of the ambient channel and its lag state.
     Ambient {
         index: usize,
@@ -412,7 +419,9 @@ pub struct EffectChain {
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum EffectError {
     /// An ambient coupling names a channel nobody provides.
-    #[error("effects[{index}] (ambient_coupling): channel {channel:?} is not available (have: {have})")]
+    #[error(
+        "effects[{index}] (ambient_coupling): channel {channel:?} is not available (have: {have})"
+    )]
     Channel {
         /// Entry.
         index: usize,
@@ -535,19 +544,12 @@ impl EffectChain {
                     *p = Some(q);
                     half_width * (tc - q) / r
                 }
-                (ScenarioEffect::Warmup { tau_s, amplitude }, _) => {
-                    amplitude * (-t / tau_s).exp()
-                }
+                (ScenarioEffect::Warmup { tau_s, amplitude }, _) => amplitude * (-t / tau_s).exp(),
                 (ScenarioEffect::AgingDrift { tau_s, amplitude }, _) => {
                     amplitude * (1.0 + t.max(0.0) / tau_s).ln()
                 }
-                (ScenarioEffect::Step { time_s, size }, _) => {
-                    if t >= *time_s {
-                        *size
-                    } else {
-                        0.0
-                    }
-                }
+                (ScenarioEffect::Step { time_s, size }, _) if t >= *time_s => *size,
+                (ScenarioEffect::Step { .. }, _) => 0.0,
                 (
                     ScenarioEffect::TidalGravity {
                         amplitude_factor,
@@ -753,8 +755,9 @@ fn group_nodes(st: &Station, setup: &ChainSetup, terms: &[&TideGroupTerm]) -> No
     let n = ((t1 - t0) / GROUP_NODE_S).ceil().max(0.0) as usize + 1;
     let v = (0..n)
         .map(|k| {
-            let args =
-                DoodsonArguments::at_unix_seconds(setup.start_unix_s + t0 + k as f64 * GROUP_NODE_S);
+            let args = DoodsonArguments::at_unix_seconds(
+                setup.start_unix_s + t0 + k as f64 * GROUP_NODE_S,
+            );
             let mut sum = 0.0;
             for (fc, fs, waves) in &per_term {
                 let (mut cs, mut sn) = (0.0, 0.0);
@@ -819,7 +822,13 @@ mod tests {
             effects: Vec<ScenarioEffect>,
         }
         let w: W = toml::from_str(text).unwrap();
-        assert_eq!(w.effects[0], ScenarioEffect::Step { time_s: 100.0, size: 2.0 });
+        assert_eq!(
+            w.effects[0],
+            ScenarioEffect::Step {
+                time_s: 100.0,
+                size: 2.0
+            }
+        );
         assert_eq!(w.effects[1].name(), "tidal_gravity");
         for (i, e) in w.effects.iter().enumerate() {
             e.validate(i).unwrap();
@@ -936,6 +945,10 @@ mod tests {
         };
         // In g: the full tide spans ~1–3e-7 g, M2 alone a good part of it.
         assert!((0.5e-7..4e-7).contains(&ptp(&b)), "{}", ptp(&b));
-        assert!(ptp(&a) > 0.2 * ptp(&b) && ptp(&a) < 1.2 * ptp(&b), "{}", ptp(&a));
+        assert!(
+            ptp(&a) > 0.2 * ptp(&b) && ptp(&a) < 1.2 * ptp(&b),
+            "{}",
+            ptp(&a)
+        );
     }
 }

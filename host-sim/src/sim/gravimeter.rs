@@ -91,7 +91,10 @@ impl GravimeterParams {
             ("offset", self.offset),
             ("drift_per_day", self.drift_per_day),
             ("tide_factor", self.tide_factor),
-            ("pressure_admittance_per_hpa", self.pressure_admittance_per_hpa),
+            (
+                "pressure_admittance_per_hpa",
+                self.pressure_admittance_per_hpa,
+            ),
         ];
         if let Some((name, _)) = finite.iter().find(|(_, v)| !v.is_finite()) {
             return Err(format!("instrument.{name} must be finite"));

@@ -425,7 +425,9 @@ impl Simulator {
                 let p = &gm.p;
                 gm.p.offset
                     + p.drift_per_day * t / 86_400.0
-                    + p.tide_factor * gm.tide.at(t - p.tide_delay_s).gravity_nm_s2 * gm.unit_per_nm_s2
+                    + p.tide_factor
+                        * gm.tide.at(t - p.tide_delay_s).gravity_nm_s2
+                        * gm.unit_per_nm_s2
                     + p.pressure_admittance_per_hpa * pressure_dev_pa / 100.0
                     + gm.noise.step(&mut gm.rng)
                     + effect
@@ -677,6 +679,60 @@ mod tests {
         let a = run(&s, 42, true);
         assert_eq!(a, run(&s, 42, true));
         assert_ne!(a, run(&s, 43, true));
+    }
+
+    fn fnv1a(bytes: &[u8]) -> u64 {
+        bytes.iter().fold(0xcbf2_9ce4_8422_2325, |h, &b| {
+            (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
+        })
+    }
+
+    #[test]
+    fn the_presets_write_the_bytes_they_wrote_before_effects_and_instruments_existed() {
+        // FNV-1a of `accomp simulate <preset> --days 0.5 --seed 42 --codes`, written by the
+        // simulator of main at 62a21c1 (before `[instrument]` and `[[effects]]`): the optional
+        // tables must not move a single draw or digit of a scenario that does not use them.
+        for (name, len, hash) in [
+            ("paper-0g", 170_818, 0x44a2_0284_6d52_a42d_u64),
+            ("paper-1g", 172_155, 0x05df_d03e_c46a_8367_u64),
+        ] {
+            let mut s = Scenario::preset(name).unwrap();
+            s.run.duration_s = 0.5 * 86_400.0;
+            let bytes = run(&s, 42, true);
+            assert_eq!((bytes.len(), fnv1a(&bytes)), (len, hash), "{name}");
+        }
+    }
+
+    #[test]
+    fn a_zero_effect_changes_no_byte_and_a_real_one_changes_only_its_channel() {
+        use super::effects::ScenarioEffect;
+        let base = short_0g();
+        let mut zero = short_0g();
+        zero.effects = vec![ScenarioEffect::Step {
+            time_s: 3600.0,
+            size: 0.0,
+        }];
+        assert_eq!(run(&base, 7, false), run(&zero, 7, false));
+        // Reading noise on the temperature: only temperature_c moves.
+        let mut noisy = short_0g();
+        noisy.effects = vec![ScenarioEffect::ChannelNoise {
+            channel: "temperature_c".into(),
+            noise: 0.01,
+        }];
+        let (a, b) = (
+            Log::read(&run(&base, 7, false)[..]).unwrap(),
+            Log::read(&run(&noisy, 7, false)[..]).unwrap(),
+        );
+        assert_eq!(a.column("output_v"), b.column("output_v"));
+        assert_eq!(a.column("tilt_arcsec"), b.column("tilt_arcsec"));
+        let d: Vec<f64> = a
+            .column("temperature_c")
+            .unwrap()
+            .iter()
+            .zip(b.column("temperature_c").unwrap())
+            .map(|(x, y)| y - x)
+            .collect();
+        assert!((std(&d) - 0.01).abs() < 0.002, "{}", std(&d));
     }
 
     #[test]

@@ -99,7 +99,8 @@ pub fn quiet(s: &Scenario) -> Scenario {
             random_walk_per_sqrt_s: 0.0,
         };
     }
-    q.effects.retain(|e| !matches!(e, ScenarioEffect::ChannelNoise { .. }));
+    q.effects
+        .retain(|e| !matches!(e, ScenarioEffect::ChannelNoise { .. }));
     q
 }
 
@@ -166,7 +167,9 @@ impl Twin {
         noise: Option<&NoiseModel>,
     ) -> Result<Twin, SimError> {
         if ds.len() < 2 {
-            return Err(SimError::Twin("the record has fewer than two points".into()));
+            return Err(SimError::Twin(
+                "the record has fewer than two points".into(),
+            ));
         }
         let mut prov: Vec<String> = Vec::new();
         let derived = base.is_none();
@@ -241,8 +244,8 @@ impl Twin {
                 )));
             };
             let (a, b) = line_fit(&t_s, &ds.y);
-            let per_nm = unit_per_g_for_suffix(&unit).unwrap_or(1.0)
-                / (STANDARD_GRAVITY_M_S2 * 1e9);
+            let per_nm =
+                unit_per_g_for_suffix(&unit).unwrap_or(1.0) / (STANDARD_GRAVITY_M_S2 * 1e9);
             let g = GravimeterParams {
                 name: format!("twin of {}", ds.output_name),
                 unit: unit.clone(),
@@ -328,7 +331,10 @@ impl Twin {
                 prov.push(format!(
                     "noise from the fitted noise model: white {:.3e}/√Hz, flicker floor {:.3e}, \
                      random walk {:.3e}/√s ({})",
-                    rec.white_adev_1s, rec.flicker_floor, rec.random_walk_per_sqrt_s, ds.output_unit
+                    rec.white_adev_1s,
+                    rec.flicker_floor,
+                    rec.random_walk_per_sqrt_s,
+                    ds.output_unit
                 ));
                 let inst = scaled(&rec, 1.0 / out_scale);
                 match g {
@@ -352,8 +358,7 @@ impl Twin {
         };
         s.validate()?;
         let drivers = drivers(ds, &s, &mut prov)?;
-        let start = Utc::parse(&s.run.start_utc)
-            .map_err(|e| SimError::Twin(e.to_string()))?;
+        let start = Utc::parse(&s.run.start_utc).map_err(|e| SimError::Twin(e.to_string()))?;
         let base = instrument_output(&s, start, &t_s, &drivers, out_scale)?;
         let mut twin = Twin {
             noise: scaled(&inst_noise, out_scale),
@@ -422,13 +427,11 @@ impl Twin {
         let offset = t.scenario.effects.len();
         let mut accepted = Vec::new();
         for (i, e) in effects.iter().enumerate() {
-            let ok = e
-                .validate(offset + i)
-                .and_then(|()| {
-                    EffectChain::new(std::slice::from_ref(e), setup.clone())
-                        .map(|_| ())
-                        .map_err(|x| x.to_string())
-                });
+            let ok = e.validate(offset + i).and_then(|()| {
+                EffectChain::new(std::slice::from_ref(e), setup.clone())
+                    .map(|_| ())
+                    .map_err(|x| x.to_string())
+            });
             match ok {
                 Ok(()) => accepted.push(e.clone()),
                 Err(why) => t
@@ -738,7 +741,8 @@ pub fn scenario_effects_from_discovery(
                 .map(|(_, v)| v.value)
                 .filter(|v| v.is_finite())
         };
-        let need = |key: &str| p(key).ok_or_else(|| format!("parameter {key} missing or not finite"));
+        let need =
+            |key: &str| p(key).ok_or_else(|| format!("parameter {key} missing or not finite"));
         let e: Result<ScenarioEffect, String> = (|| {
             Ok(match name {
                 "thermal_lag" => ScenarioEffect::ThermalLag {
@@ -800,12 +804,16 @@ pub fn scenario_effects_from_discovery(
                     amplitude: need("amplitude")?,
                     phase_rad: need("phase_rad")?,
                 },
-                "tilt_coupling" => ScenarioEffect::TiltCoupling { gain: need("gain")? },
+                "tilt_coupling" => ScenarioEffect::TiltCoupling {
+                    gain: need("gain")?,
+                },
                 "ambient_coupling" => {
                     let channel = a.effect.channel().unwrap_or_default().to_owned();
                     let in_record = d.dataset.channels.iter().any(|c| c.name == channel);
                     if !in_record && !SIMULATED_AMBIENT.contains(&channel.as_str()) {
-                        return Err(format!("channel {channel:?} is neither in the record nor simulated"));
+                        return Err(format!(
+                            "channel {channel:?} is neither in the record nor simulated"
+                        ));
                     }
                     ScenarioEffect::AmbientCoupling {
                         channel,
@@ -825,7 +833,9 @@ pub fn scenario_effects_from_discovery(
                     let channel = a.effect.channel().unwrap_or_default().to_owned();
                     ScenarioEffect::ChannelNoise {
                         channel,
-                        noise: p("noise").or_else(|| p("level")).ok_or("parameter noise missing")?,
+                        noise: p("noise")
+                            .or_else(|| p("level"))
+                            .ok_or("parameter noise missing")?,
                     }
                 }
                 other => return Err(format!("the simulator has no model of {other:?}")),
@@ -950,7 +960,12 @@ mod tests {
         let resid: Vec<f64> = ds.y.iter().zip(&det).map(|(a, b)| a - b).collect();
         // Same models, the RTD's offset (≤ 0.1 °C, a constant) and the noise are what differ:
         // the residual's spread is far below the record's.
-        assert!(std(&resid) < 0.3 * std(&ds.y), "{} vs {}", std(&resid), std(&ds.y));
+        assert!(
+            std(&resid) < 0.3 * std(&ds.y),
+            "{} vs {}",
+            std(&resid),
+            std(&ds.y)
+        );
     }
 
     #[test]
@@ -989,7 +1004,10 @@ mod tests {
             },
         ];
         let text = s.to_toml();
-        assert!(text.contains("[[effects]]") && text.contains("kind = \"gravimeter\""), "{text}");
+        assert!(
+            text.contains("[[effects]]") && text.contains("kind = \"gravimeter\""),
+            "{text}"
+        );
         assert_eq!(Scenario::from_toml(&text).unwrap(), s);
     }
 }
