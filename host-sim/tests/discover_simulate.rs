@@ -10,7 +10,7 @@
 
 use accomp_host::discover::import::{self, Dataset, DatasetOptions, Format};
 use accomp_host::discover::select;
-use accomp_host::discover::simulate::cli::simulate_dataset;
+use accomp_host::discover::simulate::cli::{simulate_dataset, write_scenario};
 use accomp_host::discover::simulate::mismatch::Quantity;
 use accomp_host::discover::simulate::Simulation;
 use std::path::Path;
@@ -127,6 +127,30 @@ fn hidden_wave_in_the_real_record_is_a_mismatch_in_its_band_that_the_extension_r
     );
     // The gain: lower out-of-sample residual after.
     assert!(s.after_scores.residual_std_out_of_sample < s.before_scores.residual_std_out_of_sample);
+    // The extended scenario is written and `accomp simulate` runs it as is; it holds the line.
+    let dir = std::env::temp_dir().join(format!("accomp-discover-simulate-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let toml = dir.join("extended.toml");
+    let mut s = s;
+    write_scenario(&mut s, Some(&toml)).expect("write scenario");
+    let text = std::fs::read_to_string(&toml).unwrap();
+    let sc = accomp_host::sim::scenario::Scenario::from_toml(&text).expect("scenario parses");
+    assert!(sc.effects.iter().any(|e| matches!(e,
+        accomp_host::sim::effects::ScenarioEffect::Periodic { period_s, .. }
+            if (period_s / HIDDEN_PERIOD_S - 1.0).abs() < 0.02)));
+    let out = dir.join("extended.csv");
+    let st = std::process::Command::new(env!("CARGO_BIN_EXE_accomp"))
+        .args(["simulate", toml.to_str().unwrap(), "--days", "0.5", "-o"])
+        .arg(&out)
+        .status()
+        .expect("accomp simulate");
+    assert!(st.success(), "accomp simulate refused the written scenario");
+    let log = std::fs::read_to_string(&out).unwrap();
+    assert!(
+        log.lines().any(|l| l.starts_with("time_s,gravity_mgal")),
+        "no gravity column"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]

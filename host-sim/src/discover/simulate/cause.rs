@@ -7,49 +7,9 @@
 
 use super::ensemble::Yardstick;
 use super::mismatch::{Comparison, Quantity};
-use crate::discover::Discovery;
 
 /// A mismatch is explained when at most this fraction of its excess is left.
 pub const EXPLAINED_EXCESS: f64 = 0.5;
-
-/// Each accepted effect's contribution to the model (output units), with a display name
-/// (the catalogue name, the channel for a coupling, `#k` for a repeat).
-pub fn contributions(d: &Discovery) -> Vec<(String, Vec<f64>)> {
-    let s = &d.selection;
-    let Some(j) = &s.joint else {
-        return Vec::new();
-    };
-    let n_eff: usize = j.effect_columns.iter().map(|c| c.len()).sum();
-    let Some(mut k) = s.beta.len().checked_sub(n_eff) else {
-        return Vec::new();
-    };
-    let n = d.dataset.len();
-    let mut names: Vec<String> = Vec::new();
-    let mut out = Vec::new();
-    for (a, cols) in s.accepted.iter().zip(&j.effect_columns) {
-        let mut c = vec![0.0; n];
-        for col in cols {
-            let b = s.beta.get(k).copied().unwrap_or(0.0);
-            for (ci, v) in c.iter_mut().zip(col) {
-                *ci += b * v;
-            }
-            k += 1;
-        }
-        let base = match a.effect.channel() {
-            Some(ch) => format!("{}({ch})", a.effect.name()),
-            None => a.effect.name().to_owned(),
-        };
-        let same = names.iter().filter(|m| **m == base).count();
-        names.push(base.clone());
-        let name = if same > 0 {
-            format!("{base}#{}", same + 1)
-        } else {
-            base
-        };
-        out.push((name, c));
-    }
-    out
-}
 
 /// Σ ln(beyond edge) of measured values over [a, b) on the mismatch's side.
 fn excess(m: &[f64], lo: &[f64], hi: &[f64], a: usize, b: usize, above: bool) -> f64 {

@@ -38,16 +38,22 @@ pub fn simulate_dataset(
     ensemble: usize,
     cfg: &select::Config,
 ) -> anyhow::Result<Simulation> {
-    if let Some(p) = scenario {
-        anyhow::bail!(
-            "--scenario {}: a base scenario needs the simulator's twin, which has not landed yet",
-            p.display()
-        );
-    }
-    let label = "derived from the record".to_owned();
+    let base = match scenario {
+        Some(p) => Some(
+            crate::sim::scenario::load(&p.to_string_lossy())
+                .map_err(|e| anyhow::anyhow!("--scenario {}: {e}", p.display()))?,
+        ),
+        None => None,
+    };
+    let label = match scenario {
+        Some(p) => p.display().to_string(),
+        None => {
+            "derived from the record (docs/simulator.md, \"Twin of a measured record\")".to_owned()
+        }
+    };
     super::simulate(
         ds,
-        |noise| Ok(super::standin::StandIn::new(ds, noise)),
+        |noise| crate::sim::twin::Twin::new(ds, base.clone(), noise).map_err(|e| e.to_string()),
         label,
         ensemble,
         cfg,

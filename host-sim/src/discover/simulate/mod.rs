@@ -22,7 +22,7 @@ pub mod gain;
 pub mod mismatch;
 pub mod output;
 pub mod spectra;
-pub mod standin;
+pub mod twin;
 
 use super::import::Dataset;
 use super::noise::NoiseModel;
@@ -104,8 +104,10 @@ pub struct Simulation {
     pub residual_before: Vec<f64>,
     /// After.
     pub residual_after: Vec<f64>,
-    /// Things the user must know (stand-in twin, failed members …).
+    /// Things the user must know (refused effects, a failed noise fit …).
     pub warnings: Vec<String>,
+    /// Whether the twin is the station simulator.
+    pub simulator: bool,
 }
 
 /// Runs the comparison with twins made by `build` (noise model → twin).
@@ -125,11 +127,7 @@ where
     // 1. The prediction and the residual's catalogue search (the cause).
     let quiet = build(None)?;
     if !quiet.is_simulator() {
-        warnings.push(
-            "the twin is a STAND-IN (model tide + the record's noise model), not the station \
-             simulator: the simulator's twin has not landed yet; no scenario can be written"
-                .to_owned(),
-        );
+        warnings.push("the twin is not the station simulator (a test stand-in)".to_owned());
     }
     let det = quiet.run(None)?;
     check_len(&det, ds)?;
@@ -221,7 +219,7 @@ where
         after_scores,
         explained_by,
         refused,
-        extended_toml: ext_quiet.scenario_toml(),
+        extended_toml: ext.scenario_toml(),
         extended_path: None,
         cause,
         frequencies_hz: freqs,
@@ -229,6 +227,7 @@ where
         residual_before: r_before,
         residual_after: r_after,
         warnings,
+        simulator: quiet.is_simulator(),
     })
 }
 

@@ -52,7 +52,7 @@ pub fn json(s: &Simulation) -> Value {
     let rel = |b: f64, a: f64| finite(1.0 - a / b);
     json!({
         "scenario": s.scenario,
-        "twin": if s.provenance.iter().any(|p| p.contains("STAND-IN")) { "stand-in" } else { "simulator" },
+        "twin": if s.simulator { "simulator" } else { "stand-in" },
         "provenance": s.provenance,
         "ensemble": s.ensemble,
         "residual": "measured − twin prediction, offset and linear drift removed",
