@@ -118,7 +118,8 @@ fn recover(e: &Effect, ds: &Dataset, r: &[f64], grid: &[f64]) -> Vec<(String, f6
             })
             .unwrap_or(0);
         let positive = grid.iter().all(|g| *g > 0.0);
-        let (to, from): (fn(f64) -> f64, fn(f64) -> f64) = if positive {
+        type Map = fn(f64) -> f64;
+        let (to, from): (Map, Map) = if positive {
             (f64::ln, f64::exp)
         } else {
             (|x| x, |x| x)
@@ -399,7 +400,7 @@ fn tide_group_corrections_of_a_gravimeter_are_what_the_tidal_analysis_reports() 
         t.groups
             .iter()
             .find(|g| g.name == n)
-            .expect(&names.join(","))
+            .unwrap_or_else(|| panic!("{}", names.join(",")))
     };
     let m2 = group("M2");
     assert!(
