@@ -24,7 +24,7 @@ use accomp::protocol::{
     upload_body_crc32, Board, DeviceMessage, HostFrame, Request, Response, CHUNK_LEN,
 };
 use accomp::reference::paper_order2_table;
-use accomp::service::Service;
+use accomp::service::{CalibrationFlash, Service};
 use accomp::storage::{RamFlash, RamFlashError, SlotLayout};
 use accomp::table::{CalibrationDate, CalibrationTable, ENCODED_LEN};
 use embedded_storage::nor_flash::{
@@ -62,6 +62,9 @@ impl NorFlashError for CutError {
         }
     }
 }
+
+/// Its errors answer as FlashFailed (kind 2, "other").
+impl CalibrationFlash for CutFlash {}
 
 impl ErrorType for CutFlash {
     type Error = CutError;
