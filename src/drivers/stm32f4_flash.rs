@@ -1,7 +1,8 @@
 //! The STM32F405's embedded flash controller as an `embedded-storage` NOR flash, written from the
-//! reference manual RM0090 (rev 19): §3.5 "Erase and program operations" (3.5.1 unlocking
-//! FLASH_CR, 3.5.2 parallelism, 3.5.3 sector erase, 3.5.4 programming) and §3.8 "Flash interface
-//! registers" (FLASH_KEYR, FLASH_SR, FLASH_CR). Generic over [`FlashRegisters`], so the same
+//! reference manual RM0090: §3.5 "Erase and program operations" (3.5.1 unlocking FLASH_CR, 3.5.2
+//! parallelism, 3.5.3 sector erase, 3.5.4 programming) and §3.8 "Flash interface registers"
+//! (FLASH_KEYR, FLASH_SR, FLASH_CR). Section numbers as in RM0090 Rev 4 (Doc ID 018909); later
+//! revisions insert a section before them and number them §3.6 and §3.9. Generic over [`FlashRegisters`], so the same
 //! sequence runs on the board (PAC registers, `board/internal_flash.rs`) and on the host against
 //! a register-level model of the controller (`stm32f4_flash/model.rs`).
 //!

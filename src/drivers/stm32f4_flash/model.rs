@@ -1,11 +1,12 @@
-//! Register-level model of the STM32F405 flash controller for host tests, from RM0090 (rev 19)
-//! §3.5 (unlock, erase, programming) and §3.8 (FLASH_KEYR, FLASH_SR, FLASH_CR):
+//! Register-level model of the STM32F405 flash controller for host tests, from RM0090 (Rev 4
+//! numbering) §3.5 (unlock, erase, programming) and §3.8 (FLASH_KEYR, FLASH_SR, FLASH_CR):
 //! - FLASH_CR is locked at reset (LOCK = 1, value 0x8000_0000); KEY1 then KEY2 in FLASH_KEYR
 //!   unlock it; a wrong key leaves it locked until reset (§3.5.1; the bus error is not modelled,
 //!   the lock is). Writes to a locked FLASH_CR are ignored; setting LOCK locks it.
 //! - Sector erase: SER + SNB, then STRT; the sector reads 0xFF afterwards (§3.5.3).
 //! - Programming: with PG set, each bus write programs the addressed cells (NOR: bits only go
-//!   1 → 0). A write with PG clear or FLASH_CR locked sets PGSERR; a byte write with PSIZE ≠ x8
+//!   1 → 0; §3.5.4 "successive write operations are possible without erase when changing bits
+//!   from 1 to 0"). A write with PG clear or FLASH_CR locked sets PGSERR; a byte write with PSIZE ≠ x8
 //!   sets PGPERR (§3.5.2, §3.8.4). A sector whose nWRP bit is cleared refuses both with WRPERR.
 //! - FLASH_SR error flags are sticky (rc_w1): they stay set until written with 1 — the cause of
 //!   issue #12.5's "every later write fails".
