@@ -2,6 +2,8 @@
 //!
 //! Every table and field is required and unknown fields are refused, so a scenario file is the
 //! complete record of a run (with the seed) and a typo cannot silently fall back to a default.
+//! Two later additions are optional, so that older files still load and mean what they meant:
+//! `[instrument]` (absent: the accelerometer) and `[[effects]]` (absent: none).
 //! `accomp simulate --print-preset paper-1g` prints a complete file to start from.
 
 use serde::{Deserialize, Serialize};
@@ -11,6 +13,8 @@ use super::accelerometer::{
 };
 use super::adc::{Ad7124Params, AdcParams, Ads1262Params};
 use super::barometer::BarometerParams;
+use super::effects::ScenarioEffect;
+use super::gravimeter::{GravimeterParams, InstrumentParams};
 use super::noise::AllanParams;
 use super::rtd::RtdParams;
 use super::thermostat::{RoomParams, ThermostatParams};
@@ -59,6 +63,14 @@ pub struct Scenario {
     pub adc: AdcParams,
     /// Station pressure and the barometer.
     pub barometer: BarometerParams,
+    /// The instrument (`[instrument] kind = "gravimeter"`); absent: the accelerometer of the
+    /// `[accelerometer]` table.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub instrument: Option<InstrumentParams>,
+    /// Catalogue effects on top of the station physics (`[[effects]]`, `effects.rs`); absent:
+    /// none.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub effects: Vec<ScenarioEffect>,
 }
 
 /// Why a scenario is refused.
@@ -108,6 +120,14 @@ impl Scenario {
         match name {
             "paper-1g" => Some(paper_1g()),
             "paper-0g" => Some(paper_0g()),
+            _ => None,
+        }
+    }
+
+    /// The gravimeter, when the station carries one instead of the accelerometer.
+    pub fn gravimeter(&self) -> Option<&GravimeterParams> {
+        match &self.instrument {
+            Some(InstrumentParams::Gravimeter(g)) => Some(g),
             _ => None,
         }
     }
@@ -186,6 +206,12 @@ impl Scenario {
         }
         if !(b.s2_peak_solar_h.is_finite() && b.s1_peak_solar_h.is_finite()) {
             return bad("barometer peak hours must be finite");
+        }
+        if let Some(InstrumentParams::Gravimeter(g)) = &self.instrument {
+            g.validate().map_err(ScenarioError::Invalid)?;
+        }
+        for (i, e) in self.effects.iter().enumerate() {
+            e.validate(i).map_err(ScenarioError::Invalid)?;
         }
         Ok(())
     }
@@ -360,6 +386,8 @@ fn paper_1g() -> Scenario {
         tiltmeter: tiltmeter(),
         adc: board(),
         barometer: barometer(),
+        instrument: None,
+        effects: Vec::new(),
     }
 }
 
@@ -422,6 +450,8 @@ fn paper_0g() -> Scenario {
         tiltmeter: tiltmeter(),
         adc: board(),
         barometer: barometer(),
+        instrument: None,
+        effects: Vec::new(),
     }
 }
 
