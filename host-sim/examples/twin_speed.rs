@@ -50,5 +50,18 @@ fn main() -> anyhow::Result<()> {
         sum,
         twin.provenance().len()
     );
+    for line in twin.provenance() {
+        println!("  {line}");
+    }
+    let r: Vec<f64> = ds.y.iter().zip(&det).map(|(a, b)| a - b).collect();
+    let n = r.len() as f64;
+    let m = r.iter().sum::<f64>() / n;
+    let sd = (r.iter().map(|x| (x - m).powi(2)).sum::<f64>() / n).sqrt();
+    let m_y = ds.y.iter().sum::<f64>() / n;
+    let sd_y = (ds.y.iter().map(|x| (x - m_y).powi(2)).sum::<f64>() / n).sqrt();
+    println!(
+        "record std {sd_y:.6} {u}, record − twin std {sd:.6} {u}",
+        u = ds.output_unit
+    );
     Ok(())
 }

@@ -1011,3 +1011,59 @@ mod tests {
         assert_eq!(Scenario::from_toml(&text).unwrap(), s);
     }
 }
+
+#[cfg(test)]
+mod from_discovery_tests {
+    use super::*;
+    use crate::discover::import::{dataset_from_log, DatasetOptions};
+    use crate::log::Log;
+    use crate::sim::{simulate, Options};
+
+    #[test]
+    fn a_discovered_step_becomes_a_scenario_effect_that_simulates() {
+        // A 3-day paper-1g log at 5 min with its noise and a 15 µg step at 1.4 d.
+        let mut s = Scenario::preset("paper-1g").unwrap();
+        s.run.duration_s = 3.0 * 86_400.0;
+        s.run.interval_s = 300.0;
+        let mut hidden = s.clone();
+        hidden.effects = vec![ScenarioEffect::Step {
+            time_s: 1.4 * 86_400.0 + 150.0,
+            size: 2e-5,
+        }];
+        let bytes = simulate(&hidden, 5, &Options::default(), Vec::new(), &mut |_, _| {})
+            .unwrap()
+            .1;
+        let ds = dataset_from_log(
+            &Log::read(&bytes[..]).unwrap(),
+            &DatasetOptions {
+                output: None,
+                max_points: 1_000_000,
+                unit_per_g_from_calibration: None,
+            },
+        )
+        .unwrap();
+        let d = crate::discover::discover(ds, None, &crate::discover::select::Config::default())
+            .unwrap();
+        let (effects, refused) = scenario_effects_from_discovery(&d);
+        let step = effects
+            .iter()
+            .find_map(|e| match e {
+                ScenarioEffect::Step { time_s, size } => Some((*time_s, *size)),
+                _ => None,
+            })
+            .unwrap_or_else(|| panic!("no step among {effects:?} (refused {refused:?})"));
+        assert!(
+            (step.0 - (1.4 * 86_400.0 + 150.0)).abs() <= 300.0,
+            "{step:?}"
+        );
+        assert!((step.1 / 2e-5 - 1.0).abs() < 0.1, "{step:?}");
+        // Written into the scenario, every converted effect validates and runs.
+        let mut ext = s.clone();
+        ext.effects = effects;
+        let back = Scenario::from_toml(&ext.to_toml()).unwrap();
+        assert_eq!(back, ext);
+        let mut short = back;
+        short.run.duration_s = 3600.0;
+        simulate(&short, 1, &Options::default(), Vec::new(), &mut |_, _| {}).unwrap();
+    }
+}
