@@ -114,30 +114,36 @@ pub fn periodogram(t: &[f64], y: &[f64], max_points: usize) -> Spectrum {
     let mut amps = Vec::with_capacity(nf);
     for k in 0..nf {
         let f = 1.0 / span + k as f64 * df;
-        if k > 0 {
-            for i in 0..n {
-                let (c0, s0) = (c[i], s[i]);
-                c[i] = c0 * dc[i] - s0 * ds[i];
-                s[i] = s0 * dc[i] + c0 * ds[i];
+        // One pass per frequency: advance the rotators and accumulate the five sums from which
+        // τ (tan 2ωτ = Σ sin 2ωt / Σ cos 2ωt, by double angles) and the τ-rotated sums follow
+        // algebraically.
+        let (mut scc, mut sss, mut scs, mut syc, mut sys) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        let advance = k > 0;
+        for (((ci, si), (dci, dsi)), yi) in c
+            .iter_mut()
+            .zip(s.iter_mut())
+            .zip(dc.iter().zip(&ds))
+            .zip(&yc)
+        {
+            if advance {
+                let (c0, s0) = (*ci, *si);
+                *ci = c0 * dci - s0 * dsi;
+                *si = s0 * dci + c0 * dsi;
             }
+            let (cv, sv) = (*ci, *si);
+            scc += cv * cv;
+            sss += sv * sv;
+            scs += cv * sv;
+            syc += yi * cv;
+            sys += yi * sv;
         }
-        // τ from tan(2ωτ) = Σ sin 2ωt / Σ cos 2ωt, using double-angle sums.
-        let (mut s2, mut c2) = (0.0, 0.0);
-        for i in 0..n {
-            s2 += 2.0 * s[i] * c[i];
-            c2 += c[i] * c[i] - s[i] * s[i];
-        }
-        let wt = 0.5 * s2.atan2(c2);
+        let wt = 0.5 * (2.0 * scs).atan2(scc - sss);
         let (ct, st) = (wt.cos(), wt.sin());
-        let (mut yc_c, mut yc_s, mut cc, mut ss) = (0.0, 0.0, 0.0, 0.0);
-        for i in 0..n {
-            let cosv = c[i] * ct + s[i] * st;
-            let sinv = s[i] * ct - c[i] * st;
-            yc_c += yc[i] * cosv;
-            yc_s += yc[i] * sinv;
-            cc += cosv * cosv;
-            ss += sinv * sinv;
-        }
+        // cos(ω(t−τ)) = c·ct + s·st, sin(ω(t−τ)) = s·ct − c·st.
+        let yc_c = ct * syc + st * sys;
+        let yc_s = ct * sys - st * syc;
+        let cc = ct * ct * scc + 2.0 * ct * st * scs + st * st * sss;
+        let ss = ct * ct * sss - 2.0 * ct * st * scs + st * st * scc;
         let p = 0.5 * (yc_c * yc_c / cc.max(1e-300) + yc_s * yc_s / ss.max(1e-300)) / var;
         let a = ((yc_c / cc.max(1e-300)).powi(2) + (yc_s / ss.max(1e-300)).powi(2)).sqrt();
         freqs.push(f);
