@@ -4,6 +4,7 @@
 //! - [`import`]: our log, the gMetrology `.tsf`, the AQG CSV → [`import::Dataset`].
 //! - [`baseline`]: the calibration or static baseline and the (whitened) least squares.
 //! - [`residual`]: spectrum, correlations, trend/step, Allan deviation of the residual.
+//! - [`eiv`]: errors in variables: each regressor channel's reading noise, fitted and smoothed.
 //! - [`effects`]: the catalogue of named effects as design-matrix extensions.
 //! - [`hysteresis`]: play / Preisach operators of the thermal hysteresis.
 //! - [`shape`]: whether an accepted effect's shape describes the data (poor-fit check).
@@ -14,6 +15,7 @@
 
 pub mod baseline;
 pub mod effects;
+pub mod eiv;
 pub mod hysteresis;
 pub mod import;
 pub mod noise;
@@ -58,8 +60,11 @@ pub struct DiscoverArgs {
 /// Everything a discovery run found.
 #[derive(Debug, Clone)]
 pub struct Discovery {
-    /// The dataset as fitted.
+    /// The dataset as fitted: regressor channels are the errors-in-variables model's smoothed
+    /// states ([`eiv`]); the readings as measured are in `measured_channels`.
     pub dataset: Dataset,
+    /// The regressor channels as read from the record.
+    pub measured_channels: Vec<import::Channel>,
     /// Baseline description and free-column names.
     pub baseline_description: String,
     /// Baseline column names.
@@ -82,8 +87,9 @@ pub struct Discovery {
     pub adev_before: Vec<(f64, f64)>,
     /// ADEV of the final residual.
     pub adev_after: Vec<(f64, f64)>,
-    /// Reading noise of each measured regressor channel (errors in variables).
-    pub channel_noise: Vec<residual::ChannelNoise>,
+    /// Reading noise of each measured regressor channel and the smoother the model used
+    /// (errors in variables, [`eiv`]).
+    pub channel_noise: Vec<eiv::ChannelNoise>,
     /// Warnings about the input and the run (also in the selection's own `warnings`); printed
     /// first in the text output and listed in the JSON `warnings`.
     pub warnings: Vec<String>,
@@ -115,6 +121,10 @@ pub fn discover(
     table: Option<&accomp::table::CalibrationTable>,
     cfg: &select::Config,
 ) -> Result<Discovery, String> {
+    let measured_channels = ds.channels.clone();
+    // Errors in variables: the effects are fitted on the channels' smoothed states, never on
+    // their raw readings (a smoothed reading noise is not physics).
+    let (ds, channel_noise) = eiv::denoise(&ds);
     let base = match table {
         Some(t) => baseline::calibrated_baseline(&ds, t)?,
         None => baseline::static_baseline(&ds),
@@ -155,7 +165,8 @@ pub fn discover(
         adev_before,
         adev_after,
         warnings: ds.warnings.clone(),
-        channel_noise: residual::channel_noise(&ds),
+        channel_noise,
+        measured_channels,
         tidal,
         dataset: ds,
     })

@@ -176,8 +176,19 @@ pub fn text(d: &Discovery) -> String {
     for c in &d.channel_noise {
         let _ = writeln!(
             o,
-            "  channel_noise: {} reads with {:.3e} {} noise per point (channel std {:.3e})",
-            c.channel, c.noise, c.unit, c.std
+            "  channel_noise: {} reads with {:.3e} {} white noise per point (channel std {:.3e}); {}",
+            c.channel,
+            c.noise,
+            c.unit,
+            c.std,
+            if c.smoothed {
+                format!(
+                    "the model uses its smoothed state (zero-phase, width {:.0} s)",
+                    c.smoothing_s
+                )
+            } else {
+                "not resolved: used as read".to_owned()
+            }
         );
     }
     let _ = writeln!(o, "what the baseline gets wrong:");

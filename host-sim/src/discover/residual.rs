@@ -306,53 +306,9 @@ pub fn adev_points(ds: &Dataset, resid: &[f64]) -> Vec<crate::allan::AllanPoint>
     crate::allan::oadev(&placed, ds.dt_s, crate::allan::TauSet::Octave).unwrap_or_default()
 }
 
-/// A measured regressor channel's own reading noise (errors in variables): a named cause of
-/// its own, never a `thermal_lag` at the edge of a grid.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
-pub struct ChannelNoise {
-    /// Column name.
-    pub channel: String,
-    /// Standard deviation of one reading's noise, in the channel's stored unit (`unit`).
-    pub noise: f64,
-    /// The stored unit (°C and other channels: the log's; tilt: rad; pressure: Pa).
-    pub unit: &'static str,
-    /// Standard deviation of the channel itself (signal + noise).
-    pub std: f64,
-}
-
-/// Reading noise of every measured regressor channel (temperature, tilt, pressure, ambient):
-/// 1.4826·MAD of the first differences inside segments, / √2 — white reading noise doubles
-/// in a difference, a slow signal hardly moves between neighbours, and the median ignores the
-/// few large differences of fast changes. On binned records it is the noise of a bin mean.
-pub fn channel_noise(ds: &Dataset) -> Vec<ChannelNoise> {
-    use super::import::ChannelKind;
-    ds.channels
-        .iter()
-        .filter(|c| c.kind != ChannelKind::Input)
-        .filter_map(|c| {
-            let mut d: Vec<f64> = (1..c.values.len())
-                .filter(|&i| !ds.segment_start[i])
-                .map(|i| (c.values[i] - c.values[i - 1]).abs())
-                .collect();
-            if d.len() < 10 {
-                return None;
-            }
-            d.sort_by(f64::total_cmp);
-            let mad = d[d.len() / 2];
-            Some(ChannelNoise {
-                channel: c.name.clone(),
-                noise: 1.4826 * mad / std::f64::consts::SQRT_2,
-                unit: match c.kind {
-                    ChannelKind::Tilt => "rad",
-                    ChannelKind::Pressure => "Pa",
-                    ChannelKind::Temperature => "°C",
-                    _ => "channel unit",
-                },
-                std: super::baseline::std(&c.values),
-            })
-        })
-        .collect()
-}
+/// A measured regressor channel's own reading noise (kept at this path: the model is
+/// [`super::eiv`]'s).
+pub use super::eiv::ChannelNoise;
 
 #[cfg(test)]
 mod tests {
@@ -378,45 +334,6 @@ mod tests {
         assert!((top.period_s - 1000.0).abs() < 10.0, "{top:?}");
         assert!(top.fap < 1e-10);
         assert!((top.amplitude - 1.0).abs() < 0.1);
-    }
-
-    #[test]
-    fn channel_noise_is_the_reading_noise_not_the_slow_signal() {
-        // A slow 0.5 °C sine plus an alternating ±0.01 °C reading error (σ = 0.01 °C).
-        let n = 2000;
-        let t: Vec<f64> = (0..n).map(|i| i as f64).collect();
-        let v: Vec<f64> = t
-            .iter()
-            .enumerate()
-            .map(|(i, x)| 25.0 + 0.5 * (x / 300.0).sin() + if i % 2 == 0 { 0.01 } else { -0.01 })
-            .collect();
-        let mut seg = vec![false; n];
-        seg[0] = true;
-        let ds = Dataset {
-            t_s: t,
-            y: vec![0.0; n],
-            segment_start: seg,
-            channels: vec![super::super::import::Channel {
-                name: "temperature_c".into(),
-                kind: super::super::import::ChannelKind::Temperature,
-                values: v,
-            }],
-            output_name: "output_g".into(),
-            output_unit: "g".into(),
-            unit_per_g: Some(1.0),
-            input_g: None,
-            start_unix_s: None,
-            site: None,
-            dt_s: 1.0,
-            notes: Vec::new(),
-            warnings: Vec::new(),
-        };
-        let c = channel_noise(&ds);
-        assert_eq!(c.len(), 1);
-        // |Δ| = 0.02 ± the sine's step (≤ 0.0017): 1.4826 · 0.02 / √2 ≈ 0.021 — the estimator
-        // reads an alternating error as white noise of that size, within 10 %.
-        assert!((c[0].noise / 0.021 - 1.0).abs() < 0.1, "{c:?}");
-        assert!(c[0].std > 0.3);
     }
 
     #[test]
