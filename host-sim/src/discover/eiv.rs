@@ -144,7 +144,7 @@ fn neg2_loglik(t_s: &[f64], x: &[f64], dt: f64, ll: [f64; 2]) -> (f64, f64) {
 /// when the channel is constant or too short. A coarse grid over both ratios, then coordinate
 /// golden-section refinements.
 fn fit(t_s: &[f64], x: &[f64], dt: f64) -> Option<([f64; 2], f64)> {
-    if x.len() < 10 || super::baseline::std(x) <= 0.0 {
+    if x.len() < 10 || crate::numerics::stats::std(x) <= 0.0 {
         return None;
     }
     let f = |p: [f64; 2]| neg2_loglik(t_s, x, dt, p).0;
@@ -260,7 +260,7 @@ pub fn denoise(ds: &Dataset) -> (Dataset, Vec<ChannelNoise>) {
         if c.kind == ChannelKind::Input {
             continue;
         }
-        let raw_std = super::baseline::std(&c.values);
+        let raw_std = crate::numerics::stats::std(&c.values);
         // One model per channel: its levels are fitted on the longest segment (the levels are a
         // property of the sensor, not of the segment), then every segment is smoothed with them.
         let Some(longest) = segs.iter().max_by_key(|r| r.len()).cloned() else {

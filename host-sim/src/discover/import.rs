@@ -626,7 +626,7 @@ pub fn dataset_from_log(log: &Log, opts: &DatasetOptions) -> Result<Dataset, Imp
             ts.len()
         )));
     }
-    let out_std = super::baseline::std(&ys);
+    let out_std = crate::numerics::stats::std(&ys);
     let out_mean = ys.iter().sum::<f64>() / ys.len() as f64;
     if out_std.is_nan() || out_std <= 1e-12 * out_mean.abs() {
         return Err(ImportError::Shape(format!(
@@ -722,7 +722,7 @@ impl Dataset {
     /// the scalar [`Dataset::input_g`] describes it).
     pub fn changing_input(&self) -> Option<&[f64]> {
         self.channel(ChannelKind::Input)
-            .filter(|c| super::baseline::std(&c.values) > CHANGING_INPUT_STD_G)
+            .filter(|c| crate::numerics::stats::std(&c.values) > CHANGING_INPUT_STD_G)
             .map(|c| c.values.as_slice())
     }
     /// The nominal input at row `i`, g: the input channel when it changes, else the scalar.

@@ -406,7 +406,7 @@ impl NoiseModel {
         let values: Vec<f64> = idx.iter().map(|&i| x[i]).collect();
         let fail = |why: String| {
             let var = if n > 1 {
-                super::baseline::std(&values).powi(2)
+                crate::numerics::stats::std(&values).powi(2)
             } else {
                 0.0
             };
@@ -428,7 +428,7 @@ impl NoiseModel {
         if values.iter().any(|v| !v.is_finite()) {
             return fail("the residual has non-finite values".into());
         }
-        let var = super::baseline::std(&values).powi(2);
+        let var = crate::numerics::stats::std(&values).powi(2);
         if !(var > 0.0 && var.is_finite()) {
             return fail(format!(
                 "the residual's variance is {var:e}: nothing to model"
@@ -600,32 +600,17 @@ impl NoiseModel {
     }
 }
 
-/// Gaussian elimination with partial pivoting on the leading k×k block.
-#[allow(clippy::needless_range_loop)] // elimination: indices are the algorithm
+/// Solves the leading k×k block of `a`·x = `b` (nalgebra's LU with partial pivoting); None when
+/// singular.
 fn solve_small(a: &[[f64; 3]; 3], b: &[f64; 3], k: usize) -> Option<[f64; 3]> {
-    let mut m = *a;
-    let mut v = *b;
-    for c in 0..k {
-        let p = (c..k).max_by(|&i, &j| m[i][c].abs().total_cmp(&m[j][c].abs()))?;
-        if m[p][c].abs() < 1e-300 {
-            return None;
-        }
-        m.swap(c, p);
-        v.swap(c, p);
-        for r in c + 1..k {
-            let f = m[r][c] / m[c][c];
-            for q in c..k {
-                m[r][q] -= f * m[c][q];
-            }
-            v[r] -= f * v[c];
-        }
+    let m = nalgebra::DMatrix::from_fn(k, k, |r, c| a[r][c]);
+    let v = nalgebra::DVector::from_fn(k, |r, _| b[r]);
+    let x = m.lu().solve(&v)?;
+    let mut out = [0.0; 3];
+    for (o, xi) in out.iter_mut().zip(x.iter()) {
+        *o = *xi;
     }
-    let mut x = [0.0; 3];
-    for r in (0..k).rev() {
-        let s: f64 = (r + 1..k).map(|q| m[r][q] * x[q]).sum();
-        x[r] = (v[r] - s) / m[r][r];
-    }
-    Some(x)
+    Some(out)
 }
 
 /// Transition factors `a` and process noise `q` of the model's states over `dt_s` (flicker OU

@@ -969,8 +969,8 @@ fn edge_hint(e: &Effect, theta: f64, ds: &Dataset) -> String {
     match e {
         Effect::ThermalLag | Effect::AmbientCoupling(_) if lower => {
             "; the shortest lag improving the fit is the signature of the channel's own \
-             reading noise (errors in variables: smoothing a noisy regressor always helps), \
-             see channel_noise"
+             reading noise (errors in variables: smoothing a noisy regressor always helps) \
+             left after the channel's fitted smoother, see channel_noise"
                 .into()
         }
         _ if !lower => "; the upper end: a slow trend the record is too short to resolve".into(),
