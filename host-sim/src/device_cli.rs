@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use crate::device::{compensate, samples_csv, Connection, Target};
+use crate::device::{compensate, Connection, Target};
 use anyhow::Context as _;
 
 /// Stream samples through the firmware (or the same core on the host) and write what it returns.
@@ -56,43 +56,20 @@ pub struct TableGetArgs {
     pub firmware: Option<PathBuf>,
 }
 
-/// Runs `accomp compensate`.
+/// Runs `accomp compensate` (streams its output: docs/protocol.md).
 pub fn run_compensate(args: &CompensateArgs) -> anyhow::Result<()> {
-    let table = std::fs::read(&args.calibration)
-        .with_context(|| format!("reading {}", args.calibration.display()))?;
-    let text = std::fs::read_to_string(&args.input)
-        .with_context(|| format!("reading {}", args.input.display()))?;
-    let file = samples_csv::parse(&text)?;
-    let started = std::time::Instant::now();
-    let rows = compensate::compensate(
+    compensate::run_to_file(
         &args.target,
         args.firmware.as_deref(),
-        &table,
-        &file.rows,
-        |what, done, total| {
-            if done == total || done % 1000 == 0 {
-                eprint!("\r{what}: {done}/{total}   ");
-            }
-        },
-    )?;
-    eprintln!(
-        "\n{} samples through {:?} in {:.2} s",
-        rows.len(),
-        args.target,
-        started.elapsed().as_secs_f64()
-    );
-    std::fs::write(
+        &args.calibration,
+        &args.input,
         &args.output,
-        samples_csv::write_output(&file.metadata, &rows),
     )
-    .with_context(|| format!("writing {}", args.output.display()))?;
-    Ok(())
 }
 
 /// Runs `accomp load`.
 pub fn run_load(args: &LoadArgs) -> anyhow::Result<()> {
-    let bytes = std::fs::read(&args.calibration)
-        .with_context(|| format!("reading {}", args.calibration.display()))?;
+    let bytes = crate::calibration_file::read_table_bytes(&args.calibration)?;
     if !args.no_local_check {
         crate::calibration_file::decode_named(&bytes).context("table refused locally")?;
     }

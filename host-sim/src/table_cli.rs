@@ -1,11 +1,11 @@
 //! `accomp table show|verify <cal>`: what a calibration table file holds, and whether the
 //! firmware would accept it (the same `CalibrationTable::decode` the board runs).
 
-use crate::calibration_file::{decode_named, read_table};
+use crate::calibration_file::{decode_named, read_table, read_table_bytes};
 use accomp::poly::TempPoly;
 use accomp::table::{CalibrationTable, ENCODED_LEN};
 use accomp::units::{Celsius, RAD_PER_ARCMIN};
-use anyhow::{Context, Result};
+use anyhow::Result;
 use serde::Serialize;
 use serde_json::Value;
 use std::path::PathBuf;
@@ -255,8 +255,18 @@ pub fn run(args: &TableArgs) -> Result<()> {
         }
         TableAction::Get(get) => crate::device_cli::run_table_get(get)?,
         TableAction::Verify { path, json } => {
-            let bytes =
-                std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+            let bytes = match read_table_bytes(path) {
+                Ok(b) => b,
+                Err(e) => {
+                    if *json {
+                        println!(
+                            "{}",
+                            serde_json::json!({"valid": false, "error": format!("{e:#}")})
+                        );
+                    }
+                    return Err(e);
+                }
+            };
             match decode_named(&bytes) {
                 Ok(t) => {
                     if *json {

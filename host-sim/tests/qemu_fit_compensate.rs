@@ -18,6 +18,8 @@ const TABLE1: &str = concat!(
 fn accomp(args: &[&str]) -> String {
     let out = Command::new(env!("CARGO_BIN_EXE_accomp"))
         .args(args)
+        // This test's own emulated board, not the user's persistent one.
+        .env(accomp_host::device::qemu::STATE_ENV, tmp("board"))
         .output()
         .expect("accomp runs");
     assert!(

@@ -160,10 +160,6 @@ fn garbage_on_the_line_mid_stream_costs_at_most_the_frame_it_hits() {
         // A steady stream before the burst.
         let before = c.process_samples(&raws, 4, |_, _| {}).unwrap();
         let last_before_us = before.iter().map(|f| f.time_us).max().unwrap();
-        let first_before_us = before.iter().map(|f| f.time_us).min().unwrap();
-        // Steady-state firmware time per sample in QEMU (its USART model is slower than a
-        // 115200 Bd line: ~0.15–0.25 ms per byte instead of 0.087 ms).
-        let period_ms = (last_before_us - first_before_us) as f64 / 1e3 / 3.0;
         // 64…511 random bytes (zeros included, and no delimiter at the end guaranteed).
         let len = 64 + (rng.next_u64() % 448) as usize;
         let garbage: Vec<u8> = (0..len).map(|_| rng.next_u64() as u8).collect();
@@ -181,8 +177,9 @@ fn garbage_on_the_line_mid_stream_costs_at_most_the_frame_it_hits() {
             pending.push((id, k));
         }
         let mut answered = vec![None; AFTER];
-        let deadline = Instant::now() + Duration::from_millis(600);
-        while answered.iter().any(Option::is_none) && Instant::now() < deadline {
+        let deadline = Instant::now() + Duration::from_secs(5);
+        // Answers come in order: once samples 1.. are in, sample 0 has come or is lost.
+        while answered.iter().skip(1).any(Option::is_none) && Instant::now() < deadline {
             match c.recv(Duration::from_millis(100)) {
                 Ok(DeviceMessage::Sample { id, frame }) => {
                     if let Some(&(_, k)) = pending.iter().find(|(i, _)| *i == id) {
@@ -207,16 +204,13 @@ fn garbage_on_the_line_mid_stream_costs_at_most_the_frame_it_hits() {
                 assert_uses(&good, &raws[k % raws.len()], f, "after garbage");
             }
         }
-        // Firmware time from the last sample before the burst to the first one after it: the
-        // garbage may hold the stream up only for as long as the device takes to read it (at
-        // QEMU's byte rate, up to 3× the 115200 Bd wire time) plus the lost frame and the next
-        // sample's round trip: a few steady-state periods. A decoder that stalled, or a worker
-        // that choked on the noise, would blow through this.
+        // Firmware time from the last sample before the burst to the first one after it, printed
+        // below. Not asserted: without -icount the firmware clock is the host's real time, so on
+        // a loaded machine it measures the host's scheduling as much as the decoder (a bound of
+        // a few sample periods failed at load 9 with 93–121 ms). What proves that the decoder
+        // resynchronises on its own is above: every sample after the first is answered, with
+        // the right values. Timing belongs in docs/benchmarks.md (GUIDE: no timed assertions).
         let gap_ms = (first.time_us - last_before_us) as f64 / 1e3;
-        assert!(
-            gap_ms <= 3.0 * garbage_wire_ms + 4.0 * period_ms.max(6.0),
-            "burst {burst}: {gap_ms} ms firmware gap for {len} B ({garbage_wire_ms:.1} ms of wire)"
-        );
         resume_ms.push((len, garbage_wire_ms, gap_ms, first_at.as_secs_f64() * 1e3));
     }
     for (len, wire, gap, wall) in &resume_ms {

@@ -1,5 +1,11 @@
 //! QEMU `netduinoplus2` board: HSI clock, USART1 on the first `-serial`, samples injected as
 //! frames, defmt over semihosting, and every fatal path ends QEMU with a distinct exit code.
+//!
+//! The calibration flash is a [`RamFlash`] mirrored, operation by operation, into the host
+//! file `accomp-flash.bin` in QEMU's working directory (semihosting file I/O): restored at
+//! boot, written through after every erase and program. So the emulated board keeps its
+//! tables across QEMU runs like a real board across power cycles, and killing QEMU at any
+//! instant is a power cut between two flash operations (docs/storage.md, "QEMU board").
 
 use cortex_m_rt::{exception, ExceptionFrame};
 use defmt_semihosting as _;
@@ -14,7 +20,9 @@ use super::{Fatal, Parts};
 use accomp::acquisition::{AdsReading, RtdReading};
 use accomp::drivers::ads1262::DataRate;
 use accomp::protocol::{Board, BootReport};
-use accomp::storage::{RamFlash, SlotLayout};
+use accomp::storage::{RamFlash, RamFlashError, SlotLayout};
+use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
+use semihosting::io::{Read as _, Seek as _, SeekFrom, Write as _};
 
 /// Board reported in READY and Info.
 pub const BOARD: Board = Board::Qemu;
@@ -31,8 +39,16 @@ const SLOT_BYTES: usize = 1024;
 /// restart is a power-off anyway): two slots, 4-byte program unit like the F405 at x32.
 pub type RamCalibrationFlash = RamFlash<{ 3 * SLOT_BYTES }, SLOT_BYTES, 4>;
 
-/// The calibration flash: a static RamFlash.
-pub type Flash = &'static mut RamCalibrationFlash;
+/// The calibration flash: a static RamFlash persisted to the host.
+pub type Flash = PersistentFlash;
+
+/// Host file holding the flash image (relative to QEMU's working directory).
+const FLASH_FILE: &core::ffi::CStr = c"accomp-flash.bin";
+/// Test hook for the system-level power-cut test: if this file exists and holds "N Q" (two
+/// decimal numbers), the first Q quarters of the (N+1)-th flash operation since boot reach the
+/// file (Q = 0: none, 2: a torn half) and QEMU exits with [`exit_code::POWER_CUT`] — the power
+/// goes during that operation.
+const CUT_FILE: &core::ffi::CStr = c"accomp-power-cut.txt";
 
 /// Slot A at 0, slot B at 1 KiB, slot C at 2 KiB.
 pub const SLOT_LAYOUT: SlotLayout = SlotLayout::consecutive(SLOT_BYTES as u32);
@@ -45,6 +61,143 @@ pub mod exit_code {
     pub const HARD_FAULT: i32 = 102;
     /// Base of [`super::Fatal`] start-up failures (code = 100 + variant).
     pub const FATAL_BASE: i32 = 100;
+    /// The power-cut test hook fired (see `CUT_FILE`).
+    pub const POWER_CUT: i32 = 120;
+}
+
+/// [`RamCalibrationFlash`] written through to [`FLASH_FILE`] after every operation.
+pub struct PersistentFlash {
+    ram: &'static mut RamCalibrationFlash,
+    /// None when the host file could not be opened: the board then runs with RAM only.
+    file: Option<semihosting::fs::File>,
+    /// Flash operations persisted since boot.
+    ops: u32,
+    /// From [`CUT_FILE`]: the operation during which the power goes, and how many quarters of
+    /// it are persisted.
+    cut_at: Option<(u32, u32)>,
+}
+
+impl PersistentFlash {
+    /// Restores the image from the host file (a missing or short file is a factory-new,
+    /// erased part, and is created).
+    fn open(ram: &'static mut RamCalibrationFlash) -> Self {
+        let existing = semihosting::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .open(FLASH_FILE);
+        let file = match existing {
+            Ok(mut f) => {
+                let mut image = [0xFFu8; 3 * SLOT_BYTES];
+                let mut got = 0;
+                while let Some(rest) = image.get_mut(got..) {
+                    match f.read(rest) {
+                        Ok(0) | Err(_) => break,
+                        Ok(n) => got += n,
+                    }
+                }
+                if got == image.len() {
+                    ram.as_bytes_mut().copy_from_slice(&image);
+                    defmt::info!("flash image restored from the host");
+                } else {
+                    defmt::warn!("flash image short ({} bytes): starting erased", got);
+                }
+                Some(f)
+            }
+            Err(_) => semihosting::fs::OpenOptions::new()
+                .read(true)
+                .write(true)
+                .create(true)
+                .truncate(true)
+                .open(FLASH_FILE)
+                .ok(),
+        };
+        if file.is_none() {
+            defmt::warn!("no host flash file: tables live in RAM only");
+        }
+        let mut flash = PersistentFlash {
+            ram,
+            file,
+            ops: 0,
+            cut_at: read_cut_at(),
+        };
+        // A new or short file gets the whole (erased) image, so later offsets exist.
+        if flash.file.is_some() {
+            let len = flash.ram.as_bytes().len() as u32;
+            flash.persist_range(0, len, false);
+        }
+        flash
+    }
+
+    fn persist(&mut self, from: u32, to: u32) {
+        if let Some((op, quarters)) = self.cut_at.filter(|(op, _)| *op == self.ops) {
+            // Power cut during this operation: only part of it reaches the cells.
+            let part = (to - from) / 4 * quarters.min(4);
+            self.persist_range(from, from + part, false);
+            defmt::warn!("power-cut hook: exiting during flash operation {}", op);
+            semihosting::process::exit(exit_code::POWER_CUT)
+        }
+        self.persist_range(from, to, true);
+    }
+
+    fn persist_range(&mut self, from: u32, to: u32, count: bool) {
+        if count {
+            self.ops = self.ops.wrapping_add(1);
+        }
+        let Some(file) = self.file.as_mut() else {
+            return;
+        };
+        let Some(bytes) = self.ram.as_bytes().get(from as usize..to as usize) else {
+            return;
+        };
+        let written = file
+            .seek(SeekFrom::Start(u64::from(from)))
+            .and_then(|_| file.write_all(bytes));
+        if written.is_err() {
+            defmt::warn!("host flash file write failed: tables kept in RAM only");
+            self.file = None;
+        }
+    }
+}
+
+/// The power-cut hook's operation number and persisted quarters, if the test asked for one.
+fn read_cut_at() -> Option<(u32, u32)> {
+    let mut f = semihosting::fs::File::open(CUT_FILE).ok()?;
+    let mut buf = [0u8; 24];
+    let n = f.read(&mut buf).ok()?;
+    let text = core::str::from_utf8(buf.get(..n)?).ok()?;
+    let mut words = text.split_whitespace();
+    let op = words.next()?.parse().ok()?;
+    let quarters = words.next().and_then(|w| w.parse().ok()).unwrap_or(2);
+    Some((op, quarters))
+}
+
+impl ErrorType for PersistentFlash {
+    type Error = RamFlashError;
+}
+
+impl ReadNorFlash for PersistentFlash {
+    const READ_SIZE: usize = 1;
+    fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
+        self.ram.read(offset, bytes)
+    }
+    fn capacity(&self) -> usize {
+        self.ram.capacity()
+    }
+}
+
+impl NorFlash for PersistentFlash {
+    const WRITE_SIZE: usize = RamCalibrationFlash::WRITE_SIZE;
+    const ERASE_SIZE: usize = RamCalibrationFlash::ERASE_SIZE;
+    fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+        self.ram.erase(from, to)?;
+        self.persist(from, to);
+        Ok(())
+    }
+    fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
+        self.ram.write(offset, bytes)?;
+        self.persist(offset, offset + bytes.len() as u32);
+        Ok(())
+    }
 }
 
 /// HSI clock (QEMU hangs on any HSE/PLL set-up), USART1 at 115200 8N1 with the RX interrupt on.
@@ -63,10 +216,11 @@ pub fn init(dp: pac::Peripherals) -> Parts {
     let (tx, mut rx) = serial.split();
     rx.listen();
     // Taken once, in init: None would mean init ran twice.
-    let flash = match cortex_m::singleton!(: RamCalibrationFlash = RamCalibrationFlash::new()) {
+    let ram = match cortex_m::singleton!(: RamCalibrationFlash = RamCalibrationFlash::new()) {
         Some(f) => f,
         None => fatal(Fatal::Flash),
     };
+    let flash = PersistentFlash::open(ram);
     Parts {
         rx,
         tx,

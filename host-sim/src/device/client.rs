@@ -299,8 +299,28 @@ impl Client {
         window: usize,
         mut progress: impl FnMut(usize, usize),
     ) -> Result<Vec<Frame>, ClientError> {
+        let mut out = Vec::with_capacity(raws.len());
+        self.stream_samples(raws, window, |i, frame| {
+            out.push(frame);
+            progress(i + 1, raws.len());
+            Ok(())
+        })?;
+        Ok(out)
+    }
+
+    /// Runs every raw sample through the device, keeping `window` requests in flight, and hands
+    /// each frame to `on_frame(index, frame)` in input order as soon as it and all before it
+    /// have arrived (a streaming writer; nothing is kept beyond the window).
+    pub fn stream_samples(
+        &mut self,
+        raws: &[RawSample],
+        window: usize,
+        mut on_frame: impl FnMut(usize, Frame) -> Result<(), ClientError>,
+    ) -> Result<(), ClientError> {
         let window = window.max(1);
-        let mut out: Vec<Option<Frame>> = vec![None; raws.len()];
+        // Frames that arrived ahead of an earlier one, by index.
+        let mut pending: HashMap<usize, Frame> = HashMap::new();
+        let mut emitted = 0usize;
         let mut in_flight: HashMap<u32, usize> = HashMap::new();
         let mut next = 0usize;
         let mut done = 0usize;
@@ -314,9 +334,12 @@ impl Client {
             match self.next_message(deadline, "a sample")? {
                 DeviceMessage::Sample { id, frame } => {
                     if let Some(i) = in_flight.remove(&id) {
-                        out[i] = Some(frame);
+                        pending.insert(i, frame);
                         done += 1;
-                        progress(done, raws.len());
+                        while let Some(f) = pending.remove(&emitted) {
+                            on_frame(emitted, f)?;
+                            emitted += 1;
+                        }
                     }
                 }
                 DeviceMessage::Error { id, error } if in_flight.contains_key(&id) => {
@@ -326,7 +349,7 @@ impl Client {
                 _ => {}
             }
         }
-        Ok(out.into_iter().flatten().collect())
+        Ok(())
     }
 }
 

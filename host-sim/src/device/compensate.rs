@@ -65,18 +65,45 @@ pub fn compensate(
     rows: &[SampleRow],
     mut progress: impl FnMut(&str, usize, usize),
 ) -> anyhow::Result<Vec<(f64, Frame)>> {
+    let mut out = Vec::with_capacity(rows.len());
+    let total = rows.len();
+    let progress = std::cell::RefCell::new(&mut progress);
+    compensate_streaming(
+        target,
+        firmware,
+        table_bytes,
+        rows,
+        |what, done, total| (progress.borrow_mut())(what, done, total),
+        |t, f| {
+            out.push((t, *f));
+            (progress.borrow_mut())("samples", out.len(), total);
+            Ok(())
+        },
+    )?;
+    Ok(out)
+}
+
+/// As [`compensate`], but each output row goes to `on_row(time_s, frame)` in input order as soon
+/// as it is known, so a long run is on disk while it runs (issue #15.8).
+pub fn compensate_streaming(
+    target: &Target,
+    firmware: Option<&Path>,
+    table_bytes: &[u8],
+    rows: &[SampleRow],
+    mut progress: impl FnMut(&str, usize, usize),
+    mut on_row: impl FnMut(f64, &Frame) -> anyhow::Result<()>,
+) -> anyhow::Result<()> {
     let table = CalibrationTable::decode(table_bytes)
         .map_err(|e| anyhow::anyhow!("calibration refused locally: {e:?}"))?;
     let raws: Vec<RawSample> = rows.iter().map(|r| raw_for_row(&table, r)).collect();
-    let frames: Vec<Frame> = match target {
-        Target::Host => raws
-            .iter()
-            .enumerate()
-            .map(|(i, raw)| {
+    match target {
+        Target::Host => {
+            for (i, raw) in raws.iter().enumerate() {
                 let t_us = (rows[i].time_s * 1e6).round().max(0.0) as u64;
-                pipeline::process(i as u32, t_us, raw, Some(&table))
-            })
-            .collect(),
+                let f = pipeline::process(i as u32, t_us, raw, Some(&table));
+                on_row(rows[i].time_s, &f)?;
+            }
+        }
         _ => {
             let mut conn = Connection::open(target, firmware)?;
             let info = conn.client.info()?;
@@ -84,16 +111,100 @@ pub fn compensate(
                 conn.client
                     .load(table_bytes, |sent, total| progress("upload", sent, total))?;
             }
-            let frames = conn
-                .client
-                .process_samples(&raws, DEFAULT_WINDOW, |done, total| {
-                    progress("samples", done, total)
-                })?;
+            // The writer's error is kept aside: the client's callback speaks ClientError.
+            let mut write_error = None;
+            let streamed =
+                conn.client
+                    .stream_samples(&raws, DEFAULT_WINDOW, |i, frame| {
+                        match on_row(rows[i].time_s, &frame) {
+                            Ok(()) => Ok(()),
+                            Err(e) => {
+                                write_error = Some(e);
+                                Err(super::ClientError::Unexpected("output write failed".into()))
+                            }
+                        }
+                    });
+            if let Some(e) = write_error {
+                return Err(e);
+            }
+            streamed?;
             if let Some(q) = conn.qemu.take() {
                 q.shutdown();
             }
-            frames
         }
-    };
-    Ok(rows.iter().map(|r| r.time_s).zip(frames).collect())
+    }
+    Ok(())
+}
+
+/// `accomp compensate` end to end: reads the table and the samples CSV, streams the output CSV
+/// to `output` (rows flushed at least every 200 ms while they arrive) and shows a progress bar
+/// with samples/s on stderr.
+pub fn run_to_file(
+    target: &Target,
+    firmware: Option<&Path>,
+    calibration: &Path,
+    input: &Path,
+    output: &Path,
+) -> anyhow::Result<()> {
+    use anyhow::Context as _;
+    use std::io::Write as _;
+    let table = crate::calibration_file::read_table_bytes(calibration)?;
+    let text =
+        std::fs::read_to_string(input).with_context(|| format!("reading {}", input.display()))?;
+    let file = super::samples_csv::parse(&text)?;
+    let out =
+        std::fs::File::create(output).with_context(|| format!("creating {}", output.display()))?;
+    let mut out = std::io::BufWriter::new(out);
+    out.write_all(super::samples_csv::output_header(&file.metadata).as_bytes())?;
+    out.flush()?;
+    let total = file.rows.len() as u64;
+    let bar = indicatif::ProgressBar::new(total);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{msg:>8} [{bar:30}] {pos}/{len} {per_sec} ETA {eta}",
+        )
+        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+        .progress_chars("=> "),
+    );
+    bar.set_message("samples");
+    let started = std::time::Instant::now();
+    let mut last_flush = started;
+    let mut written = 0u64;
+    let result = compensate_streaming(
+        target,
+        firmware,
+        &table,
+        &file.rows,
+        |what, done, total| {
+            if what == "upload" {
+                bar.set_message(format!("upload {done}/{total} B"));
+            }
+        },
+        |t, f| {
+            out.write_all(super::samples_csv::output_row(t, f).as_bytes())
+                .with_context(|| format!("writing {}", output.display()))?;
+            written += 1;
+            if written == 1 {
+                bar.set_message("samples");
+            }
+            bar.set_position(written);
+            if last_flush.elapsed() >= std::time::Duration::from_millis(200) {
+                out.flush()
+                    .with_context(|| format!("writing {}", output.display()))?;
+                last_flush = std::time::Instant::now();
+            }
+            Ok(())
+        },
+    );
+    out.flush()
+        .with_context(|| format!("writing {}", output.display()))?;
+    bar.finish_and_clear();
+    result?;
+    eprintln!(
+        "{written} samples through {target:?} in {:.2} s ({:.0} samples/s), written to {}",
+        started.elapsed().as_secs_f64(),
+        written as f64 / started.elapsed().as_secs_f64().max(1e-9),
+        output.display()
+    );
+    Ok(())
 }

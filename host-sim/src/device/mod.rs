@@ -80,7 +80,12 @@ impl Connection {
             Target::Host => anyhow::bail!("the host target has no device to connect to"),
             Target::Qemu => {
                 let elf = firmware_path(firmware);
-                let (qemu, client) = Qemu::launch(&elf, &qemu::QemuOptions::default())?;
+                // The CLI's board keeps its flash across commands, like a real board.
+                let opts = qemu::QemuOptions {
+                    state_dir: Some(qemu::board_state_dir()),
+                    ..qemu::QemuOptions::default()
+                };
+                let (qemu, client) = Qemu::launch(&elf, &opts)?;
                 Ok(Connection {
                     client,
                     qemu: Some(qemu),

@@ -3,6 +3,13 @@
 //! QEMU's stderr and the firmware's semihosting output (defmt frames, binary) go to files in a
 //! log directory; any failure to boot is reported with both, and with QEMU's exit status (the
 //! firmware exits with 101 on panic, 102 on HardFault, 103/104 on start-up failures).
+//!
+//! The emulated board's flash lives in `accomp-flash.bin` in QEMU's working directory (the
+//! firmware reads and writes it by semihosting): [`QemuOptions::state_dir`]. The CLI uses a
+//! persistent directory ([`board_state_dir`]), so `accomp load` then `accomp table get` see the
+//! same board; tests use a fresh temporary one. A temporary log/state directory is removed when
+//! the [`Qemu`] is dropped, and on SIGINT/SIGTERM every running QEMU is killed and its
+//! temporary directory removed ([`install_signal_cleanup`]).
 
 use std::fs::{self, File};
 use std::net::{TcpListener, TcpStream};
@@ -20,8 +27,12 @@ pub struct QemuOptions {
     pub ready_timeout: Duration,
     /// `-icount shift=N` for deterministic virtual time (benchmarks), None for real time.
     pub icount_shift: Option<u32>,
-    /// Directory for `qemu-stderr.txt` and `semihosting.bin`; a fresh temp dir when None.
+    /// Directory for `qemu-stderr.txt` and `semihosting.bin`; a fresh temp dir when None
+    /// (removed when the QEMU is dropped, unless `ACCOMP_KEEP_QEMU_LOGS` is set).
     pub log_dir: Option<PathBuf>,
+    /// QEMU's working directory, where the board keeps `accomp-flash.bin`: the board's state
+    /// across runs. None: the log directory (a fresh board, forgotten with it).
+    pub state_dir: Option<PathBuf>,
 }
 
 impl Default for QemuOptions {
@@ -30,6 +41,7 @@ impl Default for QemuOptions {
             ready_timeout: Duration::from_secs(20),
             icount_shift: None,
             log_dir: None,
+            state_dir: None,
         }
     }
 }
@@ -73,7 +85,88 @@ pub struct Qemu {
     child: Child,
     /// Directory with QEMU's stderr and the firmware's semihosting output.
     pub log_dir: PathBuf,
+    /// Whether `log_dir` was created for this run (then it is removed on drop).
+    temporary_log_dir: bool,
     elf: PathBuf,
+}
+
+/// Name of the board's flash image in its state directory (read by the firmware).
+pub const FLASH_IMAGE: &str = "accomp-flash.bin";
+/// Environment variable naming the CLI's persistent board state directory.
+pub const STATE_ENV: &str = "ACCOMP_QEMU_STATE";
+
+/// The persistent state directory of the emulated board used by the CLI:
+/// `$ACCOMP_QEMU_STATE`, else `$XDG_STATE_HOME/accomp/qemu-board`, else
+/// `~/.local/state/accomp/qemu-board`, else a directory in the system temp dir.
+pub fn board_state_dir() -> PathBuf {
+    if let Some(d) = std::env::var_os(STATE_ENV) {
+        return PathBuf::from(d);
+    }
+    let base = std::env::var_os("XDG_STATE_HOME")
+        .map(PathBuf::from)
+        .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".local/state")))
+        .unwrap_or_else(std::env::temp_dir);
+    base.join("accomp").join("qemu-board")
+}
+
+/// QEMUs running in this process (pid, temporary directory to remove), for the signal handler.
+static RUNNING: std::sync::Mutex<Vec<(u32, Option<PathBuf>)>> = std::sync::Mutex::new(Vec::new());
+
+/// Installs (once) a SIGINT/SIGTERM handler that kills every QEMU this process started, removes
+/// their temporary directories and exits with 130. Called by every launch; the CLI's commands
+/// all go through it.
+pub fn install_signal_cleanup() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        let _ = ctrlc::set_handler(cleanup_running);
+    });
+}
+
+/// Kills the registered QEMUs and removes their temporary directories. Holds the registry's
+/// lock throughout and exits with it: a [`Qemu`] being stopped meanwhile (its connection just
+/// broke) either finished its own clean-up before (`Qemu::stop` holds the lock too) or waits
+/// for the lock until the process ends.
+fn cleanup_running() {
+    let mut list = match RUNNING.lock() {
+        Ok(l) => l,
+        Err(p) => p.into_inner(),
+    };
+    for (pid, dir) in list.drain(..) {
+        // SIGKILL: the guest has nothing to flush (the flash file is written through).
+        let _ = Command::new("kill").arg("-9").arg(pid.to_string()).status();
+        wait_gone(pid);
+        if let Some(d) = dir {
+            let _ = fs::remove_dir_all(d);
+        }
+    }
+    eprintln!("\ninterrupted: QEMU stopped");
+    // Exit with the lock held, so no `Qemu::stop` starts a clean-up the exit would cut short.
+    std::process::exit(130);
+}
+
+/// Waits (briefly) until process `pid` is gone, so its files can be removed.
+fn wait_gone(pid: u32) {
+    let proc_dir = PathBuf::from(format!("/proc/{pid}"));
+    for _ in 0..50 {
+        match fs::read_to_string(proc_dir.join("stat")) {
+            // Gone, or a zombie (state Z) that holds no files any more.
+            Err(_) => return,
+            Ok(s)
+                if s.rsplit(')')
+                    .next()
+                    .is_some_and(|r| r.trim_start().starts_with('Z')) =>
+            {
+                return
+            }
+            Ok(_) => std::thread::sleep(Duration::from_millis(10)),
+        }
+    }
+}
+
+fn register(pid: u32, dir: Option<PathBuf>) {
+    if let Ok(mut l) = RUNNING.lock() {
+        l.push((pid, dir));
+    }
 }
 
 /// Connections tried before giving up on READY (see `Qemu::launch`).
@@ -95,6 +188,8 @@ impl Qemu {
         if !elf.is_file() {
             return Err(QemuError::NoFirmware(elf.to_path_buf()));
         }
+        install_signal_cleanup();
+        let temporary_log_dir = opts.log_dir.is_none();
         let log_dir = match &opts.log_dir {
             Some(d) => d.clone(),
             None => std::env::temp_dir().join(format!(
@@ -105,6 +200,10 @@ impl Qemu {
         };
         let io_err = |e: std::io::Error| QemuError::Spawn(e);
         fs::create_dir_all(&log_dir).map_err(io_err)?;
+        let state_dir = opts.state_dir.clone().unwrap_or_else(|| log_dir.clone());
+        fs::create_dir_all(&state_dir).map_err(io_err)?;
+        // Absolute: QEMU runs in the state directory.
+        let elf = &fs::canonicalize(elf).unwrap_or_else(|_| elf.to_path_buf());
         let stdout = File::create(log_dir.join("semihosting.bin")).map_err(io_err)?;
         let stderr = File::create(log_dir.join("qemu-stderr.txt")).map_err(io_err)?;
         let port = free_port().map_err(io_err)?;
@@ -125,13 +224,16 @@ impl Qemu {
         }
         cmd.arg("-kernel")
             .arg(elf)
+            .current_dir(&state_dir)
             .stdin(Stdio::null())
             .stdout(stdout)
             .stderr(stderr);
         let child = cmd.spawn().map_err(QemuError::Spawn)?;
+        register(child.id(), temporary_log_dir.then(|| log_dir.clone()));
         let mut qemu = Qemu {
             child,
             log_dir,
+            temporary_log_dir,
             elf: elf.to_path_buf(),
         };
         let deadline = Instant::now() + opts.ready_timeout;
@@ -250,13 +352,45 @@ impl Qemu {
         self.stop()
     }
 
-    fn stop(&mut self) -> Option<i32> {
-        if let Some(s) = self.exited() {
-            return s.code();
+    /// Waits up to `timeout` for QEMU to exit by itself (the firmware's semihosting exit) and
+    /// returns its exit code.
+    pub fn wait_exit(&mut self, timeout: Duration) -> Option<i32> {
+        let deadline = Instant::now() + timeout;
+        while Instant::now() < deadline {
+            if let Some(s) = self.exited() {
+                return s.code();
+            }
+            std::thread::sleep(Duration::from_millis(10));
         }
-        // The guest has nothing to flush: killing the emulator is a clean stop.
-        let _ = self.child.kill();
-        self.child.wait().ok().and_then(|s| s.code())
+        None
+    }
+
+    /// Kills QEMU, reaps it and removes its temporary directory, all under the registry lock,
+    /// and only then unregisters it. The SIGINT/SIGTERM handler takes the same lock: it either
+    /// finds this QEMU still registered and stops it itself, or waits until this is done. (When
+    /// the entry was dropped first and the folder removed after, a signal whose handler ran in
+    /// between exited the process with the folder still there: the signal itself interrupts the
+    /// UART read, so the main thread drops its `Qemu` just as the handler runs.)
+    fn stop(&mut self) -> Option<i32> {
+        let mut list = match RUNNING.lock() {
+            Ok(l) => l,
+            Err(p) => p.into_inner(),
+        };
+        let code = match self.exited() {
+            Some(s) => s.code(),
+            None => {
+                // The guest has nothing to flush (the flash file is written through): killing
+                // the emulator is a clean stop, and exactly a power cut.
+                let _ = self.child.kill();
+                self.child.wait().ok().and_then(|s| s.code())
+            }
+        };
+        if self.temporary_log_dir && std::env::var_os("ACCOMP_KEEP_QEMU_LOGS").is_none() {
+            let _ = fs::remove_dir_all(&self.log_dir);
+        }
+        let pid = self.child.id();
+        list.retain(|(p, _)| *p != pid);
+        code
     }
 }
 

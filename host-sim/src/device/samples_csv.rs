@@ -124,6 +124,15 @@ pub fn status_names(s: Status) -> String {
 
 /// Output CSV: metadata, header, one row per frame (f64 printed shortest-exact, NaN as NaN).
 pub fn write_output(metadata: &BTreeMap<String, String>, rows: &[(f64, Frame)]) -> String {
+    let mut out = output_header(metadata);
+    for (t, f) in rows {
+        out += &output_row(*t, f);
+    }
+    out
+}
+
+/// The metadata lines and the header of the output CSV (streamed writers start with this).
+pub fn output_header(metadata: &BTreeMap<String, String>) -> String {
     let mut out = String::new();
     for (k, v) in metadata {
         let _ = writeln!(out, "# {k}: {v}");
@@ -131,19 +140,20 @@ pub fn write_output(metadata: &BTreeMap<String, String>, rows: &[(f64, Frame)]) 
     out.push_str(
         "time_s,output_v,temperature_c,tilt_arcsec,a_i_exact_g,output_linearized_v,status\n",
     );
-    for (t, f) in rows {
-        let _ = writeln!(
-            out,
-            "{t},{},{},{},{},{},{}",
-            f.output_v,
-            f.temperature_c,
-            f.tilt_arcsec,
-            f.a_i_exact_g,
-            f.output_linearized_v,
-            status_names(f.status)
-        );
-    }
     out
+}
+
+/// One output row, newline included.
+pub fn output_row(t: f64, f: &Frame) -> String {
+    format!(
+        "{t},{},{},{},{},{},{}\n",
+        f.output_v,
+        f.temperature_c,
+        f.tilt_arcsec,
+        f.a_i_exact_g,
+        f.output_linearized_v,
+        status_names(f.status)
+    )
 }
 
 #[cfg(test)]

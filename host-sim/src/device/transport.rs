@@ -30,12 +30,16 @@ impl TcpTransport {
     }
 }
 
+/// A read that returned nothing for a benign reason is "no bytes yet": the poll timeout, or a
+/// signal (a socket with SO_RCVTIMEO is never restarted after a signal handler, SA_RESTART or
+/// not — signal(7) — so Ctrl-C or SIGTERM would otherwise surface as an I/O error while the
+/// signal handler is still cleaning up).
 fn timeout_is_empty(r: io::Result<usize>) -> io::Result<usize> {
     match r {
         Err(e)
             if matches!(
                 e.kind(),
-                io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut
+                io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut | io::ErrorKind::Interrupted
             ) =>
         {
             Ok(0)
@@ -60,6 +64,13 @@ impl Transport for TcpTransport {
 /// A real board on a serial port (8N1).
 pub struct SerialTransport {
     port: Box<dyn serialport::SerialPort>,
+    /// The port's path, named in every error.
+    path: String,
+}
+
+/// `e` with the port named: "serial port /dev/ttyUSB0: …".
+fn on_port(path: &str, e: io::Error) -> io::Error {
+    io::Error::new(e.kind(), format!("serial port {path}: {e}"))
 }
 
 impl SerialTransport {
@@ -68,20 +79,32 @@ impl SerialTransport {
         let port = serialport::new(path, baud)
             .timeout(POLL)
             .open()
-            .map_err(io::Error::other)?;
-        Ok(SerialTransport { port })
+            .map_err(|e| {
+                let kind = match e.kind() {
+                    serialport::ErrorKind::NoDevice => io::ErrorKind::NotFound,
+                    serialport::ErrorKind::Io(k) => k,
+                    _ => io::ErrorKind::Other,
+                };
+                on_port(path, io::Error::new(kind, e.description))
+            })?;
+        Ok(SerialTransport {
+            port,
+            path: path.to_string(),
+        })
     }
 }
 
 impl Transport for SerialTransport {
     fn send(&mut self, bytes: &[u8]) -> io::Result<()> {
-        self.port.write_all(bytes)
+        self.port
+            .write_all(bytes)
+            .map_err(|e| on_port(&self.path, e))
     }
     fn recv(&mut self, buf: &mut [u8]) -> io::Result<usize> {
         match self.port.read(buf) {
             // A serial port has no end of stream: zero bytes only means the timeout passed.
             Ok(0) => Ok(0),
-            other => timeout_is_empty(other),
+            other => timeout_is_empty(other).map_err(|e| on_port(&self.path, e)),
         }
     }
 }

@@ -34,6 +34,55 @@ pub struct SimulateArgs {
     /// Print a preset as a complete scenario TOML and exit.
     #[arg(long, value_name = "PRESET", value_parser = PRESETS)]
     pub print_preset: Option<String>,
+    /// Allow a log above the size limits (MAX_ROWS rows, MAX_LOG_BYTES bytes).
+    #[arg(long)]
+    pub allow_large: bool,
+}
+
+/// Rows a simulation writes without `--allow-large`: 20 million (231 days at 1 s).
+pub const MAX_ROWS: u64 = 20_000_000;
+/// Estimated log size written without `--allow-large`: 4 GiB.
+pub const MAX_LOG_BYTES: u64 = 4 << 30;
+/// Rows no flag allows: 1e12 rows is beyond any disk (≈ 100 TB).
+pub const HARD_MAX_ROWS: f64 = 1e12;
+
+/// Bytes per row of this scenario's log, measured by simulating a few rows into memory.
+fn bytes_per_row(sc: &Scenario, seed: u64, codes: bool) -> anyhow::Result<f64> {
+    let size = |n: f64| -> anyhow::Result<f64> {
+        let mut small = sc.clone();
+        small.run.duration_s = n * small.run.interval_s;
+        let mut buf = Vec::new();
+        simulate(&small, seed, &Options { codes }, &mut buf, &mut |_, _| {})?;
+        Ok(buf.len() as f64)
+    };
+    Ok((size(40.0)? - size(20.0)?) / 20.0)
+}
+
+/// Refuses a log above the limits (unless allowed), printing the estimate either way.
+fn check_size(sc: &Scenario, seed: u64, codes: bool, allow_large: bool) -> anyhow::Result<()> {
+    // In f64: an interval of 1e-300 s or 1e300 days overflows any integer count.
+    let rows = (sc.run.duration_s / sc.run.interval_s).floor();
+    let bytes = rows * bytes_per_row(sc, seed, codes)?;
+    let estimate = format!(
+        "{rows:.3e} rows, about {:.3} GB ({} s interval over {:.4} days)",
+        bytes / 1e9,
+        sc.run.interval_s,
+        sc.run.duration_s / 86_400.0
+    );
+    if rows.is_nan() || rows > HARD_MAX_ROWS {
+        anyhow::bail!(
+            "refused: the log would be {estimate}; no flag allows more than {HARD_MAX_ROWS:e} rows"
+        );
+    }
+    if (rows > MAX_ROWS as f64 || bytes > MAX_LOG_BYTES as f64) && !allow_large {
+        anyhow::bail!(
+            "refused: the log would be {estimate}, above the limit of {MAX_ROWS} rows / {} GiB; \
+             pass --allow-large to write it anyway",
+            MAX_LOG_BYTES >> 30
+        );
+    }
+    eprintln!("simulate: {estimate}");
+    Ok(())
 }
 
 /// Runs the subcommand.
@@ -54,6 +103,7 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
         sc.run.duration_s = days * 86_400.0;
     }
     sc.validate()?;
+    check_size(&sc, args.seed, args.codes, args.allow_large)?;
     let file =
         File::create(output).with_context(|| format!("cannot create {}", output.display()))?;
     let bar = ProgressBar::new(sc.samples());

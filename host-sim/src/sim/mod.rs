@@ -9,6 +9,9 @@
 //! - `barometer.rs`: station pressure (height, atmospheric tide, weather) and the barometer;
 //! - `adc.rs`: ADS1262 and AD7124 codes as the board sees them;
 //! - `noise.rs`: seeded processes (AR(1), random walk, flicker, Allan noise);
+//! - `gravimeter.rs`: a gravimeter in place of the accelerometer (output in a gravity unit);
+//! - `effects.rs`: the discovery catalogue's effects as optional scenario physics;
+//! - `twin.rs`: the simulated twin of a measured record (drivers from the record);
 //! - `scenario.rs`: the TOML scenario and presets; `time.rs`: UTC; `writer.rs`: the log.
 //!
 //! Physics, parameters and default magnitudes: docs/simulator.md.
@@ -17,6 +20,8 @@ pub mod accelerometer;
 pub mod adc;
 pub mod barometer;
 pub mod cli;
+pub mod effects;
+pub mod gravimeter;
 pub mod noise;
 pub mod rtd;
 pub mod scenario;
@@ -24,6 +29,7 @@ pub mod thermostat;
 pub mod tide;
 pub mod tilt;
 pub mod time;
+pub mod twin;
 pub mod writer;
 
 use std::io::Write;
@@ -32,6 +38,8 @@ use accomp::units::{Volts, RAD_PER_ARCSEC};
 
 use accelerometer::{axes, AccelError, Accelerometer, DividingHead};
 use barometer::Barometer;
+use effects::{ChainSetup, Drive, EffectChain};
+use gravimeter::GravimeterParams;
 use noise::{stream, AllanNoise, SimRng};
 use rtd::Rtd;
 use scenario::Scenario;
@@ -55,6 +63,8 @@ mod streams {
     pub const TILTMETER: u64 = 7;
     pub const ADC: u64 = 8;
     pub const BAROMETER: u64 = 9;
+    pub const EFFECTS: u64 = 10;
+    pub const GRAVIMETER: u64 = 11;
 }
 
 /// Why a simulation fails.
@@ -77,6 +87,12 @@ pub enum SimError {
         /// Why.
         error: accomp::adc::AdcError,
     },
+    /// The scenario's effects cannot be set up (an unknown ambient channel, a bad site).
+    #[error(transparent)]
+    Effects(#[from] effects::EffectError),
+    /// A twin cannot be built from the record.
+    #[error("twin: {0}")]
+    Twin(String),
     /// Writing the log failed.
     #[error("writing the log: {0}")]
     Io(#[from] std::io::Error),
@@ -102,6 +118,8 @@ pub struct Sample {
     pub tilt_arcsec: f64,
     /// Station pressure measured by the barometer, hPa.
     pub pressure_hpa: f64,
+    /// Gravimeter output in its unit (NaN when the station carries the accelerometer).
+    pub gravity: f64,
     /// ADS1262 accelerometer code, signed.
     pub accel_code: i32,
     /// AD7124 RTD code.
@@ -154,6 +172,8 @@ pub struct Simulator {
     foundation: Foundation,
     tide: TideSampler,
     barometer: Barometer,
+    effects: Option<EffectChain>,
+    gravimeter: Option<Gravimeter>,
     rng_room: SimRng,
     rng_thermostat: SimRng,
     rng_accel: SimRng,
@@ -163,6 +183,36 @@ pub struct Simulator {
     rng_tiltmeter: SimRng,
     rng_adc: SimRng,
     rng_barometer: SimRng,
+    rng_effects: SimRng,
+}
+
+/// The gravimeter's running parts.
+struct Gravimeter {
+    p: GravimeterParams,
+    unit_per_nm_s2: f64,
+    noise: AllanNoise,
+    tide: TideSampler,
+    rng: SimRng,
+}
+
+/// Output units per g of the scenario's instrument: K1 at the set point (V/g) for the
+/// accelerometer, the gravity unit's for the gravimeter.
+pub fn unit_per_g(scenario: &Scenario) -> Result<f64, SimError> {
+    match scenario.gravimeter() {
+        Some(g) => g
+            .unit_per_g()
+            .ok_or_else(|| SimError::Twin(format!("unknown gravity unit {:?}", g.unit))),
+        None => {
+            let models = scenario
+                .accelerometer
+                .calibration
+                .load(scenario.thermostat.setpoint_c)?;
+            Ok(
+                accelerometer::true_coefficients(&models, scenario.thermostat.setpoint_c)
+                    .scale_factor_v_per_g,
+            )
+        }
+    }
 }
 
 impl Simulator {
@@ -190,7 +240,54 @@ impl Simulator {
         } else {
             None
         };
+        let head = DividingHead::new(&s.accelerometer.orientation)?;
+        let effects = if s.effects.is_empty() {
+            None
+        } else {
+            let input_g = match s.gravimeter() {
+                Some(_) => 1.0,
+                None => head.nominal_input_g(),
+            };
+            Some(EffectChain::new(
+                &s.effects,
+                ChainSetup {
+                    start_unix_s: start.0,
+                    site: (s.site.latitude_deg, s.site.longitude_deg, s.site.height_m),
+                    span_s: (0.0, s.run.duration_s),
+                    unit_per_g: unit_per_g(s)?,
+                    input_g,
+                    ambient: effects::SIMULATED_AMBIENT
+                        .iter()
+                        .map(|c| (*c).to_owned())
+                        .collect(),
+                },
+            )?)
+        };
+        let gravimeter = match s.gravimeter() {
+            Some(g) => {
+                let mut rng = stream(seed, streams::GRAVIMETER);
+                let noise = AllanNoise::new(&g.noise, dt, s.run.duration_s, &mut rng);
+                let model = if s.tide.enabled {
+                    Some(TideModel::new(&s.site, s.tide.tilt_azimuth_deg)?)
+                } else {
+                    None
+                };
+                Some(Gravimeter {
+                    unit_per_nm_s2: g.unit_per_nm_s2().ok_or_else(|| {
+                        SimError::Twin(format!("unknown gravity unit {:?}", g.unit))
+                    })?,
+                    noise,
+                    tide: TideSampler::new(model, start, s.tide.step_s),
+                    p: g.clone(),
+                    rng,
+                })
+            }
+            None => None,
+        };
         Ok(Simulator {
+            effects,
+            gravimeter,
+            rng_effects: stream(seed, streams::EFFECTS),
             start,
             interval_s: dt,
             samples: s.samples(),
@@ -200,7 +297,7 @@ impl Simulator {
             // The board starts at the mean room temperature.
             board: LowPass::new(s.adc.board_lowpass_min * 60.0, dt, s.room.mean_c),
             accel: Accelerometer::new(models, noise),
-            head: DividingHead::new(&s.accelerometer.orientation)?,
+            head,
             rtd: Rtd::new(&s.rtd, &mut rng_rtd),
             foundation: Foundation::new(&s.foundation, dt),
             tide: TideSampler::new(tide_model, start, s.tide.step_s),
@@ -270,6 +367,17 @@ impl Simulator {
             "truth_rtd_offset_c".into(),
             format!("{}", round_to(self.rtd_offset_c(), 9)),
         ));
+        if let Some(g) = s.gravimeter() {
+            // A vertical gravimeter: its input is gravity (1 g), its unit the column's suffix.
+            for (k, v) in m.iter_mut() {
+                match k.as_str() {
+                    "instrument" => *v = g.name.clone(),
+                    "input_g" => *v = "1".into(),
+                    _ => {}
+                }
+            }
+            m.retain(|(k, _)| k != "scale_factor_v_per_g");
+        }
         m
     }
 
@@ -296,7 +404,39 @@ impl Simulator {
             head + tilt * RAD_PER_ARCSEC,
             g,
         );
-        let e = self.accel.sample(proof, a_i, cross, &mut self.rng_accel);
+        let mut e = self.accel.sample(proof, a_i, cross, &mut self.rng_accel);
+        // The barometer draws from its own stream: stepping it before the output changes none
+        // of its values.
+        let pressure = self.barometer.step(solar_h, &mut self.rng_barometer);
+        let pressure_dev_pa = (pressure.truth_hpa - self.barometer.mean_hpa()) * 100.0;
+        let effect = match &mut self.effects {
+            Some(chain) => chain.output_term(&Drive {
+                t_s: t,
+                temperature_c: mount,
+                input_g: a_i.0,
+                tilt_rad: tilt * RAD_PER_ARCSEC,
+                pressure_dev_pa,
+                ambient: &[room_dev, board - self.room.mean_c()],
+            }),
+            None => 0.0,
+        };
+        let gravity = match &mut self.gravimeter {
+            Some(gm) => {
+                let p = &gm.p;
+                gm.p.offset
+                    + p.drift_per_day * t / 86_400.0
+                    + p.tide_factor
+                        * gm.tide.at(t - p.tide_delay_s).gravity_nm_s2
+                        * gm.unit_per_nm_s2
+                    + p.pressure_admittance_per_hpa * pressure_dev_pa / 100.0
+                    + gm.noise.step(&mut gm.rng)
+                    + effect
+            }
+            None => {
+                e.output = Volts(e.output.0 + effect);
+                f64::NAN
+            }
+        };
 
         let ads = &s.adc.ads1262;
         let adc_err = |error| SimError::Adc { time_s: t, error };
@@ -322,14 +462,23 @@ impl Simulator {
         )
         .map_err(adc_err)?;
 
-        let pressure = self.barometer.step(solar_h, &mut self.rng_barometer);
+        let mut temperature_c = temperature_c;
+        let mut tilt_arcsec = tilt_conv.volts.map_or(f64::NAN, |v| v.0 * k);
+        let mut pressure_hpa = pressure.measured_hpa;
+        if let Some(chain) = self.effects.as_ref().filter(|c| c.has_reading_noise()) {
+            let (dt_c, dtilt_rad, dp_pa) = chain.reading_noise(&mut self.rng_effects);
+            temperature_c += dt_c;
+            tilt_arcsec += dtilt_rad / RAD_PER_ARCSEC;
+            pressure_hpa += dp_pa / 100.0;
+        }
 
         Ok(Sample {
             time_s: t,
             output_v: accel.volts.map_or(f64::NAN, |v| v.0),
             temperature_c,
-            tilt_arcsec: tilt_conv.volts.map_or(f64::NAN, |v| v.0 * k),
-            pressure_hpa: pressure.measured_hpa,
+            tilt_arcsec,
+            pressure_hpa,
+            gravity,
             accel_code: accel.code as i32,
             rtd_code: rtd.code,
             tilt_code: tilt_conv.code as i32,
@@ -396,11 +545,33 @@ pub fn columns(opts: &Options) -> Vec<Column> {
     v
 }
 
+/// The log's columns for a scenario: a gravimeter writes `gravity_<unit>` where the
+/// accelerometer writes `output_v`.
+pub fn columns_for(scenario: &Scenario, opts: &Options) -> Vec<Column> {
+    let mut v = columns(opts);
+    if let Some(g) = scenario.gravimeter() {
+        v[1] = Column {
+            name: g.column(),
+            decimals: Some(match g.unit.as_str() {
+                "mgal" => 7,
+                "ugal" => 4,
+                "nm_s2" => 3,
+                _ => 12,
+            }),
+        };
+    }
+    v
+}
+
 fn row(s: &Sample, opts: &Options, out: &mut Vec<f64>) {
     out.clear();
     out.extend([
         s.time_s,
-        s.output_v,
+        if s.gravity.is_nan() {
+            s.output_v
+        } else {
+            s.gravity
+        },
         s.temperature_c,
         s.tilt_arcsec,
         s.pressure_hpa,
@@ -451,7 +622,7 @@ pub fn simulate<W: Write>(
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<(Summary, W), SimError> {
     let mut sim = Simulator::new(scenario, seed)?;
-    let mut w = LogWriter::new(out, &sim.metadata(seed), columns(opts))?;
+    let mut w = LogWriter::new(out, &sim.metadata(seed), columns_for(scenario, opts))?;
     let total = sim.samples();
     let mut values = Vec::with_capacity(24);
     for i in 0..total {
@@ -508,6 +679,60 @@ mod tests {
         let a = run(&s, 42, true);
         assert_eq!(a, run(&s, 42, true));
         assert_ne!(a, run(&s, 43, true));
+    }
+
+    fn fnv1a(bytes: &[u8]) -> u64 {
+        bytes.iter().fold(0xcbf2_9ce4_8422_2325, |h, &b| {
+            (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
+        })
+    }
+
+    #[test]
+    fn the_presets_write_the_bytes_they_wrote_before_effects_and_instruments_existed() {
+        // FNV-1a of `accomp simulate <preset> --days 0.5 --seed 42 --codes`, written by the
+        // simulator of main at 62a21c1 (before `[instrument]` and `[[effects]]`): the optional
+        // tables must not move a single draw or digit of a scenario that does not use them.
+        for (name, len, hash) in [
+            ("paper-0g", 170_818, 0x44a2_0284_6d52_a42d_u64),
+            ("paper-1g", 172_155, 0x05df_d03e_c46a_8367_u64),
+        ] {
+            let mut s = Scenario::preset(name).unwrap();
+            s.run.duration_s = 0.5 * 86_400.0;
+            let bytes = run(&s, 42, true);
+            assert_eq!((bytes.len(), fnv1a(&bytes)), (len, hash), "{name}");
+        }
+    }
+
+    #[test]
+    fn a_zero_effect_changes_no_byte_and_a_real_one_changes_only_its_channel() {
+        use super::effects::ScenarioEffect;
+        let base = short_0g();
+        let mut zero = short_0g();
+        zero.effects = vec![ScenarioEffect::Step {
+            time_s: 3600.0,
+            size: 0.0,
+        }];
+        assert_eq!(run(&base, 7, false), run(&zero, 7, false));
+        // Reading noise on the temperature: only temperature_c moves.
+        let mut noisy = short_0g();
+        noisy.effects = vec![ScenarioEffect::ChannelNoise {
+            channel: "temperature_c".into(),
+            noise: 0.01,
+        }];
+        let (a, b) = (
+            Log::read(&run(&base, 7, false)[..]).unwrap(),
+            Log::read(&run(&noisy, 7, false)[..]).unwrap(),
+        );
+        assert_eq!(a.column("output_v"), b.column("output_v"));
+        assert_eq!(a.column("tilt_arcsec"), b.column("tilt_arcsec"));
+        let d: Vec<f64> = a
+            .column("temperature_c")
+            .unwrap()
+            .iter()
+            .zip(b.column("temperature_c").unwrap())
+            .map(|(x, y)| y - x)
+            .collect();
+        assert!((std(&d) - 0.01).abs() < 0.002, "{}", std(&d));
     }
 
     #[test]

@@ -2,6 +2,8 @@
 //!
 //! Every table and field is required and unknown fields are refused, so a scenario file is the
 //! complete record of a run (with the seed) and a typo cannot silently fall back to a default.
+//! Two later additions are optional, so that older files still load and mean what they meant:
+//! `[instrument]` (absent: the accelerometer) and `[[effects]]` (absent: none).
 //! `accomp simulate --print-preset paper-1g` prints a complete file to start from.
 
 use serde::{Deserialize, Serialize};
@@ -11,6 +13,8 @@ use super::accelerometer::{
 };
 use super::adc::{Ad7124Params, AdcParams, Ads1262Params};
 use super::barometer::BarometerParams;
+use super::effects::ScenarioEffect;
+use super::gravimeter::{GravimeterParams, InstrumentParams};
 use super::noise::AllanParams;
 use super::rtd::RtdParams;
 use super::thermostat::{RoomParams, ThermostatParams};
@@ -59,6 +63,14 @@ pub struct Scenario {
     pub adc: AdcParams,
     /// Station pressure and the barometer.
     pub barometer: BarometerParams,
+    /// The instrument (`[instrument] kind = "gravimeter"`); absent: the accelerometer of the
+    /// `[accelerometer]` table.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub instrument: Option<InstrumentParams>,
+    /// Catalogue effects on top of the station physics (`[[effects]]`, `effects.rs`); absent:
+    /// none.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub effects: Vec<ScenarioEffect>,
 }
 
 /// Why a scenario is refused.
@@ -73,7 +85,16 @@ pub enum ScenarioError {
     /// Neither a file nor a preset of that name.
     #[error("no scenario file or preset named {0:?} (presets: {presets})", presets = PRESETS.join(", "))]
     Unknown(String),
+    /// The file exists but is not UTF-8 text (a scenario is TOML).
+    #[error("scenario file {0:?} is not UTF-8 text (a scenario is a TOML file)")]
+    NotUtf8(String),
+    /// The file exists but could not be read, or is larger than a scenario can be.
+    #[error("scenario file {0:?}: {1}")]
+    Unreadable(String, String),
 }
+
+/// Largest scenario file read (a complete scenario is about 3 KB of TOML).
+pub const MAX_SCENARIO_BYTES: u64 = 1 << 20;
 
 /// Names of the built-in presets.
 pub const PRESETS: [&str; 2] = ["paper-1g", "paper-0g"];
@@ -99,6 +120,14 @@ impl Scenario {
         match name {
             "paper-1g" => Some(paper_1g()),
             "paper-0g" => Some(paper_0g()),
+            _ => None,
+        }
+    }
+
+    /// The gravimeter, when the station carries one instead of the accelerometer.
+    pub fn gravimeter(&self) -> Option<&GravimeterParams> {
+        match &self.instrument {
+            Some(InstrumentParams::Gravimeter(g)) => Some(g),
             _ => None,
         }
     }
@@ -178,6 +207,12 @@ impl Scenario {
         if !(b.s2_peak_solar_h.is_finite() && b.s1_peak_solar_h.is_finite()) {
             return bad("barometer peak hours must be finite");
         }
+        if let Some(InstrumentParams::Gravimeter(g)) = &self.instrument {
+            g.validate().map_err(ScenarioError::Invalid)?;
+        }
+        for (i, e) in self.effects.iter().enumerate() {
+            e.validate(i).map_err(ScenarioError::Invalid)?;
+        }
         Ok(())
     }
 }
@@ -187,10 +222,26 @@ pub fn load(arg: &str) -> Result<Scenario, ScenarioError> {
     if let Some(s) = Scenario::preset(arg) {
         return Ok(s);
     }
-    match std::fs::read_to_string(arg) {
-        Ok(text) => Scenario::from_toml(&text),
-        Err(_) => Err(ScenarioError::Unknown(arg.to_string())),
+    use std::io::Read as _;
+    let file = match std::fs::File::open(arg) {
+        Ok(f) => f,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            return Err(ScenarioError::Unknown(arg.to_string()))
+        }
+        Err(e) => return Err(ScenarioError::Unreadable(arg.to_string(), e.to_string())),
+    };
+    let mut bytes = Vec::new();
+    file.take(MAX_SCENARIO_BYTES + 1)
+        .read_to_end(&mut bytes)
+        .map_err(|e| ScenarioError::Unreadable(arg.to_string(), e.to_string()))?;
+    if bytes.len() as u64 > MAX_SCENARIO_BYTES {
+        return Err(ScenarioError::Unreadable(
+            arg.to_string(),
+            format!("larger than {MAX_SCENARIO_BYTES} bytes, not a scenario"),
+        ));
     }
+    let text = String::from_utf8(bytes).map_err(|_| ScenarioError::NotUtf8(arg.to_string()))?;
+    Scenario::from_toml(&text)
 }
 
 fn beijing() -> Site {
@@ -335,6 +386,8 @@ fn paper_1g() -> Scenario {
         tiltmeter: tiltmeter(),
         adc: board(),
         barometer: barometer(),
+        instrument: None,
+        effects: Vec::new(),
     }
 }
 
@@ -397,6 +450,8 @@ fn paper_0g() -> Scenario {
         tiltmeter: tiltmeter(),
         adc: board(),
         barometer: barometer(),
+        instrument: None,
+        effects: Vec::new(),
     }
 }
 
