@@ -37,8 +37,9 @@ pub struct ChannelNoise {
     /// Effective width of the smoother, seconds: the shorter of the times over which the level's
     /// and the slope's diffusion move the true value by one reading noise (0 = not smoothed).
     pub smoothing_s: f64,
-    /// Whether the model uses the smoothed state (false when the reading noise is not
-    /// resolved: the channel is used as read).
+    /// Whether the reading noise is resolved (the smoother averages over at least a spacing).
+    pub resolved: bool,
+    /// Whether the model was fitted on the smoothed state (false: the channel as read).
     pub smoothed: bool,
     /// How the levels were obtained.
     pub method: &'static str,
@@ -234,7 +235,7 @@ fn segments(ds: &Dataset) -> Vec<std::ops::Range<usize>> {
             start = i;
         }
     }
-    if ds.len() > 0 {
+    if !ds.is_empty() {
         out.push(start..ds.len());
     }
     out
@@ -249,9 +250,10 @@ fn smoothing_width_s(dt: f64, ll: [f64; 2]) -> f64 {
 }
 
 /// Fits the errors-in-variables model of every regressor channel of `ds` and returns the
-/// dataset the effects are fitted on (channels replaced by their smoothed states; the output and
-/// the input channel untouched) with what was found per channel.
-pub fn denoise(ds: &Dataset) -> (Dataset, Vec<ChannelNoise>) {
+/// dataset the effects are fitted on — with `apply`, resolved channels replaced by their
+/// smoothed states (the output and the input channel untouched); without, the channels as
+/// read — with what was found per channel.
+pub fn denoise(ds: &Dataset, apply: bool) -> (Dataset, Vec<ChannelNoise>) {
     let mut model = ds.clone();
     let mut report = Vec::new();
     let dt = ds.dt_s.max(1e-9);
@@ -276,7 +278,7 @@ pub fn denoise(ds: &Dataset) -> (Dataset, Vec<ChannelNoise>) {
         // smoother would average over less than a spacing) the white part is not resolved: the
         // channel is used as read.
         let resolved = r > 0.0 && smoothing_width_s(dt, ll) >= dt;
-        if resolved {
+        if resolved && apply {
             let mut v = c.values.clone();
             for s in &segs {
                 if s.len() >= 3 {
@@ -303,7 +305,8 @@ pub fn denoise(ds: &Dataset) -> (Dataset, Vec<ChannelNoise>) {
             } else {
                 0.0
             },
-            smoothed: resolved,
+            resolved,
+            smoothed: resolved && apply,
             method: METHOD_LOCAL_TREND_ML,
         });
     }
@@ -361,7 +364,7 @@ mod tests {
             .map(|i| 25.0 + 0.5 * (2.0 * std::f64::consts::PI * i as f64 * dt / 21_600.0).sin())
             .collect();
         let read: Vec<f64> = truth.iter().zip(&w).map(|(t, e)| t + 0.003 * e).collect();
-        let (m, rep) = denoise(&dataset(read.clone(), dt));
+        let (m, rep) = denoise(&dataset(read.clone(), dt), true);
         assert_eq!(rep.len(), 1);
         let c = &rep[0];
         assert!(c.smoothed, "{c:?}");
@@ -400,7 +403,7 @@ mod tests {
                 acc
             })
             .collect();
-        let (m, rep) = denoise(&dataset(v.clone(), 10.0));
+        let (m, rep) = denoise(&dataset(v.clone(), 10.0), true);
         assert!(!rep[0].smoothed, "{:?}", rep[0]);
         assert_eq!(m.channels[0].values, v);
     }

@@ -181,13 +181,16 @@ pub fn text(d: &Discovery) -> String {
             c.noise,
             c.unit,
             c.std,
-            if c.smoothed {
-                format!(
+            match (c.resolved, c.smoothed) {
+                (true, true) => format!(
                     "the model uses its smoothed state (zero-phase, width {:.0} s)",
                     c.smoothing_s
-                )
-            } else {
-                "not resolved: used as read".to_owned()
+                ),
+                (true, false) => format!(
+                    "smoother of width {:.0} s fitted, the model uses the reading",
+                    c.smoothing_s
+                ),
+                _ => "not resolved: used as read".to_owned(),
             }
         );
     }

@@ -702,6 +702,15 @@ pub fn select(
             if !(after.prediction_z < before.prediction_z * (1.0 - cfg.min_gain)
                 && after.raw < before.raw)
             {
+                refuse(
+                    &mut refused,
+                    s.effect.name(),
+                    format!(
+                        "ΔBIC {:.1}, but the blocked cross-validation did not improve (held-out \
+                         prediction z {:.4} → {:.4}, raw {:.4e} → {:.4e})",
+                        s.delta_bic, before.prediction_z, after.prediction_z, before.raw, after.raw
+                    ),
+                );
                 continue;
             }
             let fwd_after = forward_validate(ds, &trial, target, &cur.noise.model);
@@ -721,6 +730,10 @@ pub fn select(
                     ),
                 );
                 continue;
+            }
+            if !s.effect.repeatable() {
+                // Refused in an earlier round, accepted now: the refusal no longer holds.
+                refused.retain(|(n, _)| n != s.effect.name());
             }
             took = Some((s.clone(), before, after, fwd_before, fwd_after));
             break;
@@ -969,8 +982,8 @@ fn edge_hint(e: &Effect, theta: f64, ds: &Dataset) -> String {
     match e {
         Effect::ThermalLag | Effect::AmbientCoupling(_) if lower => {
             "; the shortest lag improving the fit is the signature of the channel's own \
-             reading noise (errors in variables: smoothing a noisy regressor always helps) \
-             left after the channel's fitted smoother, see channel_noise"
+             reading noise (errors in variables: smoothing a noisy regressor always helps), \
+             see channel_noise"
                 .into()
         }
         _ if !lower => "; the upper end: a slow trend the record is too short to resolve".into(),
