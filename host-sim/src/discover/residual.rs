@@ -310,6 +310,52 @@ pub fn adev_points(ds: &Dataset, resid: &[f64]) -> Vec<crate::allan::AllanPoint>
 /// [`super::eiv`]'s).
 pub use super::eiv::ChannelNoise;
 
+/// `ChannelNoise::method` of [`channel_noise`].
+pub const METHOD_MAD_OF_DIFFERENCES: &str = "mad_of_first_differences";
+
+/// Reading noise of every measured regressor channel (temperature, tilt, pressure, ambient):
+/// 1.4826·MAD of the first differences inside segments, / √2 — white reading noise doubles
+/// in a difference, a slow signal hardly moves between neighbours, and the median ignores the
+/// few large differences of fast changes. On binned records it is the noise of a bin mean.
+///
+/// A quick robust estimate without a model (used by the simulator's recovery tests); the
+/// discovery itself reports [`super::eiv`]'s maximum-likelihood levels.
+pub fn channel_noise(ds: &Dataset) -> Vec<ChannelNoise> {
+    use super::import::ChannelKind;
+    ds.channels
+        .iter()
+        .filter(|c| c.kind != ChannelKind::Input)
+        .filter_map(|c| {
+            let mut d: Vec<f64> = (1..c.values.len())
+                .filter(|&i| !ds.segment_start[i])
+                .map(|i| (c.values[i] - c.values[i - 1]).abs())
+                .collect();
+            if d.len() < 10 {
+                return None;
+            }
+            d.sort_by(f64::total_cmp);
+            let mad = d[d.len() / 2];
+            Some(ChannelNoise {
+                channel: c.name.clone(),
+                noise: 1.4826 * mad / std::f64::consts::SQRT_2,
+                unit: match c.kind {
+                    ChannelKind::Tilt => "rad",
+                    ChannelKind::Pressure => "Pa",
+                    ChannelKind::Temperature => "°C",
+                    _ => "channel unit",
+                },
+                std: crate::numerics::stats::std(&c.values),
+                diffusion_per_s: f64::NAN,
+                slope_diffusion_per_s3: f64::NAN,
+                smoothing_s: 0.0,
+                resolved: false,
+                smoothed: false,
+                method: METHOD_MAD_OF_DIFFERENCES,
+            })
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
