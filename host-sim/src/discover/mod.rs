@@ -23,6 +23,7 @@ pub mod report;
 pub mod residual;
 pub mod select;
 pub mod shape;
+pub mod simulate;
 pub mod tidal;
 
 use effects::{Context, Effect};
@@ -55,6 +56,19 @@ pub struct DiscoverArgs {
     /// Bin to at most this many points before fitting.
     #[arg(long, default_value_t = 50_000)]
     pub max_points: usize,
+    /// Compare the record with its simulated twin: what the simulation gets wrong, the cause,
+    /// the extended simulator and the gain (docs/discovery.md, "Simulation in the loop").
+    #[arg(long)]
+    pub simulate: bool,
+    /// Base scenario of the twin (default: derived from the record).
+    #[arg(long, requires = "simulate")]
+    pub scenario: Option<PathBuf>,
+    /// Ensemble size of the twin (seeds 1..=N).
+    #[arg(long, default_value_t = simulate::DEFAULT_ENSEMBLE, requires = "simulate")]
+    pub ensemble: usize,
+    /// Write the extended scenario (TOML that `accomp simulate` runs) here.
+    #[arg(long, requires = "simulate")]
+    pub write_scenario: Option<PathBuf>,
 }
 
 /// Everything a discovery run found.
@@ -216,6 +230,9 @@ pub fn discover_path(
 
 /// `accomp discover`.
 pub fn run(args: &DiscoverArgs) -> anyhow::Result<()> {
+    if args.simulate {
+        return simulate::cli::run(args);
+    }
     let table = match &args.calibration {
         Some(p) => {
             let bytes = std::fs::read(p)?;

@@ -32,6 +32,9 @@ pub mod time;
 pub mod twin;
 pub mod writer;
 
+#[cfg(test)]
+mod recovery_tests;
+
 use std::io::Write;
 
 use accomp::units::{Volts, RAD_PER_ARCSEC};

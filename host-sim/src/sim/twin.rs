@@ -118,11 +118,12 @@ fn line_fit(t: &[f64], y: &[f64]) -> (f64, f64) {
     (my - b * mt, b)
 }
 
-/// Allan levels of a fitted noise model (its unit).
-fn levels_of(m: &NoiseModel) -> AllanParams {
+/// Allan levels of a fitted noise model (its unit) for points spaced `dt_s`.
+fn levels_of(m: &NoiseModel, dt_s: f64) -> AllanParams {
     AllanParams {
-        // h_w = σ²_white·Δ: ADEV(τ) = √(h_w/τ), so at 1 s √h_w.
-        white_adev_1s: m.h[0].max(0.0).sqrt(),
+        // White variance σ² per point of spacing Δ: h_w = σ²·Δ, ADEV(τ) = √(h_w/τ), so at
+        // 1 s √h_w.
+        white_adev_1s: (m.white_var.max(0.0) * dt_s).sqrt(),
         flicker_floor: m.flicker_floor(),
         // Allan variance of the walk q·τ/3 = K²·τ/3.
         random_walk_per_sqrt_s: m.rw_per_s.max(0.0).sqrt(),
@@ -327,7 +328,7 @@ impl Twin {
         // Noise levels.
         let inst_noise = match (noise, s.gravimeter()) {
             (Some(m), g) => {
-                let rec = levels_of(m);
+                let rec = levels_of(m, ds.dt_s);
                 prov.push(format!(
                     "noise from the fitted noise model: white {:.3e}/√Hz, flicker floor {:.3e}, \
                      random walk {:.3e}/√s ({})",
@@ -986,6 +987,31 @@ mod tests {
     }
 
     #[test]
+    fn members_draw_from_a_given_noise_model_and_the_scenario_gets_its_levels() {
+        let s = gravimeter_scenario();
+        let ds = dataset(&s, 4);
+        // White noise of 0.5 µGal per point (at the record's 300 s spacing).
+        let m = NoiseModel::white(0.25);
+        let twin = Twin::new(&ds, None, Some(&m)).unwrap();
+        let det = twin.run(None).unwrap();
+        let n: Vec<f64> = twin
+            .run(Some(3))
+            .unwrap()
+            .iter()
+            .zip(&det)
+            .map(|(a, b)| a - b)
+            .collect();
+        assert!((std(&n) / 0.5 - 1.0).abs() < 0.1, "{}", std(&n));
+        let g = twin.scenario().gravimeter().unwrap();
+        // √h_w with h_w = 0.25 µGal²·300 s.
+        assert!((g.noise.white_adev_1s / (0.25f64 * 300.0).sqrt() - 1.0).abs() < 1e-9);
+        assert!(twin
+            .provenance()
+            .iter()
+            .any(|l| l.contains("fitted noise model")));
+    }
+
+    #[test]
     fn scenario_toml_with_effects_and_a_gravimeter_round_trips() {
         let mut s = gravimeter_scenario();
         s.effects = vec![
@@ -1009,5 +1035,61 @@ mod tests {
             "{text}"
         );
         assert_eq!(Scenario::from_toml(&text).unwrap(), s);
+    }
+}
+
+#[cfg(test)]
+mod from_discovery_tests {
+    use super::*;
+    use crate::discover::import::{dataset_from_log, DatasetOptions};
+    use crate::log::Log;
+    use crate::sim::{simulate, Options};
+
+    #[test]
+    fn a_discovered_step_becomes_a_scenario_effect_that_simulates() {
+        // A 3-day paper-1g log at 5 min with its noise and a 15 µg step at 1.4 d.
+        let mut s = Scenario::preset("paper-1g").unwrap();
+        s.run.duration_s = 3.0 * 86_400.0;
+        s.run.interval_s = 300.0;
+        let mut hidden = s.clone();
+        hidden.effects = vec![ScenarioEffect::Step {
+            time_s: 1.4 * 86_400.0 + 150.0,
+            size: 2e-5,
+        }];
+        let bytes = simulate(&hidden, 5, &Options::default(), Vec::new(), &mut |_, _| {})
+            .unwrap()
+            .1;
+        let ds = dataset_from_log(
+            &Log::read(&bytes[..]).unwrap(),
+            &DatasetOptions {
+                output: None,
+                max_points: 1_000_000,
+                unit_per_g_from_calibration: None,
+            },
+        )
+        .unwrap();
+        let d = crate::discover::discover(ds, None, &crate::discover::select::Config::default())
+            .unwrap();
+        let (effects, refused) = scenario_effects_from_discovery(&d);
+        let step = effects
+            .iter()
+            .find_map(|e| match e {
+                ScenarioEffect::Step { time_s, size } => Some((*time_s, *size)),
+                _ => None,
+            })
+            .unwrap_or_else(|| panic!("no step among {effects:?} (refused {refused:?})"));
+        assert!(
+            (step.0 - (1.4 * 86_400.0 + 150.0)).abs() <= 300.0,
+            "{step:?}"
+        );
+        assert!((step.1 / 2e-5 - 1.0).abs() < 0.1, "{step:?}");
+        // Written into the scenario, every converted effect validates and runs.
+        let mut ext = s.clone();
+        ext.effects = effects;
+        let back = Scenario::from_toml(&ext.to_toml()).unwrap();
+        assert_eq!(back, ext);
+        let mut short = back;
+        short.run.duration_s = 3600.0;
+        simulate(&short, 1, &Options::default(), Vec::new(), &mut |_, _| {}).unwrap();
     }
 }

@@ -1,0 +1,317 @@
+//! The `--simulate` part of the text, the JSON `"simulation"` object and the report's figures
+//! (measured vs envelope for ADEV and PSD, before and after, mismatched ranges shaded).
+
+use super::mismatch::{sentence, tau_words, Comparison, Quantity};
+use super::{Scores, Simulation};
+use crate::plot::draw::{Figure, Marker, XYCurve, XYFigure};
+use plotters::style::RGBColor;
+use serde_json::{json, Map, Value};
+use std::fmt::Write as _;
+
+fn finite(x: f64) -> Option<f64> {
+    x.is_finite().then_some(x)
+}
+
+fn side_json(c: &Comparison, s: &Scores) -> Value {
+    json!({
+        "residual_std_out_of_sample": finite(s.residual_std_out_of_sample),
+        "residual_std_fixed_amplitudes": finite(s.residual_std_fixed_amplitudes),
+        "adev_outside_fraction": finite(c.adev_outside_fraction),
+        "psd_outside_fraction": finite(c.psd_outside_fraction),
+        "mismatches": c.mismatches.iter().map(|m| {
+            let mut o = serde_json::to_value(m).unwrap_or(Value::Null);
+            if let Value::Object(map) = &mut o {
+                map.insert("sentence".into(), json!(sentence(m)));
+                map.insert("factor".into(), json!(finite(m.factor)));
+            }
+            o
+        }).collect::<Vec<_>>(),
+        "adev": {
+            "tau_s": c.adev.x,
+            "measured": c.measured.adev.iter().map(|p| finite(p.1)).collect::<Vec<_>>(),
+            "envelope_5": c.adev.low.iter().map(|v| finite(*v)).collect::<Vec<_>>(),
+            "envelope_50": c.adev.median.iter().map(|v| finite(*v)).collect::<Vec<_>>(),
+            "envelope_95": c.adev.high.iter().map(|v| finite(*v)).collect::<Vec<_>>(),
+        },
+        "psd": {
+            "frequency_hz": c.psd.x,
+            "measured": c.measured.psd.iter().map(|v| finite(*v)).collect::<Vec<_>>(),
+            "envelope_5": c.psd.low.iter().map(|v| finite(*v)).collect::<Vec<_>>(),
+            "envelope_50": c.psd.median.iter().map(|v| finite(*v)).collect::<Vec<_>>(),
+            "envelope_95": c.psd.high.iter().map(|v| finite(*v)).collect::<Vec<_>>(),
+        },
+    })
+}
+
+/// The JSON `"simulation"` object.
+pub fn json(s: &Simulation) -> Value {
+    let mut ex = Map::new();
+    for (name, idx) in &s.explained_by {
+        ex.insert(name.clone(), json!(idx));
+    }
+    let rel = |b: f64, a: f64| finite(1.0 - a / b);
+    json!({
+        "scenario": s.scenario,
+        "twin": if s.simulator { "simulator" } else { "stand-in" },
+        "provenance": s.provenance,
+        "ensemble": s.ensemble,
+        "residual": "measured − twin prediction, offset and linear drift removed",
+        "before": side_json(&s.before, &s.before_scores),
+        "after": side_json(&s.after, &s.after_scores),
+        "gain": {
+            "residual_std_out_of_sample": rel(s.before_scores.residual_std_out_of_sample, s.after_scores.residual_std_out_of_sample),
+            "adev_outside_fraction": {"before": finite(s.before.adev_outside_fraction), "after": finite(s.after.adev_outside_fraction)},
+            "psd_outside_fraction": {"before": finite(s.before.psd_outside_fraction), "after": finite(s.after.psd_outside_fraction)},
+        },
+        "explained_by": Value::Object(ex),
+        "refused": s.refused.iter().map(|(n, w)| json!({"effect": n, "why": w})).collect::<Vec<_>>(),
+        "extended_scenario": s.extended_path.as_ref().map(|p| p.display().to_string()),
+        "coherence_channels": s.channels,
+        "warnings": s.warnings,
+    })
+}
+
+/// The text printed first.
+pub fn text(s: &Simulation, unit: &str) -> String {
+    let mut o = String::new();
+    for w in &s.warnings {
+        let _ = writeln!(o, "WARNING: {w}");
+    }
+    let _ = writeln!(
+        o,
+        "Simulation in the loop: the record against its simulated twin ({} members, base \
+         scenario: {})",
+        s.ensemble, s.scenario
+    );
+    for p in &s.provenance {
+        let _ = writeln!(o, "  twin: {p}");
+    }
+    let _ = writeln!(
+        o,
+        "\nWhat the simulation gets wrong (measured − twin, against the members' 5–95 % envelope):"
+    );
+    if s.before.mismatches.is_empty() {
+        let _ = writeln!(
+            o,
+            "  nothing: the measured residual stays inside the envelopes"
+        );
+    }
+    for (i, m) in s.before.mismatches.iter().enumerate() {
+        let _ = writeln!(o, "  [{i}] {}", sentence(m));
+    }
+    let _ = writeln!(
+        o,
+        "\nCause (catalogue search on the measured − twin residual):"
+    );
+    if s.explained_by.is_empty() {
+        let _ = writeln!(o, "  no effect accepted");
+    }
+    let mut explained = vec![false; s.before.mismatches.len()];
+    for (name, idx) in &s.explained_by {
+        for &i in idx {
+            explained[i] = true;
+        }
+        let what = if idx.is_empty() {
+            "explains none of the mismatches on its own".to_owned()
+        } else {
+            format!(
+                "explains {}",
+                idx.iter()
+                    .map(|i| format!("[{i}]"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )
+        };
+        let _ = writeln!(o, "  {name}: {what}");
+    }
+    let left: Vec<String> = explained
+        .iter()
+        .enumerate()
+        .filter(|(_, e)| !**e)
+        .map(|(i, _)| format!("[{i}]"))
+        .collect();
+    if !left.is_empty() && !s.before.mismatches.is_empty() {
+        let _ = writeln!(
+            o,
+            "  not explained by any single effect: {}",
+            left.join(", ")
+        );
+    }
+    let pct = |b: f64, a: f64| 100.0 * (1.0 - a / b);
+    let _ = writeln!(
+        o,
+        "\nGain (base twin → twin extended by the accepted effects):"
+    );
+    let _ = writeln!(
+        o,
+        "  out-of-sample residual std (forward chaining): {:.4e} → {:.4e} {unit} ({:+.1} %)",
+        s.before_scores.residual_std_out_of_sample,
+        s.after_scores.residual_std_out_of_sample,
+        -pct(
+            s.before_scores.residual_std_out_of_sample,
+            s.after_scores.residual_std_out_of_sample
+        )
+    );
+    let _ = writeln!(
+        o,
+        "  ADEV points outside the envelope: {:.0} % → {:.0} %; PSD bands outside: {:.0} % → {:.0} %",
+        100.0 * s.before.adev_outside_fraction,
+        100.0 * s.after.adev_outside_fraction,
+        100.0 * s.before.psd_outside_fraction,
+        100.0 * s.after.psd_outside_fraction
+    );
+    if s.after.mismatches.is_empty() {
+        let _ = writeln!(
+            o,
+            "  after the extension the residual stays inside the envelopes"
+        );
+    } else {
+        let _ = writeln!(o, "  still wrong after the extension:");
+        for m in &s.after.mismatches {
+            let _ = writeln!(o, "    {}", sentence(m));
+        }
+    }
+    match (&s.extended_path, &s.extended_toml) {
+        (Some(p), _) => {
+            let _ = writeln!(o, "  extended scenario written to {}", p.display());
+        }
+        (None, Some(_)) => {
+            let _ = writeln!(
+                o,
+                "  extended scenario: pass --write-scenario FILE to write it"
+            );
+        }
+        (None, None) => {}
+    }
+    o
+}
+
+const MEASURED: RGBColor = RGBColor(200, 30, 30);
+const ENVELOPE: RGBColor = RGBColor(40, 90, 180);
+const MEDIAN: RGBColor = RGBColor(120, 150, 210);
+
+fn figure(c: &Comparison, q: Quantity, title: String, unit: &str) -> Figure {
+    let (x, m, e, x_desc, y_desc, scale): (Vec<f64>, Vec<f64>, _, String, String, f64) = match q {
+        Quantity::Adev => (
+            c.adev.x.clone(),
+            c.measured.adev.iter().map(|p| p.1).collect(),
+            &c.adev,
+            "τ (s)".into(),
+            format!("σ_y(τ) ({unit})"),
+            1.0,
+        ),
+        _ => (
+            c.psd.x.iter().map(|f| f * 86_400.0).collect(),
+            c.measured.psd.clone(),
+            &c.psd,
+            "frequency (cycles/day)".into(),
+            format!("PSD ({unit}²/Hz)"),
+            86_400.0,
+        ),
+    };
+    let pts = |y: &[f64]| x.iter().copied().zip(y.iter().copied()).collect::<Vec<_>>();
+    let spans = c
+        .mismatches
+        .iter()
+        .filter(|mm| mm.quantity == q)
+        .map(|mm| {
+            (
+                mm.from,
+                mm.to,
+                format!("{} ×{:.1}", mm.direction, mm.factor),
+            )
+        })
+        .collect::<Vec<_>>();
+    let x_markers = spans
+        .iter()
+        .flat_map(|(a, b, l)| {
+            [
+                Marker {
+                    at: *a,
+                    label: l.clone(),
+                },
+                Marker {
+                    at: *b,
+                    label: String::new(),
+                },
+            ]
+        })
+        .collect();
+    let _ = scale;
+    Figure::XY(XYFigure {
+        title,
+        x_desc,
+        y_desc,
+        x_log: true,
+        y_log: true,
+        y_floor: None,
+        curves: vec![
+            XYCurve {
+                label: "simulation 5 %".into(),
+                color: ENVELOPE,
+                points: pts(&e.low),
+            },
+            XYCurve {
+                label: "simulation 95 %".into(),
+                color: ENVELOPE,
+                points: pts(&e.high),
+            },
+            XYCurve {
+                label: "simulation median".into(),
+                color: MEDIAN,
+                points: pts(&e.median),
+            },
+            XYCurve {
+                label: "measured".into(),
+                color: MEASURED,
+                points: pts(&m),
+            },
+        ],
+        x_markers,
+        y_markers: Vec::new(),
+    })
+}
+
+/// The report's simulation figures: (file stem, caption, figure).
+pub fn figures(s: &Simulation, unit: &str) -> Vec<(&'static str, String, Figure)> {
+    let mut v = Vec::new();
+    for (stem, q, c, when) in [
+        (
+            "simulate_adev_before",
+            Quantity::Adev,
+            &s.before,
+            "base twin",
+        ),
+        (
+            "simulate_adev_after",
+            Quantity::Adev,
+            &s.after,
+            "extended twin",
+        ),
+        ("simulate_psd_before", Quantity::Psd, &s.before, "base twin"),
+        (
+            "simulate_psd_after",
+            Quantity::Psd,
+            &s.after,
+            "extended twin",
+        ),
+    ] {
+        let what = if q == Quantity::Adev {
+            "Allan deviation"
+        } else {
+            "Welch PSD"
+        };
+        let caption = format!(
+            "{what} of measured − {when} against the ensemble's 5–95 % envelope ({} members); \
+             marked: the mismatched ranges",
+            s.ensemble
+        );
+        v.push((
+            stem,
+            caption.clone(),
+            figure(c, q, format!("{what}: measured vs {when}"), unit),
+        ));
+    }
+    let _ = tau_words;
+    v
+}
