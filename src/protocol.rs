@@ -351,11 +351,27 @@ pub enum ErrorCode {
     /// The calibration store could not be opened at boot (slot layout does not fit the flash),
     /// so nothing can be committed. Detail: 0.
     StorageUnavailable = 62,
+    /// STM32 flash controller PGSERR (programming sequence error, RM0090 §3.8.4). Detail: 0.
+    /// Like every flash error: the active table is unchanged, the flag is cleared, the next
+    /// operation runs normally.
+    FlashProgramSequence = 63,
+    /// STM32 flash controller PGPERR (programming parallelism error). Detail: 0.
+    FlashProgramParallelism = 64,
+    /// STM32 flash controller PGAERR (programming alignment error). Detail: 0.
+    FlashProgramAlignment = 65,
+    /// STM32 flash controller WRPERR: the calibration sector is write-protected (option bytes
+    /// nWRP). Detail: 0.
+    FlashWriteProtected = 66,
+    /// STM32 flash controller OPERR (operation error). Detail: 0.
+    FlashOperation = 67,
+    /// FLASH_CR stayed locked after the unlock keys (a wrong key sequence locks it until
+    /// reset, RM0090 §3.5.1). Detail: 0.
+    FlashLocked = 68,
 }
 
 impl ErrorCode {
     /// Every code, for documentation and exhaustive tests.
-    pub const ALL: [ErrorCode; 37] = [
+    pub const ALL: [ErrorCode; 43] = [
         ErrorCode::Malformed,
         ErrorCode::FrameCrc,
         ErrorCode::FrameTooLong,
@@ -393,6 +409,12 @@ impl ErrorCode {
         ErrorCode::FlashFailed,
         ErrorCode::FlashVerify,
         ErrorCode::StorageUnavailable,
+        ErrorCode::FlashProgramSequence,
+        ErrorCode::FlashProgramParallelism,
+        ErrorCode::FlashProgramAlignment,
+        ErrorCode::FlashWriteProtected,
+        ErrorCode::FlashOperation,
+        ErrorCode::FlashLocked,
     ];
 
     /// The code for a number from the wire.

@@ -15,6 +15,7 @@
 //! (load of another table, activate of the previous one, rollback) makes the table active
 //! before it the rollback table; rollback and activate swap back; all of it survives a reboot.
 
+use crate::drivers::stm32f4_flash::{FlashError, FlashRegisters, Stm32f4Flash};
 use crate::pipeline::{self, RawSample};
 use crate::prepared::PreparedCalibration;
 use crate::protocol::{
@@ -79,15 +80,45 @@ pub struct Service<F> {
     erase_pending: bool,
 }
 
-/// The protocol reply for a storage failure. Generic over the driver's error, which the wire
-/// carries only as its `NorFlashErrorKind` (the same three numbers for every board).
-pub fn storage_reply<E: NorFlashError>(e: StorageError<E>) -> ErrorReply {
-    match e {
-        StorageError::Flash(f) => ErrorCode::FlashFailed.reply(match f.kind() {
+/// A calibration flash whose driver errors have protocol codes. The default maps a driver
+/// error to FlashFailed with its `NorFlashErrorKind` (0 not aligned, 1 out of bounds, 2 other);
+/// the STM32 flash names each FLASH_SR error flag (63–68).
+pub trait CalibrationFlash: NorFlash {
+    /// The reply for a driver error.
+    fn error_reply(e: &Self::Error) -> ErrorReply {
+        ErrorCode::FlashFailed.reply(match e.kind() {
             NorFlashErrorKind::NotAligned => 0,
             NorFlashErrorKind::OutOfBounds => 1,
             _ => 2,
-        }),
+        })
+    }
+}
+
+impl<const N: usize, const ERASE: usize, const WRITE: usize> CalibrationFlash
+    for crate::storage::RamFlash<N, ERASE, WRITE>
+{
+}
+
+impl<R: FlashRegisters> CalibrationFlash for Stm32f4Flash<R> {
+    fn error_reply(e: &FlashError) -> ErrorReply {
+        let code = match e {
+            FlashError::NotAligned => return ErrorCode::FlashFailed.reply(0),
+            FlashError::OutOfBounds => return ErrorCode::FlashFailed.reply(1),
+            FlashError::ProgramSequence => ErrorCode::FlashProgramSequence,
+            FlashError::ProgramParallelism => ErrorCode::FlashProgramParallelism,
+            FlashError::ProgramAlignment => ErrorCode::FlashProgramAlignment,
+            FlashError::WriteProtected => ErrorCode::FlashWriteProtected,
+            FlashError::Operation => ErrorCode::FlashOperation,
+            FlashError::Locked => ErrorCode::FlashLocked,
+        };
+        code.reply(0)
+    }
+}
+
+/// The protocol reply for a storage failure of flash `F`.
+pub fn storage_reply<F: CalibrationFlash>(e: StorageError<F::Error>) -> ErrorReply {
+    match e {
+        StorageError::Flash(f) => F::error_reply(&f),
         StorageError::Table(t) => t.into(),
         StorageError::Verify(slot) => ErrorCode::FlashVerify.reply(slot.index() as u32),
         StorageError::NoValidSlot | StorageError::NoPreviousSlot => {
@@ -97,7 +128,7 @@ pub fn storage_reply<E: NorFlashError>(e: StorageError<E>) -> ErrorReply {
     }
 }
 
-impl<F: NorFlash> Service<F> {
+impl<F: CalibrationFlash> Service<F> {
     /// Opens the calibration store on `flash` and restores the newest valid table (active) and
     /// the newest valid slot with another table (previous, for rollback). Never fails: a device
     /// without a usable store still answers and streams (flagged NO_CALIBRATION).
@@ -401,10 +432,10 @@ impl<F: NorFlash> Service<F> {
         let Some(store) = self.store.as_mut() else {
             return Ok(false);
         };
-        if store.spare_erased().map_err(storage_reply)? {
+        if store.spare_erased().map_err(storage_reply::<F>)? {
             return Ok(false);
         }
-        store.prepare_commit().map_err(storage_reply)?;
+        store.prepare_commit().map_err(storage_reply::<F>)?;
         Ok(true)
     }
 
@@ -444,7 +475,7 @@ impl<F: NorFlash> Service<F> {
             .as_mut()
             .ok_or(ErrorCode::StorageUnavailable.reply(0))?;
         // Only a table the store has committed (programmed, read back, marked) becomes active.
-        let slot = store.commit(bytes).map_err(storage_reply)?;
+        let slot = store.commit(bytes).map_err(storage_reply::<F>)?;
         self.erase_pending = true;
         self.previous = self.active.replace(table);
         self.prepare_active();
@@ -465,7 +496,7 @@ impl<F: NorFlash> Service<F> {
             .store
             .as_mut()
             .ok_or(ErrorCode::StorageUnavailable.reply(0))?;
-        store.commit(&target.encode()).map_err(storage_reply)?;
+        store.commit(&target.encode()).map_err(storage_reply::<F>)?;
         self.erase_pending = true;
         core::mem::swap(&mut self.active, &mut self.previous);
         self.prepare_active();
@@ -497,6 +528,8 @@ impl<F: NorFlash> Service<F> {
 }
 
 #[cfg(test)]
+mod flash_tests;
+#[cfg(test)]
 mod fuzz_tests;
 #[cfg(test)]
 mod model_tests;
@@ -520,12 +553,12 @@ mod tests {
     }
 
     /// Power off and on: a new service on the same flash cells.
-    fn reboot<F: NorFlash>(s: Service<F>) -> Service<F> {
+    fn reboot<F: CalibrationFlash>(s: Service<F>) -> Service<F> {
         let board = s.board;
         Service::new(board, s.into_flash().unwrap(), LAYOUT)
     }
 
-    fn req<F: NorFlash>(s: &mut Service<F>, request: Request) -> DeviceMessage {
+    fn req<F: CalibrationFlash>(s: &mut Service<F>, request: Request) -> DeviceMessage {
         s.handle(HostFrame { id: 9, request }, &|| 1_000)
     }
 
@@ -551,7 +584,7 @@ mod tests {
         }
     }
 
-    fn upload<F: NorFlash>(s: &mut Service<F>, bytes: &[u8]) -> DeviceMessage {
+    fn upload<F: CalibrationFlash>(s: &mut Service<F>, bytes: &[u8]) -> DeviceMessage {
         let begin = req(s, begin(7, bytes));
         if !matches!(begin, DeviceMessage::Response { .. }) {
             return begin;
@@ -576,7 +609,7 @@ mod tests {
         }
     }
 
-    fn active_id<F: NorFlash>(s: &mut Service<F>) -> Option<u32> {
+    fn active_id<F: CalibrationFlash>(s: &mut Service<F>) -> Option<u32> {
         match req(s, Request::Info) {
             DeviceMessage::Response {
                 body: Response::Info(i),
@@ -911,6 +944,8 @@ mod tests {
         fail_writes: bool,
     }
 
+    impl CalibrationFlash for Probe {}
+
     impl embedded_storage::nor_flash::ErrorType for Probe {
         type Error = crate::storage::RamFlashError;
     }
@@ -979,7 +1014,7 @@ mod tests {
         raw_from_physical(&paper_table(), Volts(1.3), Celsius(50.0), TiltArcsec(0.0)).unwrap()
     }
 
-    fn info<F: NorFlash>(s: &mut Service<F>) -> DeviceInfo {
+    fn info<F: CalibrationFlash>(s: &mut Service<F>) -> DeviceInfo {
         match req(s, Request::Info) {
             DeviceMessage::Response {
                 body: Response::Info(i),

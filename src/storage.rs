@@ -318,6 +318,12 @@ impl<F: NorFlash> CalibrationStore<F> {
         self.flash
     }
 
+    /// The flash, for tests that inject faults into it while the store holds it.
+    #[cfg(test)]
+    pub(crate) fn flash_mut(&mut self) -> &mut F {
+        &mut self.flash
+    }
+
     /// Scans both slots and makes the newest valid one active: highest sequence number in
     /// serial-number arithmetic among the slots with magic, length, commit marker, slot CRC and
     /// a table that decodes. Returns `None` when neither is valid.

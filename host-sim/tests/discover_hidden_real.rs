@@ -320,6 +320,7 @@ fn effects_injected_into_the_real_gravimeter_residual_are_found_by_snr() {
             );
             if !ok {
                 eprintln!("    last round (ΔBIC): {:?}", d.selection.last_round);
+                eprintln!("    refused: {:?}", d.selection.refused);
             }
             hits += usize::from(ok);
         }

@@ -212,7 +212,10 @@ fn describe(d: &Discovery) -> String {
         .take(4)
         .map(|(n, b)| format!("{n} {b:.1}"))
         .collect();
-    format!("accepted {acc:?}; shape checks {sc:?}; last round ΔBIC {last:?}")
+    format!(
+        "accepted {acc:?}; shape checks {sc:?}; last round ΔBIC {last:?}; refused {:?}",
+        d.selection.refused
+    )
 }
 
 /// Draws per SNR band (the six shapes in turn).

@@ -204,7 +204,7 @@ pub fn init(mut dp: pac::Peripherals) -> Parts {
         rtd,
         drdy,
         watchdog: Watchdog(watchdog),
-        flash: super::Flash::new(dp.FLASH),
+        flash: super::internal_flash::new(dp.FLASH),
         boot: BootReport {
             reset_cause,
             clock_fallback: !crystal,

@@ -1,98 +1,64 @@
-//! The STM32F405's internal flash as the calibration store's NOR flash (sectors 9, 10, 11).
-//!
-//! The HAL's `UnlockedFlash` implements `NorFlash` but borrows `LockedFlash` for as long as it
-//! lives, and the store must own its flash for the whole run. [`InternalFlash`] owns the
-//! `LockedFlash` and unlocks it only for the duration of one erase or program, so a stray write
-//! anywhere else in the firmware still hits a locked controller.
+//! The STM32F405's internal flash as the calibration store's NOR flash (sectors 9, 10, 11):
+//! the core's register-level driver ([`accomp::drivers::stm32f4_flash`], RM0090 §3.5/§3.8) on
+//! the PAC's FLASH registers. The driver unlocks FLASH_CR only for one erase or program, clears
+//! the sticky FLASH_SR error flags before each and names the ones an operation raises (the
+//! HAL's `UnlockedFlash` never cleared them: after one error every later write failed).
 
-use embedded_storage::nor_flash::{
-    check_erase, check_read, check_write, ErrorType, NorFlash, NorFlashError, NorFlashErrorKind,
-    ReadNorFlash,
-};
-use stm32f4xx_hal::flash::{self, FlashExt, LockedFlash};
+use accomp::drivers::stm32f4_flash::{FlashRegisters, Stm32f4Flash, FLASH_BYTES};
+use accomp::storage::SlotLayout;
 use stm32f4xx_hal::pac;
 
-use accomp::storage::SlotLayout;
-
 /// The calibration flash of this board.
-pub type Flash = InternalFlash;
+pub type Flash = Stm32f4Flash<PacFlash>;
 
 /// Sectors 9 (0x080A_0000), 10 and 11; memory.x keeps the program below them.
 pub const SLOT_LAYOUT: SlotLayout = SlotLayout::STM32F405_SECTORS_9_11;
 
-/// Why a flash operation failed.
-#[derive(Debug, Clone, Copy)]
-pub enum InternalFlashError {
-    /// Refused before reaching the controller (alignment, bounds).
-    Refused(NorFlashErrorKind),
-    /// The flash controller reported an error (sequence, parallelism, protection, …).
-    Controller(flash::Error),
+/// Base of the main flash memory on the AHB (RM0090 §3.3, Table 5).
+const FLASH_BASE: usize = 0x0800_0000;
+
+/// The FLASH peripheral's registers and the flash memory bus.
+pub struct PacFlash {
+    flash: pac::FLASH,
 }
 
-impl NorFlashError for InternalFlashError {
-    fn kind(&self) -> NorFlashErrorKind {
-        match self {
-            InternalFlashError::Refused(k) => *k,
-            InternalFlashError::Controller(e) => e.kind(),
-        }
+/// Takes the flash controller (locked until an operation).
+pub fn new(flash: pac::FLASH) -> Flash {
+    Stm32f4Flash::new(PacFlash { flash })
+}
+
+impl FlashRegisters for PacFlash {
+    fn sr(&mut self) -> u32 {
+        self.flash.sr().read().bits()
     }
-}
-
-/// Internal flash, locked except during one erase or program.
-pub struct InternalFlash {
-    flash: LockedFlash,
-}
-
-impl InternalFlash {
-    /// Takes the flash controller.
-    pub fn new(flash: pac::FLASH) -> Self {
-        InternalFlash {
-            flash: LockedFlash::new(flash),
-        }
+    fn clear_sr(&mut self, bits: u32) {
+        // rc_w1 flags: writing 1 clears, 0 leaves; BSY is read-only.
+        self.flash.sr().write(|w| unsafe { w.bits(bits) });
     }
-}
-
-impl ErrorType for InternalFlash {
-    type Error = InternalFlashError;
-}
-
-impl ReadNorFlash for InternalFlash {
-    const READ_SIZE: usize = 1;
-
-    fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
-        // The HAL slices the memory map without a bounds check: check here, never panic.
-        check_read(self, offset, bytes.len()).map_err(InternalFlashError::Refused)?;
+    fn cr(&mut self) -> u32 {
+        self.flash.cr().read().bits()
+    }
+    fn set_cr(&mut self, value: u32) {
+        self.flash.cr().write(|w| unsafe { w.bits(value) });
+    }
+    fn key(&mut self, key: u32) {
+        self.flash.keyr().write(|w| unsafe { w.bits(key) });
+    }
+    fn write_byte(&mut self, offset: u32, byte: u8) {
+        // The driver checked `offset` against FLASH_BYTES (embedded-storage check_write).
+        let at = FLASH_BASE + offset as usize;
+        // SAFETY: inside the 1 MiB main memory; with PG set the controller turns this byte
+        // access into a program operation (RM0090 §3.5.4), it is never a plain RAM store.
+        unsafe { core::ptr::write_volatile(at as *mut u8, byte) };
+    }
+    fn read(&mut self, offset: u32, bytes: &mut [u8]) {
         let start = offset as usize;
-        let src = self
-            .flash
-            .read()
-            .get(start..start + bytes.len())
-            .ok_or(InternalFlashError::Refused(NorFlashErrorKind::OutOfBounds))?;
-        bytes.copy_from_slice(src);
-        Ok(())
-    }
-
-    fn capacity(&self) -> usize {
-        self.flash.len()
-    }
-}
-
-impl NorFlash for InternalFlash {
-    /// The HAL programs at x8 parallelism (PSIZE = 8 bits), one byte per program operation.
-    const WRITE_SIZE: usize = 1;
-    /// The largest sector; sectors 10 and 11 are exactly this size.
-    const ERASE_SIZE: usize = 128 * 1024;
-
-    fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
-        check_erase(self, from, to).map_err(InternalFlashError::Refused)?;
-        // Locked again when `unlocked` drops at the end of this statement.
-        NorFlash::erase(&mut self.flash.unlocked(), from, to)
-            .map_err(InternalFlashError::Controller)
-    }
-
-    fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
-        check_write(self, offset, bytes.len()).map_err(InternalFlashError::Refused)?;
-        NorFlash::write(&mut self.flash.unlocked(), offset, bytes)
-            .map_err(InternalFlashError::Controller)
+        if start + bytes.len() > FLASH_BYTES {
+            return; // unreachable: the driver checks bounds first
+        }
+        for (k, b) in bytes.iter_mut().enumerate() {
+            // SAFETY: inside the main memory (checked above); flash reads have no side effects.
+            *b = unsafe { core::ptr::read_volatile((FLASH_BASE + start + k) as *const u8) };
+        }
     }
 }

@@ -13,7 +13,7 @@ mod frontend;
 #[cfg(feature = "board-frontend")]
 pub use frontend::*;
 #[cfg(feature = "board-frontend")]
-mod internal_flash;
+pub(crate) mod internal_flash;
 #[cfg(feature = "board-frontend")]
 pub use internal_flash::{Flash, SLOT_LAYOUT};
 

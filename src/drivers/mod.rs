@@ -1,7 +1,9 @@
-//! SPI drivers for the two converters of the board, generic over embedded-hal 1.0.
+//! Drivers of the board's chips: the two converters over embedded-hal 1.0 SPI, and the MCU's
+//! own flash controller behind embedded-storage.
 //!
 //! - [`ads1262`]: TI ADS1262 32-bit ΔΣ ADC (accelerometer torquer-current sense and tiltmeter).
 //! - [`ad7124`]: ADI AD7124-4 24-bit ΔΣ ADC (4-wire Pt100, ratiometric, as in ADI CN-0381).
+//! - [`stm32f4_flash`]: the STM32F405 flash controller (calibration slots), register-level.
 //!
 //! Both take an [`embedded_hal::spi::SpiDevice`] (so the bus can be shared and chip select is
 //! the bus manager's business), an [`embedded_hal::digital::InputPin`] for data-ready and an
@@ -12,6 +14,7 @@
 
 pub mod ad7124;
 pub mod ads1262;
+pub mod stm32f4_flash;
 
 /// Chip-boundary test doubles shared by both drivers' tests.
 #[cfg(test)]

@@ -213,6 +213,37 @@ fn build_firmware() -> Result<PathBuf> {
     Ok(firmware_elf())
 }
 
+/// Mangled-name prefix of portable-atomic's lock-based fallback (its global seqlock spin locks).
+/// Those locks are not interrupt-safe: an interrupt that preempts their holder and takes the same
+/// lock spins forever. The firmware froze so in QEMU (SysTick's 64-bit tick counter, about one
+/// run in 50) until the 64-bit atomics were switched to masking interrupts (Cargo.toml,
+/// `portable-atomic` features). This keeps any dependency from bringing them back.
+const INTERRUPT_UNSAFE_ATOMICS: &[u8] = b"portable_atomic3imp8fallback";
+
+/// Whether an ELF image holds a symbol of the lock-based atomic fallback.
+fn has_interrupt_unsafe_atomics(image: &[u8]) -> bool {
+    image
+        .windows(INTERRUPT_UNSAFE_ATOMICS.len())
+        .any(|w| w == INTERRUPT_UNSAFE_ATOMICS)
+}
+
+/// Refuses a firmware ELF that uses lock-based atomics (see [`INTERRUPT_UNSAFE_ATOMICS`]).
+fn check_firmware_atomics(elf: &Path) -> Result<()> {
+    let image = std::fs::read(elf).map_err(|e| format!("reading {}: {e}", elf.display()))?;
+    if has_interrupt_unsafe_atomics(&image) {
+        return Err(format!(
+            "{} links portable-atomic's lock-based fallback (a spin lock an interrupt can \
+             deadlock on); enable its `unsafe-assume-single-core` feature for the firmware",
+            elf.display()
+        ));
+    }
+    eprintln!(
+        "==> {}: no lock-based atomics (interrupt-safe)",
+        elf.display()
+    );
+    Ok(())
+}
+
 fn is_root() -> bool {
     Command::new("id")
         .arg("-u")
@@ -295,8 +326,10 @@ fn test() -> Result<()> {
     run("clippy (firmware)", clippy_fw)?;
 
     // Frontend first: both builds write the same ELF path, and the QEMU one must be left there.
-    build_frontend_firmware()?;
+    let frontend = build_frontend_firmware()?;
+    check_firmware_atomics(&frontend)?;
     let elf = build_firmware()?;
+    check_firmware_atomics(&elf)?;
 
     let mut tests = cargo();
     tests
@@ -384,7 +417,18 @@ fn demo(args: &[String]) -> Result<()> {
 
 #[cfg(test)]
 mod tests {
-    use super::component_installed;
+    use super::{component_installed, has_interrupt_unsafe_atomics};
+
+    #[test]
+    fn a_firmware_image_with_the_lock_based_atomic_fallback_is_refused() {
+        // The symbol as rustc's legacy mangling writes it into the ELF's string table.
+        let mut image = vec![0u8; 64];
+        image.extend_from_slice(b"_ZN15portable_atomic3imp8fallback4lock5LOCKS17h0123E");
+        assert!(has_interrupt_unsafe_atomics(&image));
+        // The interrupt-masking implementation lives in `imp::interrupt`: allowed.
+        let ok = b"_ZN15portable_atomic3imp9interrupt8AtomicU649fetch_add17h0E";
+        assert!(!has_interrupt_unsafe_atomics(ok));
+    }
 
     #[test]
     fn a_component_is_found_by_its_name_before_the_host_triple() {

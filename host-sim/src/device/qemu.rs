@@ -330,16 +330,19 @@ impl Qemu {
         if raw.is_empty() {
             return "(empty)".into();
         }
-        let decoded = Command::new("defmt-print")
-            .arg("-e")
-            .arg(&self.elf)
-            .arg("file")
-            .arg(&path)
-            .output();
+        // defmt-print 1.2 reads the frames from stdin (its subcommands are stdin, tcp, serial).
+        let decoded = File::open(&path).and_then(|frames| {
+            Command::new("defmt-print")
+                .arg("-e")
+                .arg(&self.elf)
+                .arg("stdin")
+                .stdin(frames)
+                .output()
+        });
         match decoded {
             Ok(o) if o.status.success() => String::from_utf8_lossy(&o.stdout).into_owned(),
             _ => format!(
-                "{} bytes of defmt frames; decode with `defmt-print -e {} file {}`",
+                "{} bytes of defmt frames; decode with `defmt-print -e {} < {}`",
                 raw.len(),
                 self.elf.display(),
                 path.display()

@@ -285,15 +285,8 @@ pub fn raw_residual(cols: &[Vec<f64>], beta: &[f64], y: &[f64]) -> Vec<f64> {
     r
 }
 
-/// Sample standard deviation.
-pub fn std(v: &[f64]) -> f64 {
-    let n = v.len() as f64;
-    if n < 2.0 {
-        return 0.0;
-    }
-    let m = v.iter().sum::<f64>() / n;
-    (v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / (n - 1.0)).sqrt()
-}
+/// Sample standard deviation (kept at this path for the discovery's callers; the toolkit's).
+pub use crate::numerics::stats::std;
 
 /// The baseline: a fixed prediction subtracted from the output plus free columns.
 #[derive(Debug, Clone)]

@@ -7,7 +7,7 @@
 //! (filters, differences and whitening restart there).
 
 use crate::log::{Log, LogError};
-use crate::sim::time::{civil_from_days, days_from_civil};
+use crate::sim::time::{days_from_civil, utc_date};
 use accomp::tide::{UtcTime, STANDARD_GRAVITY_M_S2};
 use std::path::Path;
 
@@ -81,7 +81,9 @@ pub fn parse_utc(text: &str) -> Option<f64> {
 
 /// Unix seconds of a checked calendar instant, in exact integer day arithmetic (the Julian-date
 /// route of `UtcTime::unix_seconds` loses ~10 µs to the f64 day count, which would jitter
-/// `time_s`).
+/// `time_s`). The day count is still `sim::time::days_from_civil`: moving it to
+/// `sim::time::posix_seconds` (jiff) leaves that function without callers in `sim/`, which
+/// another helper owns this session.
 pub fn civil_unix_seconds(
     year: i32,
     month: u8,
@@ -95,11 +97,15 @@ pub fn civil_unix_seconds(
     Some((days * 86_400 + i64::from(hour) * 3600 + i64::from(minute) * 60) as f64 + second)
 }
 
-/// Formats Unix seconds as `YYYY-MM-DDTHH:MM:SS.sssZ` (civil-from-days, proleptic Gregorian).
+/// Formats Unix seconds as `YYYY-MM-DDTHH:MM:SS.sssZ` (the date from jiff, proleptic
+/// Gregorian).
 pub fn format_utc(unix_s: f64) -> String {
     let days = (unix_s / 86_400.0).floor();
     let sod = unix_s - days * 86_400.0;
-    let (year, month, day) = civil_from_days(days as i64);
+    let Some(date) = utc_date(days as i64 * 86_400) else {
+        return format!("{unix_s} s since 1970 (outside the calendar's years −9999..=9999)");
+    };
+    let (year, month, day) = (date.year(), date.month(), date.day());
     let h = (sod / 3600.0).floor();
     let m = ((sod - h * 3600.0) / 60.0).floor();
     let s = sod - h * 3600.0 - m * 60.0;
@@ -626,7 +632,7 @@ pub fn dataset_from_log(log: &Log, opts: &DatasetOptions) -> Result<Dataset, Imp
             ts.len()
         )));
     }
-    let out_std = super::baseline::std(&ys);
+    let out_std = crate::numerics::stats::std(&ys);
     let out_mean = ys.iter().sum::<f64>() / ys.len() as f64;
     if out_std.is_nan() || out_std <= 1e-12 * out_mean.abs() {
         return Err(ImportError::Shape(format!(
@@ -722,7 +728,7 @@ impl Dataset {
     /// the scalar [`Dataset::input_g`] describes it).
     pub fn changing_input(&self) -> Option<&[f64]> {
         self.channel(ChannelKind::Input)
-            .filter(|c| super::baseline::std(&c.values) > CHANGING_INPUT_STD_G)
+            .filter(|c| crate::numerics::stats::std(&c.values) > CHANGING_INPUT_STD_G)
             .map(|c| c.values.as_slice())
     }
     /// The nominal input at row `i`, g: the input channel when it changes, else the scalar.

@@ -174,44 +174,140 @@ pub fn neg2_loglik(model: &NoiseModel, t_s: &[f64], idx: &[usize], x: &[f64]) ->
 
 /// (Σ e²/S, Σ ln S) of the Kalman innovations.
 fn innovation_sums(model: &NoiseModel, t_s: &[f64], idx: &[usize], x: &[f64]) -> (f64, f64) {
-    let nf = model.flicker.len();
-    let k = nf + 1;
-    let r_var = model.white_var.max(1e-300);
-    let mut p = vec![0.0; k * k];
-    for (j, &(_, v)) in model.flicker.iter().enumerate() {
-        p[j * k + j] = v;
-    }
-    let mut state = vec![0.0; k];
-    let (mut a, mut q, mut ph) = (vec![1.0; k], vec![0.0; k], vec![0.0; k]);
+    let mut ric = Riccati::new(model);
+    let mut state = vec![0.0; ric.k];
     let mut prev_t: Option<f64> = None;
     let (mut chi2, mut log_det) = (0.0, 0.0);
     for &i in idx {
         let dt = prev_t.map_or(0.0, |pt| (t_s[i] - pt).max(0.0));
         prev_t = Some(t_s[i]);
-        predict_covariance(model, dt, &mut a, &mut q, &mut p);
+        ric.step(dt, true);
         let mut pred = 0.0;
-        for (s, f) in state.iter_mut().zip(&a) {
+        for (s, f) in state.iter_mut().zip(&ric.a) {
             *s *= f;
             pred += *s;
         }
-        for r in 0..k {
-            ph[r] = p[r * k..(r + 1) * k].iter().sum();
-        }
-        let s = ph.iter().sum::<f64>() + r_var;
+        let s = ric.s;
         let e = x[i] - pred;
-        for (st, h) in state.iter_mut().zip(&ph) {
+        for (st, h) in state.iter_mut().zip(&ric.ph) {
             *st += h / s * e;
         }
-        for r in 0..k {
-            let f = ph[r] / s;
-            for c in 0..k {
-                p[r * k + c] -= f * ph[c];
-            }
-        }
         chi2 += e * e / s;
-        log_det += s.ln();
+        log_det += ric.ln_s;
     }
     (chi2, log_det)
+}
+
+/// Change of the Kalman gains (absolute: a gain is the fraction of an innovation a state takes)
+/// and relative change of the innovation variance between two consecutive steps of the same
+/// length below which the covariance is taken as converged (the steady-state filter). The
+/// Riccati recursion converges geometrically, so what is left after this is far below the
+/// likelihood's rounding: the remaining steps skip the O(k²) covariance update.
+const STEADY_TOL: f64 = 1e-12;
+
+/// The covariance side of the Kalman filter of a [`NoiseModel`] (H = [1 … 1]), shared by the
+/// likelihood, the whitening and the held-out prediction. Once the gain has converged for a
+/// repeated step length it is held (steady state) until the step length changes or a row is
+/// not observed.
+struct Riccati<'m> {
+    model: &'m NoiseModel,
+    k: usize,
+    r_var: f64,
+    p: Vec<f64>,
+    /// Transition factors of the last step.
+    a: Vec<f64>,
+    q: Vec<f64>,
+    /// P Hᵀ of the last prediction (before the update).
+    ph: Vec<f64>,
+    /// Innovation variance of the last prediction, and its log.
+    s: f64,
+    ln_s: f64,
+    last_dt: f64,
+    last_observed: bool,
+    steady: bool,
+}
+
+impl<'m> Riccati<'m> {
+    fn new(model: &'m NoiseModel) -> Self {
+        let k = model.flicker.len() + 1;
+        // Initial covariance: stationary OU states, random walk at zero (offset is a column).
+        let mut p = vec![0.0; k * k];
+        for (j, &(_, v)) in model.flicker.iter().enumerate() {
+            p[j * k + j] = v;
+        }
+        Riccati {
+            model,
+            k,
+            r_var: model.white_var.max(1e-300),
+            p,
+            a: vec![1.0; k],
+            q: vec![0.0; k],
+            ph: vec![0.0; k],
+            s: 0.0,
+            ln_s: 0.0,
+            last_dt: f64::NAN,
+            last_observed: false,
+            steady: false,
+        }
+    }
+
+    /// Predicts over `dt_s` (fills `a`, `ph`, `s`) and, if `observed`, applies the measurement
+    /// update to the covariance.
+    fn step(&mut self, dt_s: f64, observed: bool) {
+        let same_dt = (dt_s - self.last_dt).abs() <= 1e-9 * dt_s.abs().max(1e-300);
+        if self.steady && same_dt && observed && self.last_observed {
+            return;
+        }
+        let k = self.k;
+        let (old_s, was_observed) = (self.s, self.last_observed);
+        let old_ph = if same_dt && observed && was_observed {
+            Some(self.ph.clone())
+        } else {
+            None
+        };
+        if !same_dt {
+            transition(self.model, dt_s, &mut self.a, &mut self.q);
+        }
+        // P ← A P A + Q and P Hᵀ (row sums) in one pass.
+        for (r, (row, ph)) in self
+            .p
+            .chunks_exact_mut(k)
+            .zip(self.ph.iter_mut())
+            .enumerate()
+        {
+            let ar = self.a[r];
+            let mut sum = 0.0;
+            for (pc, ac) in row.iter_mut().zip(&self.a) {
+                *pc *= ar * ac;
+                sum += *pc;
+            }
+            row[r] += self.q[r];
+            *ph = sum + self.q[r];
+        }
+        self.s = self.ph.iter().sum::<f64>() + self.r_var;
+        self.ln_s = self.s.ln();
+        if observed {
+            let s = self.s;
+            for (row, &phr) in self.p.chunks_exact_mut(k).zip(self.ph.iter()) {
+                let f = phr / s;
+                for (pc, phc) in row.iter_mut().zip(&self.ph) {
+                    *pc -= f * phc;
+                }
+            }
+        }
+        self.steady = match old_ph {
+            Some(old) => {
+                (self.s - old_s).abs() <= STEADY_TOL * self.s
+                    && old
+                        .iter()
+                        .zip(&self.ph)
+                        .all(|(o, n)| (n - o).abs() <= STEADY_TOL * self.s)
+            }
+            None => false,
+        };
+        self.last_dt = dt_s;
+        self.last_observed = observed;
+    }
 }
 
 /// Range of the flicker slope β (component variance ∝ (τ_c/τ_mid)^β): 0 is a flat Allan
@@ -310,7 +406,7 @@ impl NoiseModel {
         let values: Vec<f64> = idx.iter().map(|&i| x[i]).collect();
         let fail = |why: String| {
             let var = if n > 1 {
-                super::baseline::std(&values).powi(2)
+                crate::numerics::stats::std(&values).powi(2)
             } else {
                 0.0
             };
@@ -332,7 +428,7 @@ impl NoiseModel {
         if values.iter().any(|v| !v.is_finite()) {
             return fail("the residual has non-finite values".into());
         }
-        let var = super::baseline::std(&values).powi(2);
+        let var = crate::numerics::stats::std(&values).powi(2);
         if !(var > 0.0 && var.is_finite()) {
             return fail(format!(
                 "the residual's variance is {var:e}: nothing to model"
@@ -504,52 +600,29 @@ impl NoiseModel {
     }
 }
 
-/// Gaussian elimination with partial pivoting on the leading k×k block.
-#[allow(clippy::needless_range_loop)] // elimination: indices are the algorithm
+/// Solves the leading k×k block of `a`·x = `b` (nalgebra's LU with partial pivoting); None when
+/// singular.
 fn solve_small(a: &[[f64; 3]; 3], b: &[f64; 3], k: usize) -> Option<[f64; 3]> {
-    let mut m = *a;
-    let mut v = *b;
-    for c in 0..k {
-        let p = (c..k).max_by(|&i, &j| m[i][c].abs().total_cmp(&m[j][c].abs()))?;
-        if m[p][c].abs() < 1e-300 {
-            return None;
-        }
-        m.swap(c, p);
-        v.swap(c, p);
-        for r in c + 1..k {
-            let f = m[r][c] / m[c][c];
-            for q in c..k {
-                m[r][q] -= f * m[c][q];
-            }
-            v[r] -= f * v[c];
-        }
+    let m = nalgebra::DMatrix::from_fn(k, k, |r, c| a[r][c]);
+    let v = nalgebra::DVector::from_fn(k, |r, _| b[r]);
+    let x = m.lu().solve(&v)?;
+    let mut out = [0.0; 3];
+    for (o, xi) in out.iter_mut().zip(x.iter()) {
+        *o = *xi;
     }
-    let mut x = [0.0; 3];
-    for r in (0..k).rev() {
-        let s: f64 = (r + 1..k).map(|q| m[r][q] * x[q]).sum();
-        x[r] = (v[r] - s) / m[r][r];
-    }
-    Some(x)
+    Some(out)
 }
 
-/// Kalman prediction over `dt_s` for the model's states (flicker OU components, then the
-/// random walk): fills the diagonal transition `a` and process noise `q`, and advances the
-/// covariance `p` (k×k, row-major) to P ← A P A + Q.
-fn predict_covariance(model: &NoiseModel, dt_s: f64, a: &mut [f64], q: &mut [f64], p: &mut [f64]) {
+/// Transition factors `a` and process noise `q` of the model's states over `dt_s` (flicker OU
+/// components, then the random walk).
+fn transition(model: &NoiseModel, dt_s: f64, a: &mut [f64], q: &mut [f64]) {
     let nf = model.flicker.len();
-    let k = nf + 1;
     for (j, &(tc, v)) in model.flicker.iter().enumerate() {
         a[j] = (-dt_s / tc).exp();
         q[j] = v * (1.0 - a[j] * a[j]);
     }
     a[nf] = 1.0;
     q[nf] = model.rw_per_s * dt_s;
-    for r in 0..k {
-        for c in 0..k {
-            p[r * k + c] *= a[r] * a[c];
-        }
-        p[r * k + r] += q[r];
-    }
 }
 
 /// The Kalman whitening of a noise model on a set of observed rows.
@@ -570,37 +643,19 @@ pub struct Whitener {
 impl Whitener {
     /// Gains of `model` for observations at `t_s[i]` for the rows in `idx`.
     pub fn new(model: &NoiseModel, t_s: &[f64], idx: Vec<usize>) -> Self {
-        let nf = model.flicker.len();
-        let k = nf + 1;
-        let r_var = model.white_var.max(1e-300);
-        // Initial covariance: stationary OU states, random walk at zero (offset is a column).
-        let mut p = vec![0.0; k * k];
-        for (j, &(_, v)) in model.flicker.iter().enumerate() {
-            p[j * k + j] = v;
-        }
+        let mut ric = Riccati::new(model);
+        let k = ric.k;
         let mut a_all = Vec::with_capacity(idx.len() * k);
         let mut g_all = Vec::with_capacity(idx.len() * k);
         let mut s_all = Vec::with_capacity(idx.len());
-        let mut a = vec![1.0; k];
-        let mut q = vec![0.0; k];
         let mut prev_t: Option<f64> = None;
-        let mut ph = vec![0.0; k];
         for &i in &idx {
             let dt = prev_t.map_or(0.0, |pt| (t_s[i] - pt).max(0.0));
             prev_t = Some(t_s[i]);
-            predict_covariance(model, dt, &mut a, &mut q, &mut p);
-            // H = [1 … 1]: PHᵀ = row sums, S = total + R.
-            for r in 0..k {
-                ph[r] = p[r * k..(r + 1) * k].iter().sum();
-            }
-            let s = ph.iter().sum::<f64>() + r_var;
-            for r in 0..k {
-                for c in 0..k {
-                    p[r * k + c] -= ph[r] * ph[c] / s;
-                }
-            }
-            a_all.extend_from_slice(&a);
-            g_all.extend(ph.iter().map(|v| v / s));
+            ric.step(dt, true);
+            a_all.extend_from_slice(&ric.a);
+            let s = ric.s;
+            g_all.extend(ric.ph.iter().map(|v| v / s));
             s_all.push(s.sqrt());
         }
         Whitener {
@@ -662,39 +717,24 @@ pub fn held_out_chi2(
     observed: &[bool],
     x: &[f64],
 ) -> (f64, usize) {
-    let nf = model.flicker.len();
-    let k = nf + 1;
-    let r_var = model.white_var.max(1e-300);
-    let mut p = vec![0.0; k * k];
-    for (j, &(_, v)) in model.flicker.iter().enumerate() {
-        p[j * k + j] = v;
-    }
-    let mut state = vec![0.0; k];
-    let (mut a, mut q, mut ph) = (vec![1.0; k], vec![0.0; k], vec![0.0; k]);
+    let mut ric = Riccati::new(model);
+    let mut state = vec![0.0; ric.k];
     let mut prev_t: Option<f64> = None;
     let (mut chi2, mut count) = (0.0, 0usize);
     for ((&t, &obs), &xi) in t_s.iter().zip(observed).zip(x) {
         let dt = prev_t.map_or(0.0, |pt| (t - pt).max(0.0));
         prev_t = Some(t);
-        predict_covariance(model, dt, &mut a, &mut q, &mut p);
+        ric.step(dt, obs);
         let mut pred = 0.0;
-        for (s, f) in state.iter_mut().zip(&a) {
+        for (s, f) in state.iter_mut().zip(&ric.a) {
             *s *= f;
             pred += *s;
         }
-        for r in 0..k {
-            ph[r] = p[r * k..(r + 1) * k].iter().sum();
-        }
-        let s = ph.iter().sum::<f64>() + r_var;
+        let s = ric.s;
         let e = xi - pred;
         if obs {
-            for (st, h) in state.iter_mut().zip(&ph) {
+            for (st, h) in state.iter_mut().zip(&ric.ph) {
                 *st += h / s * e;
-            }
-            for r in 0..k {
-                for c in 0..k {
-                    p[r * k + c] -= ph[r] * ph[c] / s;
-                }
             }
         } else {
             chi2 += e * e / s;
@@ -767,6 +807,37 @@ mod tests {
         );
         assert_eq!(f.method, METHOD_WHITE_FALLBACK);
         assert!(f.failure.is_some());
+    }
+
+    #[test]
+    fn the_steady_state_gain_gives_the_likelihood_of_the_full_riccati_recursion() {
+        // Regular spacing (the gain converges and is then held) against the same record with
+        // spacings jittered by 1e-7 (never equal: every step runs the full recursion).
+        let n = 6000;
+        let x = normals(n, 5);
+        let t: Vec<f64> = (0..n).map(|i| 10.0 * i as f64).collect();
+        let tj: Vec<f64> = t
+            .iter()
+            .enumerate()
+            .map(|(i, v)| v * (1.0 + 1e-7 * ((i % 3) as f64 - 1.0) / (i as f64 + 1.0)))
+            .collect();
+        let m = NoiseModel::from_levels_from(1.0, 0.3, -0.5, 1e-5, 10.0, 10.0, 6e4);
+        let idx: Vec<usize> = (0..n).collect();
+        let (a, b) = (
+            neg2_loglik(&m, &t, &idx, &x),
+            neg2_loglik(&m, &tj, &idx, &x),
+        );
+        assert!((a - b).abs() < 1e-6 * a.abs(), "{a} vs {b}");
+        let (wa, wb) = (
+            Whitener::new(&m, &t, idx.clone()).whiten(&x),
+            Whitener::new(&m, &tj, idx.clone()).whiten(&x),
+        );
+        let d = wa
+            .iter()
+            .zip(&wb)
+            .map(|(p, q)| (p - q).abs())
+            .fold(0.0, f64::max);
+        assert!(d < 1e-5, "{d}");
     }
 
     #[test]

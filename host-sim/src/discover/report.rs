@@ -176,8 +176,22 @@ pub fn text(d: &Discovery) -> String {
     for c in &d.channel_noise {
         let _ = writeln!(
             o,
-            "  channel_noise: {} reads with {:.3e} {} noise per point (channel std {:.3e})",
-            c.channel, c.noise, c.unit, c.std
+            "  channel_noise: {} reads with {:.3e} {} white noise per point (channel std {:.3e}); {}",
+            c.channel,
+            c.noise,
+            c.unit,
+            c.std,
+            match (c.resolved, c.smoothed) {
+                (true, true) => format!(
+                    "the model uses its smoothed state (zero-phase, width {:.0} s)",
+                    c.smoothing_s
+                ),
+                (true, false) => format!(
+                    "smoother of width {:.0} s fitted, the model uses the reading",
+                    c.smoothing_s
+                ),
+                _ => "not resolved: used as read".to_owned(),
+            }
         );
     }
     let _ = writeln!(o, "what the baseline gets wrong:");

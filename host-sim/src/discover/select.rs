@@ -196,7 +196,7 @@ impl Current<'_> {
     }
 }
 
-fn golden<F: Fn(f64) -> f64>(f: F, mut a: f64, mut b: f64, iters: usize) -> f64 {
+pub(crate) fn golden<F: Fn(f64) -> f64>(f: F, mut a: f64, mut b: f64, iters: usize) -> f64 {
     let g = 0.618_033_988_749_895;
     let mut c = b - g * (b - a);
     let mut d = a + g * (b - a);
@@ -619,9 +619,20 @@ pub fn select(
     let mut cur_std = baseline_std;
     let mut warm = cur0.noise.model.clone();
     let mut refused: Vec<(String, String)> = Vec::new();
+    // The noise fit of the columns of the last round's start (reused at the end when nothing
+    // was added since).
+    let mut last_noise: (usize, NoiseFit) = (cols.len(), cur0.noise.clone());
     while accepted.len() < cfg.max_effects {
-        let (cur, cur_raw, _) = fit_state(ds, &cols, target, NoiseChoice::Fit(Some(&warm)));
+        // The first round's model is the baseline, whose noise was just fitted (cold start,
+        // then a warm polish): it is not fitted a third time.
+        let choice = if accepted.is_empty() {
+            NoiseChoice::Fixed(&cur0.noise)
+        } else {
+            NoiseChoice::Fit(Some(&warm))
+        };
+        let (cur, cur_raw, _) = fit_state(ds, &cols, target, choice);
         warm = cur.noise.model.clone();
+        last_noise = (cols.len(), cur.noise.clone());
         let scored = score_all(&cur, cands, ctx, &done, tides);
         // The ranking above holds the noise model fixed; an effect present in the residual
         // also inflates the fitted noise (its Allan variance), which hides it. The best few are
@@ -691,6 +702,15 @@ pub fn select(
             if !(after.prediction_z < before.prediction_z * (1.0 - cfg.min_gain)
                 && after.raw < before.raw)
             {
+                refuse(
+                    &mut refused,
+                    s.effect.name(),
+                    format!(
+                        "ΔBIC {:.1}, but the blocked cross-validation did not improve (held-out \
+                         prediction z {:.4} → {:.4}, raw {:.4e} → {:.4e})",
+                        s.delta_bic, before.prediction_z, after.prediction_z, before.raw, after.raw
+                    ),
+                );
                 continue;
             }
             let fwd_after = forward_validate(ds, &trial, target, &cur.noise.model);
@@ -710,6 +730,10 @@ pub fn select(
                     ),
                 );
                 continue;
+            }
+            if !s.effect.repeatable() {
+                // Refused in an earlier round, accepted now: the refusal no longer holds.
+                refused.retain(|(n, _)| n != s.effect.name());
             }
             took = Some((s.clone(), before, after, fwd_before, fwd_after));
             break;
@@ -762,16 +786,22 @@ pub fn select(
         cur_std = std_after;
         done.push(s.effect);
     }
-    let (cur_f, _, _) = fit_state(ds, &cols, target, NoiseChoice::Fit(Some(&warm)));
+    let final_noise = if last_noise.0 == cols.len() {
+        last_noise.1
+    } else {
+        fit_state(ds, &cols, target, NoiseChoice::Fit(Some(&warm)))
+            .0
+            .noise
+    };
     let joint = (!accepted.is_empty())
-        .then(|| joint_fit(ds, target, base_cols, &mut accepted, ctx, &cur_f.noise));
+        .then(|| joint_fit(ds, target, base_cols, &mut accepted, ctx, &final_noise));
     if let Some(j) = &joint {
         cols = base_cols.to_vec();
         for c in &j.effect_columns {
             cols.extend(c.iter().cloned());
         }
     }
-    let (cur_f, final_raw, beta) = fit_state(ds, &cols, target, NoiseChoice::Fixed(&cur_f.noise));
+    let (cur_f, final_raw, beta) = fit_state(ds, &cols, target, NoiseChoice::Fixed(&final_noise));
     let final_cv = cross_validate(ds, &cols, target, &cur0.noise.model, cfg);
     let final_forward = forward_validate(ds, &cols, target, &cur0.noise.model);
     Selection {

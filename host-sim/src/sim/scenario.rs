@@ -516,6 +516,48 @@ mod tests {
     }
 
     #[test]
+    fn a_file_without_instrument_or_effects_loads_as_the_accelerometer_without_effects() {
+        // Files written before `[instrument]` and `[[effects]]` existed: the preset's TOML
+        // has neither (empty/absent ones are not written) and loads with their defaults.
+        let text = Scenario::preset("paper-1g").unwrap().to_toml();
+        assert!(
+            !text.contains("instrument]") && !text.contains("effects"),
+            "{text}"
+        );
+        let s = Scenario::from_toml(&text).unwrap();
+        assert!(s.instrument.is_none() && s.effects.is_empty() && s.gravimeter().is_none());
+    }
+
+    #[test]
+    fn a_gravimeter_in_an_unknown_unit_or_an_unknown_effect_kind_is_refused_by_name() {
+        let text = Scenario::preset("paper-0g").unwrap().to_toml();
+        let grav = |unit: &str| {
+            format!(
+                "{text}\n[instrument]\nkind = \"gravimeter\"\nname = \"g\"\nunit = \"{unit}\"\n\
+                 offset = 0.0\ndrift_per_day = 0.0\ntide_factor = 1.0\ntide_delay_s = 0.0\n\
+                 pressure_admittance_per_hpa = 0.0\n\
+                 noise = {{ white_adev_1s = 1.0, flicker_floor = 0.0, random_walk_per_sqrt_s = 0.0 }}\n"
+            )
+        };
+        let ok = Scenario::from_toml(&grav("ugal")).unwrap();
+        assert_eq!(ok.gravimeter().map(|g| g.column()), Some("gravity_ugal"));
+        assert!(matches!(
+            Scenario::from_toml(&grav("volt")),
+            Err(ScenarioError::Invalid(m)) if m.contains("instrument.unit") && m.contains("volt")
+        ));
+        let unknown = format!("{text}\n[[effects]]\nkind = \"gremlins\"\nsize = 1.0\n");
+        assert!(matches!(
+            Scenario::from_toml(&unknown),
+            Err(ScenarioError::Toml(e)) if e.to_string().contains("gremlins")
+        ));
+        let bad = format!("{text}\n[[effects]]\nkind = \"periodic\"\nperiod_s = 0.0\namplitude = 1.0\nphase_rad = 0.0\n");
+        assert!(matches!(
+            Scenario::from_toml(&bad),
+            Err(ScenarioError::Invalid(m)) if m.contains("effects[0] (periodic): period_s")
+        ));
+    }
+
+    #[test]
     fn the_1g_preset_lasts_41_days_and_sampling_is_configurable() {
         let mut s = Scenario::preset("paper-1g").unwrap();
         assert_eq!(s.samples(), 41 * 1440);

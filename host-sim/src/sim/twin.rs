@@ -118,11 +118,12 @@ fn line_fit(t: &[f64], y: &[f64]) -> (f64, f64) {
     (my - b * mt, b)
 }
 
-/// Allan levels of a fitted noise model (its unit).
-fn levels_of(m: &NoiseModel) -> AllanParams {
+/// Allan levels of a fitted noise model (its unit) for points spaced `dt_s`.
+fn levels_of(m: &NoiseModel, dt_s: f64) -> AllanParams {
     AllanParams {
-        // h_w = σ²_white·Δ: ADEV(τ) = √(h_w/τ), so at 1 s √h_w.
-        white_adev_1s: m.h[0].max(0.0).sqrt(),
+        // White variance σ² per point of spacing Δ: h_w = σ²·Δ, ADEV(τ) = √(h_w/τ), so at
+        // 1 s √h_w.
+        white_adev_1s: (m.white_var.max(0.0) * dt_s).sqrt(),
         flicker_floor: m.flicker_floor(),
         // Allan variance of the walk q·τ/3 = K²·τ/3.
         random_walk_per_sqrt_s: m.rw_per_s.max(0.0).sqrt(),
@@ -327,7 +328,7 @@ impl Twin {
         // Noise levels.
         let inst_noise = match (noise, s.gravimeter()) {
             (Some(m), g) => {
-                let rec = levels_of(m);
+                let rec = levels_of(m, ds.dt_s);
                 prov.push(format!(
                     "noise from the fitted noise model: white {:.3e}/√Hz, flicker floor {:.3e}, \
                      random walk {:.3e}/√s ({})",
@@ -983,6 +984,31 @@ mod tests {
         let d: Vec<f64> = n.windows(2).map(|w| (w[1] - w[0]) / 2f64.sqrt()).collect();
         let want = 1.0 / 300f64.sqrt();
         assert!((std(&d) / want - 1.1).abs() < 0.2, "{} vs {want}", std(&d));
+    }
+
+    #[test]
+    fn members_draw_from_a_given_noise_model_and_the_scenario_gets_its_levels() {
+        let s = gravimeter_scenario();
+        let ds = dataset(&s, 4);
+        // White noise of 0.5 µGal per point (at the record's 300 s spacing).
+        let m = NoiseModel::white(0.25);
+        let twin = Twin::new(&ds, None, Some(&m)).unwrap();
+        let det = twin.run(None).unwrap();
+        let n: Vec<f64> = twin
+            .run(Some(3))
+            .unwrap()
+            .iter()
+            .zip(&det)
+            .map(|(a, b)| a - b)
+            .collect();
+        assert!((std(&n) / 0.5 - 1.0).abs() < 0.1, "{}", std(&n));
+        let g = twin.scenario().gravimeter().unwrap();
+        // √h_w with h_w = 0.25 µGal²·300 s.
+        assert!((g.noise.white_adev_1s / (0.25f64 * 300.0).sqrt() - 1.0).abs() < 1e-9);
+        assert!(twin
+            .provenance()
+            .iter()
+            .any(|l| l.contains("fitted noise model")));
     }
 
     #[test]
