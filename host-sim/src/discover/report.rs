@@ -464,6 +464,7 @@ fn residual_spectrum_figure(d: &Discovery) -> Figure {
         ],
         x_markers,
         y_markers: fap_level,
+        x_spans: Vec::new(),
     })
 }
 

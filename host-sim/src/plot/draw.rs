@@ -130,6 +130,8 @@ pub struct XYFigure {
     pub x_markers: Vec<Marker>,
     /// Horizontal reference lines (e.g. a significance level).
     pub y_markers: Vec<Marker>,
+    /// X ranges shaded across the plot (e.g. where a record leaves a simulation's envelope).
+    pub x_spans: Vec<(f64, f64)>,
 }
 
 /// Any figure this module draws.
@@ -149,6 +151,8 @@ const PANEL_HEIGHT_PX: u32 = 380;
 const TITLE_HEIGHT_PX: u32 = 40;
 const FONT: &str = "sans-serif";
 const GREY_BAND: RGBColor = RGBColor(200, 200, 200);
+/// Shaded x ranges of an [`XYFigure`].
+const SPAN: RGBColor = RGBColor(240, 160, 60);
 
 impl Figure {
     /// Size in pixels (SVG user units).
@@ -567,6 +571,15 @@ where
         .x_label_formatter(&x_fmt)
         .y_label_formatter(&y_fmt)
         .draw()?;
+    for &(a, b) in &fig.x_spans {
+        let (a, b) = (a.max(x_lo), b.min(x_hi));
+        if a < b {
+            chart.draw_series(std::iter::once(Rectangle::new(
+                [(a, y_lo), (b, y_hi)],
+                SPAN.mix(0.25).filled(),
+            )))?;
+        }
+    }
     let marker_style = BLACK.mix(0.45).stroke_width(1);
     let inside = fig.x_markers.iter().filter(|m| m.at > x_lo && m.at < x_hi);
     for (i, m) in inside.enumerate() {
@@ -615,7 +628,8 @@ where
         }
         for run in runs.into_iter().filter(|r| !r.is_empty()) {
             let series = chart.draw_series(LineSeries::new(run, col.stroke_width(1)))?;
-            if first {
+            // An unlabelled curve (e.g. the second edge of a band) gets no legend entry.
+            if first && !c.label.is_empty() {
                 series.label(c.label.as_str()).legend(move |(x, y)| {
                     PathElement::new(vec![(x, y), (x + 24, y)], col.stroke_width(2))
                 });

@@ -108,6 +108,8 @@ pub struct Simulation {
     pub warnings: Vec<String>,
     /// Whether the twin is the station simulator.
     pub simulator: bool,
+    /// Wall time of each stage (name, s): for docs/benchmarks.md.
+    pub timing_s: Vec<(&'static str, f64)>,
 }
 
 /// Runs the comparison with twins made by `build` (noise model → twin).
@@ -124,6 +126,12 @@ where
 {
     let ensemble = ensemble.max(2);
     let mut warnings = Vec::new();
+    let mut timing_s = Vec::new();
+    let mut clock = std::time::Instant::now();
+    let mut lap = |name: &'static str| {
+        timing_s.push((name, clock.elapsed().as_secs_f64()));
+        clock = std::time::Instant::now();
+    };
     // 1. The prediction and the residual's catalogue search (the cause).
     let quiet = build(None)?;
     if !quiet.is_simulator() {
@@ -135,7 +143,9 @@ where
     for (y, p) in resid_ds.y.iter_mut().zip(&det) {
         *y -= p;
     }
+    lap("twin");
     let cause = super::discover(resid_ds, None, cfg)?;
+    lap("catalogue search");
     // 2. The extension: the accepted effects as the twin's effects; each one's contribution is
     //    what it adds to the twin's prediction (the simulator's own rendering of it).
     let (effects, refused) = quiet.effects_from(&cause);
@@ -173,6 +183,7 @@ where
     } else {
         cause.selection.final_noise.model.clone()
     };
+    lap("extension and noise fit");
     // 4. Ensembles and comparisons, before and after.
     let twin = build(Some(&noise))?;
     let ext = twin.extended(&effects.iter().map(|e| e.1.clone()).collect::<Vec<_>>());
@@ -188,16 +199,19 @@ where
     let explained_by = cause::explained_by(&yard, &before, &r_before, &contrib);
     let members_ext = ensemble::run(&ext, &det_ext, ensemble, &yard, "extended")?;
     let after = mismatch::compare(yard.views(&r_after), &members_ext, &freqs, &channels);
+    lap("ensembles and comparisons");
     // 5. Gain: forward chaining; the extension's contributions refitted on each training part.
+    let base_std = gain::forward_std(ds, &det, &[], &noise);
     let before_scores = Scores {
-        residual_std_out_of_sample: gain::forward_std(ds, &det, &[], &noise),
-        residual_std_fixed_amplitudes: gain::forward_std(ds, &det, &[], &noise),
+        residual_std_out_of_sample: base_std,
+        residual_std_fixed_amplitudes: base_std,
     };
     let contrib_cols: Vec<Vec<f64>> = contrib.iter().map(|c| c.1.clone()).collect();
     let after_scores = Scores {
         residual_std_out_of_sample: gain::forward_std(ds, &det_ext, &contrib_cols, &noise),
         residual_std_fixed_amplitudes: gain::forward_std(ds, &det_ext, &[], &noise),
     };
+    lap("forward chaining");
     if !refused.is_empty() {
         warnings.push(format!(
             "{} accepted effect(s) could not be written into the scenario: {}",
@@ -228,6 +242,7 @@ where
         residual_after: r_after,
         warnings,
         simulator: quiet.is_simulator(),
+        timing_s,
     })
 }
 

@@ -1,9 +1,9 @@
 //! The `--simulate` part of the text, the JSON `"simulation"` object and the report's figures
 //! (measured vs envelope for ADEV and PSD, before and after, mismatched ranges shaded).
 
-use super::mismatch::{sentence, tau_words, Comparison, Quantity};
+use super::mismatch::{sentence, Comparison, Quantity};
 use super::{Scores, Simulation};
-use crate::plot::draw::{Figure, Marker, XYCurve, XYFigure};
+use crate::plot::draw::{Figure, XYCurve, XYFigure};
 use plotters::style::RGBColor;
 use serde_json::{json, Map, Value};
 use std::fmt::Write as _;
@@ -68,6 +68,7 @@ pub fn json(s: &Simulation) -> Value {
         "extended_scenario": s.extended_path.as_ref().map(|p| p.display().to_string()),
         "coherence_channels": s.channels,
         "warnings": s.warnings,
+        "timing_s": s.timing_s.iter().map(|(k, v)| json!({"stage": k, "seconds": v})).collect::<Vec<_>>(),
     })
 }
 
@@ -191,14 +192,14 @@ const ENVELOPE: RGBColor = RGBColor(40, 90, 180);
 const MEDIAN: RGBColor = RGBColor(120, 150, 210);
 
 fn figure(c: &Comparison, q: Quantity, title: String, unit: &str) -> Figure {
-    let (x, m, e, x_desc, y_desc, scale): (Vec<f64>, Vec<f64>, _, String, String, f64) = match q {
+    // PSD and its bands on a cycles/day axis (the mismatch ranges are in cycles/day too).
+    let (x, m, e, x_desc, y_desc): (Vec<f64>, Vec<f64>, _, String, String) = match q {
         Quantity::Adev => (
             c.adev.x.clone(),
             c.measured.adev.iter().map(|p| p.1).collect(),
             &c.adev,
-            "τ (s)".into(),
+            "averaging time τ (s)".into(),
             format!("σ_y(τ) ({unit})"),
-            1.0,
         ),
         _ => (
             c.psd.x.iter().map(|f| f * 86_400.0).collect(),
@@ -206,38 +207,27 @@ fn figure(c: &Comparison, q: Quantity, title: String, unit: &str) -> Figure {
             &c.psd,
             "frequency (cycles/day)".into(),
             format!("PSD ({unit}²/Hz)"),
-            86_400.0,
         ),
     };
     let pts = |y: &[f64]| x.iter().copied().zip(y.iter().copied()).collect::<Vec<_>>();
-    let spans = c
+    // A run of points is shaded from half-way to its neighbours on each side (the points are
+    // octave τ or log-spaced band centres: geometric midpoints).
+    let edge = |i: usize, j: usize| (x[i] * x[j]).sqrt();
+    let x_spans = c
         .mismatches
         .iter()
         .filter(|mm| mm.quantity == q)
         .map(|mm| {
-            (
-                mm.from,
-                mm.to,
-                format!("{} ×{:.1}", mm.direction, mm.factor),
-            )
-        })
-        .collect::<Vec<_>>();
-    let x_markers = spans
-        .iter()
-        .flat_map(|(a, b, l)| {
-            [
-                Marker {
-                    at: *a,
-                    label: l.clone(),
-                },
-                Marker {
-                    at: *b,
-                    label: String::new(),
-                },
-            ]
+            let (a, b) = mm.index;
+            let lo = if a > 0 { edge(a - 1, a) } else { x[a] };
+            let hi = if b < x.len() {
+                edge(b - 1, b)
+            } else {
+                x[b - 1]
+            };
+            (lo, hi)
         })
         .collect();
-    let _ = scale;
     Figure::XY(XYFigure {
         title,
         x_desc,
@@ -247,12 +237,12 @@ fn figure(c: &Comparison, q: Quantity, title: String, unit: &str) -> Figure {
         y_floor: None,
         curves: vec![
             XYCurve {
-                label: "simulation 5 %".into(),
+                label: "simulation 5 % / 95 %".into(),
                 color: ENVELOPE,
                 points: pts(&e.low),
             },
             XYCurve {
-                label: "simulation 95 %".into(),
+                label: String::new(),
                 color: ENVELOPE,
                 points: pts(&e.high),
             },
@@ -267,8 +257,9 @@ fn figure(c: &Comparison, q: Quantity, title: String, unit: &str) -> Figure {
                 points: pts(&m),
             },
         ],
-        x_markers,
+        x_markers: Vec::new(),
         y_markers: Vec::new(),
+        x_spans,
     })
 }
 
@@ -303,7 +294,7 @@ pub fn figures(s: &Simulation, unit: &str) -> Vec<(&'static str, String, Figure)
         };
         let caption = format!(
             "{what} of measured − {when} against the ensemble's 5–95 % envelope ({} members); \
-             marked: the mismatched ranges",
+             shaded: the mismatched ranges",
             s.ensemble
         );
         v.push((
@@ -312,6 +303,5 @@ pub fn figures(s: &Simulation, unit: &str) -> Vec<(&'static str, String, Figure)
             figure(c, q, format!("{what}: measured vs {when}"), unit),
         ));
     }
-    let _ = tau_words;
     v
 }
