@@ -74,10 +74,20 @@ pub fn run_load(args: &LoadArgs) -> anyhow::Result<()> {
         crate::calibration_file::decode_named(&bytes).context("table refused locally")?;
     }
     let mut conn = Connection::open(&args.target, args.firmware.as_deref())?;
-    let id = conn.client.load(&bytes, |sent, total| {
-        eprint!("\rupload {sent}/{total} bytes");
-    })?;
-    eprintln!("\nactive table {id:#010x} (read back and verified)");
+    // A bar on a terminal, nothing when stderr is a file or a pipe (the `\r` line it replaces
+    // ran together there: "upload 64/426 bytesupload 128/426 …").
+    let bar = indicatif::ProgressBar::new(bytes.len() as u64);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("upload [{bar:30}] {bytes}/{total_bytes}")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+            .progress_chars("=> "),
+    );
+    let loaded = conn
+        .client
+        .load(&bytes, |sent, _| bar.set_position(sent as u64));
+    bar.finish_and_clear();
+    let id = loaded?;
+    eprintln!("active table {id:#010x} (read back and verified)");
     Ok(())
 }
 
