@@ -117,4 +117,6 @@ fn a_table_fitted_from_table_1_is_loaded_into_qemu_and_used_by_compensate() {
         // (the bias alone moves 5e-5 g per °C).
         assert!((a - 1.0).abs() < 2e-8, "T = {t} °C: a_i = {a}");
     }
+    // Passed: nothing of it is left in the temp dir (a failure keeps the files to look at).
+    std::fs::remove_dir_all(cal.parent().expect("the test's own dir")).expect("temp dir removed");
 }
