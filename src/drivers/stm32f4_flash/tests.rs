@@ -13,7 +13,7 @@ fn flash() -> Stm32f4Flash<FlashModel> {
 
 fn read(f: &mut Stm32f4Flash<FlashModel>, at: u32, n: usize) -> std::vec::Vec<u8> {
     let mut buf = std::vec![0u8; n];
-    f.read(at, &mut buf).unwrap();
+    assert_eq!(f.read(at, &mut buf), Ok(()));
     buf
 }
 
@@ -33,10 +33,10 @@ fn assert_idle(f: &mut Stm32f4Flash<FlashModel>) {
 fn erase_program_read_round_trip_and_the_controller_is_left_locked() {
     let mut f = flash();
     f.registers().mem[SECTOR_9 as usize..][..4].copy_from_slice(&[1, 2, 3, 4]);
-    f.erase(SECTOR_9, SECTOR_9 + SECTOR).unwrap();
+    assert_eq!(f.erase(SECTOR_9, SECTOR_9 + SECTOR), Ok(()));
     assert_eq!(read(&mut f, SECTOR_9, 4), [0xFF; 4]);
     assert_idle(&mut f);
-    f.write(SECTOR_9 + 5, &[0x12, 0x34, 0x56]).unwrap();
+    assert_eq!(f.write(SECTOR_9 + 5, &[0x12, 0x34, 0x56]), Ok(()));
     assert_eq!(
         read(&mut f, SECTOR_9 + 4, 5),
         [0xFF, 0x12, 0x34, 0x56, 0xFF]
@@ -46,7 +46,7 @@ fn erase_program_read_round_trip_and_the_controller_is_left_locked() {
     assert_eq!(f.registers().programmed_bytes, 3);
     // Sector 10 untouched by sector 9's erase.
     f.registers().mem[SECTOR_10 as usize] = 0;
-    f.erase(SECTOR_9, SECTOR_9 + SECTOR).unwrap();
+    assert_eq!(f.erase(SECTOR_9, SECTOR_9 + SECTOR), Ok(()));
     assert_eq!(read(&mut f, SECTOR_10, 1), [0]);
 }
 
@@ -59,7 +59,7 @@ fn sectors_follow_the_f405_map() {
     assert_eq!(sector_of(SECTOR_9), (9, SECTOR));
     assert_eq!(sector_of(0xE_0000), (11, SECTOR));
     let mut f = flash();
-    f.erase(0, SECTOR).unwrap();
+    assert_eq!(f.erase(0, SECTOR), Ok(()));
     assert_eq!(
         f.registers().erases,
         5,
@@ -81,7 +81,7 @@ fn each_flash_error_is_named_and_the_next_operation_succeeds() {
     ];
     for (flag, named) in cases {
         let mut f = flash();
-        f.erase(SECTOR_9, SECTOR_9 + SECTOR).unwrap();
+        assert_eq!(f.erase(SECTOR_9, SECTOR_9 + SECTOR), Ok(()));
         f.registers().fail_next = Some(flag);
         assert_eq!(
             f.write(SECTOR_9, &[0xA5, 0x5A]),
@@ -89,7 +89,7 @@ fn each_flash_error_is_named_and_the_next_operation_succeeds() {
             "program, {flag:#x}"
         );
         assert_idle(&mut f);
-        f.write(SECTOR_9 + 16, &[0x11, 0x22]).unwrap();
+        assert_eq!(f.write(SECTOR_9 + 16, &[0x11, 0x22]), Ok(()));
         assert_eq!(read(&mut f, SECTOR_9 + 16, 2), [0x11, 0x22]);
 
         f.registers().fail_next = Some(flag);
@@ -104,7 +104,7 @@ fn each_flash_error_is_named_and_the_next_operation_succeeds() {
             "aborted erase changed cells"
         );
         assert_idle(&mut f);
-        f.erase(SECTOR_9, SECTOR_9 + SECTOR).unwrap();
+        assert_eq!(f.erase(SECTOR_9, SECTOR_9 + SECTOR), Ok(()));
         assert_eq!(read(&mut f, SECTOR_9 + 16, 2), [0xFF, 0xFF]);
     }
 }
@@ -115,9 +115,9 @@ fn each_flash_error_is_named_and_the_next_operation_succeeds() {
 fn stale_error_flags_are_cleared_before_an_operation() {
     let mut f = flash();
     f.registers().sr = sr::ERRORS | sr::EOP;
-    f.erase(SECTOR_9, SECTOR_9 + SECTOR).unwrap();
+    assert_eq!(f.erase(SECTOR_9, SECTOR_9 + SECTOR), Ok(()));
     f.registers().sr = sr::PGSERR;
-    f.write(SECTOR_9, &[0]).unwrap();
+    assert_eq!(f.write(SECTOR_9, &[0]), Ok(()));
     assert_eq!(read(&mut f, SECTOR_9, 1), [0]);
 }
 
@@ -138,8 +138,8 @@ fn a_write_protected_sector_gives_wrperr_and_keeps_its_cells() {
     );
     assert_eq!(read(&mut f, SECTOR_10, 2), [0x42, 0xFF]);
     assert_idle(&mut f);
-    f.erase(SECTOR_9, SECTOR_9 + SECTOR).unwrap();
-    f.write(SECTOR_9, &[7]).unwrap();
+    assert_eq!(f.erase(SECTOR_9, SECTOR_9 + SECTOR), Ok(()));
+    assert_eq!(f.write(SECTOR_9, &[7]), Ok(()));
 }
 
 /// A wrong key sequence locks FLASH_CR until reset (RM0090 §3.5.1): named, nothing written.
@@ -154,7 +154,7 @@ fn a_controller_locked_until_reset_is_named() {
     );
     assert_eq!(read(&mut f, SECTOR_9, 1), [0xFF]);
     f.registers().reset();
-    f.write(SECTOR_9, &[0]).unwrap();
+    assert_eq!(f.write(SECTOR_9, &[0]), Ok(()));
 }
 
 /// Alignment and bounds are refused before the controller is touched.
