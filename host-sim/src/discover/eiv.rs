@@ -317,18 +317,7 @@ pub fn denoise(ds: &Dataset, apply: bool) -> (Dataset, Vec<ChannelNoise>) {
 mod tests {
     use super::*;
     use crate::discover::import::Channel;
-
-    fn normals(n: usize, mut seed: u64) -> Vec<f64> {
-        let mut u = move || {
-            seed = seed
-                .wrapping_mul(6_364_136_223_846_793_005)
-                .wrapping_add(1_442_695_040_888_963_407);
-            ((seed >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-        };
-        (0..n)
-            .map(|_| (-2.0 * u().ln()).sqrt() * (2.0 * std::f64::consts::PI * u()).cos())
-            .collect()
-    }
+    use crate::discover::noise::tests::normals;
 
     fn dataset(values: Vec<f64>, dt: f64) -> Dataset {
         let n = values.len();

@@ -213,6 +213,13 @@ pub fn discover_path(
             .map(|(k, _)| k.scale_factor_v_per_g);
     }
     let mut ds = import::dataset_from_log(&log, &opts)?;
+    note_bad_rows(&mut ds, &bad);
+    let d = discover(ds, table, cfg).map_err(anyhow::Error::msg)?;
+    Ok((d, bad))
+}
+
+/// Says in the dataset's notes how many rows the reader skipped and why (the first ten).
+pub(crate) fn note_bad_rows(ds: &mut Dataset, bad: &[import::BadRow]) {
     if !bad.is_empty() {
         ds.notes.push(format!(
             "{} bad row(s) skipped: {}",
@@ -224,8 +231,6 @@ pub fn discover_path(
                 .join("; ")
         ));
     }
-    let d = discover(ds, table, cfg).map_err(anyhow::Error::msg)?;
-    Ok((d, bad))
 }
 
 /// `accomp discover`.

@@ -745,11 +745,12 @@ pub fn held_out_chi2(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
-    /// A deterministic standard normal sequence (Box–Muller on a 64-bit LCG).
-    fn normals(n: usize, mut seed: u64) -> Vec<f64> {
+    /// A deterministic standard normal sequence (Box–Muller on a 64-bit LCG); eiv's tests use it
+    /// too.
+    pub(crate) fn normals(n: usize, mut seed: u64) -> Vec<f64> {
         let mut u = move || {
             seed = seed
                 .wrapping_mul(6_364_136_223_846_793_005)

@@ -17,17 +17,7 @@ pub fn load(args: &DiscoverArgs) -> anyhow::Result<import::Dataset> {
         unit_per_g_from_calibration: None,
     };
     let mut ds = import::dataset_from_log(&log, &opts)?;
-    if !bad.is_empty() {
-        ds.notes.push(format!(
-            "{} bad row(s) skipped: {}",
-            bad.len(),
-            bad.iter()
-                .take(10)
-                .map(|b| format!("line {}: {}", b.line, b.reason))
-                .collect::<Vec<_>>()
-                .join("; ")
-        ));
-    }
+    crate::discover::note_bad_rows(&mut ds, &bad);
     Ok(ds)
 }
 
