@@ -717,10 +717,33 @@ pub fn held_out_chi2(
     observed: &[bool],
     x: &[f64],
 ) -> (f64, usize) {
+    let h = held_out_prediction(model, t_s, observed, x);
+    (h.chi2, h.count)
+}
+
+/// Prediction errors of the held-out rows (see [`held_out_chi2`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HeldOut {
+    /// Σ e²/S over the held-out rows (normalised by the predicted variance).
+    pub chi2: f64,
+    /// Σ e² over the held-out rows, output unit²: the errors of predicting them from the model
+    /// and the training rows before them (with white noise only, the raw residual).
+    pub sum_sq: f64,
+    /// Held-out rows.
+    pub count: usize,
+}
+
+/// [`held_out_chi2`] with the unnormalised errors too.
+pub fn held_out_prediction(
+    model: &NoiseModel,
+    t_s: &[f64],
+    observed: &[bool],
+    x: &[f64],
+) -> HeldOut {
     let mut ric = Riccati::new(model);
     let mut state = vec![0.0; ric.k];
     let mut prev_t: Option<f64> = None;
-    let (mut chi2, mut count) = (0.0, 0usize);
+    let (mut chi2, mut sum_sq, mut count) = (0.0, 0.0, 0usize);
     for ((&t, &obs), &xi) in t_s.iter().zip(observed).zip(x) {
         let dt = prev_t.map_or(0.0, |pt| (t - pt).max(0.0));
         prev_t = Some(t);
@@ -738,10 +761,15 @@ pub fn held_out_chi2(
             }
         } else {
             chi2 += e * e / s;
+            sum_sq += e * e;
             count += 1;
         }
     }
-    (chi2, count)
+    HeldOut {
+        chi2,
+        sum_sq,
+        count,
+    }
 }
 
 #[cfg(test)]
