@@ -339,6 +339,7 @@ mod tests {
             start_unix_s: None,
             site: None,
             dt_s: dt,
+            samples_per_point: Vec::new(),
             notes: Vec::new(),
             warnings: Vec::new(),
         }

@@ -297,6 +297,9 @@ pub struct Dataset {
     pub site: Option<(f64, f64, f64)>,
     /// Nominal sample spacing after binning, seconds.
     pub dt_s: f64,
+    /// Samples averaged into each point (bins of unequal counts have unequal white noise, see
+    /// `noise::white_scale_from_counts`); empty when not known (every point alike).
+    pub samples_per_point: Vec<f64>,
     /// Rows read, rows dropped for NaN, bins used: what happened on the way.
     pub notes: Vec<String>,
     /// What the user must not miss about the input (empty channels, absurd values, gaps that
@@ -694,6 +697,7 @@ pub fn dataset_from_log(log: &Log, opts: &DatasetOptions) -> Result<Dataset, Imp
         start_unix_s: log.meta("start_utc").and_then(parse_utc),
         site,
         dt_s: dt,
+        samples_per_point: counts,
         notes,
         warnings,
     })

@@ -27,6 +27,23 @@ pub struct NoiseModel {
     pub rw_per_s: f64,
     /// Fitted Allan coefficients (h_w unit²·s, flicker floor unit², h_rw unit²/s).
     pub h: [f64; 3],
+    /// Per row of the record: the factor on `white_var` of that point (a bin mean of n
+    /// samples has white variance σ²/n: the factor is the record's mean count over n, so
+    /// `white_var` stays the variance of a point of average count). `None`: every point alike.
+    pub white_scale: Option<Arc<[f64]>>,
+}
+
+use std::sync::Arc;
+
+/// Per-row white-variance factors of a record whose points hold `counts` samples each
+/// (mean count / count), or `None` when they are all equal (or not known).
+pub fn white_scale_from_counts(counts: &[f64]) -> Option<Arc<[f64]>> {
+    let first = *counts.first()?;
+    if counts.iter().all(|&c| c == first) || counts.iter().any(|&c| !(c > 0.0)) {
+        return None;
+    }
+    let mean = counts.iter().sum::<f64>() / counts.len() as f64;
+    Some(counts.iter().map(|&c| mean / c).collect())
 }
 
 /// Allan variance of an OU process of unit variance and correlation time `t_c` at averaging
@@ -123,6 +140,7 @@ impl NoiseModel {
             flicker: times.iter().map(|&t| (t, h[1])).collect(),
             rw_per_s: 3.0 * h[2],
             h,
+            white_scale: None,
         })
     }
 
@@ -133,7 +151,24 @@ impl NoiseModel {
             flicker: Vec::new(),
             rw_per_s: 0.0,
             h: [0.0; 3],
+            white_scale: None,
         }
+    }
+
+    /// The same model with per-row white-variance factors (see [`white_scale_from_counts`]).
+    pub fn with_white_scale(mut self, scale: Option<Arc<[f64]>>) -> Self {
+        self.white_scale = scale;
+        self
+    }
+
+    /// White variance of row `i`.
+    fn white_var_at(&self, i: usize) -> f64 {
+        let f = self
+            .white_scale
+            .as_ref()
+            .and_then(|s| s.get(i).copied())
+            .unwrap_or(1.0);
+        (self.white_var * f).max(1e-300)
     }
 }
 
@@ -181,7 +216,7 @@ fn innovation_sums(model: &NoiseModel, t_s: &[f64], idx: &[usize], x: &[f64]) ->
     for &i in idx {
         let dt = prev_t.map_or(0.0, |pt| (t_s[i] - pt).max(0.0));
         prev_t = Some(t_s[i]);
-        ric.step(dt, true);
+        ric.step(dt, i, true);
         let mut pred = 0.0;
         for (s, f) in state.iter_mut().zip(&ric.a) {
             *s *= f;
@@ -238,7 +273,7 @@ impl<'m> Riccati<'m> {
         Riccati {
             model,
             k,
-            r_var: model.white_var.max(1e-300),
+            r_var: f64::NAN,
             p,
             a: vec![1.0; k],
             q: vec![0.0; k],
@@ -253,14 +288,17 @@ impl<'m> Riccati<'m> {
 
     /// Predicts over `dt_s` (fills `a`, `ph`, `s`) and, if `observed`, applies the measurement
     /// update to the covariance.
-    fn step(&mut self, dt_s: f64, observed: bool) {
+    fn step(&mut self, dt_s: f64, row: usize, observed: bool) {
         let same_dt = (dt_s - self.last_dt).abs() <= 1e-9 * dt_s.abs().max(1e-300);
-        if self.steady && same_dt && observed && self.last_observed {
+        let r_var = self.model.white_var_at(row);
+        let same_r = r_var == self.r_var;
+        self.r_var = r_var;
+        if self.steady && same_dt && same_r && observed && self.last_observed {
             return;
         }
         let k = self.k;
         let (old_s, was_observed) = (self.s, self.last_observed);
-        let old_ph = if same_dt && observed && was_observed {
+        let old_ph = if same_dt && same_r && observed && was_observed {
             Some(self.ph.clone())
         } else {
             None
@@ -356,6 +394,7 @@ impl NoiseModel {
             },
             rw_per_s: q,
             h: [w * dt_s, f, q / 3.0],
+            white_scale: None,
         }
     }
 
@@ -401,6 +440,23 @@ impl NoiseModel {
         span_s: f64,
         start: &[&NoiseModel],
         max_evals: usize,
+    ) -> NoiseFit {
+        Self::fit_ml_scaled(t_s, idx, x, dt_s, span_s, start, max_evals, None)
+    }
+
+    /// [`NoiseModel::fit_ml`] for a record whose points have different white variances
+    /// (bins of unequal counts): `white_scale` as in [`white_scale_from_counts`]; the fitted
+    /// model carries it.
+    #[allow(clippy::too_many_arguments, clippy::needless_range_loop)]
+    pub fn fit_ml_scaled(
+        t_s: &[f64],
+        idx: &[usize],
+        x: &[f64],
+        dt_s: f64,
+        span_s: f64,
+        start: &[&NoiseModel],
+        max_evals: usize,
+        white_scale: Option<Arc<[f64]>>,
     ) -> NoiseFit {
         let n = idx.len();
         let values: Vec<f64> = idx.iter().map(|&i| x[i]).collect();
@@ -458,6 +514,7 @@ impl NoiseModel {
                 w * p[1].exp() / dt
             };
             NoiseModel::from_levels_from(w, f, p[2], q, dt * p[3].exp(), dt, span_s)
+                .with_white_scale(white_scale.clone())
         };
         let mut evals = 0usize;
         // Concentrated −2 ln L at p = (ln f/w, ln q·dt/w, β), and the scale c.
@@ -652,7 +709,7 @@ impl Whitener {
         for &i in &idx {
             let dt = prev_t.map_or(0.0, |pt| (t_s[i] - pt).max(0.0));
             prev_t = Some(t_s[i]);
-            ric.step(dt, true);
+            ric.step(dt, i, true);
             a_all.extend_from_slice(&ric.a);
             let s = ric.s;
             g_all.extend(ric.ph.iter().map(|v| v / s));
@@ -744,10 +801,10 @@ pub fn held_out_prediction(
     let mut state = vec![0.0; ric.k];
     let mut prev_t: Option<f64> = None;
     let (mut chi2, mut sum_sq, mut count) = (0.0, 0.0, 0usize);
-    for ((&t, &obs), &xi) in t_s.iter().zip(observed).zip(x) {
+    for (i, ((&t, &obs), &xi)) in t_s.iter().zip(observed).zip(x).enumerate() {
         let dt = prev_t.map_or(0.0, |pt| (t - pt).max(0.0));
         prev_t = Some(t);
-        ric.step(dt, obs);
+        ric.step(dt, i, obs);
         let mut pred = 0.0;
         for (s, f) in state.iter_mut().zip(&ric.a) {
             *s *= f;
@@ -823,6 +880,47 @@ pub(crate) mod tests {
     }
 
     #[test]
+    fn bins_of_unequal_counts_get_the_white_variance_of_their_count() {
+        // Bin means of 1 and 2 samples alternately (72 000 one-minute rows binned to 50 000
+        // points), white noise σ = 1 per sample: a bin of n samples has variance 1/n.
+        let n = 6000;
+        let counts: Vec<f64> = (0..n).map(|i| if i % 2 == 0 { 1.0 } else { 2.0 }).collect();
+        let t: Vec<f64> = (0..n).map(|i| 86.4 * i as f64).collect();
+        let x: Vec<f64> = normals(n, 9)
+            .iter()
+            .zip(&counts)
+            .map(|(z, c)| z / c.sqrt())
+            .collect();
+        let idx: Vec<usize> = (0..n).collect();
+        let scale = white_scale_from_counts(&counts);
+        assert!(scale.is_some());
+        let scaled = NoiseModel::fit_ml_scaled(&t, &idx, &x, 86.4, t[n - 1], &[], 110, scale);
+        let plain = NoiseModel::fit_ml(&t, &idx, &x, 86.4, t[n - 1], &[], 110);
+        assert_eq!(scaled.method, METHOD_KALMAN_ML, "{:?}", scaled.failure);
+        // The white level is that of a bin of the mean count (1.5 samples): 1/1.5.
+        let w = scaled.model.white_var;
+        assert!((w * 1.5 - 1.0).abs() < 0.1, "{w}");
+        // The likelihood tells the two apart: Δ(−2 ln L) ≈ n·(ln 0.75 − ½ ln 0.5) ≈ 350
+        // expected (its spread ≈ 40).
+        assert!(
+            plain.neg2_loglik - scaled.neg2_loglik > 200.0,
+            "{} vs {}",
+            plain.neg2_loglik,
+            scaled.neg2_loglik
+        );
+        // Whitened with the scaled model, both kinds of bin have unit variance.
+        let e = Whitener::new(&scaled.model, &t, idx.clone()).whiten(&x);
+        let var_of = |parity: usize| {
+            let v: Vec<f64> = e.iter().skip(parity).step_by(2).copied().collect();
+            v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64
+        };
+        assert!((var_of(0) - 1.0).abs() < 0.1, "{}", var_of(0));
+        assert!((var_of(1) - 1.0).abs() < 0.1, "{}", var_of(1));
+        // Equal counts: no factors at all (the steady-state filter stays exact and fast).
+        assert!(white_scale_from_counts(&[3.0; 10]).is_none());
+    }
+
+    #[test]
     fn likelihood_fit_of_a_residual_with_no_variance_fails_loudly() {
         let t: Vec<f64> = (0..100).map(f64::from).collect();
         let f = NoiseModel::fit_ml(
@@ -878,6 +976,7 @@ pub(crate) mod tests {
             flicker: Vec::new(),
             rw_per_s: 1.0,
             h: [0.0; 3],
+            white_scale: None,
         };
         let t: Vec<f64> = (0..6).map(f64::from).collect();
         let x = [0.0, 1.0, 3.0, 7.0, 2.0, 2.0];
@@ -930,6 +1029,7 @@ pub(crate) mod tests {
             flicker: Vec::new(),
             rw_per_s: 1.0,
             h: [0.0; 3],
+            white_scale: None,
         };
         let w = Whitener::new(&rw, &t, (0..5).collect());
         let e = w.filter(&[0.0, 2.0, 5.0, 9.0, 14.0], false);

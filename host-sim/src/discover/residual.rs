@@ -403,6 +403,7 @@ mod tests {
             start_unix_s: None,
             site: None,
             dt_s: 1.0,
+            samples_per_point: Vec::new(),
             notes: Vec::new(),
             warnings: Vec::new(),
         };

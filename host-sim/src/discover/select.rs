@@ -415,24 +415,28 @@ const ML_EVALS_WARM: usize = 36;
 /// `warm` (and from the Allan-deviation fit when the record's time grid allows one).
 fn noise_of(ds: &Dataset, r: &[f64], warm: Option<&NoiseModel>) -> NoiseFit {
     let idx: Vec<usize> = (0..r.len()).collect();
+    let scale = point_white_scale(ds);
+    let fit = |start: &[&NoiseModel], evals: usize| {
+        NoiseModel::fit_ml_scaled(
+            &ds.t_s,
+            &idx,
+            r,
+            ds.dt_s,
+            ds.span_s(),
+            start,
+            evals,
+            scale.clone(),
+        )
+    };
     match warm {
-        Some(m) => NoiseModel::fit_ml(&ds.t_s, &idx, r, ds.dt_s, ds.span_s(), &[m], ML_EVALS_WARM),
+        Some(m) => fit(&[m], ML_EVALS_WARM),
         None => {
             let adev_start = NoiseModel::fit(&residual::adev(ds, r), ds.dt_s, ds.span_s());
-            let cold =
-                NoiseModel::fit_ml(&ds.t_s, &idx, r, ds.dt_s, ds.span_s(), &[], ML_EVALS_COLD);
+            let cold = fit(&[], ML_EVALS_COLD);
             match adev_start {
                 Some(a) if cold.failure.is_none() => {
                     // The Allan fit is a second start; keep the more likely of the two.
-                    let alt = NoiseModel::fit_ml(
-                        &ds.t_s,
-                        &idx,
-                        r,
-                        ds.dt_s,
-                        ds.span_s(),
-                        &[&a],
-                        ML_EVALS_WARM,
-                    );
+                    let alt = fit(&[&a], ML_EVALS_WARM);
                     if alt.failure.is_none() && alt.neg2_loglik < cold.neg2_loglik {
                         NoiseFit {
                             evaluations: alt.evaluations + cold.evaluations,
@@ -446,6 +450,15 @@ fn noise_of(ds: &Dataset, r: &[f64], warm: Option<&NoiseModel>) -> NoiseFit {
             }
         }
     }
+}
+
+/// Per-point white-variance factors of the record's bins (a bin of n samples has white
+/// variance σ²/n), when its bins hold unequal counts.
+fn point_white_scale(ds: &Dataset) -> Option<std::sync::Arc<[f64]>> {
+    if ds.samples_per_point.len() != ds.len() {
+        return None;
+    }
+    super::noise::white_scale_from_counts(&ds.samples_per_point)
 }
 
 /// How `fit_state` gets its noise model.
@@ -925,8 +938,12 @@ fn joint_fit(
             f64::NAN
         };
     }
-    let all = others(&ecols, usize::MAX);
     let rows = Rows::with_noise(&noise.model, &ds.t_s, None);
+    let delay = tide_delay(ds, target, ctx, accepted, &mut ecols, &others, &rows);
+    let mut all = others(&ecols, usize::MAX);
+    if let Some(d) = &delay {
+        all.push(d.derivative.clone());
+    }
     let fit = gls(&all, target, 0.0, &rows);
     let wc: Vec<Vec<f64>> = all.iter().map(|c| rows.whiten(c, 0.0)).collect();
     let basis = Basis::new(&wc);
@@ -944,10 +961,14 @@ fn joint_fit(
     let k0 = base_cols.len();
     let mut names = Vec::new();
     let mut at = k0;
+    let mut tide_at = None;
     for (i, a) in accepted.iter_mut().enumerate() {
         let m = ecols[i].len();
         for j in 0..m {
             names.push(format!("{i}:{}:c{j}", a.effect.name()));
+        }
+        if delay.as_ref().is_some_and(|d| d.effect == i) {
+            tide_at = Some(at);
         }
         a.theta = Param {
             value: thetas[i],
@@ -962,14 +983,116 @@ fn joint_fit(
         );
         at += m;
     }
+    // The delay: the tide a·C(τ̂) + b·∂C/∂τ is a·C(τ̂ + b/a) to first order, so τ = τ̂ + b/a
+    // and its row of the covariance is the derivative coefficient's divided by a.
+    let mut scale = vec![1.0; all.len()];
+    if let (Some(d), Some(ta)) = (&delay, tide_at) {
+        let last = all.len() - 1;
+        let (a, b) = (fit.beta[ta], fit.beta[last]);
+        scale[last] = 1.0 / a;
+        names.push(format!(
+            "{}:{}:delay_s",
+            d.effect,
+            Effect::TidalGravity.name()
+        ));
+        accepted[d.effect].params.push((
+            "delay_s".into(),
+            Param {
+                value: d.delay_s + b / a,
+                sigma: se[last] / a.abs(),
+            },
+        ));
+    }
     let covariance = (k0..all.len())
-        .map(|r| (k0..all.len()).map(|c| cov_all[r][c] * s2).collect())
+        .map(|r| {
+            (k0..all.len())
+                .map(|c| cov_all[r][c] * s2 * scale[r] * scale[c])
+                .collect()
+        })
         .collect();
     JointFit {
         names,
         covariance,
         effect_columns: ecols,
     }
+}
+
+/// Largest instrument delay of the record behind the tide that the joint fit follows, s: a
+/// delay beyond it (a tide too weak to time) is not reported.
+pub const DELAY_MAX_S: f64 = 3600.0;
+/// Half-step of the tide's numerical derivative in the delay, s.
+const DELAY_STEP_S: f64 = 30.0;
+
+/// The tide's instrument delay from the joint fit.
+struct TideDelay {
+    /// Index of the tide in the accepted effects.
+    effect: usize,
+    /// The delay the tide column is evaluated at, s.
+    delay_s: f64,
+    /// ∂(tide column)/∂delay at it.
+    derivative: Vec<f64>,
+}
+
+/// The tide's instrument delay fitted jointly with every other accepted effect: Gauss–Newton
+/// on the delayed tide column (the model's tide read at t − τ), each step one GLS of all
+/// columns plus the column's derivative in τ under the final noise model. On return the tide's
+/// columns in `ecols` are at the fitted delay. `None` without a tide, a clock (start time and
+/// site) or when the delay leaves ±[`DELAY_MAX_S`].
+fn tide_delay(
+    ds: &Dataset,
+    target: &[f64],
+    ctx: &Context,
+    accepted: &[Accepted],
+    ecols: &mut [Vec<Vec<f64>>],
+    others: &dyn Fn(&[Vec<Vec<f64>>], usize) -> Vec<Vec<f64>>,
+    rows: &Rows,
+) -> Option<TideDelay> {
+    let it = accepted
+        .iter()
+        .position(|a| a.effect == Effect::TidalGravity)?;
+    if ecols[it].len() != 1 {
+        return None;
+    }
+    let clock = super::tidal::TideClock::new(ds, DELAY_MAX_S + 2.0 * DELAY_STEP_S)?;
+    let col_at = |d: f64| -> Vec<f64> {
+        let c = Context {
+            tide_gravity_g: Some(clock.delayed(&ds.t_s, d)),
+            ..ctx.clone()
+        };
+        columns(&Effect::TidalGravity, ds, &c, f64::NAN)
+            .into_iter()
+            .next()
+            .unwrap_or_default()
+    };
+    let derivative_at = |d: f64| -> Vec<f64> {
+        let (p, m) = (col_at(d + DELAY_STEP_S), col_at(d - DELAY_STEP_S));
+        p.iter()
+            .zip(&m)
+            .map(|(a, b)| (a - b) / (2.0 * DELAY_STEP_S))
+            .collect()
+    };
+    let k_tide = others(ecols, usize::MAX).len() - ecols[it..].iter().map(Vec::len).sum::<usize>();
+    let mut d = 0.0;
+    for _ in 0..5 {
+        let mut cols = others(ecols, usize::MAX);
+        cols.push(derivative_at(d));
+        let f = gls(&cols, target, 0.0, rows);
+        let step = f.beta[cols.len() - 1] / f.beta[k_tide];
+        if !step.is_finite() || (d + step).abs() > DELAY_MAX_S {
+            ecols[it] = vec![col_at(0.0)];
+            return None;
+        }
+        d += step;
+        ecols[it] = vec![col_at(d)];
+        if step.abs() < 0.01 {
+            break;
+        }
+    }
+    Some(TideDelay {
+        effect: it,
+        delay_s: d,
+        derivative: derivative_at(d),
+    })
 }
 
 /// Records why a candidate was refused (one entry per effect name, the latest reason).

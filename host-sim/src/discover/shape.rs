@@ -158,6 +158,7 @@ mod tests {
             start_unix_s: None,
             site: None,
             dt_s: 10.0,
+            samples_per_point: Vec::new(),
             notes: Vec::new(),
             warnings: Vec::new(),
         }

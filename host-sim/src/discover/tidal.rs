@@ -685,6 +685,51 @@ pub fn for_discovery(
     analyse(ds, target, &nuisance)
 }
 
+/// The model's tide gravity (g, as `effects::tide_series`) on a 60-s grid reaching
+/// `margin_s` beyond the record at both ends, so that the tide can be read at delayed times
+/// (the delay of the joint fit, `select`).
+#[derive(Debug, Clone)]
+pub struct TideClock {
+    t0_s: f64,
+    step_s: f64,
+    g: Vec<f64>,
+}
+
+impl TideClock {
+    /// The clock of a record with a start time and a site; `None` otherwise.
+    pub fn new(ds: &Dataset, margin_s: f64) -> Option<Self> {
+        let start = ds.start_unix_s?;
+        let (lat, lon, h) = ds.site?;
+        let st = Station::new(lat, lon, h).ok()?;
+        let step_s = 60.0;
+        let t0_s = ds.t_s.first()? - margin_s - step_s;
+        let t1 = ds.t_s.last()? + margin_s + step_s;
+        let n = ((t1 - t0_s) / step_s).ceil() as usize + 2;
+        let g = (0..n)
+            .map(|k| {
+                st.tide_at_unix_seconds(start + t0_s + k as f64 * step_s)
+                    .gravity_gs()
+                    .0
+            })
+            .collect();
+        Some(TideClock { t0_s, step_s, g })
+    }
+
+    /// Tide gravity (g) at each of `t_s` delayed by `delay_s` (the tide at t − delay; linear
+    /// between the 60-s nodes, as `effects::tide_series`).
+    pub fn delayed(&self, t_s: &[f64], delay_s: f64) -> Vec<f64> {
+        let last = self.g.len().saturating_sub(2);
+        t_s.iter()
+            .map(|&t| {
+                let x = ((t - delay_s - self.t0_s) / self.step_s).max(0.0);
+                let k = (x.floor() as usize).min(last);
+                let f = x - k as f64;
+                self.g[k] + (self.g[k + 1] - self.g[k]) * f
+            })
+            .collect()
+    }
+}
+
 /// Weighted least squares of the group phases κ_g = −ω_g·τ (groups with factor σ/δ < 10 %):
 /// overall and per band.
 fn fit_delay(groups: &mut [GroupFit]) -> DelayFit {

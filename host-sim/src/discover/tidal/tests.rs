@@ -84,6 +84,7 @@ fn synthetic_every(dt: f64, days: f64, truth: &Truth, seed: u64) -> Dataset {
         start_unix_s: Some(START_UNIX_S),
         site: Some(SITE),
         dt_s: dt,
+        samples_per_point: Vec::new(),
         notes: Vec::new(),
         warnings: Vec::new(),
     }
