@@ -340,13 +340,18 @@ fn effects_injected_into_the_real_gravimeter_residual_are_found_by_snr() {
     );
     // Stated before measuring: ≥ 5/6 found at SNR 9–14 and nothing accepted on ≥ 3/4 of the
     // uninjected windows (the real residual is not pure noise: the first window holds the
-    // instrument's settling). MEASURED with the Allan-fitted noise model: 3/6 at SNR 9–14, 8/12
-    // at SNR ≥ 6 — steps of ΔBIC −190…−520 and a line of ΔBIC −495 are refused by the
-    // cross-validation (docs/discovery.md, "Real residual"). Asserted now: the measured floor
-    // at SNR ≥ 6, half of the draws, with the gap written in the docs — not the goal.
+    // instrument's settling). Met since the out-of-sample score is the held-out prediction
+    // error (select.rs): measured 5/6 at 9–14 and 10/12 at SNR ≥ 6, 2/12 uninjected windows
+    // (docs/discovery.md, "Real residual"); before, the raw held-out residual refused real
+    // steps and lines of ΔBIC −190…−520 (3/6).
+    assert!(
+        curve[3] >= 5,
+        "detection at SNR 9–14: {}/{PER_BAND}",
+        curve[3]
+    );
     let strong = curve[2] + curve[3];
     assert!(
-        strong >= PER_BAND,
+        strong >= 9,
         "detection at SNR ≥ 6: {strong}/{}",
         2 * PER_BAND
     );

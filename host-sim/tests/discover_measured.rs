@@ -83,6 +83,29 @@ fn gmetrology_record_names_the_earth_tide_with_a_gravimetric_factor_near_one() {
     );
     assert!(d.selection.final_cv.raw < d.selection.baseline_cv.raw);
     assert_noise_fitted(&d);
+    // The instrument delay refitted in the joint fit (one delay of the whole tide, with the
+    // warm-up and the drift) agrees with the one the wave-group analysis reads from the group
+    // phases — two different estimates of the same lag.
+    let joint = tide
+        .params
+        .iter()
+        .find(|(k, _)| k == "delay_s")
+        .map(|(_, p)| *p)
+        .expect("delay_s in the joint fit");
+    let groups = &t["delay"]["delay_s"];
+    let (g, gs) = (
+        groups["value"].as_f64().expect("delay"),
+        groups["sigma"].as_f64().expect("sigma"),
+    );
+    eprintln!(
+        "delay: joint fit {:.1} ± {:.1} s, wave groups {g:.1} ± {gs:.1} s",
+        joint.value, joint.sigma
+    );
+    assert!(joint.sigma > 0.0 && joint.sigma < 60.0, "{joint:?}");
+    assert!(
+        (joint.value - g).abs() < 3.0 * joint.sigma.hypot(gs),
+        "joint delay {joint:?} vs wave groups {g} ± {gs}"
+    );
     // With the noise model fitted, a smooth drift is not cut into "tares": every accepted step
     // is a jump of the record at its time, larger than the jump noise there (select.rs
     // refuses the others and says so in `refused`).

@@ -91,7 +91,7 @@ pub fn json(d: &Discovery) -> Value {
         "joint_fit": s.joint.as_ref().map(|j| json!({
             "coefficients": j.names,
             "covariance": j.covariance,
-            "note": "parameters of `effects` come from this fit; the covariance is of the effects' linear coefficients (output units), conditional on the nonlinear parameters, whose uncertainties come from the likelihood profile",
+            "note": "parameters of `effects` come from this fit; the covariance is of the effects' linear coefficients (output units) and, when the tide is named, of its instrument delay (`<i>:tidal_gravity:delay_s`, seconds, refitted jointly), conditional on the other nonlinear parameters, whose uncertainties come from the likelihood profile",
         })),
         "refused": s.refused.iter().map(|(n, w)| json!({"name": n, "why": w})).collect::<Vec<_>>(),
         "forward_splits": super::select::FORWARD_SPLITS,

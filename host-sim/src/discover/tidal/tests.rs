@@ -290,8 +290,29 @@ fn discover_reports_a_hidden_record_delay_with_the_tide() {
         dl.value,
         dl.sigma
     );
+    // The joint fit refits the same delay with the drift and every other accepted effect
+    // (Gauss–Newton on the delayed tide): the hidden one within its joint-covariance σ.
+    let tide = d
+        .selection
+        .accepted
+        .iter()
+        .find(|a| a.effect.name() == "tidal_gravity")
+        .expect("tide");
+    let jd = tide
+        .params
+        .iter()
+        .find(|(k, _)| k == "delay_s")
+        .map(|(_, p)| *p)
+        .expect("delay_s in the joint fit");
+    assert!(
+        (jd.value - truth.delay_s).abs() < 4.0 * jd.sigma + 5.0 && jd.value > 5.0 * jd.sigma,
+        "joint delay {jd:?}"
+    );
     let j = crate::discover::report::json(&d);
     assert!(j["tidal_analysis"]["delay"]["delay_s"]["value"].is_number());
+    assert!(j["joint_fit"]["coefficients"].as_array().is_some_and(|n| n
+        .iter()
+        .any(|x| x.as_str() == Some("0:tidal_gravity:delay_s"))));
     assert!(crate::discover::report::text(&d).contains("delay_s = "));
 }
 
