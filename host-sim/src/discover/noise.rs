@@ -39,7 +39,7 @@ use std::sync::Arc;
 /// (mean count / count), or `None` when they are all equal (or not known).
 pub fn white_scale_from_counts(counts: &[f64]) -> Option<Arc<[f64]>> {
     let first = *counts.first()?;
-    if counts.iter().all(|&c| c == first) || counts.iter().any(|&c| !(c > 0.0)) {
+    if counts.iter().all(|&c| c == first) || counts.iter().any(|&c| c.is_nan() || c <= 0.0) {
         return None;
     }
     let mean = counts.iter().sum::<f64>() / counts.len() as f64;

@@ -939,7 +939,7 @@ fn joint_fit(
         };
     }
     let rows = Rows::with_noise(&noise.model, &ds.t_s, None);
-    let delay = tide_delay(ds, target, ctx, accepted, &mut ecols, &others, &rows);
+    let delay = tide_delay(ds, target, ctx, base_cols, accepted, &mut ecols, &rows);
     let mut all = others(&ecols, usize::MAX);
     if let Some(d) = &delay {
         all.push(d.derivative.clone());
@@ -1042,11 +1042,18 @@ fn tide_delay(
     ds: &Dataset,
     target: &[f64],
     ctx: &Context,
+    base_cols: &[Vec<f64>],
     accepted: &[Accepted],
     ecols: &mut [Vec<Vec<f64>>],
-    others: &dyn Fn(&[Vec<Vec<f64>>], usize) -> Vec<Vec<f64>>,
     rows: &Rows,
 ) -> Option<TideDelay> {
+    let all = |ecols: &[Vec<Vec<f64>>]| -> Vec<Vec<f64>> {
+        let mut c = base_cols.to_vec();
+        for e in ecols {
+            c.extend(e.iter().cloned());
+        }
+        c
+    };
     let it = accepted
         .iter()
         .position(|a| a.effect == Effect::TidalGravity)?;
@@ -1071,10 +1078,10 @@ fn tide_delay(
             .map(|(a, b)| (a - b) / (2.0 * DELAY_STEP_S))
             .collect()
     };
-    let k_tide = others(ecols, usize::MAX).len() - ecols[it..].iter().map(Vec::len).sum::<usize>();
+    let k_tide = base_cols.len() + ecols[..it].iter().map(Vec::len).sum::<usize>();
     let mut d = 0.0;
     for _ in 0..5 {
-        let mut cols = others(ecols, usize::MAX);
+        let mut cols = all(ecols);
         cols.push(derivative_at(d));
         let f = gls(&cols, target, 0.0, rows);
         let step = f.beta[cols.len() - 1] / f.beta[k_tide];
