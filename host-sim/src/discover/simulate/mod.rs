@@ -144,8 +144,12 @@ where
         *y -= p;
     }
     lap("twin");
-    let cause = super::discover(resid_ds, None, cfg)?;
+    let spin = stage_spinner("catalogue search on the measured − twin residual");
+    let cause = super::discover(resid_ds, None, cfg);
+    spin.finish_and_clear();
+    let cause = cause?;
     lap("catalogue search");
+    let spin = stage_spinner("extension and the twin's noise model");
     // 2. The extension: the accepted effects as the twin's effects; each one's contribution is
     //    what it adds to the twin's prediction (the simulator's own rendering of it).
     let (effects, refused) = quiet.effects_from(&cause);
@@ -220,6 +224,7 @@ where
     } else {
         cause.selection.final_noise.model.clone()
     };
+    spin.finish_and_clear();
     lap("extension and noise fit");
     // 4. Ensembles and comparisons, before and after.
     let twin = build(Some(&noise))?;
@@ -282,6 +287,19 @@ where
         simulator: quiet.is_simulator(),
         timing_s,
     })
+}
+
+/// A spinner with the elapsed time on stderr for a stage without countable steps (drawn only
+/// on a terminal, like the ensemble's bars).
+fn stage_spinner(what: &str) -> indicatif::ProgressBar {
+    let p = indicatif::ProgressBar::new_spinner();
+    p.set_style(
+        indicatif::ProgressStyle::with_template("{spinner} {msg} ({elapsed})")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_spinner()),
+    );
+    p.set_message(what.to_owned());
+    p.enable_steady_tick(std::time::Duration::from_millis(200));
+    p
 }
 
 /// `r` minus its least-squares fit by the tidal analysis' drift columns (cubic B-splines with
