@@ -83,6 +83,10 @@ pub struct Context {
     pub tide_tilt_rad: Option<(Vec<f64>, Vec<f64>)>,
     /// Nominal eq. (5) tilt term in output units (if subtracted by the baseline).
     pub tilt_term: Option<Vec<f64>>,
+    /// The Preisach distribution of the accepted `thermal_hysteresis` (set by the selection
+    /// once it has fitted one): its column is then that distribution scaled to width θ; without
+    /// one, a single play of half-width θ.
+    pub hysteresis: Option<super::hysteresis::Preisach>,
 }
 
 /// Tide series at the dataset's instants (evaluated at most every 60 s and interpolated
@@ -319,7 +323,12 @@ pub fn columns(e: &Effect, ds: &Dataset, ctx: &Context, theta: f64) -> Vec<Vec<f
             })
             .unwrap_or_default(),
         Effect::ThermalHysteresis => temp()
-            .map(|tc| vec![super::hysteresis::branch(&tc, theta)])
+            .map(|tc| {
+                vec![match &ctx.hysteresis {
+                    Some(p) => p.column(&tc, theta),
+                    None => super::hysteresis::branch(&tc, theta),
+                }]
+            })
             .unwrap_or_default(),
         // Torquer power ∝ I² ∝ a²: the coil temperature and with it the bias follow a² through a
         // first-order lag; the step part a² is collinear with K2·a² (the baseline's levels), so

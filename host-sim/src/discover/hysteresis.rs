@@ -60,17 +60,22 @@ pub fn branch(temp_c: &[f64], r_c: f64) -> Vec<f64> {
         .collect()
 }
 
-/// Reading-noise level of a temperature channel, °C: the median absolute first difference
-/// divided by 0.6745·√2 (robust: a slow temperature programme moves little between samples,
-/// the reading noise does every sample).
+/// Reading-noise level of a temperature channel, °C: the median absolute *second* difference
+/// divided by 0.6745·√6 (robust, and blind to a constant rate: a cycling programme's ramp
+/// moves the reading by 10–20 mK between 2-min samples, which the first difference took for
+/// noise — it put the play grid's lower end at 0.05 °C, above the narrow plays of a real loop;
+/// only the turnovers, a few minutes per half-cycle, reach the second difference).
 pub fn reading_noise_c(temp_c: &[f64]) -> f64 {
-    let mut d: Vec<f64> = temp_c.windows(2).map(|w| (w[1] - w[0]).abs()).collect();
+    let mut d: Vec<f64> = temp_c
+        .windows(3)
+        .map(|w| (w[2] - 2.0 * w[1] + w[0]).abs())
+        .collect();
     if d.is_empty() {
         return 0.0;
     }
     let mid = d.len() / 2;
     let (_, m, _) = d.select_nth_unstable_by(mid, f64::total_cmp);
-    *m / (0.6745 * std::f64::consts::SQRT_2)
+    *m / (0.6745 * 6f64.sqrt())
 }
 
 /// Search range of the play half-width, °C: from 3 × the reading noise (a play narrower than
@@ -184,6 +189,84 @@ pub fn nnls(cols: &[Vec<f64>], y: &[f64]) -> Vec<f64> {
 pub fn preisach_nnls(temp_c: &[f64], widths_c: &[f64], y: &[f64]) -> Vec<f64> {
     let cols: Vec<Vec<f64>> = widths_c.iter().map(|&r| branch(temp_c, r)).collect();
     nnls(&cols, y)
+}
+
+/// A discrete Preisach (Prandtl–Ishlinskii) distribution of play half-widths: the shape of the
+/// `thermal_hysteresis` column when the selection has fitted one (NNLS weights, normalised to
+/// sum 1, so the column saturates at ±1 and its coefficient is the branch half-width).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct Preisach {
+    /// Play half-widths, °C (the widths with a non-zero weight).
+    pub widths_c: Vec<f64>,
+    /// Their weights, ≥ 0, summing to 1.
+    pub weights: Vec<f64>,
+}
+
+impl Preisach {
+    /// From NNLS weights over `widths_c` (zero weights dropped); `None` when all are zero.
+    pub fn from_weights(widths_c: &[f64], w: &[f64]) -> Option<Self> {
+        let total: f64 = w.iter().filter(|v| **v > 0.0).sum();
+        if !(total > 0.0 && total.is_finite()) {
+            return None;
+        }
+        let (widths_c, weights) = widths_c
+            .iter()
+            .zip(w)
+            .filter(|(_, v)| **v > 0.0)
+            .map(|(r, v)| (*r, v / total))
+            .unzip();
+        Some(Self { widths_c, weights })
+    }
+
+    /// The distribution's characteristic width: the weighted geometric mean, °C (the effect's
+    /// nonlinear parameter θ; one play: its half-width).
+    pub fn width_c(&self) -> f64 {
+        self.widths_c
+            .iter()
+            .zip(&self.weights)
+            .map(|(r, w)| w * r.ln())
+            .sum::<f64>()
+            .exp()
+    }
+
+    /// The column Σ w_k·h_{r_k·θ/θ₀}[T]: the distribution scaled so that its characteristic
+    /// width is `theta` (θ = θ₀ gives the fitted shape; other θ scale every width alike, so the
+    /// width's uncertainty and the shape check keep their meaning).
+    pub fn column(&self, temp_c: &[f64], theta: f64) -> Vec<f64> {
+        let scale = theta / self.width_c();
+        let mut out = vec![0.0; temp_c.len()];
+        for (r, w) in self.widths_c.iter().zip(&self.weights) {
+            for (o, h) in out.iter_mut().zip(branch(temp_c, r * scale)) {
+                *o += w * h;
+            }
+        }
+        out
+    }
+}
+
+/// The best non-negative Preisach distribution over `widths_c` for a residual: `cols[k]` is the
+/// branch column of `widths_c[k]` and `y` the residual, both in the domain the fit is judged in
+/// (whitened, the current model projected out). Both signs are tried (the heating branch may
+/// read lower or higher). Returns the distribution, the sign and the number of active widths.
+pub fn fit_preisach(widths_c: &[f64], cols: &[Vec<f64>], y: &[f64]) -> Option<(Preisach, f64, usize)> {
+    let rss = |w: &[f64], sign: f64| {
+        (0..y.len())
+            .map(|i| {
+                let f: f64 = cols.iter().zip(w).map(|(c, wk)| wk * c[i]).sum();
+                (sign * y[i] - f).powi(2)
+            })
+            .sum::<f64>()
+    };
+    let neg: Vec<f64> = y.iter().map(|v| -v).collect();
+    let wp = nnls(cols, y);
+    let wn = nnls(cols, &neg);
+    let (w, sign) = if rss(&wp, 1.0) <= rss(&wn, -1.0) {
+        (wp, 1.0)
+    } else {
+        (wn, -1.0)
+    };
+    let active = w.iter().filter(|v| **v > 0.0).count();
+    Preisach::from_weights(widths_c, &w).map(|p| (p, sign, active))
 }
 
 #[cfg(test)]
