@@ -165,3 +165,225 @@ fn without_the_hidden_wave_there_is_no_mismatch_in_that_band() {
         accomp_host::discover::simulate::output::text(&s, &ds.output_unit)
     );
 }
+
+// ---------------------------------------------------------------------------------------------
+// A simulated accelerometer log (paper-1g-like) with a hidden second-order thermal path.
+//
+// The station simulator writes a 1 g log; the test then adds to its output column a bias that
+// follows the *true* mount temperature (the log's truth column, not the RTD reading the twin
+// sees) through two thermal masses in series (time constants 10 min and 4 min): b =
+// c·(L₂L₁[T] − T). The catalogue's `thermal_lag` is one first-order lag of the measured
+// temperature: it describes this path only approximately (its shape check says so on some
+// seeds). The tool gets the log, nothing else; seeds 7–11 were tried, all pass with the margins
+// below (after the extension at most ×1.3 beyond the envelope edge, control ×1.25).
+// The effect's band is measured from the injected series itself (its PSD against the control
+// run's envelope), never from what the tool reports.
+// ---------------------------------------------------------------------------------------------
+
+use accomp_host::discover::simulate::ensemble::Yardstick;
+use accomp_host::log::Log;
+use accomp_host::sim::scenario::Scenario;
+
+const ACCEL_DAYS: f64 = 4.0;
+const ACCEL_INTERVAL_S: f64 = 120.0;
+const PATH_TAU1_S: f64 = 10.0 * 60.0;
+const PATH_TAU2_S: f64 = 4.0 * 60.0;
+/// Output volts per °C of lag error (≈ 45 µg/°C at the preset's ≈ 1.3 V/g): a few µg against
+/// the thermostat's 0.17 °C, 15 min fluctuation.
+const PATH_COEFFICIENT_V_PER_C: f64 = 6.0e-5;
+const ACCEL_SEED: u64 = 7;
+
+/// The paper-1g log (4 days at 2 min), optionally with the hidden thermal path added to its
+/// output column.
+fn accelerometer_log(hidden: bool) -> (Dataset, Vec<f64>) {
+    let mut s = Scenario::preset("paper-1g").expect("preset");
+    s.run.duration_s = ACCEL_DAYS * 86_400.0;
+    s.run.interval_s = ACCEL_INTERVAL_S;
+    s.tide.step_s = ACCEL_INTERVAL_S;
+    // What the twin does not model (docs/simulator.md, "What the twin does not do"): it reads
+    // the RTD as the proof mass's temperature and treats the ADC as ideal. Left in, they are
+    // hidden thermal effects of their own (a 60 s proof-mass lag, the reference's tempco) that
+    // the control would rightly report.
+    s.thermostat.proof_mass_lag_s = 0.0;
+    s.adc.ads1262.vref_tempco_ppm_per_c = 0.0;
+    s.rtd.accuracy_c = 0.0;
+    let bytes = accomp_host::sim::simulate(
+        &s,
+        ACCEL_SEED,
+        &accomp_host::sim::Options::default(),
+        Vec::new(),
+        &mut |_, _| {},
+    )
+    .expect("simulate")
+    .1;
+    let log = Log::read(&bytes[..]).expect("log");
+    let t = log.time_s().to_vec();
+    let truth = log.column("truth_mount_temperature_c").expect("truth T");
+    // Two first-order lags in series (exact for a temperature held over each interval).
+    let (mut x1, mut x2) = (truth[0], truth[0]);
+    let mut effect = vec![0.0; t.len()];
+    for i in 0..t.len() {
+        if i > 0 {
+            let dt = t[i] - t[i - 1];
+            let a1 = (-dt / PATH_TAU1_S).exp();
+            let a2 = (-dt / PATH_TAU2_S).exp();
+            x1 = a1 * x1 + (1.0 - a1) * truth[i];
+            x2 = a2 * x2 + (1.0 - a2) * x1;
+        }
+        effect[i] = PATH_COEFFICIENT_V_PER_C * (x2 - truth[i]);
+    }
+    let mut out = Log::with_time(t.clone()).expect("time");
+    for (k, v) in log.metadata() {
+        out.set_meta(k, v).expect("meta");
+    }
+    for name in log.column_names().iter().filter(|n| n.as_str() != "time_s") {
+        let mut v = log.column(name).expect("column").to_vec();
+        if hidden && name == "output_v" {
+            for (y, e) in v.iter_mut().zip(&effect) {
+                *y += e;
+            }
+        }
+        out.push_column(name, v).expect("push");
+    }
+    let ds = import::dataset_from_log(&out, &DatasetOptions::default()).expect("dataset");
+    assert_eq!(ds.output_name, "output_v");
+    // The effect at the dataset's rows (no binning at this length: the same instants).
+    let e: Vec<f64> = ds
+        .t_s
+        .iter()
+        .map(|&x| effect[((x - t[0]) / ACCEL_INTERVAL_S).round() as usize])
+        .collect();
+    (ds, e)
+}
+
+/// PSD bands (indices) where the injected effect alone is ≥ 4× the control residual's 95 %
+/// envelope edge: where the effect lives, measured from the effect itself.
+fn effect_bands(ds: &Dataset, effect: &[f64], control: &Simulation) -> Vec<usize> {
+    let yard = Yardstick::new(ds);
+    let v = yard.views(&yard.detrend(effect));
+    v.psd
+        .iter()
+        .zip(&control.before.psd.high)
+        .enumerate()
+        .filter(|(_, (e, hi))| **e >= 4.0 * **hi)
+        .map(|(i, _)| i)
+        .collect()
+}
+
+fn psd_above_runs(
+    c: &accomp_host::discover::simulate::mismatch::Comparison,
+) -> Vec<(usize, usize)> {
+    c.mismatches
+        .iter()
+        .filter(|m| m.quantity == Quantity::Psd && m.direction == "above")
+        .map(|m| m.index)
+        .collect()
+}
+
+/// Measured PSD / the envelope's 95 % edge in each band (> 1: outside above).
+fn beyond_high(c: &accomp_host::discover::simulate::mismatch::Comparison) -> Vec<f64> {
+    c.measured
+        .psd
+        .iter()
+        .zip(&c.psd.high)
+        .map(|(m, h)| m / h)
+        .collect()
+}
+
+#[test]
+fn a_hidden_thermal_path_in_a_simulated_accelerometer_log_is_found_in_its_band_and_removed() {
+    let (ds0, _) = accelerometer_log(false);
+    let control = simulate_dataset(&ds0, None, 20, &select::Config::default()).expect("control");
+    let (ds, effect) = accelerometer_log(true);
+    let s = simulate_dataset(&ds, None, 20, &select::Config::default()).expect("simulate");
+    eprintln!(
+        "{}",
+        accomp_host::discover::simulate::output::text(&s, &ds.output_unit)
+    );
+    let band = effect_bands(&ds, &effect, &control);
+    let hz = &s.frequencies_hz;
+    let cpd = |i: usize| hz[i] * 86_400.0;
+    let (b0, b1, bc) = (
+        beyond_high(&s.before),
+        beyond_high(&s.after),
+        beyond_high(&control.before),
+    );
+    for &i in &band {
+        eprintln!(
+            "{:7.2} cycles/day: measured / 95 % edge before {:6.2}, after {:5.2}, control {:5.2}",
+            cpd(i),
+            b0[i],
+            b1[i],
+            bc[i]
+        );
+    }
+    assert!(
+        band.len() >= 3,
+        "the hidden path is too weak to matter ({} bands)",
+        band.len()
+    );
+    let inside = |runs: &[(usize, usize)], i: usize| runs.iter().any(|&(a, b)| a <= i && i < b);
+    // Before the extension every band of the effect is inside a PSD mismatch above the
+    // envelope, and well outside it (×2 beyond the 95 % edge at least).
+    let runs = psd_above_runs(&s.before);
+    let missed: Vec<String> = band
+        .iter()
+        .filter(|&&i| !inside(&runs, i) || b0[i] < 2.0)
+        .map(|&i| format!("{:.2}", cpd(i)))
+        .collect();
+    assert!(
+        missed.is_empty(),
+        "effect bands not clearly outside before the extension: {missed:?} cycles/day"
+    );
+    // The cause is named: an accepted thermal_lag explains the mismatch over the effect's band.
+    assert!(
+        s.cause
+            .selection
+            .accepted
+            .iter()
+            .any(|a| a.effect.name() == "thermal_lag"),
+        "no thermal_lag accepted"
+    );
+    let idx: Vec<usize> = s
+        .before
+        .mismatches
+        .iter()
+        .enumerate()
+        .filter(|(_, m)| {
+            m.quantity == Quantity::Psd
+                && m.direction == "above"
+                && band.iter().any(|&i| m.index.0 <= i && i < m.index.1)
+        })
+        .map(|(k, _)| k)
+        .collect();
+    assert!(
+        s.explained_by
+            .iter()
+            .any(|(n, k)| n.starts_with("thermal_lag") && idx.iter().any(|i| k.contains(i))),
+        "{:?} (mismatches {idx:?})",
+        s.explained_by
+    );
+    // After the extension, and in the control without the path, the effect's band is at most
+    // marginally beyond the envelope: no band by more than the ×1.5 a lone point needs to be
+    // reported (mismatch.rs, SINGLE_POINT_FACTOR), where the hidden path put it ×2 and more.
+    // (A 5–95 % envelope leaves about one band in ten outside by chance; the first-order lag
+    // only approximates the two-mass path.)
+    let worst = |b: &[f64]| band.iter().map(|&i| b[i]).fold(0.0, f64::max);
+    assert!(
+        worst(&b1) < 1.5,
+        "still outside after the extension: ×{:.2}",
+        worst(&b1)
+    );
+    assert!(
+        worst(&bc) < 1.5,
+        "the control is outside in the effect's band: ×{:.2}\n{}",
+        worst(&bc),
+        accomp_host::discover::simulate::output::text(&control, &ds0.output_unit)
+    );
+    // The gain: the out-of-sample residual drops.
+    let (b, a) = (
+        s.before_scores.residual_std_out_of_sample,
+        s.after_scores.residual_std_out_of_sample,
+    );
+    assert!(a < 0.8 * b, "out-of-sample std {b:e} → {a:e}");
+}

@@ -293,6 +293,15 @@ fn ensure_qemu() -> Result<()> {
     }
 }
 
+/// Cargo for the test run's builds. A test run compiles each crate once, so incremental
+/// compilation only costs: its caches were 780 MB of a clean run's 2.4 GB target folder, and CI's
+/// disk ran out (docs/benchmarks.md, "Build footprint").
+fn cargo_once() -> Command {
+    let mut c = cargo();
+    c.env("CARGO_INCREMENTAL", "0");
+    c
+}
+
 fn test() -> Result<()> {
     ensure_toolchain()?;
     ensure_qemu()?;
@@ -300,7 +309,7 @@ fn test() -> Result<()> {
     fmt.args(["fmt", "--all", "--check"]);
     run("cargo fmt --check", fmt)?;
 
-    let mut clippy = cargo();
+    let mut clippy = cargo_once();
     clippy.args([
         "clippy",
         "--workspace",
@@ -311,7 +320,7 @@ fn test() -> Result<()> {
     ]);
     run("clippy (host, all targets)", clippy)?;
 
-    let mut clippy_fw = cargo();
+    let mut clippy_fw = cargo_once();
     clippy_fw.args([
         "clippy",
         "--package",
@@ -331,7 +340,7 @@ fn test() -> Result<()> {
     let elf = build_firmware()?;
     check_firmware_atomics(&elf)?;
 
-    let mut tests = cargo();
+    let mut tests = cargo_once();
     tests
         .args(["test", "--workspace"])
         .env("ACCOMP_FIRMWARE_ELF", &elf);
@@ -358,7 +367,7 @@ fn aqg_record_test() -> Result<()> {
         );
         return Ok(());
     };
-    let mut c = cargo();
+    let mut c = cargo_once();
     c.args([
         "test",
         "--package",

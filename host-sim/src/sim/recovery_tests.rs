@@ -8,6 +8,11 @@
 //! of that log from the same scenario *without* the effect; the catalogue column fitted to the
 //! log minus the twin (with an offset and a slope) over the catalogue's grid of its nonlinear
 //! parameter, refined by golden section. Tolerances are stated per case.
+//!
+//! The simulator's log carries the nominal input and the room temperature only as truth
+//! columns, which the importer never takes as regressors; for `self_heating` and
+//! `ambient_coupling` the test adds them as the observables a record would have (`input_g`,
+//! `room_c`), as a station with a head programme and a room sensor writes them.
 
 use super::effects::ScenarioEffect;
 use super::noise::AllanParams;
@@ -51,11 +56,23 @@ fn quiet_station(preset: &str) -> Scenario {
 }
 
 fn dataset(s: &Scenario) -> Dataset {
+    dataset_with(s, &[])
+}
+
+/// The log of `s` read back as the discovery reads records, with `extra` columns added, each
+/// computed from the log's own columns.
+#[allow(clippy::type_complexity)]
+fn dataset_with(s: &Scenario, extra: &[(&str, &dyn Fn(&Log) -> Vec<f64>)]) -> Dataset {
     let bytes = simulate(s, 11, &Options::default(), Vec::new(), &mut |_, _| {})
         .unwrap()
         .1;
+    let mut log = Log::read(&bytes[..]).unwrap();
+    for (name, f) in extra {
+        let v = f(&log);
+        log.push_column(name, v).unwrap();
+    }
     dataset_from_log(
-        &Log::read(&bytes[..]).unwrap(),
+        &log,
         &DatasetOptions {
             output: None,
             max_points: 1_000_000,
@@ -67,9 +84,19 @@ fn dataset(s: &Scenario) -> Dataset {
 
 /// Log with `e`, and the log minus the twin without it.
 fn residual(s: &Scenario, e: ScenarioEffect) -> (Dataset, Vec<f64>) {
+    residual_with(s, e, &[])
+}
+
+/// [`residual`] with columns added to the log (see [`dataset_with`]).
+#[allow(clippy::type_complexity)]
+fn residual_with(
+    s: &Scenario,
+    e: ScenarioEffect,
+    extra: &[(&str, &dyn Fn(&Log) -> Vec<f64>)],
+) -> (Dataset, Vec<f64>) {
     let mut with = s.clone();
     with.effects = vec![e];
-    let ds = dataset(&with);
+    let ds = dataset_with(&with, extra);
     let twin = Twin::new(&ds, Some(s.clone()), None).unwrap();
     let det = twin.run(None).unwrap();
     let r = ds.y.iter().zip(&det).map(|(a, b)| a - b).collect();
@@ -333,6 +360,77 @@ fn tilt_coupling_is_recovered_at_zero_g() {
     // The catalogue's column is the measured tilt averaged over ±15 min; the simulated term
     // follows the true tilt sample by sample.
     close(&p, "gain", 0.3, 0.05);
+}
+
+#[test]
+fn self_heating_is_recovered_from_the_head_programme() {
+    use super::accelerometer::HeadPosition;
+    let mut s = quiet_station("paper-1g");
+    // 1 g and 0 g for 6 h each: the torquer's power (∝ a²) steps at every move.
+    s.accelerometer.orientation.positions = vec![
+        HeadPosition {
+            angle_deg: 90.0,
+            dwell_s: 6.0 * 3600.0,
+        },
+        HeadPosition {
+            angle_deg: 0.0,
+            dwell_s: 6.0 * 3600.0,
+        },
+    ];
+    // The nominal input of each row, as a record with a head programme logs it.
+    let input = |log: &Log| -> Vec<f64> {
+        log.column("truth_head_angle_deg")
+            .unwrap()
+            .iter()
+            .map(|a| a.to_radians().sin())
+            .collect()
+    };
+    let (ds, r) = residual_with(
+        &s,
+        ScenarioEffect::SelfHeating {
+            tau_s: 1800.0,
+            coefficient: 2e-4,
+        },
+        &[("input_g", &input)],
+    );
+    assert!(
+        ds.changing_input().is_some(),
+        "the input_g column is not taken"
+    );
+    let p = recover(
+        &Effect::SelfHeating,
+        &ds,
+        &r,
+        &effects::grid(&Effect::SelfHeating, &ds),
+    );
+    close(&p, "tau_s", 1800.0, 0.05);
+    close(&p, "coefficient", 2e-4, 0.02);
+}
+
+#[test]
+fn ambient_coupling_is_recovered_from_the_room_channel() {
+    let s = quiet_station("paper-1g");
+    // The room temperature as a record's auxiliary sensor logs it.
+    let room = |log: &Log| -> Vec<f64> { log.column("truth_room_c").unwrap().to_vec() };
+    let (ds, r) = residual_with(
+        &s,
+        ScenarioEffect::AmbientCoupling {
+            channel: "room_c".into(),
+            coefficient: 5e-5,
+            lag_s: 2.0 * 3600.0,
+        },
+        &[("room_c", &room)],
+    );
+    // The importer takes room_c as an auxiliary channel, not as the temperature.
+    assert_eq!(
+        ds.channel(crate::discover::import::ChannelKind::Temperature)
+            .map(|c| c.name.as_str()),
+        Some("temperature_c")
+    );
+    let e = Effect::AmbientCoupling("room_c".into());
+    let p = recover(&e, &ds, &r, &effects::grid(&e, &ds));
+    close(&p, "lag_s", 2.0 * 3600.0, 0.05);
+    close(&p, "coefficient", 5e-5, 0.02);
 }
 
 #[test]

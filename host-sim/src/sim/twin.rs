@@ -6,8 +6,10 @@
 //!
 //! Speed: everything that does not depend on the seed — the drivers, the tide, the instrument's
 //! deterministic output and the effects — is computed once by [`Twin::new`] /
-//! [`Twin::extended`]; [`Twin::run`] with a seed only adds the instrument noise, drawn directly
-//! at the record's (irregular) instants.
+//! [`Twin::extended`]; [`Twin::run`] with a seed adds the instrument noise, drawn directly at
+//! the record's (irregular) instants, and — only when a driver the record lacks enters the
+//! output — re-runs the station with the member's seed so that the simulated drivers carry
+//! their own weather (measured channels stay measured in every member).
 
 use accomp::units::RAD_PER_ARCSEC;
 
@@ -44,6 +46,30 @@ struct Drivers {
     ambient: Vec<Vec<f64>>,
     /// Tide gravity, nm/s² (at the instant, no delay).
     tide_nm_s2: Vec<f64>,
+    /// Tide tilt along the spindle, rad (added to a simulated tilt).
+    tide_tilt_rad: Vec<f64>,
+    /// Which drivers are simulated (the record lacks them).
+    simulated: Simulated,
+}
+
+/// Which drivers the twin simulates because the record has no such channel.
+#[derive(Debug, Clone, Default, PartialEq)]
+struct Simulated {
+    temperature: bool,
+    tilt: bool,
+    pressure: bool,
+    /// Per ambient channel (same order as `Drivers::ambient_names`).
+    ambient: Vec<bool>,
+}
+
+/// The station's own driver series at the scenario's steps (tide excluded): mount temperature
+/// °C, tilt rad, pressure − mean Pa, room and board temperature − room mean °C.
+struct StationSeries {
+    temperature_c: Vec<f64>,
+    tilt_rad: Vec<f64>,
+    pressure_dev_pa: Vec<f64>,
+    room_c: Vec<f64>,
+    board_c: Vec<f64>,
 }
 
 /// The simulated twin of a measured record.
@@ -56,6 +82,8 @@ pub struct Twin {
     drivers: Drivers,
     /// Record output units per g (what the effects' amplitudes are in).
     unit_per_g: f64,
+    /// Record output units per instrument unit.
+    out_scale: f64,
     /// Deterministic instrument output without the effects, record unit.
     base: Vec<f64>,
     /// `base` plus the effects.
@@ -364,6 +392,7 @@ impl Twin {
         let mut twin = Twin {
             noise: scaled(&inst_noise, out_scale),
             noise_model: noise.cloned(),
+            out_scale,
             unit_per_g: rec_per_g,
             dt_s: ds.dt_s,
             det: Vec::new(),
@@ -393,8 +422,15 @@ impl Twin {
     /// ensemble member with the simulator's noise. Measured temperature / pressure / tilt
     /// channels of the record drive the simulation where present (interpolated onto the
     /// simulator's steps), their simulated counterparts where absent.
+    ///
+    /// A member whose output depends on a simulated driver (see [`Twin::redraws_weather`])
+    /// re-runs the station with its seed: the simulated drivers get that member's weather (room,
+    /// thermostat, foundation, barometer), the measured channels stay the record's.
     pub fn run(&self, seed: Option<u64>) -> Result<Vec<f64>, SimError> {
-        let mut out = self.det.clone();
+        let mut out = match seed {
+            Some(k) if self.redraws_weather() => self.output(&self.redrawn_drivers(k)?)?,
+            _ => self.det.clone(),
+        };
         match (seed, &self.noise_model) {
             (Some(seed), Some(m)) => add_model_noise(&mut out, &self.t_s, m, seed),
             (Some(seed), None) => add_noise(&mut out, &self.t_s, self.dt_s, &self.noise, seed),
@@ -409,22 +445,7 @@ impl Twin {
     /// have) is left out and said so in [`Twin::provenance`].
     pub fn extended(&self, effects: &[ScenarioEffect]) -> Twin {
         let mut t = self.clone();
-        let start = Utc::parse(&t.scenario.run.start_utc).map_or(0.0, |u| u.0);
-        let setup = ChainSetup {
-            start_unix_s: start,
-            site: (
-                t.scenario.site.latitude_deg,
-                t.scenario.site.longitude_deg,
-                t.scenario.site.height_m,
-            ),
-            span_s: (
-                t.t_s.first().copied().unwrap_or(0.0),
-                t.t_s.last().copied().unwrap_or(0.0),
-            ),
-            unit_per_g: t.unit_per_g,
-            input_g: t.drivers.input_g.first().copied().unwrap_or(1.0),
-            ambient: t.drivers.ambient_names.clone(),
-        };
+        let setup = t.chain_setup();
         let offset = t.scenario.effects.len();
         let mut accepted = Vec::new();
         for (i, e) in effects.iter().enumerate() {
@@ -444,22 +465,8 @@ impl Twin {
             return t;
         }
         t.scenario.effects.extend(accepted.iter().cloned());
-        if let Ok(mut chain) = EffectChain::new(&accepted, setup) {
-            let d = &t.drivers;
-            let mut amb = vec![0.0; d.ambient.len()];
-            for (i, y) in t.det.iter_mut().enumerate() {
-                for (a, c) in amb.iter_mut().zip(&d.ambient) {
-                    *a = c[i];
-                }
-                *y += chain.output_term(&Drive {
-                    t_s: t.t_s[i],
-                    temperature_c: d.temperature_c[i],
-                    input_g: d.input_g[i],
-                    tilt_rad: d.tilt_rad[i],
-                    pressure_dev_pa: d.pressure_dev_pa[i],
-                    ambient: &amb,
-                });
-            }
+        if let Ok(chain) = EffectChain::new(&accepted, setup) {
+            add_effects(&mut t.det, chain, &t.t_s, &t.drivers);
         }
         let names: Vec<&str> = accepted.iter().map(ScenarioEffect::name).collect();
         t.provenance
@@ -471,6 +478,183 @@ impl Twin {
     pub fn noise_levels(&self) -> &AllanParams {
         &self.noise
     }
+
+    /// The simulated drivers (channels the record lacks) that enter this twin's output: the
+    /// accelerometer follows the temperature and the tilt, a gravimeter the pressure through its
+    /// admittance; effects their own drivers (thermal: temperature, tilt coupling: tilt, pressure
+    /// admittance: pressure, ambient coupling: its channel). Names as in the provenance.
+    pub fn weather_drivers(&self) -> Vec<String> {
+        let sim = &self.drivers.simulated;
+        let grav = self.scenario.gravimeter();
+        let (mut temp, mut tilt, mut press) = (
+            grav.is_none(),
+            grav.is_none(),
+            grav.is_some_and(|g| g.pressure_admittance_per_hpa != 0.0),
+        );
+        let mut amb = vec![false; sim.ambient.len()];
+        for e in &self.scenario.effects {
+            match e {
+                ScenarioEffect::ThermalLag { .. } | ScenarioEffect::ThermalHysteresis { .. } => {
+                    temp = true;
+                }
+                ScenarioEffect::TiltCoupling { .. } => tilt = true,
+                ScenarioEffect::PressureAdmittance { .. } => press = true,
+                ScenarioEffect::AmbientCoupling { channel, .. } => {
+                    if let Some(i) = self.drivers.ambient_names.iter().position(|n| n == channel) {
+                        amb[i] = true;
+                    }
+                }
+                _ => {}
+            }
+        }
+        let mut v = Vec::new();
+        for (used, simulated, name) in [
+            (temp, sim.temperature, "temperature"),
+            (tilt, sim.tilt, "tilt"),
+            (press, sim.pressure, "pressure"),
+        ] {
+            if used && simulated {
+                v.push(name.to_owned());
+            }
+        }
+        for ((used, simulated), name) in amb
+            .iter()
+            .zip(&sim.ambient)
+            .zip(&self.drivers.ambient_names)
+        {
+            if *used && *simulated {
+                v.push(name.clone());
+            }
+        }
+        v
+    }
+
+    /// Whether seeded members re-run the station for their own weather (a simulated driver
+    /// enters the output). When none does, a member is the deterministic part plus the
+    /// instrument noise, and costs nothing more.
+    pub fn redraws_weather(&self) -> bool {
+        !self.weather_drivers().is_empty()
+    }
+
+    fn chain_setup(&self) -> ChainSetup {
+        let start = Utc::parse(&self.scenario.run.start_utc).map_or(0.0, |u| u.0);
+        ChainSetup {
+            start_unix_s: start,
+            site: (
+                self.scenario.site.latitude_deg,
+                self.scenario.site.longitude_deg,
+                self.scenario.site.height_m,
+            ),
+            span_s: (
+                self.t_s.first().copied().unwrap_or(0.0),
+                self.t_s.last().copied().unwrap_or(0.0),
+            ),
+            unit_per_g: self.unit_per_g,
+            input_g: self.drivers.input_g.first().copied().unwrap_or(1.0),
+            ambient: self.drivers.ambient_names.clone(),
+        }
+    }
+
+    /// The deterministic output (instrument and effects) for other drivers, record unit.
+    fn output(&self, d: &Drivers) -> Result<Vec<f64>, SimError> {
+        let start =
+            Utc::parse(&self.scenario.run.start_utc).map_err(|e| SimError::Twin(e.to_string()))?;
+        let mut y = instrument_output(&self.scenario, start, &self.t_s, d, self.out_scale)?;
+        if !self.scenario.effects.is_empty() {
+            let chain = EffectChain::new(&self.scenario.effects, self.chain_setup())
+                .map_err(|e| SimError::Twin(e.to_string()))?;
+            add_effects(&mut y, chain, &self.t_s, d);
+        }
+        Ok(y)
+    }
+
+    /// The drivers with the simulated ones drawn from the station run with `seed` (its weather:
+    /// room, doors, thermostat, foundation creep, barometric weather; instrument and sensor
+    /// noise do not enter, the truth values are taken). The station's streams (room, thermostat,
+    /// foundation, barometer) are not the instrument noise's stream, so one seed serves both.
+    fn redrawn_drivers(&self, seed: u64) -> Result<Drivers, SimError> {
+        let mut w = self.scenario.clone();
+        w.tide.enabled = false;
+        w.effects.clear();
+        w.instrument = None;
+        let st = station_series(&w, seed)?;
+        let h = w.run.interval_s;
+        let at = |v: &[f64]| -> Vec<f64> { self.t_s.iter().map(|&t| interp(v, h, t)).collect() };
+        let mut d = self.drivers.clone();
+        let sim = &self.drivers.simulated;
+        if sim.temperature {
+            d.temperature_c = at(&st.temperature_c);
+        }
+        if sim.tilt {
+            d.tilt_rad = at(&st.tilt_rad)
+                .iter()
+                .zip(&d.tide_tilt_rad)
+                .map(|(a, b)| a + b)
+                .collect();
+        }
+        if sim.pressure {
+            d.pressure_dev_pa = at(&st.pressure_dev_pa);
+        }
+        for ((name, v), simulated) in d
+            .ambient_names
+            .iter()
+            .zip(d.ambient.iter_mut())
+            .zip(&sim.ambient)
+        {
+            if *simulated {
+                match name.as_str() {
+                    "room_c" => *v = at(&st.room_c),
+                    "board_c" => *v = at(&st.board_c),
+                    _ => {}
+                }
+            }
+        }
+        Ok(d)
+    }
+}
+
+/// Adds the chain's output terms at the record's instants to `y`.
+fn add_effects(y: &mut [f64], mut chain: EffectChain, t_s: &[f64], d: &Drivers) {
+    let mut amb = vec![0.0; d.ambient.len()];
+    for (i, y) in y.iter_mut().enumerate() {
+        for (a, c) in amb.iter_mut().zip(&d.ambient) {
+            *a = c[i];
+        }
+        *y += chain.output_term(&Drive {
+            t_s: t_s[i],
+            temperature_c: d.temperature_c[i],
+            input_g: d.input_g[i],
+            tilt_rad: d.tilt_rad[i],
+            pressure_dev_pa: d.pressure_dev_pa[i],
+            ambient: &amb,
+        });
+    }
+}
+
+/// The station's drivers from a run of `s` (tide off, no effects, accelerometer instrument) with
+/// `seed`, at its own steps.
+fn station_series(s: &Scenario, seed: u64) -> Result<StationSeries, SimError> {
+    let mut sim = Simulator::new(s, seed)?;
+    let steps = sim.samples() as usize + 1;
+    let mut o = StationSeries {
+        temperature_c: Vec::with_capacity(steps),
+        tilt_rad: Vec::with_capacity(steps),
+        pressure_dev_pa: Vec::with_capacity(steps),
+        room_c: Vec::with_capacity(steps),
+        board_c: Vec::with_capacity(steps),
+    };
+    let room_mean = s.room.mean_c;
+    let p_mean = super::barometer::mean_pressure_hpa(s.barometer.sea_level_hpa, s.site.height_m);
+    for _ in 0..steps {
+        let x = sim.step()?;
+        o.temperature_c.push(x.truth_mount_temperature_c);
+        o.tilt_rad.push(x.truth_tilt_arcsec * RAD_PER_ARCSEC);
+        o.pressure_dev_pa
+            .push((x.truth_pressure_hpa - p_mean) * 100.0);
+        o.room_c.push(x.truth_room_c - room_mean);
+        o.board_c.push(x.truth_board_c - room_mean);
+    }
+    Ok(o)
 }
 
 /// The drivers at the record's instants: measured channels where present, the quiet
@@ -497,25 +681,14 @@ fn drivers(ds: &Dataset, s: &Scenario, prov: &mut Vec<String>) -> Result<Drivers
     q.tide.enabled = false;
     q.effects.clear();
     q.instrument = None;
-    let mut sim = Simulator::new(&q, 0)?;
-    let steps = sim.samples() as usize + 1;
-    let (mut sim_t, mut sim_tilt, mut sim_p, mut sim_room, mut sim_board) = (
-        Vec::with_capacity(steps),
-        Vec::with_capacity(steps),
-        Vec::with_capacity(steps),
-        Vec::with_capacity(steps),
-        Vec::with_capacity(steps),
-    );
-    let room_mean = s.room.mean_c;
-    let p_mean = super::barometer::mean_pressure_hpa(s.barometer.sea_level_hpa, s.site.height_m);
-    for _ in 0..steps {
-        let x = sim.step()?;
-        sim_t.push(x.truth_mount_temperature_c);
-        sim_tilt.push(x.truth_tilt_arcsec * RAD_PER_ARCSEC);
-        sim_p.push((x.truth_pressure_hpa - p_mean) * 100.0);
-        sim_room.push(x.truth_room_c - room_mean);
-        sim_board.push(x.truth_board_c - room_mean);
-    }
+    let StationSeries {
+        temperature_c: sim_t,
+        tilt_rad: sim_tilt,
+        pressure_dev_pa: sim_p,
+        room_c: sim_room,
+        board_c: sim_board,
+    } = station_series(&q, 0)?;
+    let mut simulated = Simulated::default();
     let h = s.run.interval_s;
     let at = |v: &[f64]| -> Vec<f64> { ds.t_s.iter().map(|&t| interp(v, h, t)).collect() };
     let mut say = |what: &str, from: Option<&str>| {
@@ -533,6 +706,7 @@ fn drivers(ds: &Dataset, s: &Scenario, prov: &mut Vec<String>) -> Result<Drivers
         }
         None => {
             say("temperature", None);
+            simulated.temperature = true;
             at(&sim_t)
         }
     };
@@ -543,6 +717,7 @@ fn drivers(ds: &Dataset, s: &Scenario, prov: &mut Vec<String>) -> Result<Drivers
         }
         None => {
             say("tilt (tide tilt added)", None);
+            simulated.tilt = true;
             at(&sim_tilt)
                 .iter()
                 .zip(&tide_tilt_rad)
@@ -557,6 +732,7 @@ fn drivers(ds: &Dataset, s: &Scenario, prov: &mut Vec<String>) -> Result<Drivers
         }
         None => {
             say("pressure", None);
+            simulated.pressure = true;
             at(&sim_p)
         }
     };
@@ -582,11 +758,13 @@ fn drivers(ds: &Dataset, s: &Scenario, prov: &mut Vec<String>) -> Result<Drivers
     for c in ds.channels.iter().filter(|c| c.kind == ChannelKind::Other) {
         ambient_names.push(c.name.clone());
         ambient.push(centred(&c.values));
+        simulated.ambient.push(false);
     }
     for (name, v) in SIMULATED_AMBIENT.iter().zip([&sim_room, &sim_board]) {
         if !ambient_names.iter().any(|a| a == name) {
             ambient_names.push((*name).to_owned());
             ambient.push(at(v));
+            simulated.ambient.push(true);
         }
     }
     Ok(Drivers {
@@ -597,6 +775,8 @@ fn drivers(ds: &Dataset, s: &Scenario, prov: &mut Vec<String>) -> Result<Drivers
         ambient_names,
         ambient,
         tide_nm_s2,
+        tide_tilt_rad,
+        simulated,
     })
 }
 
@@ -1009,6 +1189,74 @@ mod tests {
             .provenance()
             .iter()
             .any(|l| l.contains("fitted noise model")));
+    }
+
+    #[test]
+    fn members_redraw_the_weather_of_simulated_drivers_only() {
+        let mut s = Scenario::preset("paper-1g").unwrap();
+        s.run.duration_s = 86_400.0;
+        s.run.interval_s = 300.0;
+        let full = dataset(&s, 2);
+        let m = NoiseModel::white(1e-14);
+        // Every driver the accelerometer follows is measured: members are the deterministic
+        // part plus the instrument noise.
+        let twin = Twin::new(&full, None, Some(&m)).unwrap();
+        assert!(
+            twin.weather_drivers().is_empty(),
+            "{:?}",
+            twin.weather_drivers()
+        );
+        let det = twin.run(None).unwrap();
+        let d1: Vec<f64> = twin
+            .run(Some(1))
+            .unwrap()
+            .iter()
+            .zip(&det)
+            .map(|(a, b)| a - b)
+            .collect();
+        assert!((std(&d1) / 1e-7 - 1.0).abs() < 0.2, "{}", std(&d1));
+        // Without a temperature channel the twin simulates it; each member draws its own
+        // weather: member − deterministic part is far above the instrument noise, differs
+        // between seeds and is reproducible.
+        let mut no_t = full.clone();
+        no_t.channels.retain(|c| c.kind != ChannelKind::Temperature);
+        let twin = Twin::new(&no_t, None, Some(&m)).unwrap();
+        assert_eq!(twin.weather_drivers(), vec!["temperature".to_owned()]);
+        let det = twin.run(None).unwrap();
+        let r = |k| -> Vec<f64> {
+            twin.run(Some(k))
+                .unwrap()
+                .iter()
+                .zip(&det)
+                .map(|(a, b)| a - b)
+                .collect()
+        };
+        let (a, b) = (r(1), r(2));
+        assert_eq!(a, r(1));
+        assert!(
+            std(&a) > 10.0 * 1e-7 && std(&b) > 10.0 * 1e-7,
+            "{} {}",
+            std(&a),
+            std(&b)
+        );
+        let diff: Vec<f64> = a.iter().zip(&b).map(|(x, y)| x - y).collect();
+        assert!(std(&diff) > 10.0 * 1e-7, "{}", std(&diff));
+        // A gravimeter without admittance follows no simulated driver until an effect uses one.
+        let g = dataset(&gravimeter_scenario(), 4);
+        let mut g_no_t = g.clone();
+        g_no_t
+            .channels
+            .retain(|c| c.kind != ChannelKind::Temperature);
+        let gt = Twin::new(&g_no_t, None, None).unwrap();
+        assert!(gt.weather_drivers().is_empty());
+        let ext = gt.extended(&[ScenarioEffect::ThermalLag {
+            tau_s: 3600.0,
+            coefficient: 1.0,
+        }]);
+        assert_eq!(ext.weather_drivers(), vec!["temperature".to_owned()]);
+        let det = ext.run(None).unwrap();
+        assert_ne!(ext.run(Some(1)).unwrap(), ext.run(Some(2)).unwrap());
+        assert_eq!(det, ext.run(None).unwrap());
     }
 
     #[test]

@@ -187,7 +187,7 @@ where
     // 4. Ensembles and comparisons, before and after.
     let twin = build(Some(&noise))?;
     let ext = twin.extended(&effects.iter().map(|e| e.1.clone()).collect::<Vec<_>>());
-    let provenance = twin.provenance();
+    let provenance = ext.provenance();
     let channels: Vec<String> = yard.channels.iter().map(|c| c.0.clone()).collect();
     let freqs = yard
         .welch

@@ -63,7 +63,21 @@ impl TwinModel for Twin {
     }
 
     fn provenance(&self) -> Vec<String> {
-        Twin::provenance(self).to_vec()
+        let mut v = Twin::provenance(self).to_vec();
+        let w = self.weather_drivers();
+        v.push(if w.is_empty() {
+            "ensemble members: the instrument noise only (no simulated driver enters the output; \
+             measured channels are the record's in every member)"
+                .to_owned()
+        } else {
+            format!(
+                "ensemble members: the instrument noise and their own weather of the simulated \
+                 driver(s) {} (the station re-run with the member's seed); measured channels are \
+                 the record's in every member",
+                w.join(", ")
+            )
+        });
+        v
     }
 
     fn scenario_toml(&self) -> Option<String> {
