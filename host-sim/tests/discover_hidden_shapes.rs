@@ -65,9 +65,7 @@ impl Shape {
     fn needs_cycling(&self) -> bool {
         matches!(
             self,
-            Shape::SecondOrderLag { .. }
-                | Shape::BoucWenHysteresis { .. }
-                | Shape::ExactLag { .. }
+            Shape::SecondOrderLag { .. } | Shape::BoucWenHysteresis { .. } | Shape::ExactLag { .. }
         )
     }
 }

@@ -11,8 +11,10 @@ use accomp::tide::Station;
 pub enum Effect {
     /// First-order lag between the RTD and the proof mass: column L_τ[T] − T.
     ThermalLag,
-    /// Different bias on heating and cooling branches: column (T − p_r[T])/r of a play operator
-    /// of half-width r on the measured temperature (`hysteresis.rs`).
+    /// Different bias on heating and cooling branches: a Preisach distribution of play
+    /// operators on the temperature, Σ w_k·(T − p_{r_k}[T])/r_k with NNLS weights summing to 1
+    /// (`hysteresis.rs`; `Context::hysteresis`), θ its characteristic width; without a fitted
+    /// distribution, one play of half-width θ.
     ThermalHysteresis,
     /// Bias following the torquer power ∝ input² through the coil's thermal time constant: column
     /// L_τ[a²] − a² (the instantaneous part is the baseline's K2·a², per-position levels).

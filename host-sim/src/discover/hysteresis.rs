@@ -25,12 +25,22 @@
 //! it differs by its amplitude: the lag error scales with the rate, the branch term does not
 //! (slow and fast cycles give the same offset) and it saturates after 2r.
 //!
-//! Fitting: the width r is the effect's nonlinear parameter (log grid between the reading noise
-//! and a quarter of the temperature range, look-elsewhere charged like any grid), the
-//! half-width a linear coefficient. A Preisach distribution of widths is fitted by one play at
-//! the width that explains most of it; [`preisach_nnls`] fits the non-negative weights of a
-//! set of widths when a distribution is wanted (plays of nearby widths are nearly collinear, so
-//! the selection does not charge the BIC for several).
+//! Fitting: a Preisach distribution. Each play of a 24-point log grid of widths (between 3 ×
+//! the reading noise and a quarter of the temperature range) is whitened and projected off the
+//! current model; the non-negative weights that best explain the whitened residual are found by
+//! NNLS ([`nnls`], Lawson–Hanson; both signs tried) and normalised to sum 1 ([`Preisach`]), so
+//! the column saturates at ±1 and its one linear coefficient is the branch half-width. The
+//! effect's nonlinear parameter θ is the distribution's weighted geometric-mean width; the
+//! selection charges the width search like a grid and each further width with a weight as one
+//! more parameter. A spread of widths — what a real loop with smooth turns is — is then
+//! representable, where one play was not (and lost to a thermal lag).
+//!
+//! Lag or loop: on a triangle of ONE rate a first-order lag is itself a Prandtl–Ishlinskii
+//! operator (after a reversal L_τ[T] − T relaxes as exp(−ΔT/(Ṫτ)) in the temperature moved,
+//! i.e. an exponential density of widths), so no fit can tell them apart there. What does is the
+//! rate: the lag's offset scales with Ṫ, the loop's does not — records whose ramps differ (a
+//! thermostat programme, excursions) separate them, and the selection's likelihood uses that
+//! without being told.
 
 /// Play (backlash) operator of half-width `r` on `u`, started at `u[0]` (the virgin state: no
 /// branch yet). The state is carried across gaps: hysteresis is a memory of the material, not
@@ -248,7 +258,11 @@ impl Preisach {
 /// branch column of `widths_c[k]` and `y` the residual, both in the domain the fit is judged in
 /// (whitened, the current model projected out). Both signs are tried (the heating branch may
 /// read lower or higher). Returns the distribution, the sign and the number of active widths.
-pub fn fit_preisach(widths_c: &[f64], cols: &[Vec<f64>], y: &[f64]) -> Option<(Preisach, f64, usize)> {
+pub fn fit_preisach(
+    widths_c: &[f64],
+    cols: &[Vec<f64>],
+    y: &[f64],
+) -> Option<(Preisach, f64, usize)> {
     let rss = |w: &[f64], sign: f64| {
         (0..y.len())
             .map(|i| {
@@ -354,5 +368,32 @@ mod tests {
         );
         assert!(w[0].abs() + w[2].abs() + w[4].abs() < 1e-6, "{w:?}");
         assert!(width_range_c(&temp).is_some());
+    }
+
+    #[test]
+    fn a_fitted_preisach_distribution_rebuilds_its_column_at_its_width_and_keeps_the_sign() {
+        // A loop read lower on heating (negative half-width): 3 µ·h_0.05 + 1 µ·h_0.2, negated.
+        let temp: Vec<f64> = (0..3000)
+            .map(|i| 0.5 * (f64::from(i) * std::f64::consts::TAU / 400.0).sin())
+            .collect();
+        let widths = [0.02, 0.05, 0.1, 0.2, 0.3];
+        let cols: Vec<Vec<f64>> = widths.iter().map(|&r| branch(&temp, r)).collect();
+        let y: Vec<f64> = (0..temp.len())
+            .map(|i| -(3.0 * cols[1][i] + cols[3][i]))
+            .collect();
+        let (p, _, active) = fit_preisach(&widths, &cols, &y).expect("a distribution");
+        assert_eq!(active, 2);
+        assert_eq!(p.widths_c, vec![0.05, 0.2]);
+        assert!((p.weights[0] - 0.75).abs() < 1e-9, "{p:?}");
+        let theta = p.width_c();
+        assert!((theta - (0.75 * 0.05f64.ln() + 0.25 * 0.2f64.ln()).exp()).abs() < 1e-12);
+        // At θ the column is the fitted shape, saturating at ±1: y = −4 × it.
+        let c = p.column(&temp, theta);
+        assert!(c.iter().zip(&y).all(|(c, y)| (4.0 * c + y).abs() < 1e-9));
+        // At 2θ every width doubles.
+        let c2 = p.column(&temp, 2.0 * theta);
+        let (a, b) = (branch(&temp, 0.1), branch(&temp, 0.4));
+        let want: Vec<f64> = a.iter().zip(&b).map(|(a, b)| 0.75 * a + 0.25 * b).collect();
+        assert!(c2.iter().zip(&want).all(|(a, b)| (a - b).abs() < 1e-9));
     }
 }

@@ -132,11 +132,11 @@ pub fn context(ds: &Dataset, base: &baseline::Baseline) -> Context {
 }
 
 /// Whether the effects are fitted on the errors-in-variables model's smoothed channel states
-/// ([`eiv`]) rather than on the readings. Off: measured on the 14-day hysteresis logs of
-/// `discover_hidden_shapes.rs`, fitting on the smoothed temperature moved one log from
-/// `thermal_hysteresis` to a `thermal_lag` of τ ≈ 2000 s (found 1/4 instead of 2/4) — a lag and a
-/// distribution of plays are nearly degenerate under triangular cycling, and the greedy choice
-/// between them flips on small changes; docs/discovery.md, "Errors in variables".
+/// ([`eiv`]) rather than on the readings. On since the hysteresis column is a Preisach
+/// distribution (the 14-day hysteresis logs of `discover_hidden_shapes.rs` are found in 8/8 with
+/// it on and off; with one play it had moved a log to a `thermal_lag`); with it on a real lag
+/// is fitted at its τ without the RTD's reading noise in its column. Measured both ways in
+/// docs/discovery.md, "Errors in variables".
 pub const FIT_ON_SMOOTHED_CHANNELS: bool = true;
 
 /// Runs the whole discovery on a dataset.

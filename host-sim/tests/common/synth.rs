@@ -241,7 +241,11 @@ pub fn station(n: usize, dt_s: f64, thermal: Thermal, rng: &mut ChaCha8Rng) -> S
         }
     };
     let chamber = (-dt_s / 300.0).exp();
-    let mut prog_state = if corners.is_empty() { 0.0 } else { programme(0.0) };
+    let mut prog_state = if corners.is_empty() {
+        0.0
+    } else {
+        programme(0.0)
+    };
     let temp_true_c: Vec<f64> = t_s
         .iter()
         .map(|&t| {
