@@ -279,6 +279,12 @@ pub fn fit_preisach(
     } else {
         (wn, -1.0)
     };
+    // Weights at round-off level are no width of the loop (and would be charged as one).
+    let top = w.iter().fold(0.0_f64, |m, v| m.max(*v));
+    let w: Vec<f64> = w
+        .iter()
+        .map(|&v| if v > 1e-9 * top { v } else { 0.0 })
+        .collect();
     let active = w.iter().filter(|v| **v > 0.0).count();
     Preisach::from_weights(widths_c, &w).map(|p| (p, sign, active))
 }
@@ -382,8 +388,8 @@ mod tests {
             .map(|i| -(3.0 * cols[1][i] + cols[3][i]))
             .collect();
         let (p, _, active) = fit_preisach(&widths, &cols, &y).expect("a distribution");
-        assert_eq!(active, 2);
-        assert_eq!(p.widths_c, vec![0.05, 0.2]);
+        assert_eq!(active, 2, "{p:?}");
+        assert_eq!(p.widths_c, vec![0.05, 0.2], "{p:?}");
         assert!((p.weights[0] - 0.75).abs() < 1e-9, "{p:?}");
         let theta = p.width_c();
         assert!((theta - (0.75 * 0.05f64.ln() + 0.25 * 0.2f64.ln()).exp()).abs() < 1e-12);
