@@ -8,9 +8,9 @@
 //! white + flicker + random-walk model (`noise`, [`Rows::with_noise`]); the baseline's
 //! temperature-order choice here still uses the simpler AR(1) whitening: rows and columns are *whitened*, `z_t = x_t − φ·x_{t−1}` inside each
 //! contiguous segment (the first row of a segment is dropped), with φ the lag-1 autocorrelation of
-//! the current residual. Linear parameters are solved by a modified Gram–Schmidt QR with
-//! re-orthogonalisation (a QR factorisation: no normal equations are formed), columns scaled to
-//! unit norm first.
+//! the current residual. Linear parameters are solved by the host's QR
+//! (`numerics::linalg::OrthonormalBasis`, nalgebra's Householder: no normal equations are
+//! formed), columns scaled to unit norm first.
 //!
 //! # Baseline
 //!
@@ -84,158 +84,13 @@ impl Rows {
     }
 }
 
-/// An orthonormal basis of the whitened design columns with its triangular factor.
-#[derive(Debug, Clone)]
-pub struct Basis {
-    /// Orthonormal columns (only the independent ones).
-    pub q: Vec<Vec<f64>>,
-    /// R (upper triangular over the kept columns), scaled-column coordinates.
-    pub r: Vec<Vec<f64>>,
-    /// For each input column: index into `q`, or `None` if it was dependent (coefficient 0).
-    pub kept: Vec<Option<usize>>,
-    /// Column scales (norm of each whitened input column).
-    pub scale: Vec<f64>,
-}
+/// An orthonormal basis of the whitened design columns with its triangular factor: the host's
+/// one QR (nalgebra's Householder, dependent columns dropped), kept at this path for the
+/// discovery's callers.
+pub use crate::numerics::linalg::OrthonormalBasis as Basis;
 
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
-}
-
-/// Orthogonalises `v` against `q` twice (classical Gram–Schmidt twice is as stable as needed).
-pub fn orthogonalize(q: &[Vec<f64>], v: &mut [f64]) -> Vec<f64> {
-    let mut coef = vec![0.0; q.len()];
-    for _ in 0..2 {
-        for (j, qj) in q.iter().enumerate() {
-            let c = dot(qj, v);
-            coef[j] += c;
-            for (vi, qi) in v.iter_mut().zip(qj) {
-                *vi -= c * qi;
-            }
-        }
-    }
-    coef
-}
-
-impl Basis {
-    /// QR of whitened columns; a column whose remaining norm is below 1e-9 of its own is
-    /// dependent and gets no coefficient.
-    pub fn new(cols: &[Vec<f64>]) -> Self {
-        let mut b = Basis {
-            q: Vec::new(),
-            r: Vec::new(),
-            kept: Vec::new(),
-            scale: Vec::new(),
-        };
-        for c in cols {
-            b.push(c.clone());
-        }
-        b
-    }
-
-    /// Adds one whitened column; returns whether it was independent.
-    pub fn push(&mut self, mut c: Vec<f64>) -> bool {
-        let norm = dot(&c, &c).sqrt();
-        self.scale.push(if norm > 0.0 { norm } else { 1.0 });
-        if norm == 0.0 || !norm.is_finite() {
-            self.kept.push(None);
-            return false;
-        }
-        for v in c.iter_mut() {
-            *v /= norm;
-        }
-        let coef = orthogonalize(&self.q, &mut c);
-        let rest = dot(&c, &c).sqrt();
-        if rest < 1.0e-9 {
-            self.kept.push(None);
-            return false;
-        }
-        for v in c.iter_mut() {
-            *v /= rest;
-        }
-        let mut col = coef;
-        col.push(rest);
-        self.r.push(col);
-        self.kept.push(Some(self.q.len()));
-        self.q.push(c);
-        true
-    }
-
-    /// Residual of `y` after projection on the basis.
-    pub fn residual(&self, y: &[f64]) -> Vec<f64> {
-        let mut r = y.to_vec();
-        orthogonalize(&self.q, &mut r);
-        r
-    }
-
-    /// Unscaled covariance (XᵀX)⁻¹ of the input columns' coefficients (dependent columns: row
-    /// and column 0); multiply by the residual variance for the covariance of the fit.
-    pub fn covariance(&self) -> Vec<Vec<f64>> {
-        let k = self.q.len();
-        let rr = |i: usize, j: usize| if i <= j { self.r[j][i] } else { 0.0 };
-        let mut rinv = vec![vec![0.0; k]; k];
-        #[allow(clippy::needless_range_loop)] // triangular solve: indices are the algorithm
-        for c in 0..k {
-            for i in (0..=c).rev() {
-                let s: f64 = (i + 1..=c).map(|j| rr(i, j) * rinv[j][c]).sum();
-                rinv[i][c] = (if i == c { 1.0 } else { 0.0 } - s) / rr(i, i);
-            }
-        }
-        let m = self.kept.len();
-        let mut cov = vec![vec![0.0; m]; m];
-        for (a, ka) in self.kept.iter().enumerate() {
-            for (b, kb) in self.kept.iter().enumerate() {
-                if let (Some(i), Some(j)) = (ka, kb) {
-                    // (R⁻¹R⁻ᵀ)[i][j] = Σ_c R⁻¹[i][c]·R⁻¹[j][c], in scaled coordinates.
-                    let v: f64 = (0..k).map(|c| rinv[*i][c] * rinv[*j][c]).sum();
-                    cov[a][b] = v / (self.scale[a] * self.scale[b]);
-                }
-            }
-        }
-        cov
-    }
-
-    /// Coefficients of the input columns and their unscaled standard errors (sqrt of the
-    /// diagonal of (XᵀX)⁻¹), dependent columns 0 ± ∞.
-    pub fn solve(&self, y: &[f64]) -> (Vec<f64>, Vec<f64>) {
-        let k = self.q.len();
-        let qty: Vec<f64> = self.q.iter().map(|q| dot(q, y)).collect();
-        // R is stored by columns: r[j][i] = R[i][j] for i ≤ j.
-        let rr = |i: usize, j: usize| if i <= j { self.r[j][i] } else { 0.0 };
-        let mut beta_q = vec![0.0; k];
-        for i in (0..k).rev() {
-            let s: f64 = (i + 1..k).map(|j| rr(i, j) * beta_q[j]).sum();
-            beta_q[i] = (qty[i] - s) / rr(i, i);
-        }
-        // R⁻¹ column by column for the variances: diag(R⁻¹R⁻ᵀ) = row sums of squares of R⁻¹.
-        let mut rinv = vec![vec![0.0; k]; k];
-        #[allow(clippy::needless_range_loop)] // triangular solve: indices are the algorithm
-        for c in 0..k {
-            for i in (0..=c).rev() {
-                let s: f64 = (i + 1..=c).map(|j| rr(i, j) * rinv[j][c]).sum();
-                rinv[i][c] = (if i == c { 1.0 } else { 0.0 } - s) / rr(i, i);
-            }
-        }
-        let var_q: Vec<f64> = rinv
-            .iter()
-            .map(|row| row.iter().map(|v| v * v).sum())
-            .collect();
-        let mut beta = Vec::with_capacity(self.kept.len());
-        let mut se = Vec::with_capacity(self.kept.len());
-        for (j, kept) in self.kept.iter().enumerate() {
-            match kept {
-                Some(i) => {
-                    beta.push(beta_q[*i] / self.scale[j]);
-                    se.push(var_q[*i].sqrt() / self.scale[j]);
-                }
-                None => {
-                    beta.push(0.0);
-                    se.push(f64::INFINITY);
-                }
-            }
-        }
-        (beta, se)
-    }
-}
+/// Projects `v` off the orthonormal columns `q` (twice) and returns the coefficients removed.
+pub use crate::numerics::linalg::project_out as orthogonalize;
 
 /// A generalised least-squares fit of raw columns to raw data with AR(1) whitening.
 #[derive(Debug, Clone)]
@@ -603,22 +458,6 @@ pub fn calibrated_baseline(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn qr_solve_recovers_known_coefficients_and_flags_dependent_columns() {
-        let n = 200;
-        let x1: Vec<f64> = (0..n).map(|i| (i as f64 * 0.37).sin()).collect();
-        let x2: Vec<f64> = (0..n).map(|i| i as f64 / n as f64).collect();
-        let dup: Vec<f64> = x2.iter().map(|v| 2.0 * v).collect();
-        let y: Vec<f64> = (0..n).map(|i| 3.0 + 2.0 * x1[i] - 5.0 * x2[i]).collect();
-        let cols = vec![vec![1.0; n], x1, x2, dup];
-        let b = Basis::new(&cols);
-        let (beta, se) = b.solve(&y);
-        assert!((beta[0] - 3.0).abs() < 1e-9 && (beta[1] - 2.0).abs() < 1e-9);
-        assert!((beta[2] - -5.0).abs() < 1e-9);
-        assert_eq!(b.kept[3], None);
-        assert!(se[3].is_infinite());
-    }
 
     use crate::discover::import::Channel;
 

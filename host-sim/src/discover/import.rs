@@ -7,7 +7,7 @@
 //! (filters, differences and whitening restart there).
 
 use crate::log::{Log, LogError};
-use crate::sim::time::{days_from_civil, utc_date};
+use crate::sim::time::{posix_seconds, utc_date};
 use accomp::tide::{UtcTime, STANDARD_GRAVITY_M_S2};
 use std::path::Path;
 
@@ -79,11 +79,12 @@ pub fn parse_utc(text: &str) -> Option<f64> {
     civil_unix_seconds(year, month, day, hour, minute, second)
 }
 
-/// Unix seconds of a checked calendar instant, in exact integer day arithmetic (the Julian-date
-/// route of `UtcTime::unix_seconds` loses ~10 µs to the f64 day count, which would jitter
-/// `time_s`). The day count is still `sim::time::days_from_civil`: moving it to
-/// `sim::time::posix_seconds` (jiff) leaves that function without callers in `sim/`, which
-/// another helper owns this session.
+/// Unix seconds of a checked calendar instant: whole seconds from jiff's calendar
+/// (`sim::time::posix_seconds`, exact integer arithmetic — the Julian-date route of
+/// `UtcTime::unix_seconds` loses ~10 µs to the f64 day count, which would jitter `time_s`), the
+/// fraction added after. `None` for a day or time that does not exist, or outside what the tide
+/// model takes (`accomp::tide::UtcTime`: years 1600–2400; a leap second's 60.x s is accepted
+/// there and counted POSIX-style, as the next minute's first second).
 pub fn civil_unix_seconds(
     year: i32,
     month: u8,
@@ -93,8 +94,15 @@ pub fn civil_unix_seconds(
     second: f64,
 ) -> Option<f64> {
     UtcTime::new(year, month, day, hour, minute, second).ok()?;
-    let days = days_from_civil(i64::from(year), i64::from(month), i64::from(day));
-    Some((days * 86_400 + i64::from(hour) * 3600 + i64::from(minute) * 60) as f64 + second)
+    let whole = posix_seconds(
+        i64::from(year),
+        i64::from(month),
+        i64::from(day),
+        i64::from(hour),
+        i64::from(minute),
+        0,
+    )?;
+    Some(whole as f64 + second)
 }
 
 /// Formats Unix seconds as `YYYY-MM-DDTHH:MM:SS.sssZ` (the date from jiff, proleptic
@@ -151,14 +159,18 @@ pub fn gmetrology_from_str(text: &str) -> Result<(Log, Vec<BadRow>), ImportError
             });
             continue;
         };
-        let Some(local) = civil_unix_seconds(
-            ints[0] as i32,
-            ints[1] as u8,
-            ints[2] as u8,
-            ints[3] as u8,
-            ints[4] as u8,
-            sec,
-        ) else {
+        // `try_from`, not `as`: a month of 257 must not wrap to 1.
+        let field = |k: usize| u8::try_from(ints[k]).ok();
+        let Some(local) = (|| {
+            civil_unix_seconds(
+                i32::try_from(ints[0]).ok()?,
+                field(1)?,
+                field(2)?,
+                field(3)?,
+                field(4)?,
+                sec,
+            )
+        })() else {
             bad.push(BadRow {
                 line: line_no,
                 reason: "invalid date/time".into(),
@@ -754,6 +766,29 @@ mod tests {
         assert_eq!(log.meta("start_utc"), Some("2021-06-08T00:00:00.000Z"));
         assert_eq!(log.time_s(), &[0.0, 120.0]);
         assert_eq!(bad.iter().map(|b| b.line).collect::<Vec<_>>(), vec![2, 4]);
+    }
+
+    #[test]
+    fn dates_that_do_not_exist_are_bad_rows_not_wrapped_or_rolled_over() {
+        // Month 257 would wrap to 1 through an `as u8`; 2021-02-29 and 24:00 do not exist.
+        let text = "2021 06 08 08 00 00  5882.3353 1002.2656
+                    2021 257 08 08 01 00  5882.3373 1002.2656
+                    2021 02 29 08 01 00  5882.3373 1002.2656
+                    2021 06 08 24 00 00  5882.3373 1002.2656
+                    2021 06 08 08 02 00  5882.3393 1002.2000
+";
+        let (log, bad) = gmetrology_from_str(text).unwrap();
+        assert_eq!(log.time_s(), &[0.0, 120.0]);
+        assert_eq!(
+            bad.iter().map(|b| b.line).collect::<Vec<_>>(),
+            vec![2, 3, 4]
+        );
+        assert!(bad.iter().all(|b| b.reason == "invalid date/time"));
+        // A leap year's 29 February exists.
+        assert_eq!(
+            civil_unix_seconds(2024, 2, 29, 23, 59, 30.5),
+            Some(1_709_251_170.5)
+        );
     }
 
     #[test]

@@ -2,7 +2,7 @@
 //! deviations' ln Γ), from `statrs`. The tests below are the precision tests that decided it:
 //! closed forms to 1e-13 and printed table values (docs/numerics.md, "Host numerics").
 
-use statrs::distribution::{ContinuousCDF, FisherSnedecor, StudentsT};
+use statrs::distribution::{ChiSquared, ContinuousCDF, FisherSnedecor, StudentsT};
 use statrs::function::{beta, gamma};
 use thiserror::Error;
 
@@ -78,6 +78,16 @@ pub fn t_two_sided(t: f64, nu: f64) -> Result<f64, SpecialError> {
         x: t,
     })?;
     Ok(2.0 * dist.sf(t.abs()))
+}
+
+/// Quantile of the chi-squared distribution with `nu` (> 0, real) degrees of freedom: statrs'
+/// safeguarded Newton iteration on the regularized incomplete gamma function. NaN when p is not
+/// in (0, 1) or ν ≤ 0.
+pub fn chi2_quantile(p: f64, nu: f64) -> f64 {
+    if !(p > 0.0 && p < 1.0 && nu > 0.0) {
+        return f64::NAN;
+    }
+    ChiSquared::new(nu).map_or(f64::NAN, |d| d.inverse_cdf(p))
 }
 
 #[cfg(test)]

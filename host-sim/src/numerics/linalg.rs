@@ -1,9 +1,14 @@
 //! Dense least squares for the host tools, over nalgebra's Householder QR: the design matrix is
 //! factored itself, the normal equations are never formed, so the error grows with cond(A), not
 //! cond(A)² — the difference between "fine" and "wrecked" for a 4th-order fit in raw °C. One
-//! module for every fit on the host (`fit`, `tumble`; `discover` is to be ported onto it):
-//! solution, residuals, leverages, the unscaled covariance (RᵀR)⁻¹ and the solution operator
-//! R⁻¹Qᵀ (for propagating any noise covariance to the coefficients).
+//! module for every fit on the host:
+//! - [`least_squares`] (`fit`, `tumble`): solution, residuals, leverages, the unscaled
+//!   covariance (RᵀR)⁻¹ and the solution operator R⁻¹Qᵀ (for propagating any noise covariance
+//!   to the coefficients); a rank-deficient design is an error.
+//! - [`OrthonormalBasis`] (`discover`): the same QR of columns scaled to unit norm, where a
+//!   column that adds nothing new is *dropped* (coefficient 0 ± ∞) instead of refused — the
+//!   discovery tries candidate columns that may overlap the baseline — and columns can be
+//!   appended one at a time to score candidates against the current model.
 
 use nalgebra::{DMatrix, DVector};
 use thiserror::Error;
@@ -144,6 +149,190 @@ pub fn least_squares_with(
     })
 }
 
+/// A column counts as dependent when its part orthogonal to the previous columns is below this
+/// fraction of its own norm (|R_kk| of the unit-norm column).
+pub const DEPENDENT_COLUMN_REL: f64 = 1.0e-9;
+
+/// Projects `v` onto the orthogonal complement of the orthonormal columns `q`, in place, and
+/// returns the coefficients removed (Qᵀv). Two passes: one projection loses orthogonality in
+/// proportion to how much of `v` lay in span(Q); the second restores it to rounding
+/// ("twice is enough", Giraud et al. 2005).
+pub fn project_out(q: &[Vec<f64>], v: &mut [f64]) -> Vec<f64> {
+    let mut coef = vec![0.0; q.len()];
+    let mut vv = nalgebra::DVectorViewMut::from_slice(v, v.len());
+    for _ in 0..2 {
+        for (c, qj) in coef.iter_mut().zip(q) {
+            let qv = nalgebra::DVectorView::from_slice(qj, qj.len());
+            let d = qv.dot(&vv);
+            *c += d;
+            vv.axpy(-d, &qv, 1.0);
+        }
+    }
+    coef
+}
+
+/// An orthonormal basis Q of the independent columns among those given, with the triangular
+/// factor R (columns scaled to unit norm first, so that R is well scaled whatever the units):
+/// X·diag(1/scale) restricted to the kept columns = Q·R.
+///
+/// Built by nalgebra's Householder QR; a column whose |R_kk| is below
+/// [`DEPENDENT_COLUMN_REL`] is dropped and the rest refactored. [`push`](Self::push) appends
+/// one column by the thin-Q column update (project out Q twice, normalise), which is what
+/// scoring one candidate against the current model needs.
+#[derive(Debug, Clone)]
+pub struct OrthonormalBasis {
+    /// Orthonormal columns, one per kept input column.
+    pub q: Vec<Vec<f64>>,
+    /// For each input column: its index into `q`, or `None` if it was dependent.
+    pub kept: Vec<Option<usize>>,
+    /// Norm of each input column (1 for a zero or non-finite one).
+    pub scale: Vec<f64>,
+    /// R (kept × kept, upper triangular), in scaled-column coordinates.
+    r: DMatrix<f64>,
+}
+
+impl OrthonormalBasis {
+    /// The basis of `cols` (each of the same length; rows = observations).
+    pub fn new(cols: &[Vec<f64>]) -> Self {
+        let mut b = OrthonormalBasis {
+            q: Vec::new(),
+            kept: vec![None; cols.len()],
+            scale: Vec::with_capacity(cols.len()),
+            r: DMatrix::zeros(0, 0),
+        };
+        // Candidates: non-zero, finite columns, in order.
+        let mut candidates = Vec::new();
+        for (j, c) in cols.iter().enumerate() {
+            let norm = c.iter().map(|v| v * v).sum::<f64>().sqrt();
+            b.scale.push(if norm > 0.0 { norm } else { 1.0 });
+            if norm > 0.0 && norm.is_finite() {
+                candidates.push(j);
+            }
+        }
+        let m = cols.first().map_or(0, Vec::len);
+        loop {
+            if candidates.is_empty() || m == 0 {
+                return b;
+            }
+            let k = candidates.len().min(m);
+            let a = DMatrix::from_fn(m, candidates.len(), |i, j| {
+                cols[candidates[j]][i] / b.scale[candidates[j]]
+            });
+            let qr = a.qr();
+            let r = qr.r();
+            // With more columns than rows, column m onwards is dependent by construction.
+            let dependent = (0..k)
+                .find(|&i| r[(i, i)].abs() < DEPENDENT_COLUMN_REL)
+                .or((candidates.len() > m).then_some(m));
+            if let Some(i) = dependent {
+                candidates.remove(i);
+                continue;
+            }
+            let q = qr.q();
+            b.q = q
+                .column_iter()
+                .map(|c| c.iter().copied().collect())
+                .collect();
+            for (i, &j) in candidates.iter().enumerate() {
+                b.kept[j] = Some(i);
+            }
+            b.r = r;
+            return b;
+        }
+    }
+
+    /// Appends one column; returns whether it was independent of the basis.
+    pub fn push(&mut self, mut c: Vec<f64>) -> bool {
+        let norm = c.iter().map(|v| v * v).sum::<f64>().sqrt();
+        self.scale.push(if norm > 0.0 { norm } else { 1.0 });
+        if norm == 0.0 || !norm.is_finite() {
+            self.kept.push(None);
+            return false;
+        }
+        c.iter_mut().for_each(|v| *v /= norm);
+        let coef = project_out(&self.q, &mut c);
+        let rest = c.iter().map(|v| v * v).sum::<f64>().sqrt();
+        if rest < DEPENDENT_COLUMN_REL {
+            self.kept.push(None);
+            return false;
+        }
+        c.iter_mut().for_each(|v| *v /= rest);
+        let k = self.q.len();
+        let mut r = std::mem::replace(&mut self.r, DMatrix::zeros(0, 0)).resize(k + 1, k + 1, 0.0);
+        for (i, v) in coef.iter().enumerate() {
+            r[(i, k)] = *v;
+        }
+        r[(k, k)] = rest;
+        self.r = r;
+        self.kept.push(Some(k));
+        self.q.push(c);
+        true
+    }
+
+    /// `y` minus its projection on the basis.
+    pub fn residual(&self, y: &[f64]) -> Vec<f64> {
+        let mut r = y.to_vec();
+        project_out(&self.q, &mut r);
+        r
+    }
+
+    /// R⁻¹ (kept × kept).
+    fn r_inverse(&self) -> DMatrix<f64> {
+        let k = self.q.len();
+        // R's diagonal is ≥ DEPENDENT_COLUMN_REL in magnitude by construction.
+        self.r
+            .solve_upper_triangular(&DMatrix::identity(k, k))
+            .unwrap_or_else(|| DMatrix::from_element(k, k, f64::NAN))
+    }
+
+    /// Unscaled covariance (XᵀX)⁻¹ of the input columns' coefficients (dependent columns: row
+    /// and column 0); times the residual variance it is the covariance of the fit.
+    pub fn covariance(&self) -> Vec<Vec<f64>> {
+        let rinv = self.r_inverse();
+        let cov_q = &rinv * rinv.transpose();
+        let m = self.kept.len();
+        let mut cov = vec![vec![0.0; m]; m];
+        for (a, ka) in self.kept.iter().enumerate() {
+            for (b, kb) in self.kept.iter().enumerate() {
+                if let (Some(i), Some(j)) = (ka, kb) {
+                    cov[a][b] = cov_q[(*i, *j)] / (self.scale[a] * self.scale[b]);
+                }
+            }
+        }
+        cov
+    }
+
+    /// Least-squares coefficients of the input columns for `y` and their unscaled standard
+    /// errors (√diag (XᵀX)⁻¹); dependent columns get 0 ± ∞.
+    pub fn solve(&self, y: &[f64]) -> (Vec<f64>, Vec<f64>) {
+        let k = self.q.len();
+        let yv = nalgebra::DVectorView::from_slice(y, y.len());
+        let qty = DVector::from_fn(k, |i, _| {
+            nalgebra::DVectorView::from_slice(&self.q[i], self.q[i].len()).dot(&yv)
+        });
+        let beta_q = self
+            .r
+            .solve_upper_triangular(&qty)
+            .unwrap_or_else(|| DVector::from_element(k, f64::NAN));
+        let rinv = self.r_inverse();
+        let mut beta = Vec::with_capacity(self.kept.len());
+        let mut se = Vec::with_capacity(self.kept.len());
+        for (j, kept) in self.kept.iter().enumerate() {
+            match kept {
+                Some(i) => {
+                    beta.push(beta_q[*i] / self.scale[j]);
+                    se.push(rinv.row(*i).norm() / self.scale[j]);
+                }
+                None => {
+                    beta.push(0.0);
+                    se.push(f64::INFINITY);
+                }
+            }
+        }
+        (beta, se)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -266,5 +455,80 @@ mod tests {
         ));
         let a = vec![vec![1.0], vec![f64::NAN]];
         assert_eq!(least_squares(&a, &[1.0, 2.0]), Err(LinalgError::NonFinite));
+    }
+
+    fn columns_of(a: &[Vec<f64>]) -> Vec<Vec<f64>> {
+        (0..a[0].len())
+            .map(|j| a.iter().map(|row| row[j]).collect())
+            .collect()
+    }
+
+    #[test]
+    fn basis_recovers_known_coefficients_and_drops_a_dependent_column() {
+        let n = 200;
+        let x1: Vec<f64> = (0..n).map(|i| (i as f64 * 0.37).sin()).collect();
+        let x2: Vec<f64> = (0..n).map(|i| i as f64 / n as f64).collect();
+        let dup: Vec<f64> = x2.iter().map(|v| 2.0 * v).collect();
+        let y: Vec<f64> = (0..n).map(|i| 3.0 + 2.0 * x1[i] - 5.0 * x2[i]).collect();
+        let cols = vec![vec![1.0; n], x1, dup.clone(), x2, vec![0.0; n]];
+        for b in [OrthonormalBasis::new(&cols), {
+            let mut b = OrthonormalBasis::new(&[]);
+            cols.iter().for_each(|c| {
+                b.push(c.clone());
+            });
+            b
+        }] {
+            assert_eq!(b.kept, vec![Some(0), Some(1), Some(2), None, None]);
+            let (beta, se) = b.solve(&y);
+            // x2 enters through its first copy, 2·x2.
+            for (got, want) in beta.iter().zip([3.0, 2.0, -2.5, 0.0, 0.0]) {
+                assert!((got - want).abs() < 1e-12, "{beta:?}");
+            }
+            assert!(se[3].is_infinite() && se[4].is_infinite() && se[0].is_finite());
+            assert!(b.residual(&y).iter().all(|r| r.abs() < 1e-12));
+        }
+    }
+
+    #[test]
+    fn basis_agrees_with_least_squares_on_a_full_rank_design() {
+        let t: Vec<f64> = (0..30).map(|i| 20.0 + 1.5 * f64::from(i)).collect();
+        let y: Vec<f64> = t.iter().map(|x| (x * 0.3).sin() + 0.01 * x).collect();
+        let a = vandermonde(&t, 3);
+        let ls = least_squares(&a, &y).unwrap();
+        let b = OrthonormalBasis::new(&columns_of(&a));
+        let (beta, se) = b.solve(&y);
+        let cov = b.covariance();
+        let want_cov = ls.unscaled_covariance();
+        for j in 0..4 {
+            let rel = |x: f64, w: f64| ((x - w) / w).abs();
+            assert!(
+                rel(beta[j], ls.coeffs[j]) < 1e-9,
+                "{j}: {} {}",
+                beta[j],
+                ls.coeffs[j]
+            );
+            assert!(rel(se[j] * se[j], ls.unscaled_variances()[j]) < 1e-9);
+            for k in 0..4 {
+                assert!(rel(cov[j][k], want_cov[j][k]) < 1e-9);
+            }
+        }
+        let res = b.residual(&y);
+        for (r, e) in res.iter().zip(&ls.residuals) {
+            assert!((r - e).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn projecting_out_leaves_a_vector_orthogonal_to_the_basis() {
+        let t: Vec<f64> = (0..50).map(f64::from).collect();
+        let b = OrthonormalBasis::new(&columns_of(&vandermonde(&t, 2)));
+        // Nearly in the span: one projection would leave ~1e-8 relative in it.
+        let mut v: Vec<f64> = t.iter().map(|x| x * x + 1e-8 * (x * 1.7).cos()).collect();
+        let coef = project_out(&b.q, &mut v);
+        assert_eq!(coef.len(), 3);
+        for q in &b.q {
+            let d: f64 = q.iter().zip(&v).map(|(a, b)| a * b).sum();
+            assert!(d.abs() < 1e-20, "{d:e}");
+        }
     }
 }

@@ -51,19 +51,8 @@ pub struct Utc(pub f64);
 #[error("not an ISO 8601 UTC time (YYYY-MM-DDTHH:MM:SSZ): {0:?}")]
 pub struct UtcParseError(pub String);
 
-/// Days since 1970-01-01 of a proleptic Gregorian date (H. Hinnant's days_from_civil). Kept for
-/// `discover::import` until it moves to [`posix_seconds`]/[`utc_date`] (jiff); no new callers.
-pub(crate) fn days_from_civil(y: i64, m: i64, d: i64) -> i64 {
-    let y = if m <= 2 { y - 1 } else { y };
-    let era = y.div_euclid(400);
-    let yoe = y - era * 400;
-    let mp = (m + 9) % 12;
-    let doy = (153 * mp + 2) / 5 + d - 1;
-    let doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
-    era * 146_097 + doe - 719_468
-}
-
-/// The date of a day count since 1970-01-01 (inverse of [`days_from_civil`]).
+/// The date of a day count since 1970-01-01 (H. Hinnant's civil_from_days), only for printing an
+/// instant beyond jiff's years −9999..=9999.
 pub(crate) fn civil_from_days(z: i64) -> (i64, i64, i64) {
     let z = z + 719_468;
     let era = z.div_euclid(146_097);

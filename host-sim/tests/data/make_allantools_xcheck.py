@@ -1,4 +1,4 @@
-"""Generates the allantools cross-check fixture for host-sim/src/allan.rs (run ONCE; outputs committed).
+"""Generates the allantools cross-check fixture for host-sim/src/allan/ (tests.rs) (run ONCE; outputs committed).
 
     python3 host-sim/tests/data/make_allantools_xcheck.py
 

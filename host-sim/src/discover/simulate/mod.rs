@@ -144,8 +144,12 @@ where
         *y -= p;
     }
     lap("twin");
-    let cause = super::discover(resid_ds, None, cfg)?;
+    let spin = stage_spinner("catalogue search on the measured − twin residual");
+    let cause = super::discover(resid_ds, None, cfg);
+    spin.finish_and_clear();
+    let cause = cause?;
     lap("catalogue search");
+    let spin = stage_spinner("extension and the twin's noise model");
     // 2. The extension: the accepted effects as the twin's effects; each one's contribution is
     //    what it adds to the twin's prediction (the simulator's own rendering of it).
     let (effects, refused) = quiet.effects_from(&cause);
@@ -158,16 +162,52 @@ where
         check_len(&p, ds)?;
         contrib.push((name.clone(), sub(&p, &det)));
     }
-    // 3. The simulator's noise: the likelihood noise model of the residual the extended twin
-    //    leaves (what the simulation cannot predict), started from the catalogue search's.
+    // 3. The simulator's noise: the likelihood noise model (the discovery's: white + flicker +
+    //    random walk, Kalman innovations, warm-started from the catalogue search's final fit)
+    //    of what the extended twin cannot predict. Where the discovery's tidal analysis
+    //    separates the instrument's drift (a relative gravimeter: cubic B-spline, everything
+    //    slower than ≈ 0.25 cpd), the fit sees the residual without that drift: otherwise the
+    //    three-term family spreads the drift's power into mid-band flicker and random walk
+    //    (gMetrology: ×3–10 too much power at 0.4–20 cycles/day). The comparison itself keeps
+    //    the drift: the simulation does not predict it, and says so at long τ.
     let yard = Yardstick::new(ds);
     let r_before = yard.detrend(&sub(&ds.y, &det));
     let r_after = yard.detrend(&sub(&ds.y, &det_ext));
     let idx: Vec<usize> = (0..ds.len()).collect();
+    let (noise_input, noise_source) = match &cause.tidal {
+        Ok(t) => match without_drift(ds, &r_after) {
+            Ok(r) => (
+                r,
+                format!(
+                    "noise model: likelihood fit (white + flicker + random walk) to the extended \
+                     twin's residual without the tidal analysis' drift ({}); the drift stays in \
+                     the comparison",
+                    t.drift
+                ),
+            ),
+            Err(why) => {
+                warnings.push(format!(
+                    "the tidal analysis' drift could not be removed before the noise fit ({why}): \
+                     the noise model also describes the drift"
+                ));
+                (
+                    r_after.clone(),
+                    "noise model: likelihood fit to the extended twin's residual (drift included)"
+                        .to_owned(),
+                )
+            }
+        },
+        Err(_) => (
+            r_after.clone(),
+            "noise model: likelihood fit (white + flicker + random walk) to the extended twin's \
+             residual"
+                .to_owned(),
+        ),
+    };
     let nf = NoiseModel::fit_ml(
         &ds.t_s,
         &idx,
-        &r_after,
+        &noise_input,
         ds.dt_s,
         ds.span_s(),
         &[&cause.selection.final_noise.model],
@@ -175,7 +215,8 @@ where
     );
     if let Some(why) = &nf.failure {
         warnings.push(format!(
-            "the noise model of the extended twin's residual could not be fitted ({why}): the              catalogue search's final noise model is the twin's noise instead"
+            "the noise model of the extended twin's residual could not be fitted ({why}): the \
+             catalogue search's final noise model is the twin's noise instead"
         ));
     }
     let noise = if nf.failure.is_none() {
@@ -183,11 +224,13 @@ where
     } else {
         cause.selection.final_noise.model.clone()
     };
+    spin.finish_and_clear();
     lap("extension and noise fit");
     // 4. Ensembles and comparisons, before and after.
     let twin = build(Some(&noise))?;
     let ext = twin.extended(&effects.iter().map(|e| e.1.clone()).collect::<Vec<_>>());
-    let provenance = ext.provenance();
+    let mut provenance = ext.provenance();
+    provenance.push(noise_source);
     let channels: Vec<String> = yard.channels.iter().map(|c| c.0.clone()).collect();
     let freqs = yard
         .welch
@@ -244,6 +287,41 @@ where
         simulator: quiet.is_simulator(),
         timing_s,
     })
+}
+
+/// A spinner with the elapsed time on stderr for a stage without countable steps (drawn only
+/// on a terminal, like the ensemble's bars).
+fn stage_spinner(what: &str) -> indicatif::ProgressBar {
+    let p = indicatif::ProgressBar::new_spinner();
+    p.set_style(
+        indicatif::ProgressStyle::with_template("{spinner} {msg} ({elapsed})")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_spinner()),
+    );
+    p.set_message(what.to_owned());
+    p.enable_steady_tick(std::time::Duration::from_millis(200));
+    p
+}
+
+/// `r` minus its least-squares fit by the tidal analysis' drift columns (cubic B-splines with
+/// knots every `tidal::DRIFT_KNOT_S`, per contiguous segment).
+fn without_drift(ds: &Dataset, r: &[f64]) -> Result<Vec<f64>, String> {
+    let cols = super::tidal::spline_drift(&ds.t_s, &ds.segment_start, super::tidal::DRIFT_KNOT_S);
+    if cols.is_empty() {
+        return Err("no drift columns".into());
+    }
+    let rows: Vec<Vec<f64>> = (0..r.len())
+        .map(|i| cols.iter().map(|c| c[i]).collect())
+        .collect();
+    let ls = crate::numerics::linalg::least_squares(&rows, r).map_err(|e| e.to_string())?;
+    Ok((0..r.len())
+        .map(|i| {
+            r[i] - cols
+                .iter()
+                .zip(&ls.coeffs)
+                .map(|(c, b)| c[i] * b)
+                .sum::<f64>()
+        })
+        .collect())
 }
 
 fn sub(a: &[f64], b: &[f64]) -> Vec<f64> {
