@@ -22,7 +22,8 @@
 use super::baseline::{ar1, gls, raw_residual, std, Basis, Rows};
 use super::effects::{self, columns, Context, Effect, Param};
 
-use super::import::Dataset;
+use super::hysteresis::{self, Preisach};
+use super::import::{ChannelKind, Dataset};
 use super::noise::{held_out_prediction, NoiseFit, NoiseModel};
 use super::residual;
 
@@ -158,6 +159,8 @@ pub struct Scored {
     /// The nonlinear parameter ended at the first or last point of its search grid: the fit
     /// wants a value the search did not allow, so the value is not a finding.
     pub at_edge: bool,
+    /// `thermal_hysteresis`: the Preisach distribution of play widths its column is made of.
+    pub preisach: Option<Preisach>,
 }
 
 /// The current model in the whitened domain, ready to score extensions quickly.
@@ -254,6 +257,36 @@ fn best_theta(cur: &Current, e: &Effect, ctx: &Context) -> Option<(f64, f64, boo
     } else {
         (g[ib], vals[ib], at_edge)
     })
+}
+
+/// Best Preisach distribution of play widths for `thermal_hysteresis`: each play of the width
+/// grid whitened and projected off the current model, non-negative weights by NNLS on the
+/// whitened residual (`hysteresis::fit_preisach`). Returns the distribution, its characteristic
+/// width θ, its raw column at θ, the whitened RSS with it, the number of widths with a weight
+/// and whether θ sits at an end of the grid (the distribution wants widths outside the range).
+fn best_preisach(cur: &Current) -> Option<(Preisach, f64, Vec<f64>, f64, usize, bool)> {
+    let ds = cur.ds;
+    let temp = &ds.channel(ChannelKind::Temperature)?.values;
+    let g = effects::grid(&Effect::ThermalHysteresis, ds);
+    if g.len() < 2 {
+        return None;
+    }
+    let mut cols = Vec::with_capacity(g.len());
+    for &r in &g {
+        let mut w = cur.rows.whiten(&hysteresis::branch(temp, r), cur.phi);
+        if w.iter().any(|v| !v.is_finite()) {
+            return None;
+        }
+        super::baseline::orthogonalize(&cur.basis.q, &mut w);
+        cols.push(w);
+    }
+    let (p, _, active) = hysteresis::fit_preisach(&g, &cols, &cur.r_w)?;
+    let theta = p.width_c();
+    let col = p.column(temp, theta);
+    let rss = cur.rss_with(std::slice::from_ref(&col));
+    let half_step = (g[1] / g[0]).sqrt();
+    let at_edge = theta <= g[0] * half_step || theta >= g[g.len() - 1] / half_step;
+    Some((p, theta, col, rss, active, at_edge))
 }
 
 /// Best single step: a fast scan of every position on the whitened residual (ignoring the
@@ -402,6 +435,8 @@ pub struct Selection {
     pub joint: Option<JointFit>,
     /// Forward-chaining score of the baseline.
     pub baseline_forward: CvScore,
+    /// The Preisach distribution of play widths of the accepted `thermal_hysteresis`.
+    pub hysteresis: Option<Preisach>,
     /// Of the final model.
     pub final_forward: CvScore,
 }
@@ -538,7 +573,23 @@ fn score_all(
         if !e.repeatable() && done.contains(e) {
             continue;
         }
+        let mut preisach = None;
         let (theta, rss, k_nl, at_edge) = match e {
+            // A Preisach distribution: the width search is charged like the single play's grid,
+            // each width beyond the first with a weight as one more parameter.
+            Effect::ThermalHysteresis => match best_preisach(cur) {
+                Some((p, th, col, r, active, edge)) => {
+                    let m = effects::grid(e, cur.ds).len() as f64;
+                    preisach = Some((p, col));
+                    (
+                        th,
+                        r,
+                        nl_penalty(m) + active.saturating_sub(1) as f64 * n_eff.ln(),
+                        edge,
+                    )
+                }
+                None => continue,
+            },
             Effect::Step => match best_step(cur, ctx) {
                 Some((th, r)) => (th, r, nl_penalty(m_rows), false),
                 None => continue,
@@ -564,7 +615,10 @@ fn score_all(
                 false,
             ),
         };
-        let cols = columns(e, cur.ds, ctx, theta);
+        let (cols, preisach) = match preisach {
+            Some((p, col)) => (vec![col], Some(p)),
+            None => (columns(e, cur.ds, ctx, theta), None),
+        };
         if cols.is_empty() || rss <= 0.0 || cur.rss <= 0.0 {
             continue;
         }
@@ -578,6 +632,7 @@ fn score_all(
             delta_bic,
             penalty,
             at_edge,
+            preisach,
         });
     }
     out.sort_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic));
@@ -626,6 +681,8 @@ pub fn select(
     let tides = cands
         .iter()
         .any(|e| matches!(e, Effect::TidalGravity | Effect::TidalTilt));
+    // The context grows the accepted hysteresis's Preisach distribution.
+    let mut ctx_own = ctx.clone();
     let mut cols = base_cols.to_vec();
     let (cur0, base_raw, _) = fit_state(ds, &cols, target, NoiseChoice::Fit(None));
     let baseline_cv = cross_validate(ds, &cols, target, &cur0.noise.model, cfg);
@@ -650,6 +707,7 @@ pub fn select(
         let (cur, cur_raw, _) = fit_state(ds, &cols, target, choice);
         warm = cur.noise.model.clone();
         last_noise = (cols.len(), cur.noise.clone());
+        let ctx = &ctx_own;
         let scored = score_all(&cur, cands, ctx, &done, tides);
         // The ranking above holds the noise model fixed; an effect present in the residual
         // also inflates the fitted noise (its Allan variance), which hides it. The best few are
@@ -758,6 +816,10 @@ pub fn select(
         let Some((s, before, after, fwd_before, fwd_after)) = took else {
             break;
         };
+        if let Some(p) = &s.preisach {
+            ctx_own.hysteresis = Some(p.clone());
+        }
+        let ctx = &ctx_own;
         let sigma_theta = theta_sigma(&cur, &s, ctx, cur.basis.q.len());
         let k0 = cols.len();
         cols.extend(s.cols.iter().cloned());
@@ -811,7 +873,7 @@ pub fn select(
             .noise
     };
     let joint = (!accepted.is_empty())
-        .then(|| joint_fit(ds, target, base_cols, &mut accepted, ctx, &final_noise));
+        .then(|| joint_fit(ds, target, base_cols, &mut accepted, &ctx_own, &final_noise));
     if let Some(j) = &joint {
         cols = base_cols.to_vec();
         for c in &j.effect_columns {
@@ -837,6 +899,7 @@ pub fn select(
         refused,
         joint,
         baseline_forward: forward_validate(ds, base_cols, target, &cur0.noise.model),
+        hysteresis: ctx_own.hysteresis.clone(),
         final_forward,
         baseline_noise: cur0.noise,
         final_noise: cur_f.noise,
