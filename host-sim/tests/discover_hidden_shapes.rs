@@ -245,8 +245,9 @@ fn describe(d: &Discovery) -> String {
         .map(|(n, b)| format!("{n} {b:.1}"))
         .collect();
     format!(
-        "accepted {acc:?}; shape checks {sc:?}; last round ΔBIC {last:?}; refused {:?}",
-        d.selection.refused
+        "accepted {acc:?}; shape checks {sc:?}; last round ΔBIC {last:?}; refused {:?}; \
+         warnings {:?}",
+        d.selection.refused, d.selection.warnings
     )
 }
 
