@@ -289,6 +289,31 @@ pub fn fit_preisach(
     Preisach::from_weights(widths_c, &w).map(|p| (p, sign, active))
 }
 
+/// ΔBIC difference under which `thermal_lag` and `thermal_hysteresis` are said to explain the
+/// temperature response equally (10: "very strong" evidence on the usual BIC scale).
+pub const LAG_OR_LOOP_DBIC: f64 = 10.0;
+
+/// The warning when the accepted one of `thermal_lag` / `thermal_hysteresis` (`chosen`, ΔBIC
+/// `chosen_dbic`) beat the other (`other_dbic`, scored in the same round) by less than
+/// [`LAG_OR_LOOP_DBIC`]: on ramps of one rate a lag is itself a Preisach operator, so the name
+/// is then not a finding of the mechanism (module docs).
+pub fn lag_or_loop_warning(chosen: &str, chosen_dbic: f64, other_dbic: f64) -> Option<String> {
+    let other = match chosen {
+        "thermal_lag" => "thermal_hysteresis",
+        "thermal_hysteresis" => "thermal_lag",
+        _ => return None,
+    };
+    (other_dbic < 0.0 && other_dbic - chosen_dbic < LAG_OR_LOOP_DBIC).then(|| {
+        format!(
+            "{chosen} (ΔBIC {chosen_dbic:.1}) was preferred to {other} (ΔBIC {other_dbic:.1}) by \
+             less than {LAG_OR_LOOP_DBIC}: a first-order lag and a rate-independent loop differ \
+             only where the temperature ramps at different rates (a lag's offset scales with the \
+             rate, a loop's does not); this record's ramps do not tell them apart, so the name \
+             is not a finding of which mechanism it is"
+        )
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -401,5 +426,14 @@ mod tests {
         let (a, b) = (branch(&temp, 0.1), branch(&temp, 0.4));
         let want: Vec<f64> = a.iter().zip(&b).map(|(a, b)| 0.75 * a + 0.25 * b).collect();
         assert!(c2.iter().zip(&want).all(|(a, b)| (a - b).abs() < 1e-9));
+    }
+
+    #[test]
+    fn a_lag_and_a_loop_within_the_margin_are_said_to_be_indistinguishable() {
+        let w = lag_or_loop_warning("thermal_lag", -120.0, -115.0).expect("said");
+        assert!(w.contains("thermal_hysteresis (ΔBIC -115.0)"), "{w}");
+        assert!(lag_or_loop_warning("thermal_lag", -120.0, -100.0).is_none());
+        assert!(lag_or_loop_warning("thermal_hysteresis", -50.0, 3.0).is_none());
+        assert!(lag_or_loop_warning("step", -50.0, -49.0).is_none());
     }
 }

@@ -693,6 +693,7 @@ pub fn select(
     let mut cur_std = baseline_std;
     let mut warm = cur0.noise.model.clone();
     let mut refused: Vec<(String, String)> = Vec::new();
+    let mut lag_or_loop: Vec<String> = Vec::new();
     // The noise fit of the columns of the last round's start (reused at the end when nothing
     // was added since).
     let mut last_noise: (usize, NoiseFit) = (cols.len(), cur0.noise.clone());
@@ -816,6 +817,24 @@ pub fn select(
         let Some((s, before, after, fwd_before, fwd_after)) = took else {
             break;
         };
+        // A lag and a loop explaining the data alike: said (`hysteresis::lag_or_loop_warning`).
+        let other = match s.effect {
+            Effect::ThermalLag => Some(Effect::ThermalHysteresis),
+            Effect::ThermalHysteresis => Some(Effect::ThermalLag),
+            _ => None,
+        };
+        if let Some(o) = other.and_then(|o| {
+            rescored
+                .iter()
+                .chain(scored.iter().skip(RESCORE))
+                .find(|c| c.effect == o)
+        }) {
+            lag_or_loop.extend(hysteresis::lag_or_loop_warning(
+                s.effect.name(),
+                s.delta_bic,
+                o.delta_bic,
+            ));
+        }
         if let Some(p) = &s.preisach {
             ctx_own.hysteresis = Some(p.clone());
         }
@@ -895,7 +914,10 @@ pub fn select(
         final_residual: final_raw,
         final_cv,
         last_round,
-        warnings: noise_warnings(&cur0.noise, &cur_f.noise),
+        warnings: noise_warnings(&cur0.noise, &cur_f.noise)
+            .into_iter()
+            .chain(lag_or_loop)
+            .collect(),
         refused,
         joint,
         baseline_forward: forward_validate(ds, base_cols, target, &cur0.noise.model),
