@@ -11,8 +11,10 @@ use accomp::tide::Station;
 pub enum Effect {
     /// First-order lag between the RTD and the proof mass: column L_τ[T] − T.
     ThermalLag,
-    /// Different bias on heating and cooling branches: column (T − p_r[T])/r of a play operator
-    /// of half-width r on the measured temperature (`hysteresis.rs`).
+    /// Different bias on heating and cooling branches: a Preisach distribution of play
+    /// operators on the temperature, Σ w_k·(T − p_{r_k}[T])/r_k with NNLS weights summing to 1
+    /// (`hysteresis.rs`; `Context::hysteresis`), θ its characteristic width; without a fitted
+    /// distribution, one play of half-width θ.
     ThermalHysteresis,
     /// Bias following the torquer power ∝ input² through the coil's thermal time constant: column
     /// L_τ[a²] − a² (the instantaneous part is the baseline's K2·a², per-position levels).
@@ -83,6 +85,10 @@ pub struct Context {
     pub tide_tilt_rad: Option<(Vec<f64>, Vec<f64>)>,
     /// Nominal eq. (5) tilt term in output units (if subtracted by the baseline).
     pub tilt_term: Option<Vec<f64>>,
+    /// The Preisach distribution of the accepted `thermal_hysteresis` (set by the selection
+    /// once it has fitted one): its column is then that distribution scaled to width θ; without
+    /// one, a single play of half-width θ.
+    pub hysteresis: Option<super::hysteresis::Preisach>,
 }
 
 /// Tide series at the dataset's instants (evaluated at most every 60 s and interpolated
@@ -319,7 +325,12 @@ pub fn columns(e: &Effect, ds: &Dataset, ctx: &Context, theta: f64) -> Vec<Vec<f
             })
             .unwrap_or_default(),
         Effect::ThermalHysteresis => temp()
-            .map(|tc| vec![super::hysteresis::branch(&tc, theta)])
+            .map(|tc| {
+                vec![match &ctx.hysteresis {
+                    Some(p) => p.column(&tc, theta),
+                    None => super::hysteresis::branch(&tc, theta),
+                }]
+            })
             .unwrap_or_default(),
         // Torquer power ∝ I² ∝ a²: the coil temperature and with it the bias follow a² through a
         // first-order lag; the step part a² is collinear with K2·a² (the baseline's levels), so

@@ -25,12 +25,22 @@
 //! it differs by its amplitude: the lag error scales with the rate, the branch term does not
 //! (slow and fast cycles give the same offset) and it saturates after 2r.
 //!
-//! Fitting: the width r is the effect's nonlinear parameter (log grid between the reading noise
-//! and a quarter of the temperature range, look-elsewhere charged like any grid), the
-//! half-width a linear coefficient. A Preisach distribution of widths is fitted by one play at
-//! the width that explains most of it; [`preisach_nnls`] fits the non-negative weights of a
-//! set of widths when a distribution is wanted (plays of nearby widths are nearly collinear, so
-//! the selection does not charge the BIC for several).
+//! Fitting: a Preisach distribution. Each play of a 24-point log grid of widths (between 3 ×
+//! the reading noise and a quarter of the temperature range) is whitened and projected off the
+//! current model; the non-negative weights that best explain the whitened residual are found by
+//! NNLS ([`nnls`], Lawson–Hanson; both signs tried) and normalised to sum 1 ([`Preisach`]), so
+//! the column saturates at ±1 and its one linear coefficient is the branch half-width. The
+//! effect's nonlinear parameter θ is the distribution's weighted geometric-mean width; the
+//! selection charges the width search like a grid and each further width with a weight as one
+//! more parameter. A spread of widths — what a real loop with smooth turns is — is then
+//! representable, where one play was not (and lost to a thermal lag).
+//!
+//! Lag or loop: on a triangle of ONE rate a first-order lag is itself a Prandtl–Ishlinskii
+//! operator (after a reversal L_τ[T] − T relaxes as exp(−ΔT/(Ṫτ)) in the temperature moved,
+//! i.e. an exponential density of widths), so no fit can tell them apart there. What does is the
+//! rate: the lag's offset scales with Ṫ, the loop's does not — records whose ramps differ (a
+//! thermostat programme, excursions) separate them, and the selection's likelihood uses that
+//! without being told.
 
 /// Play (backlash) operator of half-width `r` on `u`, started at `u[0]` (the virgin state: no
 /// branch yet). The state is carried across gaps: hysteresis is a memory of the material, not
@@ -60,17 +70,22 @@ pub fn branch(temp_c: &[f64], r_c: f64) -> Vec<f64> {
         .collect()
 }
 
-/// Reading-noise level of a temperature channel, °C: the median absolute first difference
-/// divided by 0.6745·√2 (robust: a slow temperature programme moves little between samples,
-/// the reading noise does every sample).
+/// Reading-noise level of a temperature channel, °C: the median absolute *second* difference
+/// divided by 0.6745·√6 (robust, and blind to a constant rate: a cycling programme's ramp
+/// moves the reading by 10–20 mK between 2-min samples, which the first difference took for
+/// noise — it put the play grid's lower end at 0.05 °C, above the narrow plays of a real loop;
+/// only the turnovers, a few minutes per half-cycle, reach the second difference).
 pub fn reading_noise_c(temp_c: &[f64]) -> f64 {
-    let mut d: Vec<f64> = temp_c.windows(2).map(|w| (w[1] - w[0]).abs()).collect();
+    let mut d: Vec<f64> = temp_c
+        .windows(3)
+        .map(|w| (w[2] - 2.0 * w[1] + w[0]).abs())
+        .collect();
     if d.is_empty() {
         return 0.0;
     }
     let mid = d.len() / 2;
     let (_, m, _) = d.select_nth_unstable_by(mid, f64::total_cmp);
-    *m / (0.6745 * std::f64::consts::SQRT_2)
+    *m / (0.6745 * 6f64.sqrt())
 }
 
 /// Search range of the play half-width, °C: from 3 × the reading noise (a play narrower than
@@ -186,6 +201,119 @@ pub fn preisach_nnls(temp_c: &[f64], widths_c: &[f64], y: &[f64]) -> Vec<f64> {
     nnls(&cols, y)
 }
 
+/// A discrete Preisach (Prandtl–Ishlinskii) distribution of play half-widths: the shape of the
+/// `thermal_hysteresis` column when the selection has fitted one (NNLS weights, normalised to
+/// sum 1, so the column saturates at ±1 and its coefficient is the branch half-width).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct Preisach {
+    /// Play half-widths, °C (the widths with a non-zero weight).
+    pub widths_c: Vec<f64>,
+    /// Their weights, ≥ 0, summing to 1.
+    pub weights: Vec<f64>,
+}
+
+impl Preisach {
+    /// From NNLS weights over `widths_c` (zero weights dropped); `None` when all are zero.
+    pub fn from_weights(widths_c: &[f64], w: &[f64]) -> Option<Self> {
+        let total: f64 = w.iter().filter(|v| **v > 0.0).sum();
+        if !(total > 0.0 && total.is_finite()) {
+            return None;
+        }
+        let (widths_c, weights) = widths_c
+            .iter()
+            .zip(w)
+            .filter(|(_, v)| **v > 0.0)
+            .map(|(r, v)| (*r, v / total))
+            .unzip();
+        Some(Self { widths_c, weights })
+    }
+
+    /// The distribution's characteristic width: the weighted geometric mean, °C (the effect's
+    /// nonlinear parameter θ; one play: its half-width).
+    pub fn width_c(&self) -> f64 {
+        self.widths_c
+            .iter()
+            .zip(&self.weights)
+            .map(|(r, w)| w * r.ln())
+            .sum::<f64>()
+            .exp()
+    }
+
+    /// The column Σ w_k·h_{r_k·θ/θ₀}[T]: the distribution scaled so that its characteristic
+    /// width is `theta` (θ = θ₀ gives the fitted shape; other θ scale every width alike, so the
+    /// width's uncertainty and the shape check keep their meaning).
+    pub fn column(&self, temp_c: &[f64], theta: f64) -> Vec<f64> {
+        let scale = theta / self.width_c();
+        let mut out = vec![0.0; temp_c.len()];
+        for (r, w) in self.widths_c.iter().zip(&self.weights) {
+            for (o, h) in out.iter_mut().zip(branch(temp_c, r * scale)) {
+                *o += w * h;
+            }
+        }
+        out
+    }
+}
+
+/// The best non-negative Preisach distribution over `widths_c` for a residual: `cols[k]` is the
+/// branch column of `widths_c[k]` and `y` the residual, both in the domain the fit is judged in
+/// (whitened, the current model projected out). Both signs are tried (the heating branch may
+/// read lower or higher). Returns the distribution, the sign and the number of active widths.
+pub fn fit_preisach(
+    widths_c: &[f64],
+    cols: &[Vec<f64>],
+    y: &[f64],
+) -> Option<(Preisach, f64, usize)> {
+    let rss = |w: &[f64], sign: f64| {
+        (0..y.len())
+            .map(|i| {
+                let f: f64 = cols.iter().zip(w).map(|(c, wk)| wk * c[i]).sum();
+                (sign * y[i] - f).powi(2)
+            })
+            .sum::<f64>()
+    };
+    let neg: Vec<f64> = y.iter().map(|v| -v).collect();
+    let wp = nnls(cols, y);
+    let wn = nnls(cols, &neg);
+    let (w, sign) = if rss(&wp, 1.0) <= rss(&wn, -1.0) {
+        (wp, 1.0)
+    } else {
+        (wn, -1.0)
+    };
+    // Weights at round-off level are no width of the loop (and would be charged as one).
+    let top = w.iter().fold(0.0_f64, |m, v| m.max(*v));
+    let w: Vec<f64> = w
+        .iter()
+        .map(|&v| if v > 1e-9 * top { v } else { 0.0 })
+        .collect();
+    let active = w.iter().filter(|v| **v > 0.0).count();
+    Preisach::from_weights(widths_c, &w).map(|p| (p, sign, active))
+}
+
+/// ΔBIC difference under which `thermal_lag` and `thermal_hysteresis` are said to explain the
+/// temperature response equally (10: "very strong" evidence on the usual BIC scale).
+pub const LAG_OR_LOOP_DBIC: f64 = 10.0;
+
+/// The warning when the accepted one of `thermal_lag` / `thermal_hysteresis` (`chosen`, ΔBIC
+/// `chosen_dbic`) beat the other (`other_dbic`, scored in the same round) by less than
+/// [`LAG_OR_LOOP_DBIC`]: on ramps of one rate a lag is itself a Preisach operator, so the name
+/// is then not a finding of the mechanism (module docs).
+pub fn lag_or_loop_warning(chosen: &str, chosen_dbic: f64, other_dbic: f64) -> Option<String> {
+    let other = match chosen {
+        "thermal_lag" => "thermal_hysteresis",
+        "thermal_hysteresis" => "thermal_lag",
+        _ => return None,
+    };
+    (other_dbic < 0.0 && other_dbic - chosen_dbic < LAG_OR_LOOP_DBIC).then(|| {
+        format!(
+            "{chosen} (ΔBIC {chosen_dbic:.1}) was preferred to {other} (ΔBIC {other_dbic:.1}) by \
+             less than {LAG_OR_LOOP_DBIC}: a first-order lag and a rate-independent loop differ \
+             only where the temperature ramps at different rates (a lag's offset scales with the \
+             rate, a loop's does not); this record's ramps do not tell them apart, so the name \
+             is not a finding of which mechanism it is"
+        )
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -271,5 +399,41 @@ mod tests {
         );
         assert!(w[0].abs() + w[2].abs() + w[4].abs() < 1e-6, "{w:?}");
         assert!(width_range_c(&temp).is_some());
+    }
+
+    #[test]
+    fn a_fitted_preisach_distribution_rebuilds_its_column_at_its_width_and_keeps_the_sign() {
+        // A loop read lower on heating (negative half-width): 3 µ·h_0.05 + 1 µ·h_0.2, negated.
+        let temp: Vec<f64> = (0..3000)
+            .map(|i| 0.5 * (f64::from(i) * std::f64::consts::TAU / 400.0).sin())
+            .collect();
+        let widths = [0.02, 0.05, 0.1, 0.2, 0.3];
+        let cols: Vec<Vec<f64>> = widths.iter().map(|&r| branch(&temp, r)).collect();
+        let y: Vec<f64> = (0..temp.len())
+            .map(|i| -(3.0 * cols[1][i] + cols[3][i]))
+            .collect();
+        let (p, _, active) = fit_preisach(&widths, &cols, &y).expect("a distribution");
+        assert_eq!(active, 2, "{p:?}");
+        assert_eq!(p.widths_c, vec![0.05, 0.2], "{p:?}");
+        assert!((p.weights[0] - 0.75).abs() < 1e-9, "{p:?}");
+        let theta = p.width_c();
+        assert!((theta - (0.75 * 0.05f64.ln() + 0.25 * 0.2f64.ln()).exp()).abs() < 1e-12);
+        // At θ the column is the fitted shape, saturating at ±1: y = −4 × it.
+        let c = p.column(&temp, theta);
+        assert!(c.iter().zip(&y).all(|(c, y)| (4.0 * c + y).abs() < 1e-9));
+        // At 2θ every width doubles.
+        let c2 = p.column(&temp, 2.0 * theta);
+        let (a, b) = (branch(&temp, 0.1), branch(&temp, 0.4));
+        let want: Vec<f64> = a.iter().zip(&b).map(|(a, b)| 0.75 * a + 0.25 * b).collect();
+        assert!(c2.iter().zip(&want).all(|(a, b)| (a - b).abs() < 1e-9));
+    }
+
+    #[test]
+    fn a_lag_and_a_loop_within_the_margin_are_said_to_be_indistinguishable() {
+        let w = lag_or_loop_warning("thermal_lag", -120.0, -115.0).expect("said");
+        assert!(w.contains("thermal_hysteresis (ΔBIC -115.0)"), "{w}");
+        assert!(lag_or_loop_warning("thermal_lag", -120.0, -100.0).is_none());
+        assert!(lag_or_loop_warning("thermal_hysteresis", -50.0, 3.0).is_none());
+        assert!(lag_or_loop_warning("step", -50.0, -49.0).is_none());
     }
 }

@@ -21,7 +21,8 @@
 use super::baseline::{ar1, gls, raw_residual, std, Basis, Rows};
 use super::effects::{self, columns, Context, Effect, Param};
 
-use super::import::Dataset;
+use super::hysteresis::{self, Preisach};
+use super::import::{ChannelKind, Dataset};
 use super::noise::{held_out_chi2, NoiseFit, NoiseModel};
 use super::residual;
 use crate::numerics::optimize::golden_section_min as golden;
@@ -155,6 +156,8 @@ pub struct Scored {
     /// The nonlinear parameter ended at the first or last point of its search grid: the fit
     /// wants a value the search did not allow, so the value is not a finding.
     pub at_edge: bool,
+    /// `thermal_hysteresis`: the Preisach distribution of play widths its column is made of.
+    pub preisach: Option<Preisach>,
 }
 
 /// The current model in the whitened domain, ready to score extensions quickly.
@@ -224,6 +227,36 @@ fn best_theta(cur: &Current, e: &Effect, ctx: &Context) -> Option<(f64, f64, boo
     } else {
         (g[ib], vals[ib], at_edge)
     })
+}
+
+/// Best Preisach distribution of play widths for `thermal_hysteresis`: each play of the width
+/// grid whitened and projected off the current model, non-negative weights by NNLS on the
+/// whitened residual (`hysteresis::fit_preisach`). Returns the distribution, its characteristic
+/// width θ, its raw column at θ, the whitened RSS with it, the number of widths with a weight
+/// and whether θ sits at an end of the grid (the distribution wants widths outside the range).
+fn best_preisach(cur: &Current) -> Option<(Preisach, f64, Vec<f64>, f64, usize, bool)> {
+    let ds = cur.ds;
+    let temp = &ds.channel(ChannelKind::Temperature)?.values;
+    let g = effects::grid(&Effect::ThermalHysteresis, ds);
+    if g.len() < 2 {
+        return None;
+    }
+    let mut cols = Vec::with_capacity(g.len());
+    for &r in &g {
+        let mut w = cur.rows.whiten(&hysteresis::branch(temp, r), cur.phi);
+        if w.iter().any(|v| !v.is_finite()) {
+            return None;
+        }
+        super::baseline::orthogonalize(&cur.basis.q, &mut w);
+        cols.push(w);
+    }
+    let (p, _, active) = hysteresis::fit_preisach(&g, &cols, &cur.r_w)?;
+    let theta = p.width_c();
+    let col = p.column(temp, theta);
+    let rss = cur.rss_with(std::slice::from_ref(&col));
+    let half_step = (g[1] / g[0]).sqrt();
+    let at_edge = theta <= g[0] * half_step || theta >= g[g.len() - 1] / half_step;
+    Some((p, theta, col, rss, active, at_edge))
 }
 
 /// Best single step: a fast scan of every position on the whitened residual (ignoring the
@@ -372,6 +405,8 @@ pub struct Selection {
     pub joint: Option<JointFit>,
     /// Forward-chaining score of the baseline.
     pub baseline_forward: CvScore,
+    /// The Preisach distribution of play widths of the accepted `thermal_hysteresis`.
+    pub hysteresis: Option<Preisach>,
     /// Of the final model.
     pub final_forward: CvScore,
 }
@@ -495,7 +530,23 @@ fn score_all(
         if !e.repeatable() && done.contains(e) {
             continue;
         }
+        let mut preisach = None;
         let (theta, rss, k_nl, at_edge) = match e {
+            // A Preisach distribution: the width search is charged like the single play's grid,
+            // each width beyond the first with a weight as one more parameter.
+            Effect::ThermalHysteresis => match best_preisach(cur) {
+                Some((p, th, col, r, active, edge)) => {
+                    let m = effects::grid(e, cur.ds).len() as f64;
+                    preisach = Some((p, col));
+                    (
+                        th,
+                        r,
+                        nl_penalty(m) + active.saturating_sub(1) as f64 * n_eff.ln(),
+                        edge,
+                    )
+                }
+                None => continue,
+            },
             Effect::Step => match best_step(cur, ctx) {
                 Some((th, r)) => (th, r, nl_penalty(m_rows), false),
                 None => continue,
@@ -521,7 +572,10 @@ fn score_all(
                 false,
             ),
         };
-        let cols = columns(e, cur.ds, ctx, theta);
+        let (cols, preisach) = match preisach {
+            Some((p, col)) => (vec![col], Some(p)),
+            None => (columns(e, cur.ds, ctx, theta), None),
+        };
         if cols.is_empty() || rss <= 0.0 || cur.rss <= 0.0 {
             continue;
         }
@@ -535,6 +589,7 @@ fn score_all(
             delta_bic,
             penalty,
             at_edge,
+            preisach,
         });
     }
     out.sort_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic));
@@ -583,6 +638,8 @@ pub fn select(
     let tides = cands
         .iter()
         .any(|e| matches!(e, Effect::TidalGravity | Effect::TidalTilt));
+    // The context grows the accepted hysteresis's Preisach distribution.
+    let mut ctx_own = ctx.clone();
     let mut cols = base_cols.to_vec();
     let (cur0, base_raw, _) = fit_state(ds, &cols, target, NoiseChoice::Fit(None));
     let baseline_cv = cross_validate(ds, &cols, target, &cur0.noise.model, cfg);
@@ -593,6 +650,7 @@ pub fn select(
     let mut cur_std = baseline_std;
     let mut warm = cur0.noise.model.clone();
     let mut refused: Vec<(String, String)> = Vec::new();
+    let mut lag_or_loop: Vec<String> = Vec::new();
     // The noise fit of the columns of the last round's start (reused at the end when nothing
     // was added since).
     let mut last_noise: (usize, NoiseFit) = (cols.len(), cur0.noise.clone());
@@ -607,6 +665,7 @@ pub fn select(
         let (cur, cur_raw, _) = fit_state(ds, &cols, target, choice);
         warm = cur.noise.model.clone();
         last_noise = (cols.len(), cur.noise.clone());
+        let ctx = &ctx_own;
         let scored = score_all(&cur, cands, ctx, &done, tides);
         // The ranking above holds the noise model fixed; an effect present in the residual
         // also inflates the fitted noise (its Allan variance), which hides it. The best few are
@@ -715,6 +774,28 @@ pub fn select(
         let Some((s, before, after, fwd_before, fwd_after)) = took else {
             break;
         };
+        // A lag and a loop explaining the data alike: said (`hysteresis::lag_or_loop_warning`).
+        let other = match s.effect {
+            Effect::ThermalLag => Some(Effect::ThermalHysteresis),
+            Effect::ThermalHysteresis => Some(Effect::ThermalLag),
+            _ => None,
+        };
+        if let Some(o) = other.and_then(|o| {
+            rescored
+                .iter()
+                .chain(scored.iter().skip(RESCORE))
+                .find(|c| c.effect == o)
+        }) {
+            lag_or_loop.extend(hysteresis::lag_or_loop_warning(
+                s.effect.name(),
+                s.delta_bic,
+                o.delta_bic,
+            ));
+        }
+        if let Some(p) = &s.preisach {
+            ctx_own.hysteresis = Some(p.clone());
+        }
+        let ctx = &ctx_own;
         let sigma_theta = theta_sigma(&cur, &s, ctx, cur.basis.q.len());
         let k0 = cols.len();
         cols.extend(s.cols.iter().cloned());
@@ -768,7 +849,7 @@ pub fn select(
             .noise
     };
     let joint = (!accepted.is_empty())
-        .then(|| joint_fit(ds, target, base_cols, &mut accepted, ctx, &final_noise));
+        .then(|| joint_fit(ds, target, base_cols, &mut accepted, &ctx_own, &final_noise));
     if let Some(j) = &joint {
         cols = base_cols.to_vec();
         for c in &j.effect_columns {
@@ -790,10 +871,14 @@ pub fn select(
         final_residual: final_raw,
         final_cv,
         last_round,
-        warnings: noise_warnings(&cur0.noise, &cur_f.noise),
+        warnings: noise_warnings(&cur0.noise, &cur_f.noise)
+            .into_iter()
+            .chain(lag_or_loop)
+            .collect(),
         refused,
         joint,
         baseline_forward: forward_validate(ds, base_cols, target, &cur0.noise.model),
+        hysteresis: ctx_own.hysteresis.clone(),
         final_forward,
         baseline_noise: cur0.noise,
         final_noise: cur_f.noise,

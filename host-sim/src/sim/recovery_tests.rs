@@ -111,6 +111,7 @@ fn context(ds: &Dataset) -> Context {
         tide_tilt_rad: tide.map(|t| (t.1, t.2)),
         tilt_term: crate::discover::baseline::tilt_term_g(ds)
             .map(|v| v.iter().map(|x| x * u).collect()),
+        hysteresis: None,
     }
 }
 

@@ -143,6 +143,18 @@ pub enum Thermal {
         /// Period, s.
         period_s: f64,
     },
+    /// The same plus a thermostat programme whose ramps differ: ±`amplitude_c` triangles, each
+    /// half-cycle's duration drawn uniformly in [`min_half_s`, `max_half_s`] (so the heating
+    /// and cooling rates change from ramp to ramp, as on a lab's programmed chamber), the
+    /// corners rounded by the chamber's 5-minute thermal time constant.
+    Programme {
+        /// Half the peak-to-peak swing, °C.
+        amplitude_c: f64,
+        /// Shortest half-cycle, s.
+        min_half_s: f64,
+        /// Longest half-cycle, s.
+        max_half_s: f64,
+    },
 }
 
 /// A generated station record: time, true and measured channels.
@@ -200,6 +212,40 @@ pub fn station(n: usize, dt_s: f64, thermal: Thermal, rng: &mut ChaCha8Rng) -> S
     }
     let phase = rng.random_range(0.0..1.0);
     let setpoint = rng.random_range(40.0..60.0);
+    // The programme's corners: (time, level) from before the start to after the end.
+    let corners: Vec<(f64, f64)> = match thermal {
+        Thermal::Programme {
+            amplitude_c,
+            min_half_s,
+            max_half_s,
+        } => {
+            let mut tc = -phase * max_half_s;
+            let mut level = if rng.random::<bool>() { 1.0 } else { -1.0 };
+            let mut v = vec![(tc, level * amplitude_c)];
+            while tc <= span + max_half_s {
+                tc += rng.random_range(min_half_s..max_half_s);
+                level = -level;
+                v.push((tc, level * amplitude_c));
+            }
+            v
+        }
+        _ => Vec::new(),
+    };
+    let programme = |t: f64| {
+        let k = corners.partition_point(|c| c.0 <= t).max(1);
+        let (a, b) = (corners[k - 1], corners[(k).min(corners.len() - 1)]);
+        if b.0 > a.0 {
+            a.1 + (b.1 - a.1) * (t - a.0) / (b.0 - a.0)
+        } else {
+            a.1
+        }
+    };
+    let chamber = (-dt_s / 300.0).exp();
+    let mut prog_state = if corners.is_empty() {
+        0.0
+    } else {
+        programme(0.0)
+    };
     let temp_true_c: Vec<f64> = t_s
         .iter()
         .map(|&t| {
@@ -232,6 +278,10 @@ pub fn station(n: usize, dt_s: f64, thermal: Thermal, rng: &mut ChaCha8Rng) -> S
                         })
                         .sum();
                     amplitude_c * tri * 8.0 / (std::f64::consts::PI.powi(2)) / 0.9986
+                }
+                Thermal::Programme { .. } => {
+                    prog_state = chamber * prog_state + (1.0 - chamber) * programme(t);
+                    prog_state
                 }
             };
             setpoint + c + w + ex + prog
