@@ -3,7 +3,7 @@
 
 use super::*;
 
-use super::record::record_log;
+use super::record::{frame_column, record_log, ExtraColumns, Metadata};
 use super::stream::{bar, raw, same_values, stream};
 use super::tables::experiment_table;
 
@@ -13,12 +13,6 @@ pub(super) struct Run<'a> {
     pub(super) days: Option<f64>,
     pub(super) paper: (f64, f64),
 }
-
-/// Log metadata as (key, value) pairs.
-pub(super) type Metadata = Vec<(String, String)>;
-
-/// A truth column of the log: its name and how to read it from a sample.
-pub(super) type TruthColumn = (&'static str, fn(&Sample) -> f64);
 
 fn simulate(sc: &Scenario, seed: u64) -> anyhow::Result<(Vec<Sample>, Metadata)> {
     let mut sim = Simulator::new(sc, seed)?;
@@ -196,11 +190,6 @@ fn stream_through_firmware(
     })
 }
 
-/// One column of the frames.
-pub(super) fn frame_column(frames: &[Frame], f: fn(&Frame) -> f64) -> Vec<f64> {
-    frames.iter().map(f).collect()
-}
-
 /// K1 at the table's reference temperature: volts → g for the uncompensated figures.
 fn reference_scale_factor(table: &CalibrationTable) -> anyhow::Result<f64> {
     Ok(table
@@ -210,9 +199,6 @@ fn reference_scale_factor(table: &CalibrationTable) -> anyhow::Result<f64> {
         .0
         .scale_factor_v_per_g)
 }
-
-/// Columns the log gets beside the firmware's (name, values).
-pub(super) type ExtraColumns = Vec<(&'static str, Vec<f64>)>;
 
 /// Step 4: the stability figures before and after compensation, beside the paper's and the
 /// floor; at 0 g also what eq. (5) contributes (the same codes through the same core without
@@ -337,7 +323,8 @@ pub(super) fn run_experiment(
     let notes = experiment_notes(&table, &station.sc, zero_g, &status_counts);
 
     let log = record_log(
-        &station,
+        &station.samples,
+        &station.meta,
         &table,
         &table_path,
         &streamed.frames,

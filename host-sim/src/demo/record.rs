@@ -1,13 +1,27 @@
 //! The recorded log of one experiment: simulated time, the firmware's frames, the raw codes and
 //! the simulation's truth beside them, with the metadata that says what each is.
 
-use super::experiment::{frame_column, ExtraColumns, Station, TruthColumn};
 use super::*;
+
+/// Log metadata as (key, value) pairs.
+pub(super) type Metadata = Vec<(String, String)>;
+
+/// A truth column of the log: its name and how to read it from a sample.
+pub(super) type TruthColumn = (&'static str, fn(&Sample) -> f64);
+
+/// Columns the log gets beside the firmware's (name, values).
+pub(super) type ExtraColumns = Vec<(&'static str, Vec<f64>)>;
+
+/// One column of the frames.
+pub(super) fn frame_column(frames: &[Frame], f: fn(&Frame) -> f64) -> Vec<f64> {
+    frames.iter().map(f).collect()
+}
 
 /// Step 6: the log (not yet written).
 #[allow(clippy::too_many_arguments)] // the step's inputs, each a different product of the steps before
 pub(super) fn record_log(
-    station: &Station,
+    samples: &[Sample],
+    meta: &Metadata,
     table: &CalibrationTable,
     table_path: &Path,
     frames: &[Frame],
@@ -16,17 +30,14 @@ pub(super) fn record_log(
     extra_cols: ExtraColumns,
     floor: Vec<f64>,
 ) -> anyhow::Result<Log> {
-    let samples = &station.samples;
     let col = |f: fn(&Frame) -> f64| frame_column(frames, f);
     let mut log = Log::with_time(samples.iter().map(|s| s.time_s).collect())?;
-    for (k, v) in &station.meta {
+    for (k, v) in meta {
         log.set_meta(k, v)?;
     }
     log.set_meta(
         "truth_scale_factor_v_per_g",
-        station
-            .meta
-            .iter()
+        meta.iter()
             .find(|(k, _)| k == "scale_factor_v_per_g")
             .map_or("", |(_, v)| v.as_str()),
     )?;
