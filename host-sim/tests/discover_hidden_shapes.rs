@@ -356,6 +356,22 @@ fn hysteresis_branch_offsets_of_a_few_microg_are_found_in_a_14_day_cycling_log()
             .iter()
             .find(|a| a.effect.name() == "thermal_hysteresis");
         let est = hit.map_or(f64::NAN, |a| hidden::param_value(a, "half_width_g"));
+        if hit.is_some() {
+            // The distribution it was fitted with is reported (JSON and text).
+            let j = discover::report::json(&d);
+            let e = j["effects"]
+                .as_array()
+                .and_then(|v| v.iter().find(|e| e["name"] == "thermal_hysteresis"))
+                .expect("the accepted hysteresis in the JSON");
+            let w: f64 = e["preisach"]["weights"]
+                .as_array()
+                .expect("preisach weights")
+                .iter()
+                .filter_map(|v| v.as_f64())
+                .sum();
+            assert!((w - 1.0).abs() < 1e-9, "{}", e["preisach"]);
+            assert!(discover::report::text(&d).contains("Preisach play half-widths"));
+        }
         // The ±0.5 °C swings saturate the loop (swing ≥ 10 transition widths): the branch
         // half-width is the saturation value.
         let ok = (est - half_width_g).abs() <= 0.3 * half_width_g;

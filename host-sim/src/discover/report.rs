@@ -62,6 +62,12 @@ pub fn json(d: &Discovery) -> Value {
             if let Some(c) = a.effect.channel() {
                 o["channel"] = json!(c);
             }
+            // The Preisach distribution of play widths the hysteresis column is made of.
+            if a.effect == super::effects::Effect::ThermalHysteresis {
+                if let Some(p) = &s.hysteresis {
+                    o["preisach"] = json!(p);
+                }
+            }
             o
         })
         .collect();
@@ -249,6 +255,17 @@ pub fn text(d: &Discovery) -> String {
             100.0 * a.gain_out_of_sample(),
             100.0 * a.gain_forward()
         );
+        if a.effect == super::effects::Effect::ThermalHysteresis {
+            if let Some(p) = &s.hysteresis {
+                let w: Vec<String> = p
+                    .widths_c
+                    .iter()
+                    .zip(&p.weights)
+                    .map(|(r, w)| format!("{r:.4} °C × {:.0} %", 100.0 * w))
+                    .collect();
+                let _ = writeln!(o, "     Preisach play half-widths: {}", w.join(", "));
+            }
+        }
     }
     for (n, why) in &s.refused {
         let _ = writeln!(o, "  refused: {n}: {why}");
