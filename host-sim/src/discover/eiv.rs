@@ -167,7 +167,7 @@ fn fit(t_s: &[f64], x: &[f64], dt: f64) -> Option<([f64; 2], f64)> {
     for width in [half, half / 4.0] {
         for d in 0..2 {
             let (a, b) = ((p[d] - width).max(lo), (p[d] + width).min(hi));
-            let g = super::select::golden(
+            let g = crate::numerics::optimize::golden_section_min(
                 |u| {
                     let mut q = p;
                     q[d] = u;

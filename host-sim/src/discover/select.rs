@@ -26,6 +26,7 @@ use super::hysteresis::{self, Preisach};
 use super::import::{ChannelKind, Dataset};
 use super::noise::{held_out_prediction, NoiseFit, NoiseModel};
 use super::residual;
+use crate::numerics::optimize::golden_section_min as golden;
 
 /// Selection settings.
 #[derive(Debug, Clone, PartialEq)]
@@ -200,33 +201,6 @@ impl Current<'_> {
             })
             .sum();
         (self.rss - red).max(0.0)
-    }
-}
-
-pub(crate) fn golden<F: Fn(f64) -> f64>(f: F, mut a: f64, mut b: f64, iters: usize) -> f64 {
-    let g = 0.618_033_988_749_895;
-    let mut c = b - g * (b - a);
-    let mut d = a + g * (b - a);
-    let (mut fc, mut fd) = (f(c), f(d));
-    for _ in 0..iters {
-        if fc < fd {
-            b = d;
-            d = c;
-            fd = fc;
-            c = b - g * (b - a);
-            fc = f(c);
-        } else {
-            a = c;
-            c = d;
-            fc = fd;
-            d = a + g * (b - a);
-            fd = f(d);
-        }
-    }
-    if fc < fd {
-        c
-    } else {
-        d
     }
 }
 

@@ -51,28 +51,6 @@ pub struct Utc(pub f64);
 #[error("not an ISO 8601 UTC time (YYYY-MM-DDTHH:MM:SSZ): {0:?}")]
 pub struct UtcParseError(pub String);
 
-/// The date of a day count since 1970-01-01 (H. Hinnant's civil_from_days), only for printing an
-/// instant beyond jiff's years −9999..=9999.
-pub(crate) fn civil_from_days(z: i64) -> (i64, i64, i64) {
-    let z = z + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z - era * 146_097;
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let d = doy - (153 * mp + 2) / 5 + 1;
-    let m = if mp < 10 { mp + 3 } else { mp - 9 };
-    (
-        if m <= 2 {
-            yoe + era * 400 + 1
-        } else {
-            yoe + era * 400
-        },
-        m,
-        d,
-    )
-}
-
 impl Utc {
     /// Parses `YYYY-MM-DDTHH:MM:SS[.fraction]Z` (a space may replace the `T`).
     pub fn parse(s: &str) -> Result<Utc, UtcParseError> {
@@ -113,15 +91,15 @@ impl fmt::Display for Utc {
         let ms = (self.0 * 1000.0).round() as i64;
         let days = ms.div_euclid(86_400_000);
         let rem = ms.rem_euclid(86_400_000);
-        let (y, m, d) = match utc_date(days * 86_400) {
-            Some(date) => (
-                i64::from(date.year()),
-                i64::from(date.month()),
-                i64::from(date.day()),
-            ),
-            // Beyond jiff's years: the day count's own civil date (never met by a real log).
-            None => civil_from_days(days),
+        let Some(date) = utc_date(days * 86_400) else {
+            // Beyond jiff's years (never met by a real log): the seconds themselves.
+            return write!(
+                f,
+                "{} s since 1970-01-01T00:00:00Z (outside the calendar's years −9999..=9999)",
+                self.0
+            );
         };
+        let (y, m, d) = (date.year(), date.month(), date.day());
         let (h, mi, s, frac) = (
             rem / 3_600_000,
             rem / 60_000 % 60,

@@ -37,6 +37,15 @@ fn hand_log(
     s
 }
 
+/// The classic four-position test (0°, 90°, 180°, 270°).
+const FOUR_POSITIONS_DEG: [f64; 4] = [0.0, 90.0, 180.0, 270.0];
+
+/// An exact four-position log about `axis` at 1 g: no K3, no tilt, one noiseless reading per
+/// position.
+fn four_position_log(axis: &str) -> String {
+    hand_log(axis, &FOUR_POSITIONS_DEG, 1.0, 0.0, 0.0, &[0.0], "")
+}
+
 fn solve(text: &str) -> Result<TumbleReport, TumbleError> {
     solve_log(&parse_log(text)?, &TumbleOptions::default())
 }
@@ -50,16 +59,7 @@ fn zero_index() -> TumbleOptions {
 
 #[test]
 fn four_noise_free_positions_recover_k0_k1_k2_and_delta_p_exactly() {
-    let r = solve(&hand_log(
-        "pendulum",
-        &[0.0, 90.0, 180.0, 270.0],
-        1.0,
-        0.0,
-        0.0,
-        &[0.0],
-        "",
-    ))
-    .unwrap();
+    let r = solve(&four_position_log("pendulum")).unwrap();
     let t = &r.tests[0];
     assert_eq!((t.unknowns, t.dof, t.noise_basis), (4, 0, NoiseBasis::None));
     assert!((t.k1_v_per_g.value - K1).abs() < 1e-14);
@@ -75,16 +75,7 @@ fn four_noise_free_positions_recover_k0_k1_k2_and_delta_p_exactly() {
 
 #[test]
 fn rotation_about_the_output_axis_identifies_delta_o_with_its_own_sign() {
-    let r = solve(&hand_log(
-        "output",
-        &[0.0, 90.0, 180.0, 270.0],
-        1.0,
-        0.0,
-        0.0,
-        &[0.0],
-        "",
-    ))
-    .unwrap();
+    let r = solve(&four_position_log("output")).unwrap();
     let t = &r.tests[0];
     assert_eq!(t.rotation_axis, RotationAxis::Output);
     assert!((t.misalignment_arcmin.value - 2.0).abs() < 1e-10);
@@ -112,7 +103,7 @@ fn local_gravity_from_metadata_is_divided_by_standard_gravity() {
     let g = 9.7940 / 9.80665;
     let text = hand_log(
         "pendulum",
-        &[0.0, 90.0, 180.0, 270.0],
+        &FOUR_POSITIONS_DEG,
         g,
         0.0,
         0.0,
@@ -139,16 +130,7 @@ fn index_error_propagates_to_half_the_angle_variance_at_four_points() {
     // Hand propagation for 0/90/180/270 with σθ = 0.2": K0 and δ are half-sum and
     // half-difference of E0 and E180, where dE/dθ = ±K1·g, so σ(K0) = σθ·g/√2 and
     // σ(δ) = σθ/√2; K2 also gets σθ/√2 (E0, E180 enter it with weight 1/(2K1)).
-    let r = solve(&hand_log(
-        "pendulum",
-        &[0.0, 90.0, 180.0, 270.0],
-        1.0,
-        0.0,
-        0.0,
-        &[0.0],
-        "",
-    ))
-    .unwrap();
+    let r = solve(&four_position_log("pendulum")).unwrap();
     let t = &r.tests[0];
     let sigma_rad = 0.2 * 4.848_136_811e-6;
     let half = sigma_rad / std::f64::consts::SQRT_2;
@@ -173,7 +155,7 @@ fn reading_scatter_gives_the_noise_se_when_the_design_is_exactly_determined() {
     let d = 1e-6;
     let log = parse_log(&hand_log(
         "pendulum",
-        &[0.0, 90.0, 180.0, 270.0],
+        &FOUR_POSITIONS_DEG,
         1.0,
         0.0,
         0.0,
@@ -227,7 +209,7 @@ fn foundation_tilt_cancels_in_the_bias_and_enters_the_misalignment_fully() {
     let phi = 4.848_136_811e-6;
     let r = solve(&hand_log(
         "output",
-        &[0.0, 90.0, 180.0, 270.0],
+        &FOUR_POSITIONS_DEG,
         1.0,
         0.0,
         phi,
@@ -329,27 +311,9 @@ fn malformed_rows_and_missing_columns_are_named() {
 
 #[test]
 fn the_rotation_axis_must_be_stated() {
-    let text = hand_log(
-        "pendulum",
-        &[0.0, 90.0, 180.0, 270.0],
-        1.0,
-        0.0,
-        0.0,
-        &[0.0],
-        "",
-    )
-    .replace("# rotation_axis: pendulum\n", "");
+    let text = four_position_log("pendulum").replace("# rotation_axis: pendulum\n", "");
     assert_eq!(solve(&text), Err(TumbleError::MissingRotationAxis));
-    let bad = hand_log(
-        "pendulum",
-        &[0.0, 90.0, 180.0, 270.0],
-        1.0,
-        0.0,
-        0.0,
-        &[0.0],
-        "",
-    )
-    .replace("pendulum", "input");
+    let bad = four_position_log("pendulum").replace("pendulum", "input");
     assert!(matches!(solve(&bad), Err(TumbleError::BadParameter { .. })));
 }
 
@@ -399,26 +363,18 @@ fn regression_on_time_matches_a_hand_computed_example() {
 #[test]
 fn table_combines_a_pendulum_and_an_output_log_into_both_misalignment_columns() {
     let with_t = |axis: &str| {
-        hand_log(
-            axis,
-            &[0.0, 90.0, 180.0, 270.0],
-            1.0,
-            0.0,
-            0.0,
-            &[-1e-6, 1e-6],
-            "",
-        )
-        .replace("angle_deg,output_v\n", "angle_deg,output_v,temperature_c\n")
-        .lines()
-        .map(|l| {
-            if l.starts_with('#') || l.starts_with("angle") {
-                l.to_string()
-            } else {
-                format!("{l},50.0")
-            }
-        })
-        .collect::<Vec<_>>()
-        .join("\n")
+        hand_log(axis, &FOUR_POSITIONS_DEG, 1.0, 0.0, 0.0, &[-1e-6, 1e-6], "")
+            .replace("angle_deg,output_v\n", "angle_deg,output_v,temperature_c\n")
+            .lines()
+            .map(|l| {
+                if l.starts_with('#') || l.starts_with("angle") {
+                    l.to_string()
+                } else {
+                    format!("{l},50.0")
+                }
+            })
+            .collect::<Vec<_>>()
+            .join("\n")
     };
     let a = parse_log(&with_t("pendulum")).unwrap();
     let b = parse_log(&with_t("output")).unwrap();
@@ -444,18 +400,10 @@ fn table_combines_a_pendulum_and_an_output_log_into_both_misalignment_columns() 
 #[test]
 fn a_reversed_angle_sense_is_refused_as_a_negative_scale_factor() {
     // θ → −θ: the 90° and 270° readings swap.
-    let text = hand_log(
-        "pendulum",
-        &[0.0, 90.0, 180.0, 270.0],
-        1.0,
-        0.0,
-        0.0,
-        &[0.0],
-        "",
-    )
-    .replace("\n90,", "\nX,")
-    .replace("\n270,", "\n90,")
-    .replace("\nX,", "\n270,");
+    let text = four_position_log("pendulum")
+        .replace("\n90,", "\nX,")
+        .replace("\n270,", "\n90,")
+        .replace("\nX,", "\n270,");
     assert!(matches!(
         solve(&text),
         Err(TumbleError::BadScaleFactor { k1, .. }) if (k1 + K1).abs() < 1e-12
@@ -464,16 +412,7 @@ fn a_reversed_angle_sense_is_refused_as_a_negative_scale_factor() {
 
 #[test]
 fn table_needs_a_temperature_per_test() {
-    let r = solve(&hand_log(
-        "pendulum",
-        &[0.0, 90.0, 180.0, 270.0],
-        1.0,
-        0.0,
-        0.0,
-        &[0.0],
-        "",
-    ))
-    .unwrap();
+    let r = solve(&four_position_log("pendulum")).unwrap();
     assert_eq!(
         table_csv(&r, false),
         Err(TumbleError::NoTemperature("1".into()))
