@@ -20,6 +20,7 @@
 
 use super::effects::Param;
 use super::import::{ChannelKind, Dataset};
+use crate::numerics::linalg::OrthonormalBasis;
 use accomp::tide::cte1973::CTE1973;
 use accomp::tide::harmonic::{sin_cos, DoodsonArguments, Wave, WaveGravity};
 use accomp::tide::{Station, NM_S2_PER_M_S2, STANDARD_GRAVITY_M_S2};
@@ -348,83 +349,14 @@ pub fn spline_drift(t_s: &[f64], seg_start: &[bool], knot_s: f64) -> Vec<Vec<f64
     cols
 }
 
-/// Least squares by the normal equations with column equilibration and a Cholesky that skips
-/// dependent columns (pivot < 1e-11 of the column's own norm²; their coefficient is 0).
+/// Least squares through the host's one QR ([`OrthonormalBasis`]: columns equilibrated, a
+/// column that adds less than [`DEPENDENT_COLUMN_REL`](crate::numerics::linalg::DEPENDENT_COLUMN_REL) of its own norm is dropped, coefficient 0).
 /// Returns coefficients and the unscaled covariance (XᵀX)⁻¹ (0 rows/columns for dropped ones).
 fn lstsq(cols: &[&[f64]], y: &[f64]) -> (Vec<f64>, Vec<Vec<f64>>) {
-    let k = cols.len();
-    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
-    let scale: Vec<f64> = cols
-        .iter()
-        .map(|c| {
-            let s = dot(c, c).sqrt();
-            if s > 0.0 {
-                s
-            } else {
-                1.0
-            }
-        })
-        .collect();
-    let mut a = vec![vec![0.0; k]; k];
-    for i in 0..k {
-        for j in 0..=i {
-            let v = dot(cols[i], cols[j]) / (scale[i] * scale[j]);
-            a[i][j] = v;
-            a[j][i] = v;
-        }
-    }
-    let b: Vec<f64> = (0..k).map(|i| dot(cols[i], y) / scale[i]).collect();
-    // Cholesky A = L Lᵀ over the kept columns.
-    let mut l = vec![vec![0.0; k]; k];
-    let mut kept = vec![false; k];
-    for j in 0..k {
-        let mut d = a[j][j];
-        for m in 0..j {
-            if kept[m] {
-                d -= l[j][m] * l[j][m];
-            }
-        }
-        if d <= 1e-11 * a[j][j].max(1e-300) {
-            continue;
-        }
-        kept[j] = true;
-        let dj = d.sqrt();
-        l[j][j] = dj;
-        for i in j + 1..k {
-            let mut s = a[i][j];
-            for m in 0..j {
-                if kept[m] {
-                    s -= l[i][m] * l[j][m];
-                }
-            }
-            l[i][j] = s / dj;
-        }
-    }
-    let idx: Vec<usize> = (0..k).filter(|&j| kept[j]).collect();
-    // Inverse of L over kept indices, then (XᵀX)⁻¹ = L⁻ᵀ L⁻¹.
-    let m = idx.len();
-    let mut linv = vec![vec![0.0; m]; m];
-    for c in 0..m {
-        linv[c][c] = 1.0 / l[idx[c]][idx[c]];
-        for r in c + 1..m {
-            let mut s = 0.0;
-            for q in c..r {
-                s += l[idx[r]][idx[q]] * linv[q][c];
-            }
-            linv[r][c] = -s / l[idx[r]][idx[r]];
-        }
-    }
-    let mut cov = vec![vec![0.0; k]; k];
-    for (p, &ip) in idx.iter().enumerate() {
-        for (q, &iq) in idx.iter().enumerate() {
-            let s: f64 = (p.max(q)..m).map(|r| linv[r][p] * linv[r][q]).sum();
-            cov[ip][iq] = s / (scale[ip] * scale[iq]);
-        }
-    }
-    let beta: Vec<f64> = (0..k)
-        .map(|i| (0..k).map(|j| cov[i][j] * b[j] * scale[j]).sum())
-        .collect();
-    (beta, cov)
+    let owned: Vec<Vec<f64>> = cols.iter().map(|c| c.to_vec()).collect();
+    let basis = OrthonormalBasis::new(&owned);
+    let (beta, _) = basis.solve(y);
+    (beta, basis.covariance())
 }
 
 /// Equivalent white-noise std of `r` in a frequency band (cpd): the mean Fourier amplitude
