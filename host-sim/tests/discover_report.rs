@@ -73,6 +73,8 @@ fn report_writes_three_png_figures_and_links_them() {
         );
     }
     assert!(!md.contains("not drawn"), "{md}");
+    // Kept when an assertion above fails, for inspection; removed when the test passes.
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
@@ -102,4 +104,5 @@ fn report_format_svg_writes_svg_figures() {
         assert!(md.contains(&format!("]({name})")), "{name} not linked");
         assert!(!report.join(format!("{stem}.png")).exists());
     }
+    let _ = std::fs::remove_dir_all(&dir);
 }
