@@ -10,7 +10,7 @@ use std::path::Path;
 
 /// Loads the record as the discovery does (same binning and notes).
 pub fn load(args: &DiscoverArgs) -> anyhow::Result<import::Dataset> {
-    let (log, bad) = import::load(&args.log, args.format)?;
+    let (log, bad) = import::load_for_dataset(&args.log, args.format, args.output.as_deref())?;
     let opts = DatasetOptions {
         output: args.output.clone(),
         max_points: args.max_points,
