@@ -611,6 +611,7 @@ struct RowLayout<'a> {
 
 impl RowLayout<'_> {
     /// Parses rows until the end or the first refused one (kept in `fault`).
+    #[allow(clippy::needless_range_loop)] // one column index into five parallel vectors
     fn parse(&self, rows: &mut dyn reader::RowStream) -> Part {
         let ncols = self.names.len();
         let mut part = Part::new(ncols);
