@@ -848,6 +848,50 @@ mod tests {
     }
 
     #[test]
+    fn a_log_of_many_blocks_reads_like_one_and_names_the_first_bad_line() {
+        let mut text = String::from("time_s,output_v,status\n");
+        for i in 0..2000u32 {
+            let status = if i % 3 == 2 { "x" } else { "ok" };
+            text.push_str(&format!("{i},{},{status}\n", f64::from(i) * 0.25));
+        }
+        let log = Log::parse_str(&text).unwrap();
+        assert_eq!(log.len(), 2000);
+        assert_eq!(log.time_s()[1999], 1999.0);
+        assert_eq!(log.column("output_v").unwrap()[7], 1.75);
+        let st = log.text_column("status").unwrap();
+        assert_eq!(st.distinct(), ["ok", "x"]);
+        assert_eq!(st.get(1999), Some("ok"));
+        assert_eq!(st.get(2), Some("x"));
+        // Only what is kept is stored; the rest is still checked.
+        let sel = Log::read_selected(text.as_bytes(), &|n| n == "status").unwrap();
+        assert_eq!(sel.column_names(), ["time_s", "status"]);
+        let lines: Vec<&str> = text.lines().collect();
+        let with = |edits: &[(usize, &str)]| {
+            let mut l = lines.clone();
+            for &(i, s) in edits {
+                l[i - 1] = s;
+            }
+            l.join("\n")
+        };
+        // A time going back at any line, whatever block it starts: named at its line. Of two
+        // faults, the first in the file.
+        for at in [3, 500, 1000, 1501, 2001] {
+            let (line, reason) = bad_row(&with(&[(at, "-5,1,ok")]));
+            assert_eq!(line, at, "{reason}");
+            assert!(reason.contains("non-monotonic"), "{reason}");
+        }
+        let (line, reason) = bad_row(&with(&[(1200, "1198.5,junk,ok"), (1700, "0,1")]));
+        assert_eq!(line, 1200, "{reason}");
+        let (line, reason) = bad_row(&with(&[(1700, "0,1,ok"), (1200, "1198,1")]));
+        assert_eq!(line, 1200, "{reason}");
+        let sel = Log::read_selected(with(&[(900, "898,1e999,ok")]).as_bytes(), &|_| false);
+        assert!(
+            matches!(sel, Err(LogError::BadRow { line: 900, .. })),
+            "{sel:?}"
+        );
+    }
+
+    #[test]
     fn comment_after_header_is_a_bad_row() {
         let (line, _) = bad_row("time_s,output_v\n0,1\n# second log\n");
         assert_eq!(line, 3);

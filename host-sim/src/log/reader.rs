@@ -129,7 +129,8 @@ impl ReadError {
 }
 
 /// Bytes of complete lines one worker of [`Records::for_each_block`] parses at a time.
-const BLOCK_BYTES: usize = 4 << 20;
+/// (A few lines in the unit tests, so that their logs span many blocks.)
+const BLOCK_BYTES: usize = if cfg!(test) { 256 } else { 4 << 20 };
 /// Bytes asked of the underlying reader per read while lines are split here.
 const READ_BYTES: usize = 1 << 20;
 
@@ -869,6 +870,65 @@ mod tests {
         ));
         let bad = Records::new(&b"# k: \xff\na,b\n"[..]).err().unwrap();
         assert!(matches!(bad, ReadError::NotUtf8 { line: 1 }));
+    }
+
+    #[test]
+    fn a_quote_hands_the_rest_to_the_csv_crate_with_the_same_fields_and_lines() {
+        let body = "0,1\n\n  \n1, 2 \r\n2,\"3\n4\"\n3,\"a,b\"\n4,5\n";
+        // Split here until line 5, the csv crate after; against the csv crate from the
+        // (quoted) header on.
+        let split = rows(&format!("# k: v\ntime_s,v\n{body}")).unwrap();
+        let csv = rows(&format!("# k: v\n\"time_s\",v\n{body}")).unwrap();
+        assert_eq!(split, csv);
+        assert_eq!(
+            split,
+            vec![
+                (3, vec!["0".into(), "1".into()]),
+                (6, vec!["1".into(), "2".into()]),
+                (8, vec!["2".into(), "3\n4".into()]),
+                (9, vec!["3".into(), "a,b".into()]),
+                (10, vec!["4".into(), "5".into()]),
+            ]
+        );
+        // A carriage return inside a line is a record end to the csv crate: handed over too.
+        let cr = rows("time_s,v\n0,1\r1,2\n").unwrap();
+        assert_eq!(cr.len(), 2);
+    }
+
+    #[test]
+    fn blocks_on_worker_threads_keep_file_order_and_lines() {
+        let mut text = String::from("time_s,v\n");
+        for i in 0..500 {
+            text.push_str(&format!("{i},{}\n", i * 3));
+            if i % 37 == 0 {
+                text.push('\n');
+            }
+        }
+        let want = rows(&text).unwrap();
+        let mut r = Records::from_text(&text).unwrap();
+        let mut got = Vec::new();
+        r.for_each_block(
+            |rows| {
+                let mut out = Vec::new();
+                while let Some(row) = rows.next_row().unwrap() {
+                    out.push((
+                        row.line,
+                        vec![
+                            row.text(0).unwrap().to_owned(),
+                            row.text(1).unwrap().to_owned(),
+                        ],
+                    ));
+                }
+                out
+            },
+            |part| -> Result<(), ReadError> {
+                got.extend(part);
+                Ok(())
+            },
+        )
+        .unwrap();
+        assert!(text.len() > 10 * BLOCK_BYTES);
+        assert_eq!(got, want);
     }
 
     #[test]
