@@ -279,7 +279,11 @@ mod firmware_path {
             );
         }
         // Codes for a sample near a_i (the reference works from what the codes say).
-        let (e, t, tilt) = (Volts(s.output_v(&m)), Celsius(s.t()), TiltArcsec(s.tilt_arcsec));
+        let (e, t, tilt) = (
+            Volts(s.output_v(&m)),
+            Celsius(s.t()),
+            TiltArcsec(s.tilt_arcsec),
+        );
         // Outputs beyond the ADC's ±2.5 V cannot be measured: not a case for this property.
         let Ok(raw) = accomp::pipeline::raw_from_physical(&table, e, t, tilt) else {
             return Ok(());
