@@ -13,7 +13,7 @@ mod hidden;
 #[path = "common/synth.rs"]
 mod synth;
 
-use accomp_host::discover::{self, import, select, Discovery};
+use accomp_host::discover::{self, Discovery};
 use accomp_host::sim::noise::AllanParams;
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
@@ -70,38 +70,6 @@ impl Shape {
     }
 }
 
-/// Bouc–Wen hysteresis of the temperature, a differential model of stick–slip (used for
-/// friction, joints and structural hysteresis), not a sum of play operators:
-///
-/// ```text
-/// dz/dT = (1/w)·(1 − |z|ⁿ·(β·sgn(dT·z) + 1 − β)),   z(0) = 0,   |z| ≤ 1
-/// ```
-///
-/// rate-independent (dz ∝ dT), saturating at z = ±1 (heating / cooling branch), leaving a
-/// branch with slope (1/w)(1 + (2β − 1)|z|ⁿ) — every reversal, however small, moves z (the
-/// controller's mK jitter makes it chatter, which a play wider than the jitter does not) —
-/// and approaching the other branch with a shape set by the exponent n (n = 1: exponential in
-/// temperature, large n: nearly linear then sharp). Integrated along the TRUE temperature with
-/// sub-steps of at most 2 % of w.
-fn bouc_wen(temp: &[f64], w: f64, n: f64, beta: f64) -> Vec<f64> {
-    let mut z: f64 = 0.0;
-    let mut prev = temp[0];
-    temp.iter()
-        .map(|&x| {
-            let d = x - prev;
-            prev = x;
-            let m = ((d.abs() / (0.02 * w)).ceil() as usize).max(1);
-            let h = d / m as f64;
-            for _ in 0..m {
-                let s = if h * z >= 0.0 { 1.0 } else { -1.0 };
-                z += h / w * (1.0 - z.abs().powf(n) * (beta * s + 1.0 - beta));
-                z = z.clamp(-1.0, 1.0);
-            }
-            z
-        })
-        .collect()
-}
-
 /// The hidden series (unit size) on the TRUE channels.
 fn series(s: Shape, st: &synth::Station) -> Vec<f64> {
     let t = &st.t_s;
@@ -119,7 +87,7 @@ fn series(s: Shape, st: &synth::Station) -> Vec<f64> {
             width_c,
             exponent,
             beta,
-        } => bouc_wen(temp, width_c, exponent, beta),
+        } => hidden::bouc_wen(temp, width_c, exponent, beta),
         Shape::PowerLawAging { t0_s, p } => {
             t.iter().map(|x| (1.0 + x / t0_s).powf(p) - 1.0).collect()
         }
@@ -134,14 +102,13 @@ fn series(s: Shape, st: &synth::Station) -> Vec<f64> {
 const DT_S: f64 = 60.0;
 const ROWS: usize = 3 * 1440;
 
-/// Bouc–Wen parameters: transition width 0.03–0.1 °C, exponent 1–3, β 0.5–0.9 (from one
-/// draw of `rng`, so the other shapes' draws stay as they were).
+/// Bouc–Wen parameters (`hidden::draw_bouc_wen`: width 0.03–0.1 °C, exponent 1–3, β 0.5–0.9).
 fn draw_bouc_wen(rng: &mut ChaCha8Rng) -> Shape {
-    let rng = &mut synth::rng(rng.random::<u64>());
+    let (width_c, exponent, beta) = hidden::draw_bouc_wen(rng);
     Shape::BoucWenHysteresis {
-        width_c: rng.random_range(0.03..0.1),
-        exponent: rng.random_range(1.0..3.0),
-        beta: rng.random_range(0.5..0.9),
+        width_c,
+        exponent,
+        beta,
     }
 }
 
@@ -203,27 +170,11 @@ fn run(s: Shape, snr: f64, seed: u64) -> (Discovery, f64) {
     let extra: Vec<f64> = unit.iter().map(|v| k * v).collect();
     let y = synth::output_g(&st, &noise, &extra, &mut rng);
     let log = synth::log_of(&st, y);
-    let ds = import::dataset_from_log(&log, &import::DatasetOptions::default()).expect("dataset");
-    (
-        discover::discover(ds, None, &select::Config::default()).expect("discover"),
-        k,
-    )
+    (hidden::discover_blind(&log).1, k)
 }
 
 fn describe(d: &Discovery) -> String {
-    let acc: Vec<String> = d
-        .selection
-        .accepted
-        .iter()
-        .map(|a| {
-            let p: Vec<String> = a
-                .params
-                .iter()
-                .map(|(k, v)| format!("{k}={:.3e}", v.value))
-                .collect();
-            format!("{} [{}]", a.effect.name(), p.join(" "))
-        })
-        .collect();
+    let acc = hidden::accepted_with_params(d);
     let sc: Vec<String> = d
         .shape_checks
         .iter()
@@ -347,9 +298,7 @@ fn hysteresis_branch_offsets_of_a_few_microg_are_found_in_a_14_day_cycling_log()
         let extra: Vec<f64> = unit.iter().map(|v| half_width_g * v).collect();
         let y = synth::output_g(&st, &noise, &extra, &mut r);
         let log = synth::log_of(&st, y);
-        let ds =
-            import::dataset_from_log(&log, &import::DatasetOptions::default()).expect("dataset");
-        let d = discover::discover(ds, None, &select::Config::default()).expect("discover");
+        let (_, d) = hidden::discover_blind(&log);
         let hit = d
             .selection
             .accepted

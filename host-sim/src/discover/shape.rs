@@ -45,7 +45,7 @@ fn second_thetas(e: &Effect, ds: &Dataset, theta: f64) -> Vec<f64> {
         return Vec::new();
     }
     match e {
-        Effect::Step => [1.0, 2.0, 3.0, 5.0, 8.0, 13.0, 21.0, 34.0, 55.0]
+        Effect::Step { .. } => [1.0, 2.0, 3.0, 5.0, 8.0, 13.0, 21.0, 34.0, 55.0]
             .iter()
             .flat_map(|k| [theta - k * ds.dt_s, theta + k * ds.dt_s])
             .filter(|x| {
@@ -170,13 +170,13 @@ mod tests {
         let ds = dataset(y);
         let ctx = Context::default();
         let mut cols = vec![vec![1.0; ds.len()]];
-        cols.extend(columns(&Effect::Step, &ds, &ctx, theta));
+        cols.extend(columns(&Effect::Step { duration_s: 0.0 }, &ds, &ctx, theta));
         let cv = CvScore {
             raw: 1.0,
             prediction_z: 1.0,
         };
         let acc = Accepted {
-            effect: Effect::Step,
+            effect: Effect::Step { duration_s: 0.0 },
             theta: Param {
                 value: theta,
                 sigma: f64::NAN,
