@@ -31,8 +31,10 @@ enum Shape {
     },
     /// Power-law settling ((1 + t/t0)^p − 1) (the catalogue has ln(1 + t/τ)).
     PowerLawAging { t0_s: f64, p: f64 },
-    /// A bias change spread over a ramp (the catalogue has a jump).
-    RampedStep { time_s: f64, ramp_s: f64 },
+    /// A bias change that settles exponentially after it starts, 1 − e^(−(t − t0)/τ) (a tare
+    /// followed by creep; the catalogue's step crosses over a straight ramp, session 4, so a
+    /// ramped step is no longer off the catalogue).
+    SettlingStep { time_s: f64, tau_s: f64 },
     /// Controls with exactly the catalogue's shapes: must not be called poor.
     ExactStep { time_s: f64 },
     /// One first-order lag.
@@ -46,7 +48,7 @@ impl Shape {
             Shape::SecondOrderLag { .. } | Shape::ExactLag { .. } => "thermal_lag",
             Shape::BoucWenHysteresis { .. } => "thermal_hysteresis",
             Shape::PowerLawAging { .. } => "aging_drift",
-            Shape::RampedStep { .. } | Shape::ExactStep { .. } => "step",
+            Shape::SettlingStep { .. } | Shape::ExactStep { .. } => "step",
         }
     }
 
@@ -91,9 +93,15 @@ fn series(s: Shape, st: &synth::Station) -> Vec<f64> {
         Shape::PowerLawAging { t0_s, p } => {
             t.iter().map(|x| (1.0 + x / t0_s).powf(p) - 1.0).collect()
         }
-        Shape::RampedStep { time_s, ramp_s } => t
+        Shape::SettlingStep { time_s, tau_s } => t
             .iter()
-            .map(|x| ((x - time_s) / ramp_s).clamp(0.0, 1.0))
+            .map(|x| {
+                if *x >= time_s {
+                    1.0 - (-(x - time_s) / tau_s).exp()
+                } else {
+                    0.0
+                }
+            })
             .collect(),
         Shape::ExactStep { time_s } => t.iter().map(|x| f64::from(*x >= time_s)).collect(),
     }
@@ -124,9 +132,9 @@ fn draw_shape(rng: &mut ChaCha8Rng, k: usize) -> Shape {
             t0_s: 10f64.powf(rng.random_range(3.5..4.5)),
             p: rng.random_range(0.25..0.5),
         },
-        3 => Shape::RampedStep {
+        3 => Shape::SettlingStep {
             time_s: rng.random_range(0.2..0.7) * span,
-            ramp_s: rng.random_range(1800.0..5400.0),
+            tau_s: rng.random_range(900.0..2700.0),
         },
         4 => Shape::ExactStep {
             time_s: rng.random_range(0.2..0.8) * span,
@@ -180,10 +188,11 @@ fn describe(d: &Discovery) -> String {
         .iter()
         .map(|c| {
             format!(
-                "{} Δχ²={:.1}/{:.1}{}",
+                "{} Δχ²={:.1}/{:.1} (second {:.4e}){}",
                 c.effect,
                 c.delta_chi2,
                 c.threshold,
+                c.second_theta,
                 if c.poor { " POOR" } else { "" }
             )
         })
