@@ -2,9 +2,9 @@
 
 pub mod allan;
 pub mod calibration_file;
+pub mod cli;
 pub mod demo;
 pub mod device;
-pub mod device_cli;
 pub mod discover;
 pub mod fit;
 pub mod log;
@@ -12,7 +12,5 @@ pub mod numerics;
 pub mod plot;
 pub mod sim;
 pub mod stability;
-pub mod table_cli;
 pub mod tumble;
-pub mod tumble_cli;
 pub mod tumble_sim;

@@ -1,6 +1,7 @@
-//! `accomp`: the lab-PC command line. Each subcommand lives in its own module; this file only
-//! dispatches.
+//! `accomp`: the lab-PC command line. Each subcommand's arguments and glue live in its own file
+//! of `accomp_host::cli`; this file only dispatches.
 
+use accomp_host::cli;
 use clap::{Parser, Subcommand};
 
 #[derive(Parser)]
@@ -18,44 +19,44 @@ struct Cli {
 enum Command {
     /// Fit temperature models of the calibration coefficients (orders 0–4), compare them with
     /// the paper's printed models, optionally write a calibration table.
-    Fit(accomp_host::fit::FitArgs),
+    Fit(cli::fit::FitArgs),
     /// Inspect or check a calibration table file.
-    Table(accomp_host::table_cli::TableArgs),
+    Table(cli::table::TableArgs),
     /// Solve dividing-head tumble logs for K0, K1, K2, δ (and K3) per test (docs/tumble.md).
-    Tumble(accomp_host::tumble_cli::TumbleArgs),
+    Tumble(cli::tumble::TumbleArgs),
     /// Generate a tumble log from true temperature models (the paper's printed order-2 models).
-    SimulateTumble(accomp_host::tumble_cli::SimulateTumbleArgs),
+    SimulateTumble(cli::simulate_tumble::SimulateTumbleArgs),
     /// Simulate the test station (scenario file or preset) and write a log.
-    Simulate(accomp_host::sim::cli::SimulateArgs),
+    Simulate(cli::simulate::SimulateArgs),
     /// Stream samples through the firmware (or the same core on the host) and write what it
     /// returns.
-    Compensate(accomp_host::device_cli::CompensateArgs),
+    Compensate(cli::compensate::CompensateArgs),
     /// Upload a calibration table to the device, verify by read-back, activate it.
-    Load(accomp_host::device_cli::LoadArgs),
+    Load(cli::load::LoadArgs),
     /// Find what the static model gets wrong in a log, name the physical cause, measure the gain.
-    Discover(accomp_host::discover::DiscoverArgs),
+    Discover(cli::discover::DiscoverArgs),
     /// Figures like the paper's Figs. 2–5 and Allan deviation with confidence bands.
-    Plot(accomp_host::plot::PlotArgs),
+    Plot(cli::plot::PlotArgs),
     /// Stability (std, drift), OADEV and MDEV of a log's output columns.
-    Stability(accomp_host::stability::StabilityArgs),
+    Stability(cli::stability::StabilityArgs),
     /// The paper's two experiments through the firmware in QEMU: fit, upload, stream raw codes,
     /// record, report stability before/after compensation next to the paper and the floor.
-    Demo(accomp_host::demo::DemoArgs),
+    Demo(cli::demo::DemoArgs),
 }
 
 fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
     match cli.command {
-        Command::Fit(args) => accomp_host::fit::run(&args),
-        Command::Table(args) => accomp_host::table_cli::run(&args),
-        Command::Tumble(args) => accomp_host::tumble_cli::run(args),
-        Command::SimulateTumble(args) => accomp_host::tumble_cli::run_simulate(args),
-        Command::Simulate(args) => accomp_host::sim::cli::run(&args),
-        Command::Compensate(args) => accomp_host::device_cli::run_compensate(&args),
-        Command::Load(args) => accomp_host::device_cli::run_load(&args),
-        Command::Discover(args) => accomp_host::discover::run(&args),
-        Command::Plot(args) => accomp_host::plot::run(&args),
-        Command::Stability(args) => Ok(accomp_host::stability::run(&args)?),
-        Command::Demo(args) => accomp_host::demo::run(&args),
+        Command::Fit(args) => cli::fit::run(&args),
+        Command::Table(args) => cli::table::run(&args),
+        Command::Tumble(args) => cli::tumble::run(args),
+        Command::SimulateTumble(args) => cli::simulate_tumble::run(args),
+        Command::Simulate(args) => cli::simulate::run(&args),
+        Command::Compensate(args) => cli::compensate::run(&args),
+        Command::Load(args) => cli::load::run(&args),
+        Command::Discover(args) => cli::discover::run(&args),
+        Command::Plot(args) => cli::plot::run(&args),
+        Command::Stability(args) => Ok(cli::stability::run(&args)?),
+        Command::Demo(args) => cli::demo::run(&args),
     }
 }

@@ -108,29 +108,6 @@ impl Kind {
     }
 }
 
-/// `accomp plot`: figures like the paper's Figs. 2–5 and an Allan deviation plot.
-#[derive(Debug, Clone, clap::Args)]
-pub struct PlotArgs {
-    /// The log (CSV with `# key: value` metadata, header, one row per sample).
-    pub log: PathBuf,
-    /// Directory the figures are written to (created if needed).
-    #[arg(long, default_value = "plots")]
-    pub out_dir: PathBuf,
-    /// Image format.
-    #[arg(long, value_enum, default_value_t = Format::Png)]
-    pub format: Format,
-    /// Which figure(s).
-    #[arg(long, value_enum, default_value_t = Kind::All)]
-    pub kind: Kind,
-    /// Uncompensated output column.
-    #[arg(long, default_value = DEFAULT_RAW)]
-    pub raw: String,
-    /// Compensated output column (repeatable). Default: those of a_i_exact_g,
-    /// output_linearized_v, output_compensated_g that the log has.
-    #[arg(long = "compensated")]
-    pub compensated: Vec<String>,
-}
-
 /// Errors of `accomp plot`.
 #[derive(Debug, thiserror::Error)]
 pub enum PlotError {
@@ -225,31 +202,6 @@ pub struct PlotOutcome {
     pub written: Vec<PathBuf>,
     /// Figures `--kind all` skipped, with the reason.
     pub skipped: Vec<String>,
-}
-
-/// Runs the subcommand: reads the log, writes the figures, prints their paths.
-pub fn run(args: &PlotArgs) -> anyhow::Result<()> {
-    let log = Log::read_path(&args.log)?;
-    let stem = args
-        .log
-        .file_stem()
-        .map_or_else(|| "log".to_owned(), |s| s.to_string_lossy().into_owned());
-    let opts = PlotOptions {
-        out_dir: args.out_dir.clone(),
-        stem,
-        format: args.format,
-        kind: args.kind,
-        raw: args.raw.clone(),
-        compensated: args.compensated.clone(),
-    };
-    let out = plot_log(&log, &opts)?;
-    for s in &out.skipped {
-        eprintln!("skipped {s}");
-    }
-    for p in &out.written {
-        println!("{}", p.display());
-    }
-    Ok(())
 }
 
 /// Writes the figures `opts` asks for.

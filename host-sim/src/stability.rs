@@ -27,8 +27,6 @@
 //! (never interpolates). A log whose time stamps do not fit a grid gets stability and regression
 //! but no Allan curves, and the report says why.
 
-use std::path::PathBuf;
-
 use crate::allan::{AllanPoint, Phase, Statistic, TauSet};
 use crate::log::{unit_suffix, Log, LogError, TIME_COLUMN};
 use serde::Serialize;
@@ -594,51 +592,6 @@ impl Report {
         );
         s
     }
-}
-
-/// `accomp stability`: stability, drift, OADEV and MDEV of a log's output columns.
-#[derive(Debug, clap::Args)]
-pub struct StabilityArgs {
-    /// The log (CSV with `# key: value` metadata, header, one row per sample).
-    pub log: PathBuf,
-    /// Print one JSON object instead of the table.
-    #[arg(long)]
-    pub json: bool,
-    /// Column to analyse (repeatable). Default: every `*_v` / `*_g` column except input_g.
-    #[arg(long = "column")]
-    pub columns: Vec<String>,
-    /// Averaging times: octave (m = 1, 2, 4, ...) or all (every m; short logs only).
-    #[arg(long, value_enum, default_value_t = TausArg::Octave)]
-    pub taus: TausArg,
-}
-
-/// `--taus` values.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum TausArg {
-    /// m = 1, 2, 4, 8, ...
-    Octave,
-    /// Every m.
-    All,
-}
-
-/// Runs the subcommand, printing to stdout.
-pub fn run(args: &StabilityArgs) -> Result<(), StabilityError> {
-    let log = Log::read_path(&args.log)?;
-    let opts = Options {
-        columns: args.columns.clone(),
-        taus: match args.taus {
-            TausArg::Octave => TauSet::Octave,
-            TausArg::All => TauSet::All,
-        },
-        allan: true,
-    };
-    let report = analyse(&log, &opts)?;
-    if args.json {
-        println!("{}", report.to_json());
-    } else {
-        print!("{}", report.to_table());
-    }
-    Ok(())
 }
 
 #[cfg(test)]

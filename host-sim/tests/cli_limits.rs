@@ -3,26 +3,15 @@
 //! flag), and the messages name the actual problem (sizes of a padded table, the serial port,
 //! a non-UTF-8 scenario file).
 
-use std::path::PathBuf;
-use std::process::{Command, Output};
 use std::time::{Duration, Instant};
 
-fn accomp(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_accomp"))
-        .args(args)
-        .output()
-        .expect("accomp runs")
-}
+#[path = "common/cli.rs"]
+mod cli;
+#[path = "common/scratch.rs"]
+mod scratch;
 
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn tmp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("accomp-cli-limits-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).expect("temp dir");
-    dir.join(name)
-}
+use cli::{accomp, stderr};
+use scratch::Scratch;
 
 #[test]
 fn table_verify_of_an_endless_file_stops_after_one_table_and_says_why() {
@@ -39,7 +28,8 @@ fn table_verify_of_an_endless_file_stops_after_one_table_and_says_why() {
 fn a_table_with_one_trailing_byte_names_both_sizes() {
     let mut bytes = accomp_host::device::paper_table().encode().to_vec();
     bytes.push(0);
-    let path = tmp("padded.acal");
+    let dir = Scratch::new("cli-limits");
+    let path = dir.path("padded.acal");
     std::fs::write(&path, &bytes).unwrap();
     for cmd in ["verify", "show"] {
         let o = accomp(&["table", cmd, path.to_str().unwrap()]);
@@ -54,7 +44,8 @@ fn a_table_with_one_trailing_byte_names_both_sizes() {
 
 #[test]
 fn simulate_refuses_absurd_sizes_and_prints_the_estimate() {
-    let out = tmp("huge.csv");
+    let dir = Scratch::new("cli-limits");
+    let out = dir.path("huge.csv");
     for (interval, days) in [("1e-9", "365"), ("1e-300", "1"), ("60", "1e300")] {
         let started = Instant::now();
         let o = accomp(&[
@@ -106,13 +97,14 @@ fn simulate_refuses_absurd_sizes_and_prints_the_estimate() {
 
 #[test]
 fn a_non_utf8_scenario_file_is_reported_as_such() {
-    let path = tmp("latin1.toml");
+    let dir = Scratch::new("cli-limits");
+    let path = dir.path("latin1.toml");
     std::fs::write(&path, b"name = \"caf\xe9\"\n").unwrap();
     let o = accomp(&[
         "simulate",
         path.to_str().unwrap(),
         "-o",
-        tmp("x.csv").to_str().unwrap(),
+        dir.path("x.csv").to_str().unwrap(),
     ]);
     assert!(!o.status.success());
     let e = stderr(&o);
@@ -122,7 +114,8 @@ fn a_non_utf8_scenario_file_is_reported_as_such() {
 
 #[test]
 fn serial_errors_name_the_port() {
-    let table = tmp("t.acal");
+    let dir = Scratch::new("cli-limits");
+    let table = dir.path("t.acal");
     std::fs::write(&table, accomp_host::device::paper_table().encode()).unwrap();
     let port = "/dev/accomp-no-such-port";
     let o = accomp(&[

@@ -10,9 +10,9 @@
 
 use accomp_host::discover::import::{self, Dataset, DatasetOptions, Format};
 use accomp_host::discover::select;
-use accomp_host::discover::simulate::cli::{simulate_dataset, write_scenario};
 use accomp_host::discover::simulate::mismatch::Quantity;
 use accomp_host::discover::simulate::Simulation;
+use accomp_host::discover::simulate::{simulate_dataset, write_scenario};
 use std::path::Path;
 
 const GMETROLOGY: &str = concat!(

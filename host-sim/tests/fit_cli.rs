@@ -1,11 +1,18 @@
 //! `accomp fit` end to end: the binary on the paper's Table 1, its JSON shape, its error messages
 //! and the calibration table it writes.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::path::Path;
 
 use accomp::table::{CalibrationTable, ENCODED_LEN};
 use accomp::units::{Celsius, RAD_PER_ARCMIN};
+
+#[path = "common/cli.rs"]
+mod cli;
+#[path = "common/scratch.rs"]
+mod scratch;
+
+use cli::accomp;
+use scratch::Scratch;
 
 const TABLE1: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
@@ -19,19 +26,6 @@ fn table1() -> &'static str {
         "Table 1 data missing at {TABLE1}: the repository's data/ folder is incomplete"
     );
     TABLE1
-}
-
-fn accomp(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_accomp"))
-        .args(args)
-        .output()
-        .expect("run accomp")
-}
-
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("accomp-fit-cli-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
 }
 
 fn json(args: &[&str]) -> serde_json::Value {
@@ -117,7 +111,8 @@ fn printed_fourth_order_k1_model_misses_table_1_by_far_more_than_the_refit() {
 
 #[test]
 fn missing_paper_file_leaves_empty_arrays_and_says_so() {
-    let copy = scratch("alone.csv");
+    let dir = Scratch::new("fit-cli");
+    let copy = dir.path("alone.csv");
     std::fs::copy(table1(), &copy).unwrap();
     let doc = json(&["fit", copy.to_str().unwrap(), "--json"]);
     for c in doc["coefficients"].as_array().unwrap() {
@@ -131,7 +126,8 @@ fn missing_paper_file_leaves_empty_arrays_and_says_so() {
 
 #[test]
 fn bad_rows_are_reported_with_their_line_number() {
-    let bad = scratch("bad.csv");
+    let dir = Scratch::new("fit-cli");
+    let bad = dir.path("bad.csv");
     std::fs::write(
         &bad,
         "# header comment\ntemperature_c,k0_g,k1_v_per_g\n30,0.001,1.3\n35,0.002,x1.3\n40,0.003,1.31\n",
@@ -148,7 +144,8 @@ fn bad_rows_are_reported_with_their_line_number() {
 
 #[test]
 fn output_table_decodes_and_carries_the_selected_models() {
-    let out_path = scratch("cal.acal");
+    let dir = Scratch::new("fit-cli");
+    let out_path = dir.path("cal.acal");
     let out = accomp(&[
         "fit",
         table1(),
@@ -192,7 +189,8 @@ fn output_table_decodes_and_carries_the_selected_models() {
 
 #[test]
 fn reference_outside_the_range_is_refused_with_a_named_error() {
-    let out_path = scratch("refused.acal");
+    let dir = Scratch::new("fit-cli");
+    let out_path = dir.path("refused.acal");
     let out = accomp(&[
         "fit",
         table1(),

@@ -1,22 +1,15 @@
 //! `accomp plot` from the command line: on a simulated log, on a hand-written one, and the error
 //! for a missing column.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::path::Path;
 
-fn accomp(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_accomp"))
-        .args(args)
-        .output()
-        .expect("run accomp")
-}
+#[path = "common/cli.rs"]
+mod cli;
+#[path = "common/scratch.rs"]
+mod scratch;
 
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("accomp-plot-cli-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
+use cli::accomp;
+use scratch::Scratch;
 
 fn s(p: &Path) -> &str {
     p.to_str().unwrap()
@@ -24,7 +17,7 @@ fn s(p: &Path) -> &str {
 
 #[test]
 fn plots_a_simulated_zero_g_log_as_fig2_fig5_fig4_and_adev() {
-    let dir = scratch("sim");
+    let dir = Scratch::new("plot-cli-sim");
     let log = dir.join("zero.csv");
     let sim = accomp(&["simulate", "paper-0g", "--seed", "3", "-o", s(&log)]);
     assert!(
@@ -60,7 +53,7 @@ fn plots_a_simulated_zero_g_log_as_fig2_fig5_fig4_and_adev() {
 
 #[test]
 fn one_kind_as_svg_and_a_missing_column_named_on_stderr() {
-    let dir = scratch("hand");
+    let dir = Scratch::new("plot-cli-hand");
     let log = dir.join("small.csv");
     let mut csv = String::from("# input_g: 1\n# scale_factor_v_per_g: 1.3\ntime_s,output_v\n");
     for i in 0..200 {

@@ -14,17 +14,19 @@ use accomp::table::{CalibrationTable, ENCODED_LEN};
 use accomp_host::device::qemu::{QemuOptions, FLASH_IMAGE, STATE_ENV};
 use accomp_host::device::{firmware_path, paper_table, Client, Qemu};
 
+#[path = "common/scratch.rs"]
+mod scratch;
+use scratch::Scratch;
+
 fn table(day: u8) -> CalibrationTable {
     let mut t = paper_table();
     t.date.day = day;
     t
 }
 
-fn fresh_dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("accomp-persist-test-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).expect("temp dir");
-    d
+/// A fresh folder, removed when the test passes.
+fn fresh_dir(name: &str) -> Scratch {
+    Scratch::new(&format!("persist-test-{name}"))
 }
 
 fn elf() -> PathBuf {
@@ -116,7 +118,7 @@ fn load_then_table_get_round_trip_across_two_qemu_runs_and_leave_no_temp_folder(
     let out = Command::new(env!("CARGO_BIN_EXE_accomp"))
         .args(["table", "get", "--target", "qemu", "-o"])
         .arg(&back)
-        .env(STATE_ENV, &state)
+        .env(STATE_ENV, &*state)
         .env("ACCOMP_FIRMWARE_ELF", elf())
         .spawn()
         .expect("spawn");
@@ -130,8 +132,6 @@ fn load_then_table_get_round_trip_across_two_qemu_runs_and_leave_no_temp_folder(
     assert!(dir.exists());
     drop(q);
     assert!(!dir.exists(), "{} left", dir.display());
-    let _ = std::fs::remove_dir_all(&state);
-    let _ = std::fs::remove_dir_all(&work);
 }
 
 #[test]
@@ -154,7 +154,7 @@ fn sigterm_stops_qemu_and_removes_its_temporary_folder() {
         .arg(&csv)
         .arg("--output")
         .arg(work.join("out.csv"))
-        .env(STATE_ENV, &state)
+        .env(STATE_ENV, &*state)
         .env("ACCOMP_FIRMWARE_ELF", elf())
         .stderr(std::process::Stdio::null())
         .spawn()
@@ -207,8 +207,6 @@ fn sigterm_stops_qemu_and_removes_its_temporary_folder() {
             "QEMU {q} still running"
         );
     }
-    let _ = std::fs::remove_dir_all(&state);
-    let _ = std::fs::remove_dir_all(&work);
 }
 
 /// Direct children of `pid` (from /proc).
@@ -335,6 +333,4 @@ fn power_cut_at_every_step_of_an_upload_commit_and_erase_ahead_leaves_old_or_new
     // At least: boot erase ahead, image, marker, erase ahead after the commit (× 2 tears).
     assert!(cut_points >= 8, "only {cut_points} cut points");
     assert!(saw_new_after_cut, "no cut fell after the commit marker");
-    let _ = std::fs::remove_dir_all(&state);
-    let _ = std::fs::remove_dir_all(&template);
 }

@@ -5,7 +5,14 @@ use accomp::poly::{TempPoly, TemperatureScale};
 use accomp::table::*;
 use accomp::units::*;
 use std::path::PathBuf;
-use std::process::Command;
+
+#[path = "common/cli.rs"]
+mod cli;
+#[path = "common/scratch.rs"]
+mod scratch;
+
+use cli::accomp;
+use scratch::Scratch;
 
 fn table() -> CalibrationTable {
     let scale = TemperatureScale::for_range(Celsius(30.0), Celsius(65.0)).unwrap();
@@ -30,23 +37,17 @@ fn table() -> CalibrationTable {
     )
 }
 
-fn write(name: &str, bytes: &[u8]) -> PathBuf {
-    let p = std::env::temp_dir().join(format!("accomp-table-cli-{}-{name}", std::process::id()));
+fn write(dir: &Scratch, name: &str, bytes: &[u8]) -> PathBuf {
+    let p = dir.path(name);
     std::fs::write(&p, bytes).unwrap();
     p
-}
-
-fn accomp(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_accomp"))
-        .args(args)
-        .output()
-        .unwrap()
 }
 
 #[test]
 fn show_json_reports_the_tables_fields_in_lab_units() {
     let t = table();
-    let p = write("good.acal", &t.encode());
+    let dir = Scratch::new("table-cli");
+    let p = write(&dir, "good.acal", &t.encode());
     let out = accomp(&["table", "show", "--json", p.to_str().unwrap()]);
     assert!(
         out.status.success(),
@@ -69,18 +70,19 @@ fn show_json_reports_the_tables_fields_in_lab_units() {
 fn verify_refuses_a_corrupted_file_with_the_named_error() {
     let mut b = table().encode();
     b[100] ^= 0x01;
-    let p = write("flipped.acal", &b);
+    let dir = Scratch::new("table-cli");
+    let p = write(&dir, "flipped.acal", &b);
     let out = accomp(&["table", "verify", p.to_str().unwrap()]);
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("bad CRC"), "{err}");
 
-    let p = write("truncated.acal", &table().encode()[..200]);
+    let p = write(&dir, "truncated.acal", &table().encode()[..200]);
     let out = accomp(&["table", "verify", p.to_str().unwrap()]);
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("bad length"));
 
-    let p = write("good2.acal", &table().encode());
+    let p = write(&dir, "good2.acal", &table().encode());
     let out = accomp(&["table", "verify", p.to_str().unwrap()]);
     assert!(out.status.success());
 }

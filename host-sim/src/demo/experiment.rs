@@ -81,7 +81,7 @@ pub(super) struct Station {
 }
 
 /// Step 1: the station simulated at the preset's step (60 s) or finer, every n-th reading kept.
-fn simulate_station(args: &DemoArgs, run: &Run<'_>) -> anyhow::Result<Station> {
+fn simulate_station(args: &DemoOptions, run: &Run<'_>) -> anyhow::Result<Station> {
     let mut sc = Scenario::preset(run.name).context("unknown preset")?;
     if let Some(d) = run.days {
         sc.run.duration_s = d * 86_400.0;
@@ -116,7 +116,7 @@ fn upload_table(
     qemu_client: &mut device::Client,
     base: &CalibrationTable,
     station: &Station,
-    args: &DemoArgs,
+    args: &DemoOptions,
     run: &Run<'_>,
 ) -> anyhow::Result<(CalibrationTable, PathBuf)> {
     let first = station
@@ -309,7 +309,7 @@ fn experiment_notes(
 pub(super) fn run_experiment(
     qemu_client: &mut device::Client,
     base: &CalibrationTable,
-    args: &DemoArgs,
+    args: &DemoOptions,
     run: &Run<'_>,
 ) -> anyhow::Result<Experiment> {
     let station = simulate_station(args, run)?;

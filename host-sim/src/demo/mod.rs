@@ -16,7 +16,8 @@
 //! carried, so the recorded log's `time_s` is simulated time and the firmware's own stamp is kept
 //! as `fw_time_s`. Figures: docs/demo.md.
 //!
-//! Files: `mod.rs` the command and the report types; `tables.rs` Table 1's fit and each
+//! Files: `mod.rs` the options, the run and the report types (the command's flags and printing:
+//! [`crate::cli::demo`]); `tables.rs` Table 1's fit and each
 //! experiment's table; `experiment.rs` one experiment, step by step; `stream.rs` raw codes
 //! through the firmware; `record.rs` the recorded log; `report.rs` report.txt; `tests.rs`.
 
@@ -44,7 +45,6 @@ use accomp::pipeline::{self, ChannelFlags, Frame, RawSample, Status};
 use accomp::table::{CalibrationDate, CalibrationTable, TiltAxis};
 use accomp::units::{Celsius, Gs, TiltArcsec, Volts};
 use anyhow::Context;
-use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
 
@@ -70,36 +70,26 @@ const DEMO_DATE: CalibrationDate = CalibrationDate {
     day: 1,
 };
 
-/// Arguments of `accomp demo`.
-#[derive(Debug, Args)]
-pub struct DemoArgs {
-    /// Table 1 CSV (default: data/jn06_a12124_coefficients_vs_temperature.csv of the repository
-    /// the binary was built from).
-    #[arg(long)]
+/// What `accomp demo` runs and where it writes (the command's flags: [`crate::cli::demo`]).
+#[derive(Debug, Clone)]
+pub struct DemoOptions {
+    /// Table 1 CSV (`None`: the repository's `data/` copy, [`TABLE1_FILE`]).
     pub table1: Option<PathBuf>,
     /// Where the log, figures, tables and report are written.
-    #[arg(short, long, default_value = "target/demo")]
     pub out_dir: PathBuf,
     /// Seed of the simulation (both experiments).
-    #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Sample interval of paper-1g, s (600 s: 5 904 samples over 41 days).
-    #[arg(long, default_value_t = 600.0)]
+    /// Sample interval of paper-1g, s.
     pub interval_1g: f64,
-    /// Sample interval of paper-0g, s (30 s: 2 880 samples over 1 day).
-    #[arg(long, default_value_t = 30.0)]
+    /// Sample interval of paper-0g, s.
     pub interval_0g: f64,
-    /// Override the duration of paper-1g, days (default: the preset's 41).
-    #[arg(long)]
+    /// Duration of paper-1g, days (`None`: the preset's 41).
     pub days_1g: Option<f64>,
-    /// Override the duration of paper-0g, days (default: the preset's 1).
-    #[arg(long)]
+    /// Duration of paper-0g, days (`None`: the preset's 1).
     pub days_0g: Option<f64>,
-    /// Firmware ELF (default: $ACCOMP_FIRMWARE_ELF, else target/thumbv7em-none-eabihf/release/accomp-fw).
-    #[arg(long)]
+    /// Firmware ELF (`None`: `device::firmware_path`'s default).
     pub firmware: Option<PathBuf>,
     /// Skip the figures.
-    #[arg(long)]
     pub no_plots: bool,
 }
 
@@ -183,7 +173,7 @@ pub struct Report {
 }
 
 /// Runs the demo; returns the report (also printed and written to the output directory).
-pub fn run_demo(args: &DemoArgs) -> anyhow::Result<Report> {
+pub fn run_demo(args: &DemoOptions) -> anyhow::Result<Report> {
     let started = Instant::now();
     fs::create_dir_all(&args.out_dir)
         .with_context(|| format!("cannot create {}", args.out_dir.display()))?;
@@ -242,16 +232,4 @@ pub fn run_demo(args: &DemoArgs) -> anyhow::Result<Report> {
     )?;
     fs::write(args.out_dir.join("report.txt"), report.to_text())?;
     Ok(report)
-}
-
-/// `accomp demo`.
-pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
-    let report = run_demo(args)?;
-    print!("{}", report.to_text());
-    println!(
-        "report: {} and {}",
-        args.out_dir.join("report.txt").display(),
-        args.out_dir.join("report.json").display()
-    );
-    Ok(())
 }

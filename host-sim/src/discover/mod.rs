@@ -11,7 +11,8 @@
 //! - [`select`]: greedy selection with BIC (effective sample size) and blocked cross-validation.
 //! - [`report`]: text, JSON and the Markdown report with figures.
 //!
-//! Method, catalogue, rates and measured-data findings: `docs/discovery.md`.
+//! The command's arguments and output: [`crate::cli::discover`]. Method, catalogue, rates and
+//! measured-data findings: `docs/discovery.md`.
 
 pub mod baseline;
 pub mod effects;
@@ -28,48 +29,6 @@ pub mod tidal;
 
 use effects::{Context, Effect};
 use import::{Dataset, DatasetOptions, Format};
-use std::path::PathBuf;
-
-/// Arguments of `accomp discover`.
-#[derive(Debug, Clone, clap::Args)]
-pub struct DiscoverArgs {
-    /// The record: a log (design/architecture.md), a gMetrology .tsf or the AQG CSV.
-    pub log: PathBuf,
-    /// Calibration table (`accomp fit -o`): the baseline becomes its prediction.
-    #[arg(long)]
-    pub calibration: Option<PathBuf>,
-    /// Print one JSON object.
-    #[arg(long)]
-    pub json: bool,
-    /// Write a Markdown report with figures into this directory.
-    #[arg(long)]
-    pub report: Option<PathBuf>,
-    /// Image format of the report's figures.
-    #[arg(long, value_enum, default_value = "png")]
-    pub report_format: crate::plot::Format,
-    /// Record format.
-    #[arg(long, value_enum, default_value = "auto")]
-    pub format: Format,
-    /// Output column (default: first `output*`, `gravity*` or `a_i*` column).
-    #[arg(long)]
-    pub output: Option<String>,
-    /// Bin to at most this many points before fitting.
-    #[arg(long, default_value_t = 50_000)]
-    pub max_points: usize,
-    /// Compare the record with its simulated twin: what the simulation gets wrong, the cause,
-    /// the extended simulator and the gain (docs/discovery.md, "Simulation in the loop").
-    #[arg(long)]
-    pub simulate: bool,
-    /// Base scenario of the twin (default: derived from the record).
-    #[arg(long, requires = "simulate")]
-    pub scenario: Option<PathBuf>,
-    /// Ensemble size of the twin (seeds 1..=N).
-    #[arg(long, default_value_t = simulate::DEFAULT_ENSEMBLE, requires = "simulate")]
-    pub ensemble: usize,
-    /// Write the extended scenario (TOML that `accomp simulate` runs) here.
-    #[arg(long, requires = "simulate")]
-    pub write_scenario: Option<PathBuf>,
-}
 
 /// Everything a discovery run found.
 #[derive(Debug, Clone)]
@@ -237,42 +196,4 @@ pub(crate) fn note_bad_rows(ds: &mut Dataset, bad: &[import::BadRow]) {
                 .join("; ")
         ));
     }
-}
-
-/// `accomp discover`.
-pub fn run(args: &DiscoverArgs) -> anyhow::Result<()> {
-    if args.simulate {
-        return simulate::cli::run(args);
-    }
-    let table = match &args.calibration {
-        Some(p) => {
-            let bytes = std::fs::read(p)?;
-            Some(
-                accomp::table::CalibrationTable::decode(&bytes)
-                    .map_err(|e| anyhow::anyhow!("{}: {e}", p.display()))?,
-            )
-        }
-        None => None,
-    };
-    let opts = DatasetOptions {
-        output: args.output.clone(),
-        max_points: args.max_points,
-        unit_per_g_from_calibration: None,
-    };
-    let (d, _bad) = discover_path(
-        &args.log,
-        args.format,
-        &opts,
-        table.as_ref(),
-        &select::Config::default(),
-    )?;
-    if let Some(dir) = &args.report {
-        report::write_report(&d, dir, args.report_format)?;
-    }
-    if args.json {
-        println!("{}", serde_json::to_string_pretty(&report::json(&d))?);
-    } else {
-        print!("{}", report::text(&d));
-    }
-    Ok(())
 }

@@ -5,18 +5,16 @@
 //!
 //! Files: `table.rs` reads the coefficient-vs-temperature table and the printed models;
 //! `orders.rs` fits every order (QR least squares), compares them and picks one; `calibration.rs`
-//! turns the chosen models into a calibration table; `text.rs` the human report; `cli.rs` the
-//! command; `tests.rs`.
+//! turns the chosen models into a calibration table; `text.rs` the human report; `tests.rs`. The
+//! command's arguments and file handling: [`crate::cli::fit`].
 
 mod calibration;
-mod cli;
 mod orders;
 mod table;
 #[cfg(test)]
 mod tests;
 
 pub use calibration::*;
-pub use cli::*;
 pub use orders::*;
 pub use table::*;
 pub use text::render_text;

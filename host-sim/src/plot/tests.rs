@@ -1,21 +1,16 @@
 use super::*;
 
 use std::path::Path;
-use std::sync::atomic::{AtomicUsize, Ordering};
+
+#[path = "../../tests/common/scratch.rs"]
+mod scratch;
+use scratch::Scratch;
 
 const K1_V_PER_G: f64 = 1.25;
 
-/// A fresh empty directory under the system temp dir (no tempfile dependency).
-fn scratch(name: &str) -> PathBuf {
-    static N: AtomicUsize = AtomicUsize::new(0);
-    let dir = std::env::temp_dir().join(format!(
-        "accomp-plot-{}-{}-{name}",
-        std::process::id(),
-        N.fetch_add(1, Ordering::Relaxed)
-    ));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+/// A fresh empty directory under the system temp dir, removed when the test passes.
+fn scratch(name: &str) -> Scratch {
+    Scratch::new(&format!("plot-{name}"))
 }
 
 /// Deterministic pseudo-noise in [-1, 1) (no rand dependency; the exact values do not matter).

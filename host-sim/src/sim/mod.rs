@@ -19,7 +19,6 @@
 pub mod accelerometer;
 pub mod adc;
 pub mod barometer;
-pub mod cli;
 pub mod effects;
 pub mod gravimeter;
 pub mod noise;

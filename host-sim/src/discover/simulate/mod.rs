@@ -16,13 +16,15 @@
 //!    before and after.
 
 pub mod cause;
-pub mod cli;
 pub mod ensemble;
+mod entry;
 pub mod gain;
 pub mod mismatch;
 pub mod output;
 pub mod spectra;
 pub mod twin;
+
+pub use entry::{simulate_dataset, write_report, write_scenario};
 
 use super::import::Dataset;
 use super::noise::NoiseModel;

@@ -1,6 +1,14 @@
-//! `accomp fit`: arguments, reading the files, writing the report and the table.
+//! `accomp fit`: arguments, reading the files, writing the report and the table (the fits are
+//! in [`crate::fit`]).
 
-use super::*;
+use std::path::{Path, PathBuf};
+
+use accomp::units::Celsius;
+
+use crate::fit::{
+    calibration_table, fit_table, parse_coefficient_table, parse_date, parse_printed_models,
+    render_text, today_utc, FitError, PAPER_MODELS_FILE,
+};
 
 /// Arguments of `accomp fit`.
 #[derive(Debug, Clone, clap::Args)]

@@ -1,25 +1,11 @@
-//! `accomp discover <record> --simulate [--scenario base.toml] [--ensemble N]
-//! [--write-scenario out.toml]`: prints what the simulation gets wrong first, then the catalogue
-//! search on the measured − twin residual.
+//! Library entry points of `accomp discover <record> --simulate` (the command itself is
+//! [`crate::cli::discover`]): the comparison on a loaded record, the extended scenario and the
+//! report's simulation section.
 
 use super::{output, Simulation};
-use crate::discover::import::{self, DatasetOptions};
-use crate::discover::{report, select, DiscoverArgs};
+use crate::discover::{import, report, select};
 use std::fmt::Write as _;
 use std::path::Path;
-
-/// Loads the record as the discovery does (same binning and notes).
-pub fn load(args: &DiscoverArgs) -> anyhow::Result<import::Dataset> {
-    let (log, bad) = import::load(&args.log, args.format)?;
-    let opts = DatasetOptions {
-        output: args.output.clone(),
-        max_points: args.max_points,
-        unit_per_g_from_calibration: None,
-    };
-    let mut ds = import::dataset_from_log(&log, &opts)?;
-    crate::discover::note_bad_rows(&mut ds, &bad);
-    Ok(ds)
-}
 
 /// Runs the comparison on a loaded record (library entry point of the CLI and the tests).
 pub fn simulate_dataset(
@@ -93,39 +79,5 @@ pub fn write_report(s: &Simulation, dir: &Path, format: crate::plot::Format) -> 
     let mut all = std::fs::read_to_string(&path).unwrap_or_default();
     all.push_str(&md);
     std::fs::write(path, all)?;
-    Ok(())
-}
-
-/// `accomp discover --simulate`.
-pub fn run(args: &DiscoverArgs) -> anyhow::Result<()> {
-    if args.calibration.is_some() {
-        anyhow::bail!(
-            "--simulate with --calibration: the twin takes its instrument from the record or \
-             the base scenario (--scenario), not from a calibration table"
-        );
-    }
-    let ds = load(args)?;
-    let mut s = simulate_dataset(
-        &ds,
-        args.scenario.as_deref(),
-        args.ensemble,
-        &select::Config::default(),
-    )?;
-    write_scenario(&mut s, args.write_scenario.as_deref())?;
-    if let Some(dir) = &args.report {
-        write_report(&s, dir, args.report_format)?;
-    }
-    let unit = s.cause.dataset.output_unit.clone();
-    if args.json {
-        let mut j = report::json(&s.cause);
-        if let serde_json::Value::Object(m) = &mut j {
-            m.insert("simulation".into(), output::json(&s));
-        }
-        println!("{}", serde_json::to_string_pretty(&j)?);
-    } else {
-        print!("{}", output::text(&s, &unit));
-        println!("\nCatalogue search on the measured − twin residual:\n");
-        print!("{}", report::text(&s.cause));
-    }
     Ok(())
 }

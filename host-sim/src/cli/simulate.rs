@@ -1,4 +1,5 @@
-//! `accomp simulate`: run a scenario (file or preset) and write its log.
+//! `accomp simulate`: run a scenario (file or preset) and write its log (the simulator is
+//! [`crate::sim`]).
 
 use std::fs::File;
 use std::path::PathBuf;
@@ -7,8 +8,8 @@ use anyhow::Context;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
-use super::scenario::{self, Scenario, PRESETS};
-use super::{simulate, Options};
+use crate::sim::scenario::{self, Scenario, PRESETS};
+use crate::sim::{simulate, Options};
 
 /// Arguments of `accomp simulate`.
 #[derive(Debug, Args)]

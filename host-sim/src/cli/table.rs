@@ -1,10 +1,13 @@
-//! `accomp table show|verify <cal>`: what a calibration table file holds, and whether the
-//! firmware would accept it (the same `CalibrationTable::decode` the board runs).
+//! `accomp table show|get|verify`: what a calibration table file holds, the device's active
+//! table, and whether the firmware would accept a file (the same `CalibrationTable::decode` the
+//! board runs).
 
 use crate::calibration_file::{decode_named, read_table, read_table_bytes};
+use crate::device::{Connection, Target};
 use accomp::poly::TempPoly;
 use accomp::table::{CalibrationTable, ENCODED_LEN};
 use accomp::units::{Celsius, RAD_PER_ARCMIN};
+use anyhow::Context as _;
 use anyhow::Result;
 use serde::Serialize;
 use serde_json::Value;
@@ -231,7 +234,7 @@ enum TableAction {
         json: bool,
     },
     /// Read the device's active table into a file.
-    Get(crate::device_cli::TableGetArgs),
+    Get(TableGetArgs),
     /// Check a table as the firmware would; exits non-zero with the named error if refused.
     Verify {
         /// Calibration table file.
@@ -253,7 +256,7 @@ pub fn run(args: &TableArgs) -> Result<()> {
                 print!("{}", table_text(&t));
             }
         }
-        TableAction::Get(get) => crate::device_cli::run_table_get(get)?,
+        TableAction::Get(get) => run_get(get)?,
         TableAction::Verify { path, json } => {
             let bytes = match read_table_bytes(path) {
                 Ok(b) => b,
@@ -294,5 +297,29 @@ pub fn run(args: &TableArgs) -> Result<()> {
             }
         }
     }
+    Ok(())
+}
+
+/// Read the device's active table into a file.
+#[derive(clap::Args, Debug)]
+pub struct TableGetArgs {
+    /// qemu or serial:<port>
+    #[arg(long)]
+    pub target: Target,
+    /// Where to write the table.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Firmware ELF for --target qemu.
+    #[arg(long)]
+    pub firmware: Option<PathBuf>,
+}
+
+/// Runs `accomp table get`.
+pub fn run_get(args: &TableGetArgs) -> anyhow::Result<()> {
+    let mut conn = Connection::open(&args.target, args.firmware.as_deref())?;
+    let bytes = conn.client.read_table()?;
+    std::fs::write(&args.output, &bytes)
+        .with_context(|| format!("writing {}", args.output.display()))?;
+    eprintln!("{} bytes written to {}", bytes.len(), args.output.display());
     Ok(())
 }

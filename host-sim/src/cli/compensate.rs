@@ -1,0 +1,38 @@
+//! `accomp compensate`: stream samples through the firmware (or the same core on the host) and
+//! write what it returns (the streaming is [`crate::device::compensate`]).
+
+use std::path::PathBuf;
+
+use crate::device::{compensate, Target};
+
+/// Stream samples through the firmware (or the same core on the host) and write what it returns.
+#[derive(clap::Args, Debug)]
+pub struct CompensateArgs {
+    /// host, qemu or serial:<port>
+    #[arg(long)]
+    pub target: Target,
+    /// Calibration table (binary, as written by `accomp fit -o`).
+    #[arg(long)]
+    pub calibration: PathBuf,
+    /// Samples CSV: time_s, output_v, temperature_c[, tilt_arcsec].
+    #[arg(long)]
+    pub input: PathBuf,
+    /// Output CSV.
+    #[arg(long)]
+    pub output: PathBuf,
+    /// Firmware ELF for --target qemu (default: $ACCOMP_FIRMWARE_ELF, then
+    /// target/thumbv7em-none-eabihf/release/accomp-fw).
+    #[arg(long)]
+    pub firmware: Option<PathBuf>,
+}
+
+/// Runs `accomp compensate` (streams its output: docs/protocol.md).
+pub fn run(args: &CompensateArgs) -> anyhow::Result<()> {
+    compensate::run_to_file(
+        &args.target,
+        args.firmware.as_deref(),
+        &args.calibration,
+        &args.input,
+        &args.output,
+    )
+}

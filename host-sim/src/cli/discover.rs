@@ -1,0 +1,134 @@
+//! `accomp discover`: arguments, loading the record, printing and writing the report (the
+//! discovery is [`crate::discover`], the simulation in the loop [`crate::discover::simulate`]).
+
+use std::path::PathBuf;
+
+use crate::discover::import::{self, DatasetOptions, Format};
+use crate::discover::simulate::{self, output, simulate_dataset, write_report, write_scenario};
+use crate::discover::{discover_path, note_bad_rows, report, select};
+
+/// Arguments of `accomp discover`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct DiscoverArgs {
+    /// The record: a log (design/architecture.md), a gMetrology .tsf or the AQG CSV.
+    pub log: PathBuf,
+    /// Calibration table (`accomp fit -o`): the baseline becomes its prediction.
+    #[arg(long)]
+    pub calibration: Option<PathBuf>,
+    /// Print one JSON object.
+    #[arg(long)]
+    pub json: bool,
+    /// Write a Markdown report with figures into this directory.
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+    /// Image format of the report's figures.
+    #[arg(long, value_enum, default_value = "png")]
+    pub report_format: crate::plot::Format,
+    /// Record format.
+    #[arg(long, value_enum, default_value = "auto")]
+    pub format: Format,
+    /// Output column (default: first `output*`, `gravity*` or `a_i*` column).
+    #[arg(long)]
+    pub output: Option<String>,
+    /// Bin to at most this many points before fitting.
+    #[arg(long, default_value_t = 50_000)]
+    pub max_points: usize,
+    /// Compare the record with its simulated twin: what the simulation gets wrong, the cause,
+    /// the extended simulator and the gain (docs/discovery.md, "Simulation in the loop").
+    #[arg(long)]
+    pub simulate: bool,
+    /// Base scenario of the twin (default: derived from the record).
+    #[arg(long, requires = "simulate")]
+    pub scenario: Option<PathBuf>,
+    /// Ensemble size of the twin (seeds 1..=N).
+    #[arg(long, default_value_t = simulate::DEFAULT_ENSEMBLE, requires = "simulate")]
+    pub ensemble: usize,
+    /// Write the extended scenario (TOML that `accomp simulate` runs) here.
+    #[arg(long, requires = "simulate")]
+    pub write_scenario: Option<PathBuf>,
+}
+
+/// `accomp discover`.
+pub fn run(args: &DiscoverArgs) -> anyhow::Result<()> {
+    if args.simulate {
+        return run_simulate(args);
+    }
+    let table = match &args.calibration {
+        Some(p) => {
+            let bytes = std::fs::read(p)?;
+            Some(
+                accomp::table::CalibrationTable::decode(&bytes)
+                    .map_err(|e| anyhow::anyhow!("{}: {e}", p.display()))?,
+            )
+        }
+        None => None,
+    };
+    let opts = DatasetOptions {
+        output: args.output.clone(),
+        max_points: args.max_points,
+        unit_per_g_from_calibration: None,
+    };
+    let (d, _bad) = discover_path(
+        &args.log,
+        args.format,
+        &opts,
+        table.as_ref(),
+        &select::Config::default(),
+    )?;
+    if let Some(dir) = &args.report {
+        report::write_report(&d, dir, args.report_format)?;
+    }
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report::json(&d))?);
+    } else {
+        print!("{}", report::text(&d));
+    }
+    Ok(())
+}
+
+/// Loads the record as the discovery does (same binning and notes).
+pub fn load(args: &DiscoverArgs) -> anyhow::Result<import::Dataset> {
+    let (log, bad) = import::load(&args.log, args.format)?;
+    let opts = DatasetOptions {
+        output: args.output.clone(),
+        max_points: args.max_points,
+        unit_per_g_from_calibration: None,
+    };
+    let mut ds = import::dataset_from_log(&log, &opts)?;
+    note_bad_rows(&mut ds, &bad);
+    Ok(ds)
+}
+
+/// `accomp discover --simulate`.
+fn run_simulate(args: &DiscoverArgs) -> anyhow::Result<()> {
+    if args.calibration.is_some() {
+        anyhow::bail!(
+            "--simulate with --calibration: the twin takes its instrument from the record or \
+             the base scenario (--scenario), not from a calibration table"
+        );
+    }
+    let ds = load(args)?;
+    let mut s = simulate_dataset(
+        &ds,
+        args.scenario.as_deref(),
+        args.ensemble,
+        &select::Config::default(),
+    )?;
+    write_scenario(&mut s, args.write_scenario.as_deref())?;
+    if let Some(dir) = &args.report {
+        write_report(&s, dir, args.report_format)?;
+    }
+    let unit = s.cause.dataset.output_unit.clone();
+    if args.json {
+        let mut j = report::json(&s.cause);
+        if let serde_json::Value::Object(m) = &mut j {
+            m.insert("simulation".into(), output::json(&s));
+        }
+        println!("{}", serde_json::to_string_pretty(&j)?);
+    } else {
+        print!("{}", output::text(&s, &unit));
+        println!("\nCatalogue search on the measured − twin residual:\n");
+        print!("{}", report::text(&s.cause));
+    }
+    Ok(())
+}

@@ -1,0 +1,18 @@
+//! The command line's glue, one file per subcommand of `accomp` (`main.rs` only dispatches): its
+//! clap arguments, reading the files it names, calling the domain module, printing and writing
+//! what it returns. The domain modules (`fit`, `sim`, `tumble`, `discover`, `plot`, `stability`,
+//! `demo`, `device`) hold no clap arguments; value enums that are the domain's own vocabulary
+//! (`plot::Format`, `plot::Kind`, `discover::import::Format`) derive `clap::ValueEnum` there
+//! rather than being mirrored here.
+
+pub mod compensate;
+pub mod demo;
+pub mod discover;
+pub mod fit;
+pub mod load;
+pub mod plot;
+pub mod simulate;
+pub mod simulate_tumble;
+pub mod stability;
+pub mod table;
+pub mod tumble;
