@@ -459,11 +459,12 @@ fn hidden_effects_are_named_with_their_parameters() {
         );
         tally.add(o.hidden.name(), o.named, o.params_ok, o.gain_ok);
     }
-    tally.print("1 g");
+    tally.print("1 g", true);
     let (named, params, gains) = (tally.named, tally.params, tally.gains);
     // Detection: the goal stated in docs/discovery.md is 80 %, and it is NOT met (measured
-    // 67–70 %; thermal_hysteresis is never found, warm-up and aging transients are confused
-    // with each other). What is asserted is a regression floor of 55 %, 1.5 binomial standard
+    // 20/30 in sessions 3 and 4; the hysteresis draws — Bouc–Wen loops since session 4 — are
+    // not found in 2 days of regulation noise at SNR 5–7, warm-up and aging transients are
+    // confused with each other). What is asserted is a regression floor of 55 %, 1.5 binomial standard
     // deviations under the measured rate, chosen after measuring (docs/discovery.md).
     hidden::assert_at_least_percent(named, HIDDEN_DRAWS, 55, "detection rate (floor)");
     hidden::assert_at_least_percent(

@@ -347,7 +347,7 @@ fn hidden_0g_tilt_effects_are_named_with_their_parameters() {
         );
         tally.add(o.hidden.name(), o.named, o.params_ok, false);
     }
-    tally.print("0 g");
+    tally.print("0 g", false);
     let (named, params) = (tally.named, tally.params);
     hidden::assert_at_least_percent(named, HIDDEN_DRAWS, 80, "0 g detection rate");
     hidden::assert_at_least_percent(

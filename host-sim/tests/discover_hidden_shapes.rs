@@ -264,14 +264,14 @@ fn off_catalogue_shapes_are_named_by_their_closest_cause_and_a_poor_fit_is_said(
          {poor_exact}/{n_exact} exact"
     );
     hidden::assert_at_least_percent(named, DRAWS, 75, "closest cause named at SNR 8–15");
-    // Stated before measuring: ≥ 50 % of the off-catalogue shapes (then 8 with two Preisach
-    // draws, which a single play could not describe: 4/8). With the Preisach column those loops
-    // are described (not poor, rightly: counted apart) and with the fit on the smoothed
-    // temperature a two-stage lag of nearly equal stages (816 s, 1033 s) is within Δχ² 4.5 of
-    // one lag: measured 2/6 (a two-stage lag, a ramp; the power laws are never told from
-    // ln(1 + t/τ) over 3 days). Asserted at the measured floor, the goal not met
-    // (docs/discovery.md, "Non-circular tests").
-    hidden::assert_at_least_percent(poor_off, n_off, 33, "poor fit said at SNR 40–80");
+    // Stated before measuring: ≥ 50 % of the off-catalogue shapes. Measured 2/6 in session 3
+    // (the check kept the accepted member and searched a second one); since session 4 the best
+    // pair of the family replaces the effect (a two-stage lag is two first-order lags) and
+    // overlapping steps are one change: 4/6 (both two-stage lags, both settling steps; not the
+    // power laws, never told from ln(1 + t/τ) over 3 days). Asserted at the measured 4/6
+    // (docs/discovery.md, "Shape check"). The exact controls: 1/4 (an exact lag at SNR 54 on the
+    // true temperature, fitted on the smoothed RTD reading), at the stated limit.
+    hidden::assert_at_least_percent(poor_off, n_off, 66, "poor fit said at SNR 40–80");
     hidden::assert_at_most_percent(poor_exact, n_exact, 25, "exact shapes called poor");
 }
 

@@ -1,19 +1,14 @@
 //! Is an accepted effect's shape right? The catalogue names the *closest* cause; a real effect
 //! need not have the catalogue's exact shape (a second-order thermal path named `thermal_lag`,
-//! a ramp named `step`, a distribution of hysteresis widths named by one play, a power-law
-//! settling named `aging_drift`). The check asks whether the same effect at a second value of
-//! its nonlinear parameter — a two-component version of the shape — explains significantly
-//! more of the final residual:
-//!
-//! Δχ² = whitened RSS reduction from adding the effect's columns at θ′ (best θ′ away from θ),
-//! charged exactly like a new effect: (columns)·ln n + max(ln n, 2 ln M), M the number of θ′
-//! tried. If the extension would pass that BIC, the single-parameter shape does not describe
-//! the data: the fit is reported as **poor** (text and JSON), with θ′. A shape that is right
-//! leaves only noise for θ′, whose largest Δχ² over M trials is ≈ 2 ln M, under the charge.
-//!
-//! Steps are checked at θ ± 1…55 samples (a ramp or a two-stage jump is two steps close
-//! together); gridded effects (lags, τ, play width) over their search grid minus the points
-//! within a factor 1.5 of θ; `periodic` and the linear effects are not checked (no shape
+//! a settling named `step`, a distribution of hysteresis widths named by one, a power-law
+//! settling named `aging_drift`). The check asks whether two members of the effect's own family
+//! in its place — a two-component version of the shape — explain significantly more of the
+//! final residual (see [`check`]); if that would pass the selection's charge for one more
+//! column and one more searched parameter, the single-parameter shape does not describe the
+//! data and the fit is reported as **poor** (text and JSON). A shape that is right leaves only
+//! noise for the second member, whose largest Δχ² over P pairs is ≈ 2 ln P, under the charge.
+//! Several accepted steps with overlapping transitions are one change the catalogue could only
+//! describe in pieces: also poor. `periodic` and the linear effects are not checked (no shape
 //! parameter).
 
 use super::baseline::{orthogonalize, Basis, Rows};
@@ -29,9 +24,9 @@ pub struct ShapeCheck {
     pub effect: String,
     /// The accepted nonlinear parameter.
     pub theta: f64,
-    /// The best second value of it.
+    /// The other member of the best pair (for overlapping steps: the nearest other step's time).
     pub second_theta: f64,
-    /// Whitened χ² reduction from the second component.
+    /// Whitened χ² reduction of the pair over the one accepted member.
     pub delta_chi2: f64,
     /// What a new effect is charged (the BIC penalty with look-elsewhere).
     pub threshold: f64,

@@ -141,14 +141,20 @@ impl Tally {
         e.1 += usize::from(named);
     }
 
-    /// Prints the per-effect counts and the rate line `<label> DETECTION RATE k/n …`.
-    pub fn print(&self, label: &str) {
+    /// Prints the per-effect counts and the rate line `<label> DETECTION RATE k/n …` (with the
+    /// gain count when the test checks gains).
+    pub fn print(&self, label: &str, with_gain: bool) {
         for (name, (n, k)) in &self.per_effect {
             eprintln!("{label} {name}: named {k}/{n}");
         }
+        let gain = if with_gain {
+            format!(", gain close {}", self.gains)
+        } else {
+            String::new()
+        };
         eprintln!(
-            "{label} DETECTION RATE {}/{} (parameters within tolerance {}, gain close {})",
-            self.named, self.draws, self.params, self.gains
+            "{label} DETECTION RATE {}/{} (parameters within tolerance {}{gain})",
+            self.named, self.draws, self.params
         );
     }
 }
