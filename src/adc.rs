@@ -208,6 +208,18 @@ mod tests {
         }
     }
 
+    /// AD7124 unipolar at gain 16 (the board's RTD channel), 2.5 V reference.
+    fn ad7124_gain_16() -> AdcScale {
+        AdcScale {
+            bits: 24,
+            coding: Coding::Unipolar,
+            pga_gain: 16.0,
+            vref: Volts(2.5),
+            gain_correction: 1.0,
+            offset: Volts(0.0),
+        }
+    }
+
     #[test]
     fn ads1262_code_to_volts_follows_the_datasheet_lsb() {
         // ADS1262 datasheet: 1 LSB = 2·Vref / (gain · 2^32); 0x4000_0000 = +Vref/2 at gain 1.
@@ -231,14 +243,7 @@ mod tests {
     #[test]
     fn ratiometric_resistance_is_independent_of_reference_voltage() {
         // AD7124 unipolar, gain 16, Rref 5.11 kΩ: code for 100 Ω is 2^24·100·16/5110.
-        let mut s = AdcScale {
-            bits: 24,
-            coding: Coding::Unipolar,
-            pga_gain: 16.0,
-            vref: Volts(2.5),
-            gain_correction: 1.0,
-            offset: Volts(0.0),
-        };
+        let mut s = ad7124_gain_16();
         let code = (16_777_216.0 * 100.0 * 16.0 / 5110.0_f64).round() as u32;
         let r1 = s.ratiometric_ohms(code, Ohms(5110.0)).unwrap();
         s.vref = Volts(1.0);
@@ -326,14 +331,7 @@ mod tests {
     #[test]
     fn ohms_to_code_matches_the_ratiometric_formula() {
         // AD7124 unipolar, gain 16, Rref 5.11 kΩ: 100 Ω ↔ round(2^24·100·16/5110) = 5 253 140 (computed independently).
-        let s = AdcScale {
-            bits: 24,
-            coding: Coding::Unipolar,
-            pga_gain: 16.0,
-            vref: Volts(2.5),
-            gain_correction: 1.0,
-            offset: Volts(0.0),
-        };
+        let s = ad7124_gain_16();
         assert_eq!(s.code_for_ohms(RtdOhms(100.0), Ohms(5110.0)), Ok(5_253_140));
         assert_eq!(
             s.code_for_ohms(RtdOhms(100.0), Ohms(0.0)),

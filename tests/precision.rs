@@ -42,19 +42,61 @@ prop_compose! {
     }
 }
 
+/// Where in the calibrated range a sample is taken and what the accelerometer feels.
+#[derive(Debug, Clone, Copy)]
+struct Sample {
+    /// Position in the range, 0 at its low end, 1 at its high end.
+    t_frac: f64,
+    a_i: f64,
+    a_p: f64,
+    a_o: f64,
+    tilt_arcsec: f64,
+    /// Low end of the calibrated range, °C.
+    lo: f64,
+    /// Width of the calibrated range, °C.
+    span: f64,
+}
+
+impl Sample {
+    /// The temperature, °C.
+    fn t(&self) -> f64 {
+        self.lo + self.t_frac * self.span
+    }
+
+    /// The output eq. (1) gives for models `m` (coefficients in x = (T − Tc)/Ts), V.
+    fn output_v(&self, m: &[[f64; 5]; 5]) -> f64 {
+        let x = (self.t() - (self.lo + 0.5 * self.span)) / (0.5 * self.span);
+        let [k0, k1, k2, dp, d_o] = m.map(|c| reference_eval(&c, x));
+        let a_i = self.a_i;
+        k1 * (k0 + a_i + k2 * a_i * a_i + d_o * self.a_p - dp * self.a_o)
+    }
+}
+
+prop_compose! {
+    /// Samples anywhere in a range of width `spans` starting at 20..40 °C, |a_i| ≤ 1.5 g, cross
+    /// accelerations up to 1 g, tilt up to ±60".
+    fn samples(spans: std::ops::Range<f64>)(
+        t_frac in 0.0..=1.0f64,
+        a_i in -1.5..=1.5f64,
+        a_p in -1.0..=1.0f64,
+        a_o in -1.0..=1.0f64,
+        tilt_arcsec in -60.0..60.0f64,
+        lo in 20.0..40.0f64,
+        span in spans,
+    ) -> Sample {
+        Sample { t_frac, a_i, a_p, a_o, tilt_arcsec, lo, span }
+    }
+}
+
 proptest! {
     #![proptest_config(ProptestConfig { cases: 20_000, ..ProptestConfig::default() })]
 
     #[test]
     fn exact_a_i_agrees_with_an_f64_reference_within_1e_9_g(
         m in models(),
-        t_frac in 0.0..=1.0f64,
-        a_i in -1.5..=1.5f64,
-        a_p in -1.0..=1.0f64,
-        a_o in -1.0..=1.0f64,
-        lo in 20.0..40.0f64,
-        span in 5.0..60.0f64,
+        s in samples(5.0..60.0),
     ) {
+        let Sample { a_i, a_p, a_o, lo, span, .. } = s;
         let scale = TemperatureScale::for_range(Celsius(lo), Celsius(lo + span)).unwrap();
         let comp = ThermalCompensator {
             scale,
@@ -67,12 +109,8 @@ proptest! {
                 misalignment_o_rad: poly(m[4]),
             },
         };
-        let t = lo + t_frac * span;
-        let x = (t - (lo + 0.5 * span)) / (0.5 * span);
-        let [k0, k1, k2, dp, d_o] = m.map(|c| reference_eval(&c, x));
-        let e = k1 * (k0 + a_i + k2 * a_i * a_i + d_o * a_p - dp * a_o);
         let cross = CrossAxis { a_p: Gs(a_p), a_o: Gs(a_o) };
-        let got = comp.exact(Volts(e), Celsius(t), cross).unwrap();
+        let got = comp.exact(Volts(s.output_v(&m)), Celsius(s.t()), cross).unwrap();
         prop_assert!((got.input.0 - a_i).abs() <= BUDGET_G,
             "a_i={a_i} got={} err={:e}", got.input.0, got.input.0 - a_i);
     }
@@ -229,20 +267,8 @@ mod firmware_path {
     }
 
     /// Runs one sample through the firmware path and checks it against the reference.
-    // The proptest parameters, passed straight through: a struct would only rename them.
-    #[allow(clippy::too_many_arguments)]
-    fn check(
-        m: [[f64; 5]; 5],
-        t_frac: f64,
-        a_i: f64,
-        a_p: f64,
-        a_o: f64,
-        tilt: f64,
-        lo: f64,
-        span: f64,
-        expect_mixed: bool,
-    ) -> Result<(), TestCaseError> {
-        let table = table(m, lo, span, a_p, a_o);
+    fn check(m: [[f64; 5]; 5], s: Sample, expect_mixed: bool) -> Result<(), TestCaseError> {
+        let table = table(m, s.lo, s.span, s.a_p, s.a_o);
         let prepared = PreparedCalibration::new(&table).unwrap();
         if expect_mixed {
             prop_assert_eq!(
@@ -253,14 +279,13 @@ mod firmware_path {
             );
         }
         // Codes for a sample near a_i (the reference works from what the codes say).
-        let t = lo + t_frac * span;
-        let x = (t - (lo + 0.5 * span)) / (0.5 * span);
-        let [k0, k1, k2, dp, d_o] = m.map(|c| reference_eval(&c, x));
-        let e = k1 * (k0 + a_i + k2 * a_i * a_i + d_o * a_p - dp * a_o);
+        let (e, t, tilt) = (
+            Volts(s.output_v(&m)),
+            Celsius(s.t()),
+            TiltArcsec(s.tilt_arcsec),
+        );
         // Outputs beyond the ADC's ±2.5 V cannot be measured: not a case for this property.
-        let Ok(raw) =
-            accomp::pipeline::raw_from_physical(&table, Volts(e), Celsius(t), TiltArcsec(tilt))
-        else {
+        let Ok(raw) = accomp::pipeline::raw_from_physical(&table, e, t, tilt) else {
             return Ok(());
         };
         let f = process_prepared(0, 0, &raw, Some(&prepared));
@@ -322,31 +347,19 @@ mod firmware_path {
         #[test]
         fn firmware_path_agrees_with_an_f64_reference_within_1e_9_g(
             m in realistic(),
-            t_frac in 0.0..=1.0f64,
-            a_i in -1.5..=1.5f64,
-            a_p in -1.0..=1.0f64,
-            a_o in -1.0..=1.0f64,
-            tilt in -60.0..60.0f64,
-            lo in 20.0..40.0f64,
-            span in 20.0..45.0f64,
+            s in samples(20.0..45.0),
         ) {
-            check(m, t_frac, a_i, a_p, a_o, tilt, lo, span, true)?;
+            check(m, s, true)?;
         }
 
         /// Tables with large curvature terms fall back to f64 and stay within budget too.
         #[test]
         fn firmware_path_with_large_curvature_stays_within_1e_9_g(
             m in models(),
-            t_frac in 0.0..=1.0f64,
-            a_i in -1.5..=1.5f64,
-            a_p in -1.0..=1.0f64,
-            a_o in -1.0..=1.0f64,
-            tilt in -60.0..60.0f64,
-            lo in 20.0..40.0f64,
-            span in 5.0..45.0f64,
+            s in samples(5.0..45.0),
         ) {
             prop_assume!(m[1][0] - m[1][1..].iter().map(|c| c.abs()).sum::<f64>() > 0.01);
-            check(m, t_frac, a_i, a_p, a_o, tilt, lo, span, false)?;
+            check(m, s, false)?;
         }
     }
 

@@ -74,22 +74,9 @@ fn main() {
         t2.date.day = 1 + (k % 2) as u8;
         let bytes = t2.encode();
         let t0 = Instant::now();
-        let upload_id = c.new_upload_id();
-        c.call(Request::UploadBegin {
-            upload_id,
-            total_len: ENCODED_LEN as u32,
-            body_crc32: upload_body_crc32(&bytes),
-        })
-        .unwrap();
+        let upload_id = c.begin_upload(&bytes).unwrap();
         begin += t0.elapsed();
-        for (i, ch) in bytes.chunks(CHUNK_LEN).enumerate() {
-            c.call(Request::UploadChunk {
-                upload_id,
-                offset: (i * CHUNK_LEN) as u32,
-                data: heapless::Vec::from_slice(ch).unwrap(),
-            })
-            .unwrap();
-        }
+        c.send_chunks(upload_id, &bytes, |_, _| {}).unwrap();
         let tc = Instant::now();
         c.call(Request::UploadCommit { upload_id }).unwrap();
         commit += tc.elapsed();
@@ -157,21 +144,8 @@ fn icount_commit(base: &accomp::table::CalibrationTable) {
     for k in 0..ROUNDS {
         t.date.day = 1 + (k % 3) as u8;
         let bytes = t.encode();
-        let upload_id = c.new_upload_id();
-        c.call(Request::UploadBegin {
-            upload_id,
-            total_len: ENCODED_LEN as u32,
-            body_crc32: upload_body_crc32(&bytes),
-        })
-        .unwrap();
-        for (i, ch) in bytes.chunks(CHUNK_LEN).enumerate() {
-            c.call(Request::UploadChunk {
-                upload_id,
-                offset: (i * CHUNK_LEN) as u32,
-                data: heapless::Vec::from_slice(ch).unwrap(),
-            })
-            .unwrap();
-        }
+        let upload_id = c.begin_upload(&bytes).unwrap();
+        c.send_chunks(upload_id, &bytes, |_, _| {}).unwrap();
         // Same frame length: the wrong id differs only in its last bit.
         refused.push(bracket(
             &mut c,

@@ -8,7 +8,9 @@ use accomp::table::CalibrationTable;
 use accomp::units::{Celsius, Gs};
 use accomp_host::device::firmware_path;
 use std::path::{Path, PathBuf};
-use std::process::Command;
+
+#[path = "common/cli.rs"]
+mod cli;
 
 const TABLE1: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
@@ -16,17 +18,9 @@ const TABLE1: &str = concat!(
 );
 
 fn accomp(args: &[&str]) -> String {
-    let out = Command::new(env!("CARGO_BIN_EXE_accomp"))
-        .args(args)
-        // This test's own emulated board, not the user's persistent one.
-        .env(accomp_host::device::qemu::STATE_ENV, tmp("board"))
-        .output()
-        .expect("accomp runs");
-    assert!(
-        out.status.success(),
-        "accomp {args:?} failed:\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    // This test's own emulated board, not the user's persistent one.
+    let board = tmp("board");
+    let out = cli::accomp_ok(args, &[(accomp_host::device::qemu::STATE_ENV, &board)]);
     String::from_utf8_lossy(&out.stdout).into_owned()
 }
 

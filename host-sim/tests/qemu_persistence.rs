@@ -14,6 +14,8 @@ use accomp::table::{CalibrationTable, ENCODED_LEN};
 use accomp_host::device::qemu::{QemuOptions, FLASH_IMAGE, STATE_ENV};
 use accomp_host::device::{firmware_path, paper_table, Client, Qemu};
 
+#[path = "common/cli.rs"]
+mod cli;
 #[path = "common/scratch.rs"]
 mod scratch;
 use scratch::Scratch;
@@ -69,18 +71,7 @@ fn qemu_dirs_of(pid: u32) -> Vec<PathBuf> {
 }
 
 fn accomp(state: &Path, args: &[&str]) -> std::process::Output {
-    let out = Command::new(env!("CARGO_BIN_EXE_accomp"))
-        .args(args)
-        .env(STATE_ENV, state)
-        .env("ACCOMP_FIRMWARE_ELF", elf())
-        .output()
-        .expect("accomp runs");
-    assert!(
-        out.status.success(),
-        "accomp {args:?} failed:\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out
+    cli::accomp_ok(args, &[(STATE_ENV, state), ("ACCOMP_FIRMWARE_ELF", &elf())])
 }
 
 #[test]

@@ -16,7 +16,6 @@ use stm32f4xx_hal::{
     pac,
     prelude::*,
     rcc::Config,
-    serial::{self, Serial},
     spi::Spi,
     watchdog::IndependentWatchdog,
 };
@@ -142,17 +141,7 @@ pub fn init(mut dp: pac::Peripherals) -> Parts {
     let gpiob = dp.GPIOB.split(&mut rcc);
     let gpioc = dp.GPIOC.split(&mut rcc);
 
-    let serial = match Serial::new(
-        dp.USART1,
-        (gpioa.pa9, gpioa.pa10),
-        serial::Config::default().baudrate(115_200.bps()),
-        &mut rcc,
-    ) {
-        Ok(s) => s,
-        Err(_) => fatal(Fatal::Uart),
-    };
-    let (tx, mut rx) = serial.split();
-    rx.listen();
+    let (tx, rx) = super::uart1(dp.USART1, (gpioa.pa9, gpioa.pa10), &mut rcc);
 
     // One bus per converter, each in its datasheet's mode: no mode switching, no sharing, no
     // lock between the DRDY interrupt and the RTD task.

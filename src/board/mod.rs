@@ -57,6 +57,23 @@ pub enum Fatal {
     Flash = 5,
 }
 
+/// USART1 on PA9 (TX) / PA10 (RX) at 115200 8N1 with the RX interrupt on: the console of both
+/// boards.
+pub(crate) fn uart1(
+    usart1: stm32f4xx_hal::pac::USART1,
+    pins: (stm32f4xx_hal::gpio::PA9, stm32f4xx_hal::gpio::PA10),
+    rcc: &mut stm32f4xx_hal::rcc::Rcc,
+) -> (UartTx, UartRx) {
+    let config = stm32f4xx_hal::serial::Config::default().baudrate(115_200.bps());
+    let serial = match stm32f4xx_hal::serial::Serial::new(usart1, pins, config, rcc) {
+        Ok(s) => s,
+        Err(_) => fatal(Fatal::Uart),
+    };
+    let (tx, mut rx) = serial.split();
+    rx.listen();
+    (tx, rx)
+}
+
 /// Next received byte, or None when the receive register is empty. Line errors (overrun,
 /// framing, noise) lose bytes; the frame CRC catches that, so they are skipped here.
 pub fn read_byte(rx: &mut UartRx) -> Option<u8> {

@@ -9,12 +9,7 @@
 
 use cortex_m_rt::{exception, ExceptionFrame};
 use defmt_semihosting as _;
-use stm32f4xx_hal::{
-    pac,
-    prelude::*,
-    rcc::Config,
-    serial::{self, Serial},
-};
+use stm32f4xx_hal::{pac, prelude::*, rcc::Config};
 
 use super::{Fatal, Parts};
 use accomp::acquisition::{AdsReading, RtdReading};
@@ -207,17 +202,7 @@ impl NorFlash for PersistentFlash {
 pub fn init(dp: pac::Peripherals) -> Parts {
     let mut rcc = dp.RCC.freeze(Config::hsi());
     let gpioa = dp.GPIOA.split(&mut rcc);
-    let serial = match Serial::new(
-        dp.USART1,
-        (gpioa.pa9, gpioa.pa10),
-        serial::Config::default().baudrate(115_200.bps()),
-        &mut rcc,
-    ) {
-        Ok(s) => s,
-        Err(_) => fatal(Fatal::Uart),
-    };
-    let (tx, mut rx) = serial.split();
-    rx.listen();
+    let (tx, rx) = super::uart1(dp.USART1, (gpioa.pa9, gpioa.pa10), &mut rcc);
     // Taken once, in init: None would mean init ran twice.
     let ram = match cortex_m::singleton!(: RamCalibrationFlash = RamCalibrationFlash::new()) {
         Some(f) => f,

@@ -114,6 +114,27 @@ impl<SpiE, PinE> Error<SpiE, PinE> {
     }
 }
 
+/// Polls an active-low data-ready pin at most `limit` times, `interval_us` apart: both converters
+/// pull their DRDY output low when a conversion result is ready.
+pub(crate) fn wait_low<
+    SpiE,
+    P: embedded_hal::digital::InputPin,
+    D: embedded_hal::delay::DelayNs,
+>(
+    pin: &mut P,
+    delay: &mut D,
+    limit: u32,
+    interval_us: u32,
+) -> Result<(), Error<SpiE, P::Error>> {
+    for _ in 0..limit {
+        if pin.is_low().map_err(Error::Pin)? {
+            return Ok(());
+        }
+        delay.delay_us(interval_us);
+    }
+    Err(Error::DrdyTimeout)
+}
+
 /// CRC-8 with polynomial x^8 + x^2 + x + 1 (0x07), initial value 0, no reflection, no final XOR
 /// (the CRC-8/SMBUS parameter set): the AD7124 SPI CRC and the ADS1262 CRC mode both use it.
 pub(crate) const CRC8_ATM: crc::Crc<u8> = crc::Crc::<u8>::new(&crc::CRC_8_SMBUS);

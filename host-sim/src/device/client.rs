@@ -224,14 +224,36 @@ impl Client {
     pub fn upload(
         &mut self,
         bytes: &[u8],
-        mut progress: impl FnMut(usize, usize),
+        progress: impl FnMut(usize, usize),
     ) -> Result<u32, ClientError> {
+        let upload_id = self.begin_upload(bytes)?;
+        self.send_chunks(upload_id, bytes, progress)?;
+        match self.call(Request::UploadCommit { upload_id })? {
+            Response::Committed { table_id } => Ok(table_id),
+            other => Err(ClientError::Unexpected(format!("{other:?}"))),
+        }
+    }
+
+    /// The first step of [`Client::upload`]: announces an upload of `bytes` under a fresh
+    /// upload id, which it returns.
+    pub fn begin_upload(&mut self, bytes: &[u8]) -> Result<u32, ClientError> {
         let upload_id = self.new_upload_id();
         self.expect_ok(Request::UploadBegin {
             upload_id,
             total_len: bytes.len() as u32,
             body_crc32: upload_body_crc32(bytes),
         })?;
+        Ok(upload_id)
+    }
+
+    /// The second step of [`Client::upload`]: sends `bytes` in chunks (not committed);
+    /// `progress(sent, total)` after each chunk.
+    pub fn send_chunks(
+        &mut self,
+        upload_id: u32,
+        bytes: &[u8],
+        mut progress: impl FnMut(usize, usize),
+    ) -> Result<(), ClientError> {
         for (i, chunk) in bytes.chunks(CHUNK_LEN).enumerate() {
             let data = heapless::Vec::from_slice(chunk)
                 .map_err(|_| ClientError::Unexpected("chunk too long".into()))?;
@@ -242,10 +264,7 @@ impl Client {
             })?;
             progress((i * CHUNK_LEN + chunk.len()).min(bytes.len()), bytes.len());
         }
-        match self.call(Request::UploadCommit { upload_id })? {
-            Response::Committed { table_id } => Ok(table_id),
-            other => Err(ClientError::Unexpected(format!("{other:?}"))),
-        }
+        Ok(())
     }
 
     /// Upload, then read the active table back and compare byte by byte.

@@ -504,6 +504,21 @@ mod tests {
         (ds, a, temp)
     }
 
+    /// The unweighted least-squares fit of the baseline, which must leave no residual (the data
+    /// are made from the baseline's own model).
+    fn fit_exactly(ds: &Dataset, b: &Baseline) -> Fit {
+        let f = gls(
+            &b.columns,
+            &b.target,
+            0.0,
+            &Rows::new(&ds.segment_start, None),
+        );
+        let r = raw_residual(&b.columns, &f.beta, &b.target);
+        let worst = r.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+        assert!(worst < 1e-12, "residual {worst:e}");
+        f
+    }
+
     fn coefficient(b: &Baseline, beta: &[f64], name: &str) -> f64 {
         let i = b.names.iter().position(|n| n == name);
         assert!(i.is_some(), "no column {name} in {:?}", b.names);
@@ -527,15 +542,7 @@ mod tests {
             .collect();
         let b = static_baseline(&ds);
         assert_eq!(b.columns.len(), b.names.len());
-        let f = gls(
-            &b.columns,
-            &b.target,
-            0.0,
-            &Rows::new(&ds.segment_start, None),
-        );
-        let r = raw_residual(&b.columns, &f.beta, &b.target);
-        let worst = r.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
-        assert!(worst < 1e-12, "residual {worst:e}");
+        let f = fit_exactly(&ds, &b);
         // The temperature column is (T − mean)/std: its coefficients are the tempcos × std(T).
         let m = temp.iter().sum::<f64>() / n as f64;
         let st = std(&temp);
@@ -608,15 +615,7 @@ mod tests {
             b.names,
             vec!["offset", "linear_drift", "scale_factor_error", "k2_error"]
         );
-        let f = gls(
-            &b.columns,
-            &b.target,
-            0.0,
-            &Rows::new(&ds.segment_start, None),
-        );
-        let r = raw_residual(&b.columns, &f.beta, &b.target);
-        let worst = r.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
-        assert!(worst < 1e-12, "residual {worst:e}");
+        let f = fit_exactly(&ds, &b);
         assert!((f.beta[0] - off).abs() < 1e-12 && (f.beta[1]).abs() < 1e-12);
         assert!((f.beta[2] - d_sf).abs() < 1e-12 && (f.beta[3] - d_k2).abs() < 1e-12);
     }

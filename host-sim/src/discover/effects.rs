@@ -201,31 +201,8 @@ pub fn step_durations(ds: &Dataset) -> Vec<f64> {
 pub const TILT_COUPLING_SMOOTHING_S: f64 = 900.0;
 
 /// Centred moving average over ±`half_window_s` inside each segment (the window shrinks at the
-/// segment's ends).
-pub fn moving_average(v: &[f64], t: &[f64], seg_start: &[bool], half_window_s: f64) -> Vec<f64> {
-    let n = v.len();
-    let mut seg_id = vec![0usize; n];
-    for i in 1..n {
-        seg_id[i] = seg_id[i - 1] + usize::from(seg_start[i]);
-    }
-    let mut prefix = vec![0.0; n + 1];
-    for i in 0..n {
-        prefix[i + 1] = prefix[i] + v[i];
-    }
-    let (mut lo, mut hi) = (0usize, 0usize);
-    (0..n)
-        .map(|i| {
-            while t[i] - t[lo] > half_window_s || seg_id[lo] != seg_id[i] {
-                lo += 1;
-            }
-            hi = hi.max(i);
-            while hi + 1 < n && t[hi + 1] - t[i] <= half_window_s && seg_id[hi + 1] == seg_id[i] {
-                hi += 1;
-            }
-            (prefix[hi + 1] - prefix[lo]) / (hi + 1 - lo) as f64
-        })
-        .collect()
-}
+/// segment's ends): the baseline's running mean, the same that smooths the tilt term.
+pub use super::baseline::centred_mean as moving_average;
 
 /// The candidates applicable to a dataset, and the catalogue entries that are not, with why.
 pub fn candidates(

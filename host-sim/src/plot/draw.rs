@@ -268,6 +268,62 @@ pub fn is_125(v: f64) -> bool {
         .any(|m| (mantissa - m).abs() < 1e-6 * m)
 }
 
+/// A log axis' label: only on the 1, 2 and 5 of each decade (the other key points are grid lines).
+fn log_label_125(v: f64) -> String {
+    if is_125(v) {
+        log_tick(v)
+    } else {
+        String::new()
+    }
+}
+
+/// A shaded band between the (x, low, high) edges: the upper edge left to right, then the lower
+/// edge back.
+fn band<I>(edges: I, style: ShapeStyle) -> Polygon<(f64, f64)>
+where
+    I: DoubleEndedIterator<Item = (f64, f64, f64)> + Clone,
+{
+    let upper = edges.clone().map(|(x, _, high)| (x, high));
+    let lower = edges.rev().map(|(x, low, _)| (x, low));
+    Polygon::new(upper.chain(lower).collect::<Vec<_>>(), style)
+}
+
+/// A legend entry's sample: a short line in the series' style.
+fn legend_line(style: ShapeStyle) -> impl Fn((i32, i32)) -> PathElement<(i32, i32)> {
+    move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], style)
+}
+
+/// The legend box, top right, over a half-transparent white.
+fn draw_legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(
+    chart: &mut ChartContext<'a, DB, CT>,
+) -> Result<(), DrawError>
+where
+    DB::ErrorType: 'static,
+{
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .label_font((FONT, 15))
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK.mix(0.5))
+        .draw()?;
+    Ok(())
+}
+
+/// A one-panel chart with its title, room for the axis labels and descriptions.
+fn captioned<'a, 'b, DB: DrawingBackend>(
+    root: &'a DrawingArea<DB, Shift>,
+    title: &str,
+) -> ChartBuilder<'a, 'b, DB> {
+    let mut builder = ChartBuilder::on(root);
+    builder
+        .caption(title, (FONT, 20))
+        .margin(15)
+        .x_label_area_size(50)
+        .y_label_area_size(80);
+    builder
+}
+
 fn draw_time<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
     fig: &TimeFigure,
@@ -313,15 +369,8 @@ where
                     continue;
                 }
                 any_band = true;
-                let band: Vec<(f64, f64)> = run
-                    .iter()
-                    .map(|b| (b.x, b.max))
-                    .chain(run.iter().rev().map(|b| (b.x, b.min)))
-                    .collect();
-                chart.draw_series(std::iter::once(Polygon::new(
-                    band,
-                    tr.color.mix(0.25).filled(),
-                )))?;
+                let edges = run.iter().map(|b| (b.x, b.min, b.max));
+                chart.draw_series(std::iter::once(band(edges, tr.color.mix(0.25).filled())))?;
             }
         }
         for tr in &panel.traces {
@@ -332,9 +381,9 @@ where
                     chart.draw_series(LineSeries::new(run.iter().map(|b| (b.x, b.mean)), style))?;
                 if first {
                     let c = tr.color;
-                    series.label(tr.label.as_str()).legend(move |(x, y)| {
-                        PathElement::new(vec![(x, y), (x + 24, y)], c.stroke_width(2))
-                    });
+                    series
+                        .label(tr.label.as_str())
+                        .legend(legend_line(c.stroke_width(2)));
                     first = false;
                 }
             }
@@ -346,13 +395,7 @@ where
                 .legend(|(x, y)| Rectangle::new([(x, y - 5), (x + 24, y + 5)], GREY_BAND.filled()));
         }
         if panel.traces.iter().any(|t| !t.label.is_empty()) {
-            chart
-                .configure_series_labels()
-                .position(SeriesLabelPosition::UpperRight)
-                .label_font((FONT, 15))
-                .background_style(WHITE.mix(0.85))
-                .border_style(BLACK.mix(0.5))
-                .draw()?;
+            draw_legend(&mut chart)?;
         }
     }
     Ok(())
@@ -382,11 +425,7 @@ where
     let decade_below = |v: f64| 0.99 * 10f64.powf(v.log10().floor());
     let (tau_lo, tau_hi) = (decade_below(tau_lo / 1.2), tau_hi * 1.5);
     let (y_lo, y_hi) = (decade_below(y_lo / 1.2), y_hi * 3.0);
-    let mut chart = ChartBuilder::on(root)
-        .caption(&fig.title, (FONT, 20))
-        .margin(15)
-        .x_label_area_size(50)
-        .y_label_area_size(80)
+    let mut chart = captioned(root, &fig.title)
         .build_cartesian_2d((tau_lo..tau_hi).log_scale(), (y_lo..y_hi).log_scale())?;
     chart
         .configure_mesh()
@@ -399,26 +438,11 @@ where
         .light_line_style(WHITE.mix(0.0))
         .bold_line_style(BLACK.mix(0.12))
         .x_label_formatter(&|v| log_tick(*v))
-        .y_label_formatter(&|v| {
-            if is_125(*v) {
-                log_tick(*v)
-            } else {
-                String::new()
-            }
-        })
+        .y_label_formatter(&|v| log_label_125(*v))
         .draw()?;
     for c in &fig.curves {
-        // Band: upper bounds left to right, then lower bounds back.
-        let band: Vec<(f64, f64)> = c
-            .points
-            .iter()
-            .map(|p| (p.0, p.3))
-            .chain(c.points.iter().rev().map(|p| (p.0, p.2.max(y_lo))))
-            .collect();
-        chart.draw_series(std::iter::once(Polygon::new(
-            band,
-            c.color.mix(0.18).filled(),
-        )))?;
+        let edges = c.points.iter().map(|p| (p.0, p.2.max(y_lo), p.3));
+        chart.draw_series(std::iter::once(band(edges, c.color.mix(0.18).filled())))?;
     }
     for c in &fig.curves {
         let col = c.color;
@@ -428,20 +452,14 @@ where
                 col.stroke_width(2),
             ))?
             .label(c.label.as_str())
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], col.stroke_width(2)));
+            .legend(legend_line(col.stroke_width(2)));
         chart.draw_series(
             c.points
                 .iter()
                 .map(|p| Circle::new((p.0, p.1), 3, col.filled())),
         )?;
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .label_font((FONT, 15))
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK.mix(0.5))
-        .draw()?;
+    draw_legend(&mut chart)?;
     Ok(())
 }
 
@@ -522,12 +540,7 @@ where
     X::CoordDescType: ValueFormatter<f64>,
     Y::CoordDescType: ValueFormatter<f64>,
 {
-    let mut chart = ChartBuilder::on(root)
-        .caption(&fig.title, (FONT, 20))
-        .margin(15)
-        .x_label_area_size(50)
-        .y_label_area_size(80)
-        .build_cartesian_2d(x_spec, y_spec)?;
+    let mut chart = captioned(root, &fig.title).build_cartesian_2d(x_spec, y_spec)?;
     let (x_lo, x_hi) = {
         let r = chart.x_range();
         (r.start, r.end)
@@ -537,22 +550,14 @@ where
     let (x_log, y_log) = (fig.x_log, fig.y_log);
     let x_fmt = move |v: &f64| {
         if x_log {
-            if is_125(*v) {
-                log_tick(*v)
-            } else {
-                String::new()
-            }
+            log_label_125(*v)
         } else {
             fixed(*v, x_dec)
         }
     };
     let y_fmt = move |v: &f64| {
         if y_log {
-            if is_125(*v) {
-                log_tick(*v)
-            } else {
-                String::new()
-            }
+            log_label_125(*v)
         } else {
             fixed(*v, y_dec)
         }
@@ -608,9 +613,7 @@ where
                 marker_style,
             )))?
             .label(m.label.as_str())
-            .legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 24, y)], BLACK.mix(0.45).stroke_width(1))
-            });
+            .legend(legend_line(marker_style));
     }
     for c in &fig.curves {
         let col = c.color;
@@ -630,20 +633,14 @@ where
             let series = chart.draw_series(LineSeries::new(run, col.stroke_width(1)))?;
             // An unlabelled curve (e.g. the second edge of a band) gets no legend entry.
             if first && !c.label.is_empty() {
-                series.label(c.label.as_str()).legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 24, y)], col.stroke_width(2))
-                });
+                series
+                    .label(c.label.as_str())
+                    .legend(legend_line(col.stroke_width(2)));
                 first = false;
             }
         }
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .label_font((FONT, 15))
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK.mix(0.5))
-        .draw()?;
+    draw_legend(&mut chart)?;
     Ok(())
 }
 

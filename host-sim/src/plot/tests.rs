@@ -112,16 +112,20 @@ fn png_size(path: &Path) -> (u32, u32) {
     (w, h)
 }
 
+/// The files' names without their folder.
+fn file_names(paths: &[PathBuf]) -> Vec<String> {
+    paths
+        .iter()
+        .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
+        .collect()
+}
+
 #[test]
 fn all_kinds_of_a_1g_log_write_four_valid_svgs() {
     let dir = scratch("svg");
     let log = synthetic(3 * 1440, 60.0, 1.0);
     let out = plot_log(&log, &opts(&dir, Format::Svg, Kind::All)).unwrap();
-    let names: Vec<String> = out
-        .written
-        .iter()
-        .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
-        .collect();
+    let names = file_names(&out.written);
     assert_eq!(
         names,
         [
@@ -162,11 +166,7 @@ fn a_zero_g_log_gets_fig5_instead_of_fig3() {
     let dir = scratch("zero");
     let log = synthetic(1440, 60.0, 0.0);
     let out = plot_log(&log, &opts(&dir, Format::Svg, Kind::All)).unwrap();
-    let names: Vec<String> = out
-        .written
-        .iter()
-        .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
-        .collect();
+    let names = file_names(&out.written);
     assert!(
         names.contains(&"t_fig5_output_0g.svg".to_string()),
         "{names:?}"

@@ -127,18 +127,9 @@ mod tests {
     use super::super::noise::stream;
     use super::*;
 
+    /// The presets' Beijing barometric environment.
     fn params() -> BarometerParams {
-        BarometerParams {
-            sea_level_hpa: 1013.25,
-            s2_amplitude_hpa: 0.5,
-            s2_peak_solar_h: 10.0,
-            s1_amplitude_hpa: 0.3,
-            s1_peak_solar_h: 7.0,
-            weather_std_hpa: 4.0,
-            weather_tau_h: 48.0,
-            noise_hpa: 0.01,
-            resolution_hpa: 0.01,
-        }
+        super::super::scenario::barometer()
     }
 
     #[test]

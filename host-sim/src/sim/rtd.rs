@@ -108,16 +108,12 @@ mod tests {
     use super::super::noise::stream;
     use super::*;
 
+    /// The presets' Pt100 without self-heating and reading noise.
     fn pt100() -> RtdParams {
         RtdParams {
-            r0_ohm: 100.0,
-            cvd_a: 3.9083e-3,
-            cvd_b: -5.775e-7,
-            cvd_c: -4.183e-12,
-            accuracy_c: 0.1,
-            excitation_ua: 250.0,
             self_heating_c_per_mw: 0.0,
             noise_uv_rms: 0.0,
+            ..super::super::scenario::pt100()
         }
     }
 

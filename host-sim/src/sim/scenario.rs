@@ -253,7 +253,8 @@ fn beijing() -> Site {
     }
 }
 
-fn pt100() -> RtdParams {
+/// The paper-1g Pt100 (also the RTD tests' sensor, without self-heating and noise).
+pub(crate) fn pt100() -> RtdParams {
     RtdParams {
         r0_ohm: 100.0,
         cvd_a: 3.9083e-3,
@@ -303,7 +304,7 @@ fn tiltmeter() -> TiltmeterParams {
 /// peaking at 10 and 22 LST; S1 0.3 hPa peaking at 7 LST (continental mid latitude); weather
 /// 4 hPa with a 2-day correlation time (a season of passing systems); a PTB330-class barometer
 /// (0.01 hPa noise and resolution). Sources in `barometer.rs`.
-fn barometer() -> BarometerParams {
+pub(crate) fn barometer() -> BarometerParams {
     BarometerParams {
         sea_level_hpa: 1013.25,
         s2_amplitude_hpa: 0.5,

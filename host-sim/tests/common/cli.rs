@@ -1,6 +1,7 @@
 //! The `accomp` binary as the CLI tests run it (`#[path = "common/cli.rs"] mod cli;`).
 #![allow(dead_code)]
 
+use std::path::Path;
 use std::process::{Command, Output};
 
 /// Runs `accomp` with `args` and waits for it.
@@ -9,6 +10,23 @@ pub fn accomp(args: &[&str]) -> Output {
         .args(args)
         .output()
         .expect("accomp runs")
+}
+
+/// Runs `accomp` with `args` and these environment variables; fails the test, showing
+/// accomp's stderr, when accomp fails.
+pub fn accomp_ok(args: &[&str], env: &[(&str, &Path)]) -> Output {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_accomp"));
+    cmd.args(args);
+    for (key, value) in env {
+        cmd.env(key, value);
+    }
+    let out = cmd.output().expect("accomp runs");
+    assert!(
+        out.status.success(),
+        "accomp {args:?} failed:\n{}",
+        stderr(&out)
+    );
+    out
 }
 
 /// What it wrote to stderr, as text.

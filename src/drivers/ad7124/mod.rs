@@ -22,7 +22,7 @@ use embedded_hal::digital::InputPin;
 use embedded_hal::spi::{Mode, SpiDevice, MODE_3};
 
 use crate::adc::{Ad7124Code, AdcScale};
-use crate::drivers::{Error, CRC8_ATM};
+use crate::drivers::{wait_low, Error, CRC8_ATM};
 use crate::units::Volts;
 use registers::{adc_control, config, err, status, Reg};
 pub use registers::{AnalogInput, Excitation, FilterType, Gain, IoutPin, PowerMode, Reference};
@@ -410,13 +410,11 @@ where
 
     /// Poll the DRDY pin (DOUT/RDY, active low) at most `drdy_poll_limit` times.
     pub fn wait_drdy(&mut self) -> Result<(), DriverError<SPI, DRDY>> {
-        for _ in 0..self.config.drdy_poll_limit {
-            if self.drdy.is_low().map_err(Error::Pin)? {
-                return Ok(());
-            }
-            self.delay.delay_us(self.config.drdy_poll_interval_us);
-        }
-        Err(Error::DrdyTimeout)
+        let (limit, interval_us) = (
+            self.config.drdy_poll_limit,
+            self.config.drdy_poll_interval_us,
+        );
+        wait_low(&mut self.drdy, &mut self.delay, limit, interval_us)
     }
 
     /// Poll the STATUS register's RDY bit at most `drdy_poll_limit` times (shared-bus path).

@@ -16,7 +16,7 @@ use embedded_hal::digital::InputPin;
 use embedded_hal::spi::{Mode, SpiDevice, MODE_1};
 
 use crate::adc::{AdcScale, Ads1262Code};
-use crate::drivers::{Error, CRC8_ATM};
+use crate::drivers::{wait_low, Error, CRC8_ATM};
 use crate::units::Volts;
 use registers::{cmd, reg, status};
 pub use registers::{
@@ -440,13 +440,11 @@ where
 
     /// Poll DRDY (active low) at most `drdy_poll_limit` times.
     pub fn wait_drdy(&mut self) -> Result<(), DriverError<SPI, DRDY>> {
-        for _ in 0..self.config.drdy_poll_limit {
-            if self.drdy.is_low().map_err(Error::Pin)? {
-                return Ok(());
-            }
-            self.delay.delay_us(self.config.drdy_poll_interval_us);
-        }
-        Err(Error::DrdyTimeout)
+        let (limit, interval_us) = (
+            self.config.drdy_poll_limit,
+            self.config.drdy_poll_interval_us,
+        );
+        wait_low(&mut self.drdy, &mut self.delay, limit, interval_us)
     }
 
     /// Read the latest ADC1 conversion with RDATA1 and check it (no DRDY wait).
