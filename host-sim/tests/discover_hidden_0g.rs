@@ -24,8 +24,8 @@ mod hidden;
 
 use accomp::tide::{Station, MAS_PER_RAD};
 use accomp::units::RAD_PER_ARCSEC;
-use accomp_host::discover::import::{dataset_from_log, parse_utc, DatasetOptions};
-use accomp_host::discover::{self, select};
+use accomp_host::discover::import::parse_utc;
+use accomp_host::discover::select;
 use accomp_host::log::Log;
 use accomp_host::sim::noise::AllanParams;
 use accomp_host::sim::scenario::Scenario;
@@ -73,14 +73,6 @@ impl Hidden {
     }
 }
 
-fn sign(rng: &mut ChaCha8Rng) -> f64 {
-    if rng.random::<bool>() {
-        1.0
-    } else {
-        -1.0
-    }
-}
-
 /// A draw with unit size (factor 1, amplitude 1 g, gain ±1 as a direction) and its target SNR.
 fn draw(rng: &mut ChaCha8Rng) -> (Hidden, f64) {
     let snr = rng.random_range(SNR);
@@ -93,7 +85,9 @@ fn draw(rng: &mut ChaCha8Rng) -> (Hidden, f64) {
             amplitude_g: 1.0,
             phase_rad: rng.random_range(-std::f64::consts::PI..std::f64::consts::PI),
         },
-        _ => Hidden::TiltCoupling { gain: sign(rng) },
+        _ => Hidden::TiltCoupling {
+            gain: hidden::sign(rng),
+        },
     };
     (h, snr)
 }
@@ -315,31 +309,10 @@ struct Outcome {
 
 fn run_one(unit: &Hidden, snr: f64, seed: u64) -> Outcome {
     let (log, hidden) = simulate(unit, snr, seed);
-    let k1 = log
-        .meta_f64("scale_factor_v_per_g")
-        .ok()
-        .flatten()
-        .unwrap_or(1.0);
-    let ds = dataset_from_log(&log, &DatasetOptions::default()).expect("dataset");
-    let d = discover::discover(ds, None, &select::Config::default()).expect("discover");
-    let accepted: Vec<String> = d
-        .selection
-        .accepted
-        .iter()
-        .map(|a| a.effect.name().to_owned())
-        .collect();
-    let hit = d
-        .selection
-        .accepted
-        .iter()
-        .find(|a| a.effect.name() == hidden.name());
-    let (named, params_ok) = match hit {
-        None => {
-            if !matches!(hidden, Hidden::None) {
-                eprintln!("    last round (ΔBIC): {:?}", d.selection.last_round);
-            }
-            (false, false)
-        }
+    let k1 = hidden::k1_of(&log);
+    let (_, d) = hidden::discover_blind(&log);
+    let (named, params_ok) = match hidden::find_named(&d, hidden.name()) {
+        None => (false, false),
         Some(a) => {
             let ok = parameters_ok(&hidden, a, k1);
             if !ok {
@@ -352,7 +325,7 @@ fn run_one(unit: &Hidden, snr: f64, seed: u64) -> Outcome {
         hidden,
         named,
         params_ok,
-        accepted,
+        accepted: hidden::accepted_names(&d),
     }
 }
 
@@ -363,9 +336,7 @@ const SEED: u64 = 20_240_610;
 fn hidden_0g_tilt_effects_are_named_with_their_parameters() {
     let mut rng = ChaCha8Rng::seed_from_u64(SEED);
     const HIDDEN_DRAWS: usize = 25;
-    let (mut named, mut params) = (0, 0);
-    // Per effect: (draws, named).
-    let mut per_effect: std::collections::BTreeMap<&str, (usize, usize)> = Default::default();
+    let mut tally = hidden::Tally::default();
     for i in 0..HIDDEN_DRAWS {
         let (h, snr) = draw(&mut rng);
         let seed = rng.random::<u64>();
@@ -374,16 +345,10 @@ fn hidden_0g_tilt_effects_are_named_with_their_parameters() {
             "0 g draw {i}: hidden {:?} at SNR {snr:.1}: accepted {:?} named={} params={}",
             o.hidden, o.accepted, o.named, o.params_ok
         );
-        named += usize::from(o.named);
-        params += usize::from(o.named && o.params_ok);
-        let e = per_effect.entry(o.hidden.name()).or_default();
-        e.0 += 1;
-        e.1 += usize::from(o.named);
+        tally.add(o.hidden.name(), o.named, o.params_ok, false);
     }
-    for (name, (n, k)) in &per_effect {
-        eprintln!("0 g {name}: named {k}/{n}");
-    }
-    eprintln!("0 g DETECTION RATE {named}/{HIDDEN_DRAWS} (parameters within tolerance {params})");
+    tally.print("0 g", false);
+    let (named, params) = (tally.named, tally.params);
     hidden::assert_at_least_percent(named, HIDDEN_DRAWS, 80, "0 g detection rate");
     hidden::assert_at_least_percent(
         params,

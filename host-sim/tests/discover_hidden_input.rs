@@ -9,8 +9,6 @@
 #[path = "common/hidden.rs"]
 mod hidden_snr;
 
-use accomp_host::discover::import::{dataset_from_log, DatasetOptions};
-use accomp_host::discover::{self, select};
 use accomp_host::log::Log;
 use accomp_host::sim::accelerometer::HeadPosition;
 use accomp_host::sim::scenario::Scenario;
@@ -184,28 +182,14 @@ fn run_one(
     seed: u64,
 ) -> (Vec<String>, Option<(f64, f64)>, Option<Hidden>) {
     let (log, hidden) = simulate(unit, snr, seed);
-    let ds = dataset_from_log(&log, &DatasetOptions::default()).expect("dataset");
-    let d = discover::discover(ds, None, &select::Config::default()).expect("discover");
-    let names = d
-        .selection
-        .accepted
-        .iter()
-        .map(|a| a.effect.name().to_owned())
-        .collect();
-    let found = d
-        .selection
-        .accepted
-        .iter()
-        .find(|a| a.effect.name() == "self_heating")
-        .map(|a| {
-            (
-                hidden_snr::param_value(a, "tau_s"),
-                hidden_snr::param_value(a, "coefficient_g"),
-            )
-        });
-    if found.is_none() {
-        eprintln!("    last round (ΔBIC): {:?}", d.selection.last_round);
-    }
+    let (_, d) = hidden_snr::discover_blind(&log);
+    let found = hidden_snr::find_named(&d, "self_heating").map(|a| {
+        (
+            hidden_snr::param_value(a, "tau_s"),
+            hidden_snr::param_value(a, "coefficient_g"),
+        )
+    });
+    let names = hidden_snr::accepted_names(&d);
     (names, found, hidden)
 }
 

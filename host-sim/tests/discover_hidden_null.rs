@@ -8,10 +8,11 @@
 //! Goal (issue 13.7): nothing accepted in ≥ 95 % of draws. Draws, threshold and the binomial
 //! bound are stated in docs/discovery.md ("Non-circular tests").
 
+#[path = "common/hidden.rs"]
+mod hidden;
 #[path = "common/synth.rs"]
 mod synth;
 
-use accomp_host::discover::{self, import, select};
 use rand::Rng;
 
 const DT_S: f64 = 60.0;
@@ -32,29 +33,14 @@ fn accepted_on_null(seed: u64) -> (Vec<String>, String) {
     let noise = synth::draw_noise(&mut rng);
     let y = synth::output_g(&st, &noise, &vec![0.0; ROWS], &mut rng);
     let log = synth::log_of(&st, y);
-    let ds = import::dataset_from_log(&log, &import::DatasetOptions::default()).expect("dataset");
-    let d = discover::discover(ds, None, &select::Config::default()).expect("discover");
+    let (_, d) = hidden::discover_blind(&log);
     let what = format!(
         "{thermal:?}, RTD noise {:.1} mK offset {:+.0} mK, flicker {:.2} µg",
         st.rtd_noise_c * 1e3,
         st.rtd_offset_c * 1e3,
         noise.flicker_floor * 1e6
     );
-    (
-        d.selection
-            .accepted
-            .iter()
-            .map(|a| {
-                let p: Vec<String> = a
-                    .params
-                    .iter()
-                    .map(|(k, v)| format!("{k}={:.3e}", v.value))
-                    .collect();
-                format!("{} [{}]", a.effect.name(), p.join(" "))
-            })
-            .collect(),
-        what,
-    )
+    (hidden::accepted_with_params(&d), what)
 }
 
 /// Draws of the null test: 40 (≈ 1 s each in the dev profile).

@@ -13,7 +13,7 @@ mod hidden;
 #[path = "common/synth.rs"]
 mod synth;
 
-use accomp_host::discover::{self, import, select, Discovery};
+use accomp_host::discover::{self, Discovery};
 use accomp_host::sim::noise::AllanParams;
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
@@ -31,8 +31,10 @@ enum Shape {
     },
     /// Power-law settling ((1 + t/t0)^p − 1) (the catalogue has ln(1 + t/τ)).
     PowerLawAging { t0_s: f64, p: f64 },
-    /// A bias change spread over a ramp (the catalogue has a jump).
-    RampedStep { time_s: f64, ramp_s: f64 },
+    /// A bias change that settles exponentially after it starts, 1 − e^(−(t − t0)/τ) (a tare
+    /// followed by creep; the catalogue's step crosses over a straight ramp, session 4, so a
+    /// ramped step is no longer off the catalogue).
+    SettlingStep { time_s: f64, tau_s: f64 },
     /// Controls with exactly the catalogue's shapes: must not be called poor.
     ExactStep { time_s: f64 },
     /// One first-order lag.
@@ -46,7 +48,7 @@ impl Shape {
             Shape::SecondOrderLag { .. } | Shape::ExactLag { .. } => "thermal_lag",
             Shape::BoucWenHysteresis { .. } => "thermal_hysteresis",
             Shape::PowerLawAging { .. } => "aging_drift",
-            Shape::RampedStep { .. } | Shape::ExactStep { .. } => "step",
+            Shape::SettlingStep { .. } | Shape::ExactStep { .. } => "step",
         }
     }
 
@@ -70,38 +72,6 @@ impl Shape {
     }
 }
 
-/// Bouc–Wen hysteresis of the temperature, a differential model of stick–slip (used for
-/// friction, joints and structural hysteresis), not a sum of play operators:
-///
-/// ```text
-/// dz/dT = (1/w)·(1 − |z|ⁿ·(β·sgn(dT·z) + 1 − β)),   z(0) = 0,   |z| ≤ 1
-/// ```
-///
-/// rate-independent (dz ∝ dT), saturating at z = ±1 (heating / cooling branch), leaving a
-/// branch with slope (1/w)(1 + (2β − 1)|z|ⁿ) — every reversal, however small, moves z (the
-/// controller's mK jitter makes it chatter, which a play wider than the jitter does not) —
-/// and approaching the other branch with a shape set by the exponent n (n = 1: exponential in
-/// temperature, large n: nearly linear then sharp). Integrated along the TRUE temperature with
-/// sub-steps of at most 2 % of w.
-fn bouc_wen(temp: &[f64], w: f64, n: f64, beta: f64) -> Vec<f64> {
-    let mut z: f64 = 0.0;
-    let mut prev = temp[0];
-    temp.iter()
-        .map(|&x| {
-            let d = x - prev;
-            prev = x;
-            let m = ((d.abs() / (0.02 * w)).ceil() as usize).max(1);
-            let h = d / m as f64;
-            for _ in 0..m {
-                let s = if h * z >= 0.0 { 1.0 } else { -1.0 };
-                z += h / w * (1.0 - z.abs().powf(n) * (beta * s + 1.0 - beta));
-                z = z.clamp(-1.0, 1.0);
-            }
-            z
-        })
-        .collect()
-}
-
 /// The hidden series (unit size) on the TRUE channels.
 fn series(s: Shape, st: &synth::Station) -> Vec<f64> {
     let t = &st.t_s;
@@ -119,13 +89,19 @@ fn series(s: Shape, st: &synth::Station) -> Vec<f64> {
             width_c,
             exponent,
             beta,
-        } => bouc_wen(temp, width_c, exponent, beta),
+        } => hidden::bouc_wen(temp, width_c, exponent, beta),
         Shape::PowerLawAging { t0_s, p } => {
             t.iter().map(|x| (1.0 + x / t0_s).powf(p) - 1.0).collect()
         }
-        Shape::RampedStep { time_s, ramp_s } => t
+        Shape::SettlingStep { time_s, tau_s } => t
             .iter()
-            .map(|x| ((x - time_s) / ramp_s).clamp(0.0, 1.0))
+            .map(|x| {
+                if *x >= time_s {
+                    1.0 - (-(x - time_s) / tau_s).exp()
+                } else {
+                    0.0
+                }
+            })
             .collect(),
         Shape::ExactStep { time_s } => t.iter().map(|x| f64::from(*x >= time_s)).collect(),
     }
@@ -134,14 +110,13 @@ fn series(s: Shape, st: &synth::Station) -> Vec<f64> {
 const DT_S: f64 = 60.0;
 const ROWS: usize = 3 * 1440;
 
-/// Bouc–Wen parameters: transition width 0.03–0.1 °C, exponent 1–3, β 0.5–0.9 (from one
-/// draw of `rng`, so the other shapes' draws stay as they were).
+/// Bouc–Wen parameters (`hidden::draw_bouc_wen`: width 0.03–0.1 °C, exponent 1–3, β 0.5–0.9).
 fn draw_bouc_wen(rng: &mut ChaCha8Rng) -> Shape {
-    let rng = &mut synth::rng(rng.random::<u64>());
+    let (width_c, exponent, beta) = hidden::draw_bouc_wen(rng);
     Shape::BoucWenHysteresis {
-        width_c: rng.random_range(0.03..0.1),
-        exponent: rng.random_range(1.0..3.0),
-        beta: rng.random_range(0.5..0.9),
+        width_c,
+        exponent,
+        beta,
     }
 }
 
@@ -157,9 +132,9 @@ fn draw_shape(rng: &mut ChaCha8Rng, k: usize) -> Shape {
             t0_s: 10f64.powf(rng.random_range(3.5..4.5)),
             p: rng.random_range(0.25..0.5),
         },
-        3 => Shape::RampedStep {
+        3 => Shape::SettlingStep {
             time_s: rng.random_range(0.2..0.7) * span,
-            ramp_s: rng.random_range(1800.0..5400.0),
+            tau_s: rng.random_range(900.0..2700.0),
         },
         4 => Shape::ExactStep {
             time_s: rng.random_range(0.2..0.8) * span,
@@ -203,36 +178,21 @@ fn run(s: Shape, snr: f64, seed: u64) -> (Discovery, f64) {
     let extra: Vec<f64> = unit.iter().map(|v| k * v).collect();
     let y = synth::output_g(&st, &noise, &extra, &mut rng);
     let log = synth::log_of(&st, y);
-    let ds = import::dataset_from_log(&log, &import::DatasetOptions::default()).expect("dataset");
-    (
-        discover::discover(ds, None, &select::Config::default()).expect("discover"),
-        k,
-    )
+    (hidden::discover_blind(&log).1, k)
 }
 
 fn describe(d: &Discovery) -> String {
-    let acc: Vec<String> = d
-        .selection
-        .accepted
-        .iter()
-        .map(|a| {
-            let p: Vec<String> = a
-                .params
-                .iter()
-                .map(|(k, v)| format!("{k}={:.3e}", v.value))
-                .collect();
-            format!("{} [{}]", a.effect.name(), p.join(" "))
-        })
-        .collect();
+    let acc = hidden::accepted_with_params(d);
     let sc: Vec<String> = d
         .shape_checks
         .iter()
         .map(|c| {
             format!(
-                "{} Δχ²={:.1}/{:.1}{}",
+                "{} Δχ²={:.1}/{:.1} (second {:.4e}){}",
                 c.effect,
                 c.delta_chi2,
                 c.threshold,
+                c.second_theta,
                 if c.poor { " POOR" } else { "" }
             )
         })
@@ -304,14 +264,14 @@ fn off_catalogue_shapes_are_named_by_their_closest_cause_and_a_poor_fit_is_said(
          {poor_exact}/{n_exact} exact"
     );
     hidden::assert_at_least_percent(named, DRAWS, 75, "closest cause named at SNR 8–15");
-    // Stated before measuring: ≥ 50 % of the off-catalogue shapes (then 8 with two Preisach
-    // draws, which a single play could not describe: 4/8). With the Preisach column those loops
-    // are described (not poor, rightly: counted apart) and with the fit on the smoothed
-    // temperature a two-stage lag of nearly equal stages (816 s, 1033 s) is within Δχ² 4.5 of
-    // one lag: measured 2/6 (a two-stage lag, a ramp; the power laws are never told from
-    // ln(1 + t/τ) over 3 days). Asserted at the measured floor, the goal not met
-    // (docs/discovery.md, "Non-circular tests").
-    hidden::assert_at_least_percent(poor_off, n_off, 33, "poor fit said at SNR 40–80");
+    // Stated before measuring: ≥ 50 % of the off-catalogue shapes. Measured 2/6 in session 3
+    // (the check kept the accepted member and searched a second one); since session 4 the best
+    // pair of the family replaces the effect (a two-stage lag is two first-order lags) and
+    // overlapping steps are one change: 4/6 (both two-stage lags, both settling steps; not the
+    // power laws, never told from ln(1 + t/τ) over 3 days). Asserted at the measured 4/6
+    // (docs/discovery.md, "Shape check"). The exact controls: 1/4 (an exact lag at SNR 54 on the
+    // true temperature, fitted on the smoothed RTD reading), at the stated limit.
+    hidden::assert_at_least_percent(poor_off, n_off, 66, "poor fit said at SNR 40–80");
     hidden::assert_at_most_percent(poor_exact, n_exact, 25, "exact shapes called poor");
 }
 
@@ -347,9 +307,7 @@ fn hysteresis_branch_offsets_of_a_few_microg_are_found_in_a_14_day_cycling_log()
         let extra: Vec<f64> = unit.iter().map(|v| half_width_g * v).collect();
         let y = synth::output_g(&st, &noise, &extra, &mut r);
         let log = synth::log_of(&st, y);
-        let ds =
-            import::dataset_from_log(&log, &import::DatasetOptions::default()).expect("dataset");
-        let d = discover::discover(ds, None, &select::Config::default()).expect("discover");
+        let (_, d) = hidden::discover_blind(&log);
         let hit = d
             .selection
             .accepted

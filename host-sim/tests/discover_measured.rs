@@ -117,16 +117,15 @@ fn gmetrology_record_names_the_earth_tide_with_a_gravimetric_factor_near_one() {
     {
         let t = hidden_free_param(a, "time_s");
         let size = hidden_free_param(a, "size");
+        // A step that takes time: the jump is measured across its whole transition.
+        let half = 0.5 * hidden_free_param(a, "duration_s").max(0.0);
         let r = &d.selection.baseline_residual;
-        let j = d
-            .dataset
-            .t_s
-            .iter()
-            .position(|&x| x > t)
-            .expect("step inside");
-        let w = 16.min(j).min(r.len() - j);
-        let jump =
-            r[j..j + w].iter().sum::<f64>() / w as f64 - r[j - w..j].iter().sum::<f64>() / w as f64;
+        let ts = &d.dataset.t_s;
+        let j = ts.iter().position(|&x| x > t - half).expect("step inside");
+        let j1 = ts.iter().position(|&x| x >= t + half).unwrap_or(j).max(j);
+        let w = 16.min(j).min(r.len() - j1);
+        let jump = r[j1..j1 + w].iter().sum::<f64>() / w as f64
+            - r[j - w..j].iter().sum::<f64>() / w as f64;
         assert!(
             jump * size.signum() > 0.5 * size.abs(),
             "step at {t} s of {size}: the record jumps only {jump} there"

@@ -23,8 +23,14 @@ pub enum Effect {
     Warmup,
     /// Logarithmic aging trend: column ln(1 + t/τ) (beside the baseline's linear drift).
     AgingDrift,
-    /// A bias jump: column H(t − time_s).
-    Step,
+    /// A bias change: column 0 before, 1 after, crossing over a linear ramp of `duration_s`
+    /// centred on the nonlinear parameter `time_s` (`duration_s` 0: the jump H(t − time_s)).
+    /// The duration is fitted on [`step_durations`] (the candidate carries 0); a slow tare is one
+    /// step with its duration, not several jumps along its ramp.
+    Step {
+        /// Transition duration, s (0: abrupt).
+        duration_s: f64,
+    },
     /// Solid-earth tide gravity (1 g records): column tide × unit_per_g × input.
     TidalGravity,
     /// Solid-earth tide tilt along the sensitive axis (0 g records): north and east columns.
@@ -51,7 +57,7 @@ impl Effect {
             Effect::SelfHeating => "self_heating",
             Effect::Warmup => "warmup",
             Effect::AgingDrift => "aging_drift",
-            Effect::Step => "step",
+            Effect::Step { .. } => "step",
             Effect::TidalGravity => "tidal_gravity",
             Effect::TidalTilt => "tidal_tilt",
             Effect::BuildingTilt => "building_tilt",
@@ -72,7 +78,7 @@ impl Effect {
 
     /// Whether the effect can be accepted more than once (at other parameters).
     pub fn repeatable(&self) -> bool {
-        matches!(self, Effect::Step | Effect::Periodic)
+        matches!(self, Effect::Step { .. } | Effect::Periodic)
     }
 }
 
@@ -153,6 +159,36 @@ pub fn log_grid(lo: f64, hi: f64, n: usize) -> Vec<f64> {
         .collect()
 }
 
+/// A step's column: 0 before, 1 after, a linear ramp of `duration_s` centred on `time_s` in
+/// between (`duration_s` ≤ 0: the jump, 1 from `time_s` on).
+pub fn step_column(t: &[f64], time_s: f64, duration_s: f64) -> Vec<f64> {
+    if duration_s > 0.0 {
+        let start = time_s - 0.5 * duration_s;
+        t.iter()
+            .map(|x| ((x - start) / duration_s).clamp(0.0, 1.0))
+            .collect()
+    } else {
+        t.iter().map(|x| f64::from(*x >= time_s)).collect()
+    }
+}
+
+/// Longest transition a `step` may take, s: a slower change is a drift (`aging_drift`,
+/// `warmup`), not a tare.
+pub const STEP_DURATION_MAX_S: f64 = 6.0 * 3600.0;
+
+/// The grid of a step's transition durations besides 0 (abrupt): 12 log-spaced points from two
+/// spacings to the shorter of an eighth of the record and [`STEP_DURATION_MAX_S`]. The best at
+/// the last point is at the edge of the search (refused, said); the first is next to the
+/// physical bound 0, not an edge.
+pub fn step_durations(ds: &Dataset) -> Vec<f64> {
+    let lo = 2.0 * ds.dt_s;
+    let hi = (ds.span_s() / 8.0).min(STEP_DURATION_MAX_S);
+    if hi < 2.0 * lo {
+        return Vec::new();
+    }
+    log_grid(lo, hi, 12)
+}
+
 /// Half-width of the centred moving average applied to the `tilt_coupling` column, seconds.
 ///
 /// A tiltmeter's own reading noise (white noise, quantisation: 0.035" rms per sample for the
@@ -199,7 +235,7 @@ pub fn candidates(
     }
     yes.push(Effect::Warmup);
     yes.push(Effect::AgingDrift);
-    yes.push(Effect::Step);
+    yes.push(Effect::Step { duration_s: 0.0 });
     let one_g = ds.is_one_g();
     match (&ctx.tide_gravity_g, ds.unit_per_g, one_g) {
         (Some(_), Some(_), true) => yes.push(Effect::TidalGravity),
@@ -323,10 +359,7 @@ pub fn columns(e: &Effect, ds: &Dataset, ctx: &Context, theta: f64) -> Vec<Vec<f
             .unwrap_or_default(),
         Effect::Warmup => vec![t.iter().map(|x| (-(x - t0) / theta).exp()).collect()],
         Effect::AgingDrift => vec![t.iter().map(|x| (1.0 + (x - t0) / theta).ln()).collect()],
-        Effect::Step => vec![t
-            .iter()
-            .map(|x| if *x >= theta { 1.0 } else { 0.0 })
-            .collect()],
+        Effect::Step { duration_s } => vec![step_column(t, theta, *duration_s)],
         Effect::TidalGravity => ctx
             .tide_gravity_g
             .as_ref()
@@ -423,7 +456,12 @@ pub fn parameters(
         Effect::SelfHeating => vec![("tau_s".into(), theta), ("coefficient".into(), p(b0, s0))],
         Effect::Warmup => vec![("tau_s".into(), theta), ("amplitude".into(), p(b0, s0))],
         Effect::AgingDrift => vec![("tau_s".into(), theta), ("amplitude".into(), p(b0, s0))],
-        Effect::Step => vec![("time_s".into(), theta), ("size".into(), p(b0, s0))],
+        Effect::Step { duration_s } => vec![
+            ("time_s".into(), theta),
+            ("size".into(), p(b0, s0)),
+            // Its σ is not estimated: the duration is the best of a grid (refined), 0 = abrupt.
+            ("duration_s".into(), p(*duration_s, f64::NAN)),
+        ],
         Effect::TidalGravity => vec![("amplitude_factor".into(), p(b0, s0))],
         Effect::TidalTilt => {
             let (r, sr, ph, sph) = amp2();

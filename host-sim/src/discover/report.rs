@@ -273,7 +273,7 @@ pub fn text(d: &Discovery) -> String {
     for c in &d.shape_checks {
         let _ = writeln!(
             o,
-            "  shape check {}: a second component at {:.5e} improves χ² by {:.1} (a new effect is charged {:.1}){}",
+            "  shape check {}: two of its kind in its place (the other at {:.5e}) improve χ² by {:.1} (charged {:.1}){}",
             c.effect,
             c.second_theta,
             c.delta_chi2,

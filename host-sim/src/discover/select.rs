@@ -325,7 +325,7 @@ fn best_step(cur: &Current, ctx: &Context) -> Option<(f64, f64)> {
             }
             let k = k as usize;
             let th = 0.5 * (ds.t_s[k - 1] + ds.t_s[k]);
-            let r = cur.rss_with(&columns(&Effect::Step, ds, ctx, th));
+            let r = cur.rss_with(&columns(&Effect::Step { duration_s: 0.0 }, ds, ctx, th));
             if best.is_none_or(|b| r < b.1) {
                 best = Some((th, r));
             }
@@ -336,6 +336,43 @@ fn best_step(cur: &Current, ctx: &Context) -> Option<(f64, f64)> {
         }
     }
     best
+}
+
+/// Best transition duration of a step found (abrupt) at `centre`: the durations of
+/// [`effects::step_durations`] at that centre, then the centre refined by golden section within
+/// ± half the best duration (a ramp's abrupt fit lands near its middle) and the duration between
+/// its grid neighbours (in log). Returns (centre, duration, whitened RSS, duration at the grid's
+/// longest point).
+fn best_ramp(cur: &Current, centre: f64) -> Option<(f64, f64, f64, bool)> {
+    let ds = cur.ds;
+    let g = effects::step_durations(ds);
+    if g.len() < 2 {
+        return None;
+    }
+    let eval = |c: f64, d: f64| cur.rss_with(&[effects::step_column(&ds.t_s, c, d)]);
+    let vals: Vec<f64> = g.iter().map(|&d| eval(centre, d)).collect();
+    let (ib, _) = vals.iter().enumerate().min_by(|a, b| a.1.total_cmp(b.1))?;
+    let at_edge = ib + 1 == g.len();
+    let mut best = (centre, g[ib], vals[ib]);
+    let c = golden(
+        |c| eval(c, best.1),
+        centre - 0.5 * best.1,
+        centre + 0.5 * best.1,
+        14,
+    );
+    let rc = eval(c, best.1);
+    if rc < best.2 {
+        best = (c, best.1, rc);
+    }
+    let (lo, hi) = (g[ib.saturating_sub(1)], g[(ib + 1).min(g.len() - 1)]);
+    if hi > lo {
+        let d = golden(|ld| eval(best.0, ld.exp()), lo.ln(), hi.ln(), 12).exp();
+        let rd = eval(best.0, d);
+        if rd < best.2 {
+            best = (best.0, d, rd);
+        }
+    }
+    Some((best.0, best.1, best.2, at_edge))
 }
 
 /// Known tide and solar-day periods, s (M2, S2, N2, K2, K1, O1, P1, S1, M3, M4, Q1).
@@ -548,6 +585,8 @@ fn score_all(
             continue;
         }
         let mut preisach = None;
+        // A step's transition duration is fitted here (the candidate carries 0).
+        let mut effect = e.clone();
         let (theta, rss, k_nl, at_edge) = match e {
             // A Preisach distribution: the width search is charged like the single play's grid,
             // each width beyond the first with a weight as one more parameter.
@@ -564,8 +603,11 @@ fn score_all(
                 }
                 None => continue,
             },
-            Effect::Step => match best_step(cur, ctx) {
-                Some((th, r)) => (th, r, nl_penalty(m_rows), false),
+            Effect::Step { .. } => match fit_step(cur, ctx) {
+                Some((step, th, r, k, edge)) => {
+                    effect = step;
+                    (th, r, k, edge)
+                }
                 None => continue,
             },
             Effect::Periodic => match best_periodic(cur, ctx, tides) {
@@ -591,7 +633,7 @@ fn score_all(
         };
         let (cols, preisach) = match preisach {
             Some((p, col)) => (vec![col], Some(p)),
-            None => (columns(e, cur.ds, ctx, theta), None),
+            None => (columns(&effect, cur.ds, ctx, theta), None),
         };
         if cols.is_empty() || rss <= 0.0 || cur.rss <= 0.0 {
             continue;
@@ -599,7 +641,7 @@ fn score_all(
         let penalty = cols.len() as f64 * n_eff.ln() + k_nl;
         let delta_bic = n_eff * (rss / cur.rss).ln() + penalty;
         out.push(Scored {
-            effect: e.clone(),
+            effect,
             theta,
             cols,
             rss,
@@ -613,6 +655,63 @@ fn score_all(
     out
 }
 
+/// The best step on top of the current model: the position scan ([`best_step`]) for the jump,
+/// then the transition duration at that position ([`best_ramp`]). The position search is
+/// charged as for a jump; a duration other than 0 is one more nonlinear parameter searched on
+/// its grid, charged max(ln n, 2 ln M) on top, and taken only when it beats the jump after that
+/// charge. Returns the effect (with its duration), the time, the whitened RSS, the
+/// nonlinear-parameter charge and whether the duration ended at the grid's longest point.
+fn fit_step(cur: &Current, ctx: &Context) -> Option<(Effect, f64, f64, f64, bool)> {
+    let n_eff = (cur.r_w.len() as f64).max(2.0);
+    let nl_penalty = |trials: f64| n_eff.ln().max(2.0 * trials.max(1.0).ln());
+    let (th, r) = best_step(cur, ctx)?;
+    let jump_charge = nl_penalty(cur.r_w.len() as f64);
+    let abrupt = n_eff * (r / cur.rss).ln();
+    let extra = nl_penalty(effects::step_durations(cur.ds).len() as f64);
+    Some(match best_ramp(cur, th) {
+        Some((c, d, rr, edge)) if n_eff * (rr / cur.rss).ln() + extra < abrupt => (
+            Effect::Step { duration_s: d },
+            c,
+            rr,
+            jump_charge + extra,
+            edge,
+        ),
+        _ => (Effect::Step { duration_s: 0.0 }, th, r, jump_charge, false),
+    })
+}
+
+/// A step candidate decided again under the noise model fitted with it in the model: in the
+/// round's noise model (fitted to a residual that still holds the step) the jump itself reads
+/// as random walk, which blurs a jump against a ramp (a 3-σ change over 44 min: 4 of χ² apart
+/// there, 15 once the noise is refitted). `None` when the choice (jump or duration, position)
+/// stands.
+fn step_redecided(
+    ds: &Dataset,
+    cols: &[Vec<f64>],
+    target: &[f64],
+    ctx: &Context,
+    noise: &NoiseFit,
+    s: &Scored,
+) -> Option<Scored> {
+    let (cb, _, _) = fit_state(ds, cols, target, NoiseChoice::Fixed(noise));
+    let (effect, theta, rss, k_nl, at_edge) = fit_step(&cb, ctx)?;
+    if effect == s.effect && (theta - s.theta).abs() < 0.5 * ds.dt_s {
+        return None;
+    }
+    let cols = columns(&effect, ds, ctx, theta);
+    let n_eff = (cb.r_w.len() as f64).max(2.0);
+    Some(Scored {
+        effect,
+        theta,
+        penalty: cols.len() as f64 * n_eff.ln() + k_nl,
+        cols,
+        rss,
+        delta_bic: f64::NAN,
+        at_edge,
+        preisach: None,
+    })
+}
+
 /// Uncertainty of the nonlinear parameter from the curvature of the whitened RSS profile
 /// (Δχ² = 1 with σ² = RSS/(n−k), inflated by n/n_eff).
 fn theta_sigma(cur: &Current, s: &Scored, ctx: &Context, base_k: usize) -> f64 {
@@ -620,9 +719,12 @@ fn theta_sigma(cur: &Current, s: &Scored, ctx: &Context, base_k: usize) -> f64 {
         return f64::NAN;
     }
     let h = match s.effect {
-        Effect::Step => cur.ds.dt_s,
+        Effect::Step { .. } => cur.ds.dt_s,
         _ => 0.02 * s.theta.abs().max(cur.ds.dt_s),
     };
+    // The centre again under this round's noise model (a step's RSS may come from the
+    // refitted one, `step_redecided`).
+    let r0 = cur.rss_with(&s.cols);
     let rp = cur.rss_with(&columns(&s.effect, cur.ds, ctx, s.theta + h));
     let rm = cur.rss_with(&columns(
         &s.effect,
@@ -630,9 +732,9 @@ fn theta_sigma(cur: &Current, s: &Scored, ctx: &Context, base_k: usize) -> f64 {
         ctx,
         (s.theta - h).max(h * 0.01),
     ));
-    let curv = (rp + rm - 2.0 * s.rss) / (h * h);
+    let curv = (rp + rm - 2.0 * r0) / (h * h);
     let n = cur.r_w.len() as f64;
-    let s2 = s.rss / (n - (base_k + s.cols.len()) as f64).max(1.0);
+    let s2 = r0 / (n - (base_k + s.cols.len()) as f64).max(1.0);
     if curv > 0.0 {
         (2.0 * s2 / curv).sqrt()
     } else {
@@ -693,14 +795,23 @@ pub fn select(
             .iter()
             .take(RESCORE)
             .map(|s| {
-                let mut trial = cols.clone();
-                trial.extend(s.cols.iter().cloned());
-                let (c1, _, _) =
-                    fit_state(ds, &trial, target, NoiseChoice::Fit(Some(&cur.noise.model)));
+                let refit = |s: &Scored| {
+                    let mut trial = cols.clone();
+                    trial.extend(s.cols.iter().cloned());
+                    fit_state(ds, &trial, target, NoiseChoice::Fit(Some(&cur.noise.model))).0
+                };
+                let mut c1 = refit(s);
+                let mut s = s.clone();
+                if matches!(s.effect, Effect::Step { .. }) {
+                    if let Some(again) = step_redecided(ds, &cols, target, ctx, &c1.noise, &s) {
+                        c1 = refit(&again);
+                        s = again;
+                    }
+                }
                 let d = c1.neg2_loglik() - base_ll;
                 Scored {
                     delta_bic: d + s.penalty,
-                    ..s.clone()
+                    ..s
                 }
             })
             .collect();
@@ -952,7 +1063,10 @@ fn joint_fit(
         let eval = |x: f64| cur.rss_with(&columns(&e, ds, ctx, x));
         let g = effects::grid(&e, ds);
         let (lo, hi, h) = match e {
-            Effect::Step => (th - 3.0 * ds.dt_s, th + 3.0 * ds.dt_s, ds.dt_s),
+            Effect::Step { duration_s } => {
+                let w = (3.0 * ds.dt_s).max(0.5 * duration_s);
+                (th - w, th + w, ds.dt_s)
+            }
             Effect::Periodic => {
                 let span = ds.span_s().max(ds.dt_s);
                 let f = 1.0 / th;
@@ -1173,6 +1287,10 @@ fn edge_hint(e: &Effect, theta: f64, ds: &Dataset) -> String {
         .first()
         .is_some_and(|g| theta <= *g * 1.0001);
     match e {
+        Effect::Step { duration_s } => format!(
+            "; the position is {theta:.0} s, and its transition duration {duration_s:.0} s is the \
+             longest searched: a change this slow is a drift, not a step"
+        ),
         Effect::ThermalLag | Effect::AmbientCoupling(_) if lower => {
             "; the shortest lag improving the fit is the signature of the channel's own \
              reading noise (errors in variables: smoothing a noisy regressor always helps), \
@@ -1255,9 +1373,9 @@ fn implausible(
                      ±{TILT_GAIN_MAX}): the tilt column is fitting something else"
                 )
             }),
-        Effect::Step => {
+        Effect::Step { duration_s } => {
             let size = fit.beta.get(k0).copied().unwrap_or(0.0);
-            let j = local_jump(ds, cur_raw, s.theta, size, &cur.noise.model)?;
+            let j = local_jump(ds, cur_raw, s.theta, duration_s, size, &cur.noise.model)?;
             (!j.is_step).then(|| {
                 format!(
                     "the record's local jump at t = {:.0} s is {:.3e} against a fitted size \
@@ -1289,31 +1407,41 @@ struct LocalJump {
     is_step: bool,
 }
 
-/// The residual's local jump at `time_s` (mean over w points after minus w before, for each
-/// w in [`JUMP_WINDOWS`]) against the fitted `size` and the jump noise
-/// σ_J = √(2·σ²_Allan(w·dt)) of the noise model. `None` when no window fits in the record.
+/// The residual's local jump across a step at `time_s` whose transition takes `duration_s`
+/// (mean over the w points after the transition minus the w points before it, for each w in
+/// [`JUMP_WINDOWS`]) against the fitted `size` and the jump noise of the noise model,
+/// σ_J = √(2·σ²_Allan(τ)) at τ = w·dt + the duration (the two means are that far apart, the
+/// slower noise is in their difference). `None` when no window fits in the record.
 fn local_jump(
     ds: &Dataset,
     raw: &[f64],
     time_s: f64,
+    duration_s: f64,
     size: f64,
     noise: &NoiseModel,
 ) -> Option<LocalJump> {
-    let j = ds.t_s.iter().position(|&t| t > time_s)?;
+    let half = 0.5 * duration_s.max(0.0);
+    let j = ds.t_s.iter().position(|&t| t > time_s - half)?;
+    let j1 = if half > 0.0 {
+        ds.t_s.iter().position(|&t| t >= time_s + half)?
+    } else {
+        j
+    };
     let mut best: Option<LocalJump> = None;
     let mut is_step = false;
     let mean = |r: std::ops::Range<usize>| raw[r.clone()].iter().sum::<f64>() / r.len() as f64;
     for w in JUMP_WINDOWS {
-        if j < w || j + w > raw.len() {
+        if j < w || j1 + w > raw.len() {
             continue;
         }
-        let jump = mean(j..j + w) - mean(j - w..j);
-        let sigma = (2.0 * noise.avar(w as f64 * ds.dt_s)).sqrt();
+        let jump = mean(j1..j1 + w) - mean(j - w..j);
+        let tau = w as f64 * ds.dt_s + 2.0 * half;
+        let sigma = (2.0 * noise.avar(tau)).sqrt();
         let ratio = jump * size.signum() / sigma.max(f64::MIN_POSITIVE);
         // The same level change w points away on both sides: a glitch shorter than w that
         // comes back is not in it (where the record allows the guard).
-        let held = if j >= 2 * w && j + 2 * w <= raw.len() {
-            mean(j + w..j + 2 * w) - mean(j - 2 * w..j - w)
+        let held = if j >= 2 * w && j1 + 2 * w <= raw.len() {
+            mean(j1 + w..j1 + 2 * w) - mean(j - 2 * w..j - w)
         } else {
             jump
         };
@@ -1362,4 +1490,96 @@ pub fn gain_with(
     cols.extend(extra.iter().cloned());
     let after = cross_validate(ds, &cols, target, &cur0.noise.model, cfg);
     1.0 - after.raw / before.raw
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, StandardNormal};
+
+    /// 2 days at 60 s of white noise (σ 1) plus `shape`, with an offset and a drift as the
+    /// baseline, and a step as the only candidate.
+    fn select_step(shape: impl Fn(f64) -> f64, seed: u64) -> Selection {
+        let n = 2880;
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let t: Vec<f64> = (0..n).map(|i| 60.0 * i as f64).collect();
+        let y: Vec<f64> = t
+            .iter()
+            .map(|&x| {
+                let e: f64 = StandardNormal.sample(&mut rng);
+                shape(x) + e
+            })
+            .collect();
+        let mut seg = vec![false; n];
+        seg[0] = true;
+        let ds = Dataset {
+            t_s: t.clone(),
+            y: y.clone(),
+            segment_start: seg,
+            channels: Vec::new(),
+            output_name: "output_g".into(),
+            output_unit: "g".into(),
+            unit_per_g: Some(1.0),
+            input_g: Some(1.0),
+            start_unix_s: None,
+            site: None,
+            dt_s: 60.0,
+            samples_per_point: Vec::new(),
+            notes: Vec::new(),
+            warnings: Vec::new(),
+        };
+        let base = vec![vec![1.0; n], t.iter().map(|x| x / 86_400.0).collect()];
+        select(
+            &ds,
+            &y,
+            &base,
+            &[Effect::Step { duration_s: 0.0 }],
+            &Context::default(),
+            &Config::default(),
+        )
+    }
+
+    fn step_params(s: &Selection) -> Vec<(f64, f64, f64)> {
+        s.accepted
+            .iter()
+            .map(|a| {
+                let g = |k: &str| {
+                    a.params
+                        .iter()
+                        .find(|(n, _)| n == k)
+                        .map_or(f64::NAN, |(_, p)| p.value)
+                };
+                (g("time_s"), g("size"), g("duration_s"))
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_step_that_takes_44_minutes_is_one_step_with_its_duration() {
+        // A change of 3 σ spread over 44 min around t = 1 day (the shapes test's ramped tare,
+        // which the abrupt catalogue named as seven steps).
+        let (tc, d) = (86_400.0, 2640.0);
+        let s = select_step(|x| 3.0 * ((x - (tc - 0.5 * d)) / d).clamp(0.0, 1.0), 7);
+        let p = step_params(&s);
+        assert_eq!(p.len(), 1, "{p:?}; refused {:?}", s.refused);
+        let (time, size, duration) = p[0];
+        assert!((time - tc).abs() < 600.0, "{p:?}");
+        assert!((size - 3.0).abs() < 0.5, "{p:?}");
+        assert!((duration / d).ln().abs() < 0.5, "{p:?}");
+    }
+
+    #[test]
+    fn an_abrupt_step_keeps_no_duration() {
+        let tc = 100_030.0;
+        let s = select_step(|x| if x >= tc { 1.5 } else { 0.0 }, 8);
+        let p = step_params(&s);
+        assert_eq!(p.len(), 1, "{p:?}; refused {:?}", s.refused);
+        let (time, size, duration) = p[0];
+        assert!(
+            (time - tc).abs() <= 300.0 && (size - 1.5).abs() < 0.3,
+            "{p:?}"
+        );
+        assert_eq!(duration, 0.0, "{p:?}");
+    }
 }

@@ -264,7 +264,7 @@ fn transients_steps_and_lines_are_recovered_where_they_were_put() {
                 time_s: 1.3 * DAY,
                 size: 2e-5,
             },
-            Effect::Step,
+            Effect::Step { duration_s: 0.0 },
             "time_s",
             1.3 * DAY,
             "size",
@@ -275,7 +275,7 @@ fn transients_steps_and_lines_are_recovered_where_they_were_put() {
         let (ds, r) = residual(&s, inject);
         let grid = match kind {
             // The step's time: every sample time (the selection scans them the same way).
-            Effect::Step => ds.t_s.clone(),
+            Effect::Step { .. } => ds.t_s.clone(),
             _ => effects::grid(&kind, &ds),
         };
         let p = recover(&kind, &ds, &r, &grid);

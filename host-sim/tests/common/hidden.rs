@@ -23,10 +23,14 @@
 // Each test crate uses a different subset of this module.
 #![allow(dead_code)]
 
-use accomp_host::discover::select::Accepted;
+use accomp_host::discover::import::{dataset_from_log, Dataset, DatasetOptions};
+use accomp_host::discover::select::{self, Accepted};
+use accomp_host::discover::{self as disc, Discovery};
 use accomp_host::log::Log;
 use accomp_host::sim::noise::AllanParams;
 use accomp_host::sim::scenario::Scenario;
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
 
 /// Switches off the catalogue effects a preset has built in — the tide, the proof-mass thermal
 /// lag, the ADC reference tempco (an ambient coupling through the board temperature) — so that
@@ -43,6 +47,162 @@ pub fn param_value(a: &Accepted, key: &str) -> f64 {
         .iter()
         .find(|(k, _)| k == key)
         .map_or(f64::NAN, |(_, p)| p.value)
+}
+
+/// ±1 with equal probability.
+pub fn sign(rng: &mut ChaCha8Rng) -> f64 {
+    if rng.random::<bool>() {
+        1.0
+    } else {
+        -1.0
+    }
+}
+
+/// The log's scale factor K1 (V/g) from its metadata, 1 when absent (output already in g).
+pub fn k1_of(log: &Log) -> f64 {
+    log.meta_f64("scale_factor_v_per_g")
+        .ok()
+        .flatten()
+        .unwrap_or(1.0)
+}
+
+/// Runs `accomp discover` on a log with default options, told nothing: the dataset as
+/// imported and the discovery.
+pub fn discover_blind(log: &Log) -> (Dataset, Discovery) {
+    let ds = dataset_from_log(log, &DatasetOptions::default()).expect("dataset");
+    let d = disc::discover(ds.clone(), None, &select::Config::default()).expect("discover");
+    (ds, d)
+}
+
+/// Names of the accepted effects, in order.
+pub fn accepted_names(d: &Discovery) -> Vec<String> {
+    d.selection
+        .accepted
+        .iter()
+        .map(|a| a.effect.name().to_owned())
+        .collect()
+}
+
+/// The accepted effects with their parameters, for the test's log.
+pub fn accepted_with_params(d: &Discovery) -> Vec<String> {
+    d.selection
+        .accepted
+        .iter()
+        .map(|a| {
+            let p: Vec<String> = a
+                .params
+                .iter()
+                .map(|(k, v)| format!("{k}={:.3e}", v.value))
+                .collect();
+            format!("{} [{}]", a.effect.name(), p.join(" "))
+        })
+        .collect()
+}
+
+/// The accepted effect named `name`; when there is none (and something was hidden), prints
+/// the last round's ΔBIC so a miss can be read from the log.
+pub fn find_named<'d>(d: &'d Discovery, name: &str) -> Option<&'d Accepted> {
+    let hit = d
+        .selection
+        .accepted
+        .iter()
+        .find(|a| a.effect.name() == name);
+    if hit.is_none() && name != "none" {
+        eprintln!("    last round (ΔBIC): {:?}", d.selection.last_round);
+    }
+    hit
+}
+
+/// Detection tally of a hidden-effect test: named, parameters within tolerance and (where the
+/// test checks it) out-of-sample gain close to the true-parameter gain, overall and per effect.
+#[derive(Default)]
+pub struct Tally {
+    /// Draws.
+    pub draws: usize,
+    /// Hidden effect named.
+    pub named: usize,
+    /// Named with its parameters within tolerance.
+    pub params: usize,
+    /// Named with its gain close.
+    pub gains: usize,
+    /// Per effect: (draws, named).
+    pub per_effect: std::collections::BTreeMap<String, (usize, usize)>,
+}
+
+impl Tally {
+    /// Counts one draw of effect `name`.
+    pub fn add(&mut self, name: &str, named: bool, params_ok: bool, gain_ok: bool) {
+        self.draws += 1;
+        self.named += usize::from(named);
+        self.params += usize::from(named && params_ok);
+        self.gains += usize::from(named && gain_ok);
+        let e = self.per_effect.entry(name.to_owned()).or_default();
+        e.0 += 1;
+        e.1 += usize::from(named);
+    }
+
+    /// Prints the per-effect counts and the rate line `<label> DETECTION RATE k/n …` (with the
+    /// gain count when the test checks gains).
+    pub fn print(&self, label: &str, with_gain: bool) {
+        for (name, (n, k)) in &self.per_effect {
+            eprintln!("{label} {name}: named {k}/{n}");
+        }
+        let gain = if with_gain {
+            format!(", gain close {}", self.gains)
+        } else {
+            String::new()
+        };
+        eprintln!(
+            "{label} DETECTION RATE {}/{} (parameters within tolerance {}{gain})",
+            self.named, self.draws, self.params
+        );
+    }
+}
+
+/// Bouc–Wen hysteresis of a temperature series, a differential model of stick–slip (used for
+/// friction, joints and structural hysteresis), not a sum of play operators (the detector's
+/// Preisach model):
+///
+/// ```text
+/// dz/dT = (1/w)·(1 − |z|ⁿ·(β·sgn(dT·z) + 1 − β)),   z(0) = 0,   |z| ≤ 1
+/// ```
+///
+/// rate-independent (dz ∝ dT), saturating at z = ±1 (heating / cooling branch), leaving a
+/// branch with slope (1/w)(1 + (2β − 1)|z|ⁿ) — every reversal, however small, moves z (the
+/// controller's mK jitter makes it chatter, which a play wider than the jitter does not) —
+/// and approaching the other branch with a shape set by the exponent n (n = 1: exponential in
+/// temperature, large n: nearly linear then sharp). Integrated along the series with sub-steps
+/// of at most 2 % of w.
+pub fn bouc_wen(temp: &[f64], w: f64, n: f64, beta: f64) -> Vec<f64> {
+    let mut z: f64 = 0.0;
+    let mut prev = temp.first().copied().unwrap_or(0.0);
+    temp.iter()
+        .map(|&x| {
+            let d = x - prev;
+            prev = x;
+            let m = ((d.abs() / (0.02 * w)).ceil() as usize).max(1);
+            let h = d / m as f64;
+            for _ in 0..m {
+                let s = if h * z >= 0.0 { 1.0 } else { -1.0 };
+                z += h / w * (1.0 - z.abs().powf(n) * (beta * s + 1.0 - beta));
+                z = z.clamp(-1.0, 1.0);
+            }
+            z
+        })
+        .collect()
+}
+
+/// Bouc–Wen parameters (transition width w °C, exponent n, β) drawn from ONE value of `rng`
+/// (a sub-generator seeded by it), so the draws after it stay as they were: w 0.03–0.1 °C,
+/// n 1–3, β 0.5–0.9.
+pub fn draw_bouc_wen(rng: &mut ChaCha8Rng) -> (f64, f64, f64) {
+    use rand::SeedableRng;
+    let r = &mut ChaCha8Rng::seed_from_u64(rng.random::<u64>());
+    (
+        r.random_range(0.03..0.1),
+        r.random_range(1.0..3.0),
+        r.random_range(0.5..0.9),
+    )
 }
 
 /// A log with the simulator's metadata and the given columns, as the board would record it.
