@@ -205,15 +205,6 @@ pub struct SequencerCounters {
     pub errors: u32,
 }
 
-impl SequencerCounters {
-    /// Nothing counted yet (`Default` in a `const fn`).
-    pub const ZERO: Self = Self {
-        timeouts: 0,
-        reinits: 0,
-        errors: 0,
-    };
-}
-
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Recovery {
     /// Not initialised yet: the first tick starts the stepped initialisation.
@@ -267,7 +258,11 @@ where
             next_timeout_us: 0,
             diagnosis: 0,
             pending_rate: None,
-            counters: SequencerCounters::ZERO,
+            counters: SequencerCounters {
+                timeouts: 0,
+                reinits: 0,
+                errors: 0,
+            },
         }
     }
 
@@ -551,7 +546,11 @@ where
             state: RtdState::Recovery(Recovery::Start),
             last_result_us: 0,
             diagnosis: 0,
-            counters: SequencerCounters::ZERO,
+            counters: SequencerCounters {
+                timeouts: 0,
+                reinits: 0,
+                errors: 0,
+            },
         }
     }
 

@@ -72,6 +72,18 @@ pub struct RawSample {
 }
 
 impl RawSample {
+    /// A sample of these codes without driver fault flags: what a clean acquisition delivers.
+    pub const fn from_codes(accel: i32, rtd: u32, tilt: i32) -> Self {
+        RawSample {
+            accel,
+            rtd,
+            tilt,
+            accel_flags: ChannelFlags(0),
+            rtd_flags: ChannelFlags(0),
+            tilt_flags: ChannelFlags(0),
+        }
+    }
+
     /// The accelerometer code as its typed newtype.
     pub const fn accel_code(&self) -> Ads1262Code {
         Ads1262Code(self.accel)
@@ -365,14 +377,11 @@ pub fn raw_from_physical(
     t: Celsius,
     tilt: TiltArcsec,
 ) -> Result<RawSample, AdcError> {
-    Ok(RawSample {
-        accel: volts_to_ads1262(&accel_scale(Some(table)), output)?.0,
-        rtd: celsius_to_ad7124(table, t)?.0,
-        tilt: arcsec_to_ads1262(table, tilt)?.0,
-        accel_flags: ChannelFlags::default(),
-        rtd_flags: ChannelFlags::default(),
-        tilt_flags: ChannelFlags::default(),
-    })
+    Ok(RawSample::from_codes(
+        volts_to_ads1262(&accel_scale(Some(table)), output)?.0,
+        celsius_to_ad7124(table, t)?.0,
+        arcsec_to_ads1262(table, tilt)?.0,
+    ))
 }
 
 #[cfg(test)]

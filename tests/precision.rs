@@ -16,6 +16,17 @@ fn poly(c: [f64; 5]) -> TempPoly {
     TempPoly { coeffs: c }
 }
 
+/// K0, K1, K2, δp, δo from their coefficient rows.
+fn coefficient_models(m: &[[f64; 5]; 5]) -> CoefficientModels {
+    CoefficientModels {
+        bias_g: poly(m[0]),
+        scale_factor_v_per_g: poly(m[1]),
+        nonlinearity_g_per_g2: poly(m[2]),
+        misalignment_p_rad: poly(m[3]),
+        misalignment_o_rad: poly(m[4]),
+    }
+}
+
 /// Σ c_k·x^k with powi, not Horner: a different evaluation order from the core.
 fn reference_eval(c: &[f64; 5], x: f64) -> f64 {
     c.iter()
@@ -101,13 +112,7 @@ proptest! {
         let comp = ThermalCompensator {
             scale,
             reference: Celsius(lo + 0.5 * span),
-            models: CoefficientModels {
-                bias_g: poly(m[0]),
-                scale_factor_v_per_g: poly(m[1]),
-                nonlinearity_g_per_g2: poly(m[2]),
-                misalignment_p_rad: poly(m[3]),
-                misalignment_o_rad: poly(m[4]),
-            },
+            models: coefficient_models(&m),
         };
         let cross = CrossAxis { a_p: Gs(a_p), a_o: Gs(a_o) };
         let got = comp.exact(Volts(s.output_v(&m)), Celsius(s.t()), cross).unwrap();
@@ -204,13 +209,7 @@ mod firmware_path {
             thermal: ThermalCompensator {
                 scale,
                 reference: Celsius(lo + 0.7 * span),
-                models: CoefficientModels {
-                    bias_g: poly(m[0]),
-                    scale_factor_v_per_g: poly(m[1]),
-                    nonlinearity_g_per_g2: poly(m[2]),
-                    misalignment_p_rad: poly(m[3]),
-                    misalignment_o_rad: poly(m[4]),
-                },
+                models: coefficient_models(&m),
             },
             tilt: TiltConfig {
                 reference: TiltArcsec(1.5),

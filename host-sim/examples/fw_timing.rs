@@ -10,14 +10,7 @@ fn main() {
         c.call(Request::Ping).unwrap();
     }
     println!("ping rtt {:?}", t.elapsed() / 100);
-    let raw = accomp::pipeline::RawSample {
-        accel: 1000,
-        rtd: 5_000_000,
-        tilt: 0,
-        accel_flags: Default::default(),
-        rtd_flags: Default::default(),
-        tilt_flags: Default::default(),
-    };
+    let raw = accomp::pipeline::RawSample::from_codes(1000, 5_000_000, 0);
     for w in [1, 4, 8, 12] {
         let raws = vec![raw; 500];
         let t = Instant::now();

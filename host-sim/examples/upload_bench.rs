@@ -116,14 +116,7 @@ fn icount_commit(base: &accomp::table::CalibrationTable) {
         ..QemuOptions::default()
     };
     let (q, mut c) = Qemu::launch(&firmware_path(None), &opts).unwrap();
-    let raw = accomp::pipeline::RawSample {
-        accel: 1000,
-        rtd: 5_000_000,
-        tilt: 0,
-        accel_flags: Default::default(),
-        rtd_flags: Default::default(),
-        tilt_flags: Default::default(),
-    };
+    let raw = accomp::pipeline::RawSample::from_codes(1000, 5_000_000, 0);
     let bracket = |c: &mut accomp_host::device::Client, commit: Request| -> f64 {
         let a = c.send(Request::InjectSample { raw }).unwrap();
         c.send(commit).unwrap();

@@ -211,12 +211,7 @@ pub fn fatal(reason: Fatal) -> ! {
 /// SFTRSTF in Info's reset cause.
 #[panic_handler]
 fn panic(info: &core::panic::PanicInfo) -> ! {
-    cortex_m::interrupt::disable();
-    if let Some(loc) = info.location() {
-        defmt::error!("panic at {}:{}", loc.file(), loc.line());
-    } else {
-        defmt::error!("panic");
-    }
+    super::log_panic(info);
     cortex_m::peripheral::SCB::sys_reset()
 }
 

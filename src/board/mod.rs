@@ -74,6 +74,16 @@ pub(crate) fn uart1(
     (tx, rx)
 }
 
+/// The common start of both boards' panic handlers: interrupts off, where it happened logged.
+pub(crate) fn log_panic(info: &core::panic::PanicInfo) {
+    cortex_m::interrupt::disable();
+    if let Some(loc) = info.location() {
+        defmt::error!("panic at {}:{}", loc.file(), loc.line());
+    } else {
+        defmt::error!("panic");
+    }
+}
+
 /// Next received byte, or None when the receive register is empty. Line errors (overrun,
 /// framing, noise) lose bytes; the frame CRC catches that, so they are skipped here.
 pub fn read_byte(rx: &mut UartRx) -> Option<u8> {

@@ -282,12 +282,7 @@ pub fn fatal(reason: Fatal) -> ! {
 
 #[panic_handler]
 fn panic(info: &core::panic::PanicInfo) -> ! {
-    cortex_m::interrupt::disable();
-    if let Some(loc) = info.location() {
-        defmt::error!("panic at {}:{}", loc.file(), loc.line());
-    } else {
-        defmt::error!("panic");
-    }
+    super::log_panic(info);
     semihosting::process::exit(exit_code::PANIC)
 }
 

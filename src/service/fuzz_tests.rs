@@ -9,7 +9,7 @@
 //! the count and the runtime are in docs/benchmarks.md.
 
 use super::*;
-use crate::pipeline::{ChannelFlags, Status};
+use crate::pipeline::Status;
 use crate::storage::RamFlash;
 use crate::table::tests::paper_table;
 use crate::table::CRC32;
@@ -524,14 +524,7 @@ fn fuzz(seed_name: &str, cases: u32) {
         crate::units::Celsius(50.0),
         crate::units::TiltArcsec(0.0),
     )
-    .unwrap_or(RawSample {
-        accel: 0,
-        rtd: 0,
-        tilt: 0,
-        accel_flags: ChannelFlags(0),
-        rtd_flags: ChannelFlags(0),
-        tilt_flags: ChannelFlags(0),
-    });
+    .unwrap_or(RawSample::from_codes(0, 0, 0));
     let config = Config {
         cases,
         failure_persistence: None,
@@ -600,14 +593,7 @@ fn the_garbage_generator_can_reach_a_valid_request() {
         dev: Service::new(Board::Qemu, Flash::new(), LAYOUT),
         model: Model::default(),
         src: sources(),
-        raw: RawSample {
-            accel: 0,
-            rtd: 0,
-            tilt: 0,
-            accel_flags: ChannelFlags(0),
-            rtd_flags: ChannelFlags(0),
-            tilt_flags: ChannelFlags(0),
-        },
+        raw: RawSample::from_codes(0, 0, 0),
     };
     assert!(h.run(&Op::Garbage(body)).is_ok());
 }

@@ -311,6 +311,16 @@ fn flash_with<const E: usize, const W: usize, const R: usize>(
 }
 
 /// Reboots on the flash and returns the active table's bytes (None: no valid slot).
+/// Commits table 3 into slot C of the small layout, which must erase C first, and checks that a
+/// reboot finds table 3 active.
+fn commit_3_erases_slot_c(mut s: CalibrationStore<SimFlash<256, 1, 1>>) {
+    s.flash.log.clear();
+    s.commit(&table(3)).unwrap();
+    assert!(s.flash.log.contains(&Access::Erase(1024, 1536)));
+    let (active, _) = active_after_reboot(s.into_flash(), SMALL_LAYOUT);
+    assert_eq!(active, Some(table(3)));
+}
+
 fn active_after_reboot<const E: usize, const W: usize, const R: usize>(
     flash: SimFlash<E, W, R>,
     layout: SlotLayout,
@@ -485,11 +495,7 @@ fn prepared_commit_does_not_erase_again() {
     s.commit(&table(2)).unwrap();
     assert!(!s.flash.log.iter().any(|a| matches!(a, Access::Erase(..))));
     // The next commit was not prepared: it erases its target (C: A holds the rollback table).
-    s.flash.log.clear();
-    s.commit(&table(3)).unwrap();
-    assert!(s.flash.log.contains(&Access::Erase(1024, 1536)));
-    let (active, _) = active_after_reboot(s.into_flash(), SMALL_LAYOUT);
-    assert_eq!(active, Some(table(3)));
+    commit_3_erases_slot_c(s);
 }
 
 #[test]
@@ -505,11 +511,7 @@ fn an_erase_that_failed_is_redone_by_the_next_commit() {
     s.flash.dead = false;
     s.flash.budget = None;
     assert_eq!(s.spare_erased(), Ok(false));
-    s.flash.log.clear();
-    s.commit(&table(3)).unwrap();
-    assert!(s.flash.log.contains(&Access::Erase(1024, 1536)));
-    let (active, _) = active_after_reboot(s.into_flash(), SMALL_LAYOUT);
-    assert_eq!(active, Some(table(3)));
+    commit_3_erases_slot_c(s);
 }
 
 #[test]

@@ -88,7 +88,7 @@ pub fn run(args: &DiscoverArgs) -> anyhow::Result<()> {
 
 /// Loads the record as the discovery does (same binning and notes).
 pub fn load(args: &DiscoverArgs) -> anyhow::Result<import::Dataset> {
-    let (log, bad) = import::load(&args.log, args.format)?;
+    let (log, bad) = import::load_for_dataset(&args.log, args.format, args.output.as_deref())?;
     let opts = DatasetOptions {
         output: args.output.clone(),
         max_points: args.max_points,

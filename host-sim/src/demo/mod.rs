@@ -41,7 +41,7 @@ use std::time::{Duration, Instant};
 use crate::device::samples_csv::status_names;
 use accomp::compensation::tilt_compensated;
 use accomp::model::CrossAxis;
-use accomp::pipeline::{self, ChannelFlags, Frame, RawSample, Status};
+use accomp::pipeline::{self, Frame, RawSample, Status};
 use accomp::table::{CalibrationDate, CalibrationTable, TiltAxis};
 use accomp::units::{Celsius, Gs, TiltArcsec, Volts};
 use anyhow::Context;

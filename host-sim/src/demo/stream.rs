@@ -5,14 +5,7 @@ use super::*;
 
 /// The raw sample the board would acquire: the simulator's codes, no driver faults.
 pub(super) fn raw(s: &Sample) -> RawSample {
-    RawSample {
-        accel: s.accel_code,
-        rtd: s.rtd_code,
-        tilt: s.tilt_code,
-        accel_flags: ChannelFlags::default(),
-        rtd_flags: ChannelFlags::default(),
-        tilt_flags: ChannelFlags::default(),
-    }
+    RawSample::from_codes(s.accel_code, s.rtd_code, s.tilt_code)
 }
 
 /// A progress bar of `len` samples labelled `prefix`.

@@ -168,7 +168,7 @@ pub fn discover_path(
     table: Option<&accomp::table::CalibrationTable>,
     cfg: &select::Config,
 ) -> anyhow::Result<(Discovery, Vec<import::BadRow>)> {
-    let (log, bad) = import::load(path, format)?;
+    let (log, bad) = import::load_for_dataset(path, format, opts.output.as_deref())?;
     let mut opts = opts.clone();
     if let Some(t) = table {
         opts.unit_per_g_from_calibration = t

@@ -518,13 +518,22 @@ impl NoiseModel {
         };
         let mut evals = 0usize;
         // Concentrated −2 ln L at p = (ln f/w, ln q·dt/w, β), and the scale c.
-        let eval = |p: P, evals: &mut usize| -> (f64, f64) {
-            *evals += 1;
-            let m = model_at(p, var);
+        let likelihood = |p: &P| -> (f64, f64) {
+            let m = model_at(*p, var);
             let (q, ld) = innovation_sums(&m, t_s, idx, x);
             let c = q / n as f64;
             let v = n as f64 * (1.0 + c.ln()) + ld;
             (if v.is_finite() { v } else { f64::INFINITY }, c)
+        };
+        let eval = |p: P, evals: &mut usize| -> (f64, f64) {
+            *evals += 1;
+            likelihood(&p)
+        };
+        // Points that do not depend on each other (the start grid, the first simplex, a
+        // shrink) are evaluated on all cores: the same numbers, sooner.
+        let eval_all = |ps: &[P], evals: &mut usize| -> Vec<f64> {
+            *evals += ps.len();
+            crate::numerics::parallel::par_map(ps, |p| likelihood(p).0)
         };
         let to_p = |m: &NoiseModel| -> Option<P> {
             let w = m.white_var;
@@ -561,8 +570,7 @@ impl NoiseModel {
             }
         }
         let mut best: Option<(P, f64)> = None;
-        for s in &starts {
-            let (v, _) = eval(*s, &mut evals);
+        for (s, v) in starts.iter().zip(eval_all(&starts, &mut evals)) {
             if best.is_none_or(|(_, bv)| v < bv) {
                 best = Some((*s, v));
             }
@@ -580,15 +588,19 @@ impl NoiseModel {
             [2.0, 2.0, 0.5, 0.7]
         };
         let mut simplex = vec![(x0, f0)];
-        for d in 0..D {
-            let mut p = x0;
-            p[d] += if p[d] + steps[d] > hi[d] {
-                -steps[d]
-            } else {
-                steps[d]
-            };
-            let v = eval(p, &mut evals).0;
-            simplex.push((p, v));
+        let vertices: Vec<P> = (0..D)
+            .map(|d| {
+                let mut p = x0;
+                p[d] += if p[d] + steps[d] > hi[d] {
+                    -steps[d]
+                } else {
+                    steps[d]
+                };
+                p
+            })
+            .collect();
+        for (p, v) in vertices.iter().zip(eval_all(&vertices, &mut evals)) {
+            simplex.push((*p, v));
         }
         while evals < max_evals {
             simplex.sort_by(|a, b| a.1.total_cmp(&b.1));
@@ -633,7 +645,10 @@ impl NoiseModel {
                         for d in 0..D {
                             s.0[d] = 0.5 * (s.0[d] + b[d]);
                         }
-                        s.1 = eval(s.0, &mut evals).0;
+                    }
+                    let shrunk: Vec<P> = simplex[1..].iter().map(|s| s.0).collect();
+                    for (s, v) in simplex[1..].iter_mut().zip(eval_all(&shrunk, &mut evals)) {
+                        s.1 = v;
                     }
                 }
             }

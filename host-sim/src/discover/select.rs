@@ -799,11 +799,10 @@ pub fn select(
         // also inflates the fitted noise (its Allan variance), which hides it. The best few are
         // therefore re-scored with the full likelihood, the noise model re-fitted to the
         // residual of the extended model: ΔBIC = Δ(−2 ln L) + penalty.
+        // The re-fits are independent: they run on all cores (`numerics::parallel`).
         let base_ll = cur.neg2_loglik();
-        let mut rescored: Vec<Scored> = scored
-            .iter()
-            .take(RESCORE)
-            .map(|s| {
+        let mut rescored: Vec<Scored> =
+            crate::numerics::parallel::par_map(&scored[..scored.len().min(RESCORE)], |s| {
                 let refit = |s: &Scored| {
                     let mut trial = cols.clone();
                     trial.extend(s.cols.iter().cloned());
@@ -822,8 +821,7 @@ pub fn select(
                     delta_bic: d + s.penalty,
                     ..s
                 }
-            })
-            .collect();
+            });
         rescored.sort_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic));
         last_round = rescored
             .iter()

@@ -128,15 +128,173 @@ impl ReadError {
     }
 }
 
+/// Bytes of complete lines one worker of [`Records::for_each_block`] parses at a time.
+/// (A few lines in the unit tests, so that their logs span many blocks.)
+const BLOCK_BYTES: usize = if cfg!(test) { 256 } else { 4 << 20 };
+/// Bytes asked of the underlying reader per read while lines are split here.
+const READ_BYTES: usize = 1 << 20;
+
 /// An open file: metadata and header read, records on demand.
+///
+/// Lines without a quote are split on commas here (what the csv crate makes of such a line,
+/// without its per-record buffer work); from the first line with a quote (or a carriage return
+/// that does not end the line) on, the csv crate reads the rest (RFC 4180 quoting, quoted
+/// fields across lines). Both give the same fields and the same line numbers.
 pub struct Records<R: Read> {
     meta: Vec<(String, String)>,
     header: Vec<String>,
     header_line: usize,
-    csv: csv::Reader<NewlineOffsets<Chain<Cursor<Vec<u8>>, R>>>,
+    source: Source<R>,
+    /// Trimmed field bounds of the current line (split lines).
+    bounds: Vec<(usize, usize)>,
+    /// The current record (csv crate).
     record: csv::ByteRecord,
-    /// Newlines of the csv stream before the current record (the stream starts at the header).
+}
+
+/// Where the records come from.
+enum Source<R: Read> {
+    /// Every data line so far was free of quotes and stray carriage returns.
+    Lines(Lines<R>),
+    /// The csv crate, from the first line that needs it.
+    Csv(CsvSource<R>),
+    /// Only while switching from one to the other.
+    Switching,
+}
+
+/// The csv crate's reader over the rest of the file.
+struct CsvSource<R: Read> {
+    csv: csv::Reader<NewlineOffsets<Chain<Cursor<Vec<u8>>, R>>>,
+    /// File line of the csv stream's first byte.
+    first_line: usize,
+    /// Newlines of the csv stream before the current record.
     newlines_before: usize,
+}
+
+/// Raw lines of the data section, read in large pieces.
+struct Lines<R> {
+    r: R,
+    buf: Vec<u8>,
+    /// Start of the unread bytes of `buf`.
+    pos: usize,
+    /// File line of the line starting at `pos`.
+    line: usize,
+    eof: bool,
+}
+
+impl<R: Read> Lines<R> {
+    /// Appends up to [`READ_BYTES`] to `buf` (after dropping the bytes before `pos`).
+    fn refill(&mut self) -> std::io::Result<()> {
+        if self.pos > 0 {
+            self.buf.drain(..self.pos);
+            self.pos = 0;
+        }
+        let old = self.buf.len();
+        self.buf.resize(old + READ_BYTES, 0);
+        let n = loop {
+            match self.r.read(&mut self.buf[old..]) {
+                Ok(n) => break n,
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+                Err(e) => {
+                    self.buf.truncate(old);
+                    return Err(e);
+                }
+            }
+        };
+        self.buf.truncate(old + n);
+        self.eof = n == 0;
+        Ok(())
+    }
+
+    /// The end (index of its `\n`, or the end of the file) of the line at `pos`; `None` at the
+    /// end of the file.
+    fn line_end(&mut self) -> std::io::Result<Option<usize>> {
+        let mut scanned = 0;
+        loop {
+            let from = self.pos + scanned;
+            if let Some(i) = memchr::memchr(b'\n', &self.buf[from..]) {
+                return Ok(Some(from + i));
+            }
+            if self.eof {
+                return Ok((self.pos < self.buf.len()).then_some(self.buf.len()));
+            }
+            scanned = self.buf.len() - self.pos;
+            self.refill()?;
+        }
+    }
+}
+
+/// Splits one line (without its `\n`) on commas into trimmed field bounds, exactly as the csv
+/// crate does a line without quotes: `None` when the line has a quote or a carriage return
+/// before its end (the csv crate's rules apply from there), `Some(false)` for an empty line
+/// (which the csv crate skips), `Some(true)` for a record.
+fn split_line(line: &[u8], bounds: &mut Vec<(usize, usize)>) -> Option<bool> {
+    let line = line.strip_suffix(b"\r").unwrap_or(line);
+    if line.is_empty() {
+        return Some(false);
+    }
+    if memchr::memchr2(b'"', b'\r', line).is_some() {
+        return None;
+    }
+    bounds.clear();
+    let mut start = 0;
+    for end in memchr::memchr_iter(b',', line).chain(std::iter::once(line.len())) {
+        let (mut a, mut b) = (start, end);
+        while a < b && line[a].is_ascii_whitespace() {
+            a += 1;
+        }
+        while b > a && line[b - 1].is_ascii_whitespace() {
+            b -= 1;
+        }
+        bounds.push((a, b));
+        start = end + 1;
+    }
+    Some(true)
+}
+
+/// True when every line of `bytes` can be split by [`split_line`]: no quote, and every
+/// carriage return ends a line (or the bytes).
+fn splittable(bytes: &[u8]) -> bool {
+    memchr::memchr(b'"', bytes).is_none()
+        && memchr::memchr_iter(b'\r', bytes).all(|i| bytes.get(i + 1).is_none_or(|&b| b == b'\n'))
+}
+
+/// The rules every record passes, whoever split it: no `#` line after the header, a line of
+/// spaces is blank (`Ok(false)`: skipped), exactly as many fields as the header.
+fn check_record(
+    line: usize,
+    first: &[u8],
+    fields: usize,
+    expected: usize,
+) -> Result<bool, ReadError> {
+    if first.starts_with(b"#") {
+        return Err(ReadError::CommentAfterHeader { line });
+    }
+    if fields == 1 && first.is_empty() {
+        return Ok(false);
+    }
+    if fields != expected {
+        return Err(ReadError::FieldCount {
+            line,
+            expected,
+            found: fields,
+        });
+    }
+    Ok(true)
+}
+
+fn csv_reader<R: Read>(
+    start: Vec<u8>,
+    r: R,
+) -> csv::Reader<NewlineOffsets<Chain<Cursor<Vec<u8>>, R>>> {
+    csv::ReaderBuilder::new()
+        .has_headers(false)
+        .flexible(true)
+        .trim(csv::Trim::All)
+        .from_reader(NewlineOffsets {
+            inner: Cursor::new(start).chain(r),
+            offset: 0,
+            pending: VecDeque::new(),
+        })
 }
 
 /// Remembers the byte offsets of the newlines that pass through, so that a record's byte
@@ -151,7 +309,7 @@ struct NewlineOffsets<R> {
 impl<R: Read> Read for NewlineOffsets<R> {
     fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
         let n = self.inner.read(buf)?;
-        for (i, _) in buf[..n].iter().enumerate().filter(|(_, b)| **b == b'\n') {
+        for i in memchr::memchr_iter(b'\n', &buf[..n]) {
             self.pending.push_back(self.offset + i as u64);
         }
         self.offset += n as u64;
@@ -159,34 +317,130 @@ impl<R: Read> Read for NewlineOffsets<R> {
     }
 }
 
+/// The fields of one record.
+#[derive(Debug, Clone, Copy)]
+enum Fields<'a> {
+    /// Split here: the line and the trimmed bounds of its fields.
+    Split {
+        line: &'a [u8],
+        bounds: &'a [(usize, usize)],
+    },
+    /// Read by the csv crate (trimmed).
+    Csv(&'a csv::ByteRecord),
+}
+
 /// One record and the line it starts on.
 #[derive(Debug, Clone, Copy)]
 pub struct Row<'a> {
     /// 1-based line in the file.
     pub line: usize,
-    record: &'a csv::ByteRecord,
+    fields: Fields<'a>,
 }
 
 impl<'a> Row<'a> {
     /// Number of fields (always the header's).
     pub fn len(&self) -> usize {
-        self.record.len()
+        match self.fields {
+            Fields::Split { bounds, .. } => bounds.len(),
+            Fields::Csv(r) => r.len(),
+        }
     }
 
     /// True for a record without fields (never returned by [`Records::next_row`]).
     pub fn is_empty(&self) -> bool {
-        self.record.is_empty()
+        self.len() == 0
     }
 
     /// The trimmed bytes of field `i` (empty past the end).
     pub fn bytes(&self, i: usize) -> &'a [u8] {
-        self.record.get(i).unwrap_or(b"")
+        match self.fields {
+            Fields::Split { line, bounds } => bounds.get(i).map_or(b"", |&(a, b)| &line[a..b]),
+            Fields::Csv(r) => r.get(i).unwrap_or(b""),
+        }
     }
 
     /// The trimmed text of field `i`.
     pub fn text(&self, i: usize) -> Result<&'a str, ReadError> {
         std::str::from_utf8(self.bytes(i)).map_err(|_| ReadError::NotUtf8 { line: self.line })
     }
+}
+
+/// Something that hands out records in file order: an open file ([`Records`]) or one block of
+/// it ([`BlockRows`], on a worker thread of [`Records::for_each_block`]).
+pub trait RowStream {
+    /// The next record, `None` at the end.
+    fn next_row(&mut self) -> Result<Option<Row<'_>>, ReadError>;
+}
+
+/// Complete data lines, none needing the csv crate, with the file line of the first.
+struct Block {
+    bytes: Vec<u8>,
+    first_line: usize,
+}
+
+impl Block {
+    fn rows(&self, expected: usize) -> BlockRows<'_> {
+        BlockRows {
+            bytes: &self.bytes,
+            pos: 0,
+            line: self.first_line,
+            expected,
+            bounds: Vec::new(),
+        }
+    }
+}
+
+/// The records of one block.
+pub struct BlockRows<'a> {
+    bytes: &'a [u8],
+    pos: usize,
+    line: usize,
+    expected: usize,
+    bounds: Vec<(usize, usize)>,
+}
+
+impl RowStream for BlockRows<'_> {
+    fn next_row(&mut self) -> Result<Option<Row<'_>>, ReadError> {
+        while self.pos < self.bytes.len() {
+            let rest = &self.bytes[self.pos..];
+            let len = memchr::memchr(b'\n', rest).unwrap_or(rest.len());
+            let text = &rest[..len];
+            let line = self.line;
+            self.pos += len + 1;
+            self.line += 1;
+            match split_line(text, &mut self.bounds) {
+                Some(true) => {}
+                Some(false) => continue,
+                // `splittable` was checked on the whole block.
+                None => {
+                    return Err(ReadError::Csv {
+                        line,
+                        reason: "a quote in a block that was checked to have none".into(),
+                    })
+                }
+            }
+            let first = self.bounds.first().map_or(&b""[..], |&(a, b)| &text[a..b]);
+            if check_record(line, first, self.bounds.len(), self.expected)? {
+                return Ok(Some(Row {
+                    line,
+                    fields: Fields::Split {
+                        line: text,
+                        bounds: &self.bounds,
+                    },
+                }));
+            }
+        }
+        Ok(None)
+    }
+}
+
+/// What [`Records::take_block`] found.
+enum Taken {
+    Block(Block),
+    /// The file is read.
+    End,
+    /// The next lines need the csv crate (or a line is longer than a block): read on.
+    Sequential,
 }
 
 impl<'s> Records<&'s [u8]> {
@@ -238,25 +492,44 @@ impl<R: BufRead> Records<R> {
             meta.push((k.to_owned(), v.trim().to_owned(), line));
         };
         let header_line = line;
-        let mut csv = csv::ReaderBuilder::new()
-            .has_headers(false)
-            .flexible(true)
-            .trim(csv::Trim::All)
-            .from_reader(NewlineOffsets {
-                inner: Cursor::new(header_bytes).chain(r),
-                offset: 0,
-                pending: VecDeque::new(),
-            });
+        let mut bounds = Vec::new();
         let mut record = csv::ByteRecord::new();
-        let csv_error = |e: csv::Error| ReadError::Csv {
-            line: header_line,
-            reason: e.to_string(),
+        let header_text = header_bytes.strip_suffix(b"\n").unwrap_or(&header_bytes);
+        let (names, source): (Vec<&[u8]>, Source<R>) = match split_line(header_text, &mut bounds) {
+            Some(_) => (
+                bounds.iter().map(|&(a, b)| &header_text[a..b]).collect(),
+                Source::Lines(Lines {
+                    r,
+                    buf: Vec::new(),
+                    pos: 0,
+                    line: header_line + 1,
+                    eof: false,
+                }),
+            ),
+            None => {
+                // A quoted header: the csv crate reads it and everything after.
+                let mut csv = csv_reader(header_bytes.clone(), r);
+                let more = csv
+                    .read_byte_record(&mut record)
+                    .map_err(|e| ReadError::Csv {
+                        line: header_line,
+                        reason: e.to_string(),
+                    })?;
+                if !more {
+                    return Err(ReadError::NoHeader);
+                }
+                (
+                    record.iter().collect(),
+                    Source::Csv(CsvSource {
+                        csv,
+                        first_line: header_line,
+                        newlines_before: 0,
+                    }),
+                )
+            }
         };
-        if !csv.read_byte_record(&mut record).map_err(csv_error)? {
-            return Err(ReadError::NoHeader);
-        }
-        let mut header = Vec::with_capacity(record.len());
-        for (i, name) in record.iter().enumerate() {
+        let mut header = Vec::with_capacity(names.len());
+        for (i, name) in names.into_iter().enumerate() {
             let name = std::str::from_utf8(name)
                 .map_err(|_| ReadError::NotUtf8 { line: header_line })?
                 .to_owned();
@@ -278,9 +551,9 @@ impl<R: BufRead> Records<R> {
             meta: meta.into_iter().map(|(k, v, _)| (k, v)).collect(),
             header,
             header_line,
-            csv,
-            record,
-            newlines_before: 0,
+            source,
+            bounds,
+            record: csv::ByteRecord::new(),
         })
     }
 
@@ -325,6 +598,185 @@ impl<R: BufRead> Records<R> {
         })
     }
 
+    /// Hands the rest of the file, from the line at the split position on, to the csv crate.
+    fn switch_to_csv(&mut self) {
+        if let Source::Lines(l) = std::mem::replace(&mut self.source, Source::Switching) {
+            let rest = l.buf[l.pos..].to_vec();
+            self.source = Source::Csv(CsvSource {
+                csv: csv_reader(rest, l.r),
+                first_line: l.line,
+                newlines_before: 0,
+            });
+        }
+    }
+
+    /// Takes the next [`BLOCK_BYTES`] or so of whole lines if none of them needs the csv crate.
+    fn take_block(&mut self) -> Result<Taken, ReadError> {
+        let Source::Lines(l) = &mut self.source else {
+            return Ok(Taken::Sequential);
+        };
+        while l.buf.len() - l.pos < BLOCK_BYTES && !l.eof {
+            l.refill()?;
+        }
+        let avail = &l.buf[l.pos..];
+        if avail.is_empty() {
+            return Ok(Taken::End);
+        }
+        let take = if l.eof && avail.len() <= BLOCK_BYTES {
+            avail.len()
+        } else {
+            match memchr::memrchr(b'\n', &avail[..BLOCK_BYTES.min(avail.len())]) {
+                Some(i) => i + 1,
+                None => return Ok(Taken::Sequential),
+            }
+        };
+        let bytes = &avail[..take];
+        if !splittable(bytes) {
+            return Ok(Taken::Sequential);
+        }
+        let block = Block {
+            bytes: bytes.to_vec(),
+            first_line: l.line,
+        };
+        l.line += memchr::memchr_iter(b'\n', bytes).count();
+        l.pos += take;
+        Ok(Taken::Block(block))
+    }
+
+    /// Reads every remaining record: blocks of lines that need no csv crate are parsed by
+    /// `work` on up to [`std::thread::available_parallelism`] threads at once, and their results
+    /// handed to `merge` in file order on this thread; from the first line that needs the csv
+    /// crate on, `work` reads the rest of the file here (one last result). `merge` stops the
+    /// reading by returning an error; a worker reports its own errors inside its result (it
+    /// stops at its first), so `merge` decides which comes first in the file.
+    pub fn for_each_block<T: Send, E: From<ReadError>>(
+        &mut self,
+        work: impl Fn(&mut dyn RowStream) -> T + Sync,
+        mut merge: impl FnMut(T) -> Result<(), E>,
+    ) -> Result<(), E> {
+        let threads = std::thread::available_parallelism().map_or(1, |n| n.get().min(8));
+        let expected = self.header.len();
+        loop {
+            let mut blocks = Vec::with_capacity(threads);
+            let mut sequential = false;
+            while blocks.len() < threads {
+                match self.take_block()? {
+                    Taken::Block(b) => blocks.push(b),
+                    Taken::End => break,
+                    Taken::Sequential => {
+                        sequential = true;
+                        break;
+                    }
+                }
+            }
+            let full = blocks.len() == threads && !sequential;
+            let results: Vec<T> = match blocks.split_first() {
+                None => Vec::new(),
+                Some((first, rest)) => std::thread::scope(|s| {
+                    let handles: Vec<_> = rest
+                        .iter()
+                        .map(|b| s.spawn(|| work(&mut b.rows(expected))))
+                        .collect();
+                    let mut out = vec![work(&mut first.rows(expected))];
+                    for h in handles {
+                        out.push(h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)));
+                    }
+                    out
+                }),
+            };
+            for t in results {
+                merge(t)?;
+            }
+            if sequential {
+                return merge(work(self));
+            }
+            if !full {
+                return Ok(());
+            }
+        }
+    }
+}
+
+impl<R: BufRead> RowStream for Records<R> {
+    fn next_row(&mut self) -> Result<Option<Row<'_>>, ReadError> {
+        Records::next_row(self)
+    }
+}
+
+impl<R: BufRead> Records<R> {
+    /// The next record, `None` at the end of the file.
+    pub fn next_row(&mut self) -> Result<Option<Row<'_>>, ReadError> {
+        let expected = self.header.len();
+        // Where the record is, found first; the row borrowing it is made after the loop.
+        let split: Option<(usize, usize, usize)> = loop {
+            match &mut self.source {
+                Source::Lines(l) => {
+                    let Some(end) = l.line_end()? else {
+                        return Ok(None);
+                    };
+                    let (start, line) = (l.pos, l.line);
+                    let split = split_line(&l.buf[start..end], &mut self.bounds);
+                    if split.is_none() {
+                        self.switch_to_csv();
+                        continue;
+                    }
+                    l.pos = (end + 1).min(l.buf.len());
+                    l.line += 1;
+                    if split == Some(false) {
+                        continue;
+                    }
+                    let text = &l.buf[start..end];
+                    let first = self.bounds.first().map_or(&b""[..], |&(a, b)| &text[a..b]);
+                    if check_record(line, first, self.bounds.len(), expected)? {
+                        break Some((start, end, line));
+                    }
+                }
+                Source::Csv(c) => {
+                    let read = c.csv.read_byte_record(&mut self.record);
+                    let more = match read {
+                        Ok(more) => more,
+                        Err(e) => {
+                            let at = e.position().map_or(u64::MAX, |p| p.byte());
+                            return Err(ReadError::Csv {
+                                line: c.line_at(at),
+                                reason: e.to_string(),
+                            });
+                        }
+                    };
+                    if !more {
+                        return Ok(None);
+                    }
+                    // csv's record position counts skipped blank lines into the record; the
+                    // reader's position just after it does not: the record's last byte is the
+                    // one before.
+                    let end = c.csv.position().byte();
+                    let line = c.line_at(end.saturating_sub(1));
+                    let first = self.record.get(0).unwrap_or(b"");
+                    if check_record(line, first, self.record.len(), expected)? {
+                        break Some((0, 0, line));
+                    }
+                }
+                Source::Switching => break None,
+            }
+        };
+        Ok(match (split, &self.source) {
+            (Some((start, end, line)), Source::Lines(l)) => Some(Row {
+                line,
+                fields: Fields::Split {
+                    line: &l.buf[start..end],
+                    bounds: &self.bounds,
+                },
+            }),
+            (Some((_, _, line)), _) => Some(Row {
+                line,
+                fields: Fields::Csv(&self.record),
+            }),
+            (None, _) => None,
+        })
+    }
+}
+
+impl<R: Read> CsvSource<R> {
     /// The file line of the byte at `offset` of the csv stream.
     fn line_at(&mut self, offset: u64) -> usize {
         let pending = &mut self.csv.get_mut().pending;
@@ -332,49 +784,7 @@ impl<R: BufRead> Records<R> {
             pending.pop_front();
             self.newlines_before += 1;
         }
-        self.header_line + self.newlines_before
-    }
-
-    /// The next record, `None` at the end of the file.
-    pub fn next_row(&mut self) -> Result<Option<Row<'_>>, ReadError> {
-        loop {
-            let read = self.csv.read_byte_record(&mut self.record);
-            let more = match read {
-                Ok(more) => more,
-                Err(e) => {
-                    let at = e.position().map_or(u64::MAX, |p| p.byte());
-                    return Err(ReadError::Csv {
-                        line: self.line_at(at),
-                        reason: e.to_string(),
-                    });
-                }
-            };
-            if !more {
-                return Ok(None);
-            }
-            // csv's record position counts skipped blank lines into the record; the reader's
-            // position just after it does not: the record's last byte is the one before.
-            let end = self.csv.position().byte();
-            let line = self.line_at(end.saturating_sub(1));
-            if self.record.get(0).is_some_and(|f| f.starts_with(b"#")) {
-                return Err(ReadError::CommentAfterHeader { line });
-            }
-            // A line of spaces is blank, not a record of one empty field.
-            if self.record.len() == 1 && self.record.get(0).is_some_and(<[u8]>::is_empty) {
-                continue;
-            }
-            if self.record.len() != self.header.len() {
-                return Err(ReadError::FieldCount {
-                    line,
-                    expected: self.header.len(),
-                    found: self.record.len(),
-                });
-            }
-            return Ok(Some(Row {
-                line,
-                record: &self.record,
-            }));
-        }
+        self.first_line + self.newlines_before
     }
 }
 
@@ -460,6 +870,65 @@ mod tests {
         ));
         let bad = Records::new(&b"# k: \xff\na,b\n"[..]).err().unwrap();
         assert!(matches!(bad, ReadError::NotUtf8 { line: 1 }));
+    }
+
+    #[test]
+    fn a_quote_hands_the_rest_to_the_csv_crate_with_the_same_fields_and_lines() {
+        let body = "0,1\n\n  \n1, 2 \r\n2,\"3\n4\"\n3,\"a,b\"\n4,5\n";
+        // Split here until line 5, the csv crate after; against the csv crate from the
+        // (quoted) header on.
+        let split = rows(&format!("# k: v\ntime_s,v\n{body}")).unwrap();
+        let csv = rows(&format!("# k: v\n\"time_s\",v\n{body}")).unwrap();
+        assert_eq!(split, csv);
+        assert_eq!(
+            split,
+            vec![
+                (3, vec!["0".into(), "1".into()]),
+                (6, vec!["1".into(), "2".into()]),
+                (8, vec!["2".into(), "3\n4".into()]),
+                (9, vec!["3".into(), "a,b".into()]),
+                (10, vec!["4".into(), "5".into()]),
+            ]
+        );
+        // A carriage return inside a line is a record end to the csv crate: handed over too.
+        let cr = rows("time_s,v\n0,1\r1,2\n").unwrap();
+        assert_eq!(cr.len(), 2);
+    }
+
+    #[test]
+    fn blocks_on_worker_threads_keep_file_order_and_lines() {
+        let mut text = String::from("time_s,v\n");
+        for i in 0..500 {
+            text.push_str(&format!("{i},{}\n", i * 3));
+            if i % 37 == 0 {
+                text.push('\n');
+            }
+        }
+        let want = rows(&text).unwrap();
+        let mut r = Records::from_text(&text).unwrap();
+        let mut got = Vec::new();
+        r.for_each_block(
+            |rows| {
+                let mut out = Vec::new();
+                while let Some(row) = rows.next_row().unwrap() {
+                    out.push((
+                        row.line,
+                        vec![
+                            row.text(0).unwrap().to_owned(),
+                            row.text(1).unwrap().to_owned(),
+                        ],
+                    ));
+                }
+                out
+            },
+            |part| -> Result<(), ReadError> {
+                got.extend(part);
+                Ok(())
+            },
+        )
+        .unwrap();
+        assert!(text.len() > 10 * BLOCK_BYTES);
+        assert_eq!(got, want);
     }
 
     #[test]

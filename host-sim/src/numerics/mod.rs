@@ -5,4 +5,5 @@
 pub mod distributions;
 pub mod linalg;
 pub mod optimize;
+pub mod parallel;
 pub mod stats;

@@ -156,6 +156,15 @@ pub struct AllanParams {
     pub random_walk_per_sqrt_s: f64,
 }
 
+impl AllanParams {
+    /// No noise at all.
+    pub const NONE: Self = AllanParams {
+        white_adev_1s: 0.0,
+        flicker_floor: 0.0,
+        random_walk_per_sqrt_s: 0.0,
+    };
+}
+
 /// Sensor noise with the Allan deviation
 /// σ²(τ) = w²·(1 s/τ) + f² + K²·τ/3 for τ ≥ the sample interval Δ.
 ///

@@ -32,11 +32,7 @@ fn quiet_station(preset: &str) -> Scenario {
     s.run.duration_s = 3.0 * DAY;
     s.run.interval_s = 300.0;
     s.tide.step_s = 300.0;
-    s.accelerometer.noise_g = AllanParams {
-        white_adev_1s: 0.0,
-        flicker_floor: 0.0,
-        random_walk_per_sqrt_s: 0.0,
-    };
+    s.accelerometer.noise_g = AllanParams::NONE;
     s.accelerometer.orientation.indexing_std_arcsec = 0.0;
     s.rtd.noise_uv_rms = 0.0;
     s.tiltmeter.noise_arcsec = 0.0;
@@ -468,11 +464,7 @@ fn tide_group_corrections_of_a_gravimeter_are_what_the_tidal_analysis_reports() 
         tide_factor: 1.0,
         tide_delay_s: 0.0,
         pressure_admittance_per_hpa: 0.0,
-        noise: AllanParams {
-            white_adev_1s: 0.0,
-            flicker_floor: 0.0,
-            random_walk_per_sqrt_s: 0.0,
-        },
+        noise: AllanParams::NONE,
     }));
     let (ds, r) = residual(
         &s,

@@ -107,11 +107,7 @@ pub fn quiet(s: &Scenario) -> Scenario {
     q.room.door_rate_per_day = 0.0;
     q.thermostat.controller_std_c = 0.0;
     q.thermostat.setpoint_walk_c_per_sqrt_day = 0.0;
-    q.accelerometer.noise_g = AllanParams {
-        white_adev_1s: 0.0,
-        flicker_floor: 0.0,
-        random_walk_per_sqrt_s: 0.0,
-    };
+    q.accelerometer.noise_g = AllanParams::NONE;
     q.accelerometer.orientation.indexing_std_arcsec = 0.0;
     q.rtd.accuracy_c = 0.0;
     q.rtd.noise_uv_rms = 0.0;
@@ -121,11 +117,7 @@ pub fn quiet(s: &Scenario) -> Scenario {
     q.barometer.weather_std_hpa = 0.0;
     q.barometer.noise_hpa = 0.0;
     if let Some(InstrumentParams::Gravimeter(g)) = &mut q.instrument {
-        g.noise = AllanParams {
-            white_adev_1s: 0.0,
-            flicker_floor: 0.0,
-            random_walk_per_sqrt_s: 0.0,
-        };
+        g.noise = AllanParams::NONE;
     }
     q.effects
         .retain(|e| !matches!(e, ScenarioEffect::ChannelNoise { .. }));

@@ -2,7 +2,7 @@
 //! re-declared here from the AD7124-4 datasheet (Rev. B), not imported from the driver.
 
 use super::*;
-use crate::drivers::test_support::BrokenBus;
+use crate::drivers::test_support::{crc8_reference, BrokenBus};
 use embedded_hal::spi::ErrorKind;
 use embedded_hal_mock::eh1::delay::NoopDelay;
 use embedded_hal_mock::eh1::digital::{Mock as PinMock, State, Transaction as PinT};
@@ -39,22 +39,6 @@ const CHANNEL: [u8; 2] = [0x80, 0x22];
 // ADC_CONTROL: DATA_STATUS bit 10, POWER_MODE = 10 (full) at [7:6], continuous → 0x0480.
 const ADC_CTRL: [u8; 2] = [0x04, 0x80];
 const ID_AD7124_4_REV4: u8 = 0x04;
-
-/// Bitwise CRC-8, polynomial x^8 + x^2 + x + 1, initial 0: written from the definition.
-fn crc8_reference(bytes: &[u8]) -> u8 {
-    let mut crc = 0u8;
-    for &b in bytes {
-        for bit in (0..8).rev() {
-            let input = (b >> bit) & 1;
-            let top = crc >> 7;
-            crc <<= 1;
-            if top ^ input == 1 {
-                crc ^= 0x07;
-            }
-        }
-    }
-    crc
-}
 
 fn wr(addr: u8, value: &[u8], crc: bool) -> Vec<SpiT<u8>> {
     let mut sent = vec![addr];
@@ -93,6 +77,11 @@ fn rd(addr: u8, value: &[u8], crc: bool) -> Vec<SpiT<u8>> {
     rd_with(addr, value, crc, None)
 }
 
+/// A register write and its read-back, as `init` verifies every register it writes.
+fn written(addr: u8, value: &[u8], crc: bool) -> Vec<SpiT<u8>> {
+    [wr(addr, value, crc), rd(addr, value, crc)].concat()
+}
+
 fn reset() -> Vec<SpiT<u8>> {
     vec![
         SpiT::transaction_start(),
@@ -107,16 +96,11 @@ fn board_init() -> Vec<SpiT<u8>> {
         rd(ID, &[ID_AD7124_4_REV4], false),
         wr(ERROR_EN, &ERROR_EN_CRC, false),
         rd(ERROR_EN, &ERROR_EN_CRC, true),
-        wr(IO_CONTROL_1, &IOCON1, true),
-        rd(IO_CONTROL_1, &IOCON1, true),
-        wr(CONFIG_0, &CONFIG, true),
-        rd(CONFIG_0, &CONFIG, true),
-        wr(FILTER_0, &FILTER, true),
-        rd(FILTER_0, &FILTER, true),
-        wr(CHANNEL_0, &CHANNEL, true),
-        rd(CHANNEL_0, &CHANNEL, true),
-        wr(ADC_CONTROL, &ADC_CTRL, true),
-        rd(ADC_CONTROL, &ADC_CTRL, true),
+        written(IO_CONTROL_1, &IOCON1, true),
+        written(CONFIG_0, &CONFIG, true),
+        written(FILTER_0, &FILTER, true),
+        written(CHANNEL_0, &CHANNEL, true),
+        written(ADC_CONTROL, &ADC_CTRL, true),
     ]
     .concat()
 }
@@ -147,11 +131,6 @@ fn finish(d: Driver) {
 }
 
 #[test]
-fn reference_crc_matches_the_catalogue_check_value() {
-    assert_eq!(crc8_reference(b"123456789"), 0xF4);
-}
-
-#[test]
 fn board_default_converts_at_10_sps() {
     // Full power f_CLK = 614.4 kHz, sinc4: 614400 / (32 · 1920) = 10 Hz.
     assert_eq!(Ad7124Config::board_default().output_data_rate_hz(), 10.0);
@@ -178,18 +157,12 @@ fn init_without_crc_sends_no_crc_bytes() {
     let spi = [
         reset(),
         rd(ID, &[ID_AD7124_4_REV4], false),
-        wr(ERROR_EN, &ERROR_EN_NO_CRC, false),
-        rd(ERROR_EN, &ERROR_EN_NO_CRC, false),
-        wr(IO_CONTROL_1, &IOCON1, false),
-        rd(IO_CONTROL_1, &IOCON1, false),
-        wr(CONFIG_0, &CONFIG, false),
-        rd(CONFIG_0, &CONFIG, false),
-        wr(FILTER_0, &FILTER, false),
-        rd(FILTER_0, &FILTER, false),
-        wr(CHANNEL_0, &CHANNEL, false),
-        rd(CHANNEL_0, &CHANNEL, false),
-        wr(ADC_CONTROL, &ADC_CTRL, false),
-        rd(ADC_CONTROL, &ADC_CTRL, false),
+        written(ERROR_EN, &ERROR_EN_NO_CRC, false),
+        written(IO_CONTROL_1, &IOCON1, false),
+        written(CONFIG_0, &CONFIG, false),
+        written(FILTER_0, &FILTER, false),
+        written(CHANNEL_0, &CHANNEL, false),
+        written(ADC_CONTROL, &ADC_CTRL, false),
     ]
     .concat();
     let mut d = driver(&spi, &[], cfg);
@@ -204,8 +177,7 @@ fn init_reports_a_register_that_did_not_read_back() {
         rd(ID, &[ID_AD7124_4_REV4], false),
         wr(ERROR_EN, &ERROR_EN_CRC, false),
         rd(ERROR_EN, &ERROR_EN_CRC, true),
-        wr(IO_CONTROL_1, &IOCON1, true),
-        rd(IO_CONTROL_1, &IOCON1, true),
+        written(IO_CONTROL_1, &IOCON1, true),
         wr(CONFIG_0, &CONFIG, true),
         rd(CONFIG_0, &[0x08, 0x60], true), // still the reset value
     ]

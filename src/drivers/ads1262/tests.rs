@@ -1,9 +1,10 @@
 //! Host tests against embedded-hal-mock. The register map, opcodes and expected bytes are
 //! re-declared here from SBAS661C, not imported, so a wrong constant in the driver cannot agree
-//! with itself; checksums and CRCs are hand-computed or computed by the tiny bitwise CRC below.
+//! with itself; checksums and CRCs are hand-computed or computed by the tiny bitwise CRC of
+//! `drivers::test_support`.
 
 use super::*;
-use crate::drivers::test_support::BrokenBus;
+use crate::drivers::test_support::{crc8_reference, BrokenBus};
 use embedded_hal::spi::ErrorKind;
 use embedded_hal_mock::eh1::delay::NoopDelay;
 use embedded_hal_mock::eh1::digital::{Mock as PinMock, State, Transaction as PinT};
@@ -88,22 +89,6 @@ fn board_init() -> Vec<SpiT<u8>> {
     .concat()
 }
 
-/// Bitwise CRC-8, polynomial x^8 + x^2 + x + 1, initial 0: written from the definition.
-fn crc8_reference(bytes: &[u8]) -> u8 {
-    let mut crc = 0u8;
-    for &b in bytes {
-        crc ^= b;
-        for _ in 0..8 {
-            crc = if crc & 0x80 != 0 {
-                (crc << 1) ^ 0x07
-            } else {
-                crc << 1
-            };
-        }
-    }
-    crc
-}
-
 type Driver = Ads1262<SpiMock<u8>, PinMock, NoopDelay>;
 
 fn driver(spi: &[SpiT<u8>], pin: &[PinT], config: Ads1262Config) -> Driver {
@@ -119,12 +104,6 @@ fn finish(d: Driver) {
     let (mut spi, mut pin, _) = d.release();
     spi.done();
     pin.done();
-}
-
-#[test]
-fn reference_crc_matches_the_catalogue_check_value() {
-    // CRC-8/SMBUS (poly 0x07, init 0) check value over "123456789" is 0xF4.
-    assert_eq!(crc8_reference(b"123456789"), 0xF4);
 }
 
 #[test]
