@@ -83,15 +83,19 @@ pub fn cross_validate(
     let nb = (cfg.folds * cfg.blocks_per_fold).max(2);
     let fold_of = |i: usize| (i * nb / n) % cfg.folds;
     let (mut s_raw, mut n_raw, mut s_z, mut n_z) = (0.0, 0usize, 0.0, 0usize);
-    for f in 0..cfg.folds {
+    // The folds are independent: fitted on all cores, summed in fold order.
+    let folds: Vec<usize> = (0..cfg.folds).collect();
+    let held_out = crate::numerics::parallel::par_map(&folds, |&f| {
         let train: Vec<bool> = (0..n).map(|i| fold_of(i) != f).collect();
         let rows = Rows::with_noise(noise, &ds.t_s, Some(&train));
         if rows.idx.len() < cols.len() + 2 {
-            continue;
+            return None;
         }
         let fit = gls(cols, y, 0.0, &rows);
         let r = raw_residual(cols, &fit.beta, y);
-        let h = held_out_prediction(noise, &ds.t_s, &train, &r);
+        Some(held_out_prediction(noise, &ds.t_s, &train, &r))
+    });
+    for h in held_out.into_iter().flatten() {
         s_raw += h.sum_sq;
         n_raw += h.count;
         s_z += h.chi2;
@@ -478,11 +482,18 @@ fn noise_of(ds: &Dataset, r: &[f64], warm: Option<&NoiseModel>) -> NoiseFit {
         Some(m) => fit(&[m], ML_EVALS_WARM),
         None => {
             let adev_start = NoiseModel::fit(&residual::adev(ds, r), ds.dt_s, ds.span_s());
-            let cold = fit(&[], ML_EVALS_COLD);
-            match adev_start {
-                Some(a) if cold.failure.is_none() => {
-                    // The Allan fit is a second start; keep the more likely of the two.
-                    let alt = fit(&[&a], ML_EVALS_WARM);
+            // The Allan fit is a second start, fitted beside the cold one (another core).
+            let (cold, alt) = std::thread::scope(|s| {
+                let alt = adev_start
+                    .as_ref()
+                    .map(|a| s.spawn(move || fit(&[a], ML_EVALS_WARM)));
+                let cold = fit(&[], ML_EVALS_COLD);
+                let alt = alt.map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)));
+                (cold, alt)
+            });
+            match alt {
+                Some(alt) if cold.failure.is_none() => {
+                    // Keep the more likely of the two.
                     if alt.failure.is_none() && alt.neg2_loglik < cold.neg2_loglik {
                         NoiseFit {
                             evaluations: alt.evaluations + cold.evaluations,
