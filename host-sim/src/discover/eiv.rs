@@ -24,7 +24,8 @@ pub struct ChannelNoise {
     /// Column name.
     pub channel: String,
     /// Standard deviation of one reading's white noise (maximum likelihood of the local linear
-    /// trend model), in the channel's stored unit (`unit`).
+    /// trend model), in the channel's stored unit (`unit`); reported also when not `resolved`
+    /// (until session 4 it was then given as 0, which read as "no reading noise").
     pub noise: f64,
     /// The stored unit (°C and other channels: the log's; tilt: rad; pressure: Pa).
     pub unit: &'static str,
@@ -290,7 +291,7 @@ pub fn denoise(ds: &Dataset, apply: bool) -> (Dataset, Vec<ChannelNoise>) {
         }
         report.push(ChannelNoise {
             channel: c.name.clone(),
-            noise: if resolved { r.sqrt() } else { 0.0 },
+            noise: r.max(0.0).sqrt(),
             unit: match c.kind {
                 ChannelKind::Tilt => "rad",
                 ChannelKind::Pressure => "Pa",

@@ -196,7 +196,9 @@ pub fn text(d: &Discovery) -> String {
                     "smoother of width {:.0} s fitted, the model uses the reading",
                     c.smoothing_s
                 ),
-                _ => "not resolved: used as read".to_owned(),
+                _ => "not resolved (the true value moves more than that from one point to the \
+                      next, so no smoother can separate it): used as read"
+                    .to_owned(),
             }
         );
     }

@@ -621,9 +621,18 @@ fn score_all(
                 }
                 None => continue,
             },
+            // Independent frequencies up to the periodogram's Nyquist (≤ 4096 bins), M, and
+            // the frequency refined continuously between them: the false-alarm probability of
+            // a periodogram's maximum over a band (Baluev 2008, MNRAS 385, 1279, alias-free
+            // approximation) is W·e^(−z)·√z, z = Δχ²/2, where Bonferroni over M frequencies
+            // gives M·e^(−z) — √z more. Where noise peaks, z ≈ ln M: ln(ln M) more in the charge.
+            // (Charged as M alone, a 201.6 s line of 0.09 µg in an independently generated null
+            // log passed at ΔBIC −0.6.)
             Effect::Periodic => match best_periodic(cur, ctx, tides) {
-                // Independent frequencies up to the periodogram's Nyquist (≤ 4096 bins).
-                Some((p, r)) => (p, r, nl_penalty(m_rows.min(4096.0) / 2.0), false),
+                Some((p, r)) => {
+                    let m = m_rows.min(4096.0) / 2.0;
+                    (p, r, nl_penalty(m) + m.ln().max(1.0).ln(), false)
+                }
                 None => continue,
             },
             _ if !effects::grid(e, cur.ds).is_empty() => match best_theta(cur, e, ctx) {

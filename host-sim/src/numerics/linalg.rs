@@ -9,6 +9,8 @@
 //!   column that adds nothing new is *dropped* (coefficient 0 ± ∞) instead of refused — the
 //!   discovery tries candidate columns that may overlap the baseline — and columns can be
 //!   appended one at a time to score candidates against the current model.
+//! - [`solve_square`]: a small square system that is not a least-squares problem (the
+//!   noise model's 3×3 moment equations in `discover::noise`), by LU with partial pivoting.
 
 use nalgebra::{DMatrix, DVector};
 use thiserror::Error;
@@ -147,6 +149,20 @@ pub fn least_squares_with(
         r_inv,
         q,
     })
+}
+
+/// Solves the square system `a·x = b` (`a` by rows) by LU with partial pivoting; `None` when `a`
+/// is not square, its size differs from `b`'s, or it is singular. For small systems that are
+/// not least squares (a least-squares fit goes through [`least_squares`], which never forms the
+/// normal equations).
+pub fn solve_square(a: &[Vec<f64>], b: &[f64]) -> Option<Vec<f64>> {
+    let n = b.len();
+    if a.len() != n || a.iter().any(|row| row.len() != n) {
+        return None;
+    }
+    let m = DMatrix::from_fn(n, n, |r, c| a[r][c]);
+    let x = m.lu().solve(&DVector::from_column_slice(b))?;
+    Some(x.iter().copied().collect())
 }
 
 /// A column counts as dependent when its part orthogonal to the previous columns is below this
@@ -336,6 +352,28 @@ impl OrthonormalBasis {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn solve_square_solves_a_pivoting_3x3_and_refuses_a_singular_one() {
+        // a[0][0] = 0 needs a row exchange; x = (1, −2, 3) by construction.
+        let a = vec![
+            vec![0.0, 2.0, 1.0],
+            vec![4.0, 1.0, -1.0],
+            vec![2.0, -3.0, 5.0],
+        ];
+        let x_true = [1.0, -2.0, 3.0];
+        let b: Vec<f64> = a
+            .iter()
+            .map(|row| row.iter().zip(&x_true).map(|(r, x)| r * x).sum())
+            .collect();
+        let x = solve_square(&a, &b).unwrap();
+        for (xi, ti) in x.iter().zip(&x_true) {
+            assert!((xi - ti).abs() < 1e-14, "{x:?}");
+        }
+        let singular = vec![vec![1.0, 2.0], vec![2.0, 4.0]];
+        assert_eq!(solve_square(&singular, &[1.0, 2.0]), None);
+        assert_eq!(solve_square(&singular, &[1.0]), None);
+    }
 
     fn vandermonde(t: &[f64], order: usize) -> Vec<Vec<f64>> {
         t.iter()

@@ -20,6 +20,25 @@ struct Truth {
     admittance_nm_s2_per_hpa: f64,
 }
 
+impl Truth {
+    /// Band factors off the elastic model by ±1.5 %, a 150 s delay, −3 nm/s² per hPa.
+    const KNOWN: Truth = Truth {
+        diurnal: 1.015,
+        semidiurnal: 0.985,
+        degree3: 1.0,
+        delay_s: 150.0,
+        admittance_nm_s2_per_hpa: -3.0,
+    };
+    /// The elastic model itself: no delay, no pressure.
+    const ELASTIC: Truth = Truth {
+        diurnal: 1.0,
+        semidiurnal: 1.0,
+        degree3: 1.0,
+        delay_s: 0.0,
+        admittance_nm_s2_per_hpa: 0.0,
+    };
+}
+
 /// `days` of 2-minute samples with a one-day gap in the middle.
 fn synthetic(days: f64, truth: &Truth, seed: u64) -> Dataset {
     synthetic_every(120.0, days, truth, seed)
@@ -96,13 +115,7 @@ fn group<'a>(a: &'a TidalAnalysis, name: &str) -> &'a GroupFit {
 
 #[test]
 fn known_band_factors_delay_and_admittance_are_recovered_from_an_ephemeris_record() {
-    let truth = Truth {
-        diurnal: 1.015,
-        semidiurnal: 0.985,
-        degree3: 1.0,
-        delay_s: 150.0,
-        admittance_nm_s2_per_hpa: -3.0,
-    };
+    let truth = Truth::KNOWN;
     let ds = synthetic(40.0, &truth, 7);
     let a = analyse(&ds, &ds.y, &[]).unwrap();
     let names: Vec<&str> = a.groups.iter().map(|g| g.name.as_str()).collect();
@@ -174,13 +187,7 @@ fn known_band_factors_delay_and_admittance_are_recovered_from_an_ephemeris_recor
 
 #[test]
 fn no_delay_gives_zero_phase_and_a_zero_delay() {
-    let truth = Truth {
-        diurnal: 1.0,
-        semidiurnal: 1.0,
-        degree3: 1.0,
-        delay_s: 0.0,
-        admittance_nm_s2_per_hpa: 0.0,
-    };
+    let truth = Truth::ELASTIC;
     let ds = synthetic(30.0, &truth, 11);
     let a = analyse(&ds, &ds.y, &[]).unwrap();
     let d = a.delay.delay_s;
@@ -210,13 +217,7 @@ fn short_records_merge_groups_they_cannot_resolve_and_very_short_ones_are_refuse
         .collect();
     assert_eq!(names, ["Q1+O1+M1", "P1K1+J1", "N2+M2+L2", "S2K2", "M3"]);
     assert_eq!(merged_groups(60.0 * 86_400.0).len(), GROUPS.len());
-    let truth = Truth {
-        diurnal: 1.0,
-        semidiurnal: 1.0,
-        degree3: 1.0,
-        delay_s: 0.0,
-        admittance_nm_s2_per_hpa: 0.0,
-    };
+    let truth = Truth::ELASTIC;
     let mut ds = synthetic(3.0, &truth, 1);
     let keep = ds.t_s.iter().filter(|&&t| t < 86_400.0).count();
     ds.t_s.truncate(keep);
@@ -323,13 +324,7 @@ fn stated_uncertainties_match_the_scatter_over_draws() {
     // probability < 0.5 % each). Measured (12 draws): O1 0.9, M2 0.9, pressure 1.1, delay 1.4
     // (the delay carries a ~1 σ bias: P1 gets the O1 factor in the ephemeris record but its own
     // resonant one in the catalogue).
-    let truth = Truth {
-        diurnal: 1.015,
-        semidiurnal: 0.985,
-        degree3: 1.0,
-        delay_s: 150.0,
-        admittance_nm_s2_per_hpa: -3.0,
-    };
+    let truth = Truth::KNOWN;
     let mut z2 = [0.0; 4];
     let draws = 8;
     for seed in 0..draws {
