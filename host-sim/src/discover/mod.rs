@@ -138,7 +138,7 @@ pub fn discover(
         &sel.accepted,
         &final_noise,
     );
-    let tidal = tidal::for_discovery(&ds, &base.target, &base.columns, &ctx, &sel.accepted);
+    let tidal = tidal_analysis(&ds, &base.target, &base.columns, &ctx, &sel.accepted);
     Ok(Discovery {
         shape_checks,
         baseline_description: base.description.clone(),
@@ -196,4 +196,31 @@ pub(crate) fn note_bad_rows(ds: &mut Dataset, bad: &[import::BadRow]) {
                 .join("; ")
         ));
     }
+}
+
+/// The tidal analysis inside `accomp discover`: the record's baseline target, with the
+/// baseline's columns and every accepted effect except the tide itself and the pressure
+/// admittance (which the analysis fits) as nuisance columns, at their accepted nonlinear
+/// parameters. Here, not in `tidal`, so that `tidal` does not depend on `select` (which
+/// depends on `tidal`'s clock).
+fn tidal_analysis(
+    ds: &Dataset,
+    target: &[f64],
+    base_cols: &[Vec<f64>],
+    ctx: &effects::Context,
+    accepted: &[select::Accepted],
+) -> Result<tidal::TidalAnalysis, String> {
+    if let Some(why) = tidal::not_applicable(ds) {
+        return Err(why);
+    }
+    let mut nuisance = base_cols.to_vec();
+    for a in accepted {
+        if !matches!(
+            a.effect,
+            effects::Effect::TidalGravity | effects::Effect::PressureAdmittance
+        ) {
+            nuisance.extend(effects::columns(&a.effect, ds, ctx, a.theta.value));
+        }
+    }
+    tidal::analyse(ds, target, &nuisance)
 }

@@ -701,15 +701,14 @@ impl NoiseModel {
     }
 }
 
-/// Solves the leading k×k block of `a`·x = `b` (nalgebra's LU with partial pivoting); None when
-/// singular.
+/// Solves the leading k×k block of `a`·x = `b` through the host's one linear-algebra module
+/// (`numerics::linalg::solve_square`, LU with partial pivoting); None when singular.
 fn solve_small(a: &[[f64; 3]; 3], b: &[f64; 3], k: usize) -> Option<[f64; 3]> {
-    let m = nalgebra::DMatrix::from_fn(k, k, |r, c| a[r][c]);
-    let v = nalgebra::DVector::from_fn(k, |r, _| b[r]);
-    let x = m.lu().solve(&v)?;
+    let rows: Vec<Vec<f64>> = a.iter().take(k).map(|r| r[..k].to_vec()).collect();
+    let x = crate::numerics::linalg::solve_square(&rows, &b[..k])?;
     let mut out = [0.0; 3];
-    for (o, xi) in out.iter_mut().zip(x.iter()) {
-        *o = *xi;
+    for (o, xi) in out.iter_mut().zip(x) {
+        *o = xi;
     }
     Some(out)
 }

@@ -594,29 +594,6 @@ pub fn analyse(
     })
 }
 
-/// The analysis inside `accomp discover`: the record's baseline target, with the baseline's
-/// columns and every accepted effect except the tide itself and the pressure admittance (which
-/// the analysis fits) as nuisance columns, at their accepted nonlinear parameters.
-pub fn for_discovery(
-    ds: &Dataset,
-    target: &[f64],
-    base_cols: &[Vec<f64>],
-    ctx: &super::effects::Context,
-    accepted: &[super::select::Accepted],
-) -> Result<TidalAnalysis, String> {
-    use super::effects::Effect;
-    if let Some(why) = not_applicable(ds) {
-        return Err(why);
-    }
-    let mut nuisance = base_cols.to_vec();
-    for a in accepted {
-        if !matches!(a.effect, Effect::TidalGravity | Effect::PressureAdmittance) {
-            nuisance.extend(super::effects::columns(&a.effect, ds, ctx, a.theta.value));
-        }
-    }
-    analyse(ds, target, &nuisance)
-}
-
 /// The model's tide gravity (g, as `effects::tide_series`) on a 60-s grid reaching
 /// `margin_s` beyond the record at both ends, so that the tide can be read at delayed times
 /// (the delay of the joint fit, `select`).
