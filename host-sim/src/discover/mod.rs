@@ -126,10 +126,24 @@ pub fn discover(
     let trend = residual::trend(&ds, &sel.baseline_residual);
     let adev_before = residual::adev(&ds, &sel.baseline_residual);
     let adev_after = residual::adev(&ds, &sel.final_residual);
-    let final_noise =
-        noise::NoiseModel::fit(&adev_after, ds.dt_s, ds.span_s()).unwrap_or_else(|| {
+    // The shape check whitens with the Allan fit of the final residual; where that fit is not
+    // possible it uses white noise, which changes what it calls poor: said, never silent.
+    let mut warnings = ds.warnings.clone();
+    let final_noise = match noise::NoiseModel::fit(&adev_after, ds.dt_s, ds.span_s()) {
+        Some(m) => m,
+        None => {
+            if !sel.accepted.is_empty() {
+                warnings.push(
+                    "shape check: the final residual's Allan deviation could not be fitted \
+                     (too few points on its time grid), so the shape checks whiten with white \
+                     noise of the residual's variance; a \"poor fit\" there may be correlated \
+                     noise"
+                        .into(),
+                );
+            }
             noise::NoiseModel::white(baseline::std(&sel.final_residual).powi(2).max(1e-300))
-        });
+        }
+    };
     let shape_checks = shape::check(
         &ds,
         &ctx,
@@ -152,7 +166,7 @@ pub fn discover(
         trend,
         adev_before,
         adev_after,
-        warnings: ds.warnings.clone(),
+        warnings,
         channel_noise,
         measured_channels,
         tidal,
