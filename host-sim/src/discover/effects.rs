@@ -549,27 +549,13 @@ mod tests {
         let t: Vec<f64> = (0..n).map(|i| 10.0 * f64::from(i)).collect();
         // +1 g for 100 rows, then 0 g: a² drops from 1 to 0 at t = 1000 s.
         let a: Vec<f64> = (0..n).map(|i| if i < 100 { 1.0 } else { 0.0 }).collect();
-        let mut seg = vec![false; n as usize];
-        seg[0] = true;
         let ds = Dataset {
-            t_s: t,
-            y: vec![0.0; n as usize],
-            segment_start: seg,
             channels: vec![Channel {
                 name: "input_g".into(),
                 kind: ChannelKind::Input,
                 values: a,
             }],
-            output_name: "output_g".into(),
-            output_unit: "g".into(),
-            unit_per_g: Some(1.0),
-            input_g: Some(1.0),
-            start_unix_s: None,
-            site: None,
-            dt_s: 10.0,
-            samples_per_point: Vec::new(),
-            notes: Vec::new(),
-            warnings: Vec::new(),
+            ..Dataset::test_g(t, vec![0.0; n as usize], 10.0)
         };
         let c = columns(&Effect::SelfHeating, &ds, &Context::default(), 300.0);
         // Settled before the move; after it the coil cools as e^{−(t − 990)/τ}: the filter holds

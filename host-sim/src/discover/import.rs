@@ -779,6 +779,31 @@ pub fn dataset_from_log(log: &Log, opts: &DatasetOptions) -> Result<Dataset, Imp
     })
 }
 
+#[cfg(test)]
+impl Dataset {
+    /// A record in g starting one segment at its first point, with no channels, date or site:
+    /// the base the unit tests build on (`Dataset { channels, ..Dataset::test_g(..) }`).
+    pub(crate) fn test_g(t_s: Vec<f64>, y: Vec<f64>, dt_s: f64) -> Self {
+        let segment_start = (0..t_s.len()).map(|i| i == 0).collect();
+        Dataset {
+            t_s,
+            y,
+            segment_start,
+            channels: Vec::new(),
+            output_name: "output_g".into(),
+            output_unit: "g".into(),
+            unit_per_g: Some(1.0),
+            input_g: Some(1.0),
+            start_unix_s: None,
+            site: None,
+            dt_s,
+            samples_per_point: Vec::new(),
+            notes: Vec::new(),
+            warnings: Vec::new(),
+        }
+    }
+}
+
 impl Dataset {
     /// The first channel of a kind.
     pub fn channel(&self, kind: ChannelKind) -> Option<&Channel> {

@@ -1544,24 +1544,7 @@ mod tests {
                 shape(x) + e
             })
             .collect();
-        let mut seg = vec![false; n];
-        seg[0] = true;
-        let ds = Dataset {
-            t_s: t.clone(),
-            y: y.clone(),
-            segment_start: seg,
-            channels: Vec::new(),
-            output_name: "output_g".into(),
-            output_unit: "g".into(),
-            unit_per_g: Some(1.0),
-            input_g: Some(1.0),
-            start_unix_s: None,
-            site: None,
-            dt_s: 60.0,
-            samples_per_point: Vec::new(),
-            notes: Vec::new(),
-            warnings: Vec::new(),
-        };
+        let ds = Dataset::test_g(t.clone(), y.clone(), 60.0);
         let base = vec![vec![1.0; n], t.iter().map(|x| x / 86_400.0).collect()];
         select(
             &ds,

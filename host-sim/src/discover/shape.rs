@@ -279,25 +279,8 @@ mod tests {
     use crate::discover::select::CvScore;
 
     fn dataset(y: Vec<f64>) -> Dataset {
-        let n = y.len();
-        let mut seg = vec![false; n];
-        seg[0] = true;
-        Dataset {
-            t_s: (0..n).map(|i| 10.0 * i as f64).collect(),
-            y,
-            segment_start: seg,
-            channels: Vec::new(),
-            output_name: "output_g".into(),
-            output_unit: "g".into(),
-            unit_per_g: Some(1.0),
-            input_g: Some(1.0),
-            start_unix_s: None,
-            site: None,
-            dt_s: 10.0,
-            samples_per_point: Vec::new(),
-            notes: Vec::new(),
-            warnings: Vec::new(),
-        }
+        let t_s = (0..y.len()).map(|i| 10.0 * i as f64).collect();
+        Dataset::test_g(t_s, y, 10.0)
     }
 
     /// The check of a step accepted at `theta` on `y` (white noise of the pseudo-noise's

@@ -453,20 +453,11 @@ mod tests {
             .collect();
         let n = t.len();
         let ds = Dataset {
-            y: (0..n).map(|i| i as f64).collect(),
-            segment_start: (0..n).map(|i| i == 0).collect(),
-            t_s: t,
-            channels: Vec::new(),
             output_name: "y".into(),
             output_unit: "v".into(),
             unit_per_g: None,
             input_g: None,
-            start_unix_s: None,
-            site: None,
-            dt_s: 60.0,
-            samples_per_point: Vec::new(),
-            notes: Vec::new(),
-            warnings: Vec::new(),
+            ..Dataset::test_g(t, (0..n).map(|i| i as f64).collect(), 60.0)
         };
         let g = RegularGrid::new(&ds);
         let p = g.place(&ds.y);
