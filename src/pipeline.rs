@@ -184,7 +184,13 @@ pub struct Frame {
 }
 
 /// Flags a channel's driver faults; returns true when the code must not be used.
+#[inline]
 fn driver_faults(flags: ChannelFlags, status: &mut Status) -> bool {
+    // A clean conversion (every sample, as a rule) skips the six tests below: ≈ 60 instructions
+    // per channel on the M4F.
+    if flags.0 == 0 {
+        return false;
+    }
     if flags.has(ChannelFlags::CHECKSUM) {
         status.set(Status::ADC_CHECKSUM);
     }
