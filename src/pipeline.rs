@@ -293,30 +293,24 @@ pub fn process_prepared(
         status.set(Status::RTD_INVALID);
     } else {
         let temp = table.temperature(raw.rtd);
-        match temp.rtd {
-            Ok((ohms, t)) => {
-                frame.rtd_ohms = ohms;
-                frame.temperature_c = t;
+        // NaN when unknown: the frame's value then stays NaN.
+        frame.rtd_ohms = temp.ohms;
+        match temp.fault {
+            None => {
+                frame.temperature_c = temp.t_c;
                 temperature = Some(temp);
             }
-            Err((ohms, fault)) => {
-                if let Some(ohms) = ohms {
-                    frame.rtd_ohms = ohms;
-                }
-                match fault {
-                    // A unipolar code at full scale means the excitation found no path: open.
-                    RtdFault::Adc(AdcError::Saturated) => {
-                        status.set(Status::RTD_OPEN | Status::ADC_SATURATED)
-                    }
-                    RtdFault::Adc(e) => {
-                        adc_fault(e, &mut status);
-                        status.set(Status::RTD_INVALID);
-                    }
-                    RtdFault::Rtd(RtdError::Open) => status.set(Status::RTD_OPEN),
-                    RtdFault::Rtd(RtdError::Short) => status.set(Status::RTD_SHORT),
-                    RtdFault::Rtd(_) => status.set(Status::RTD_INVALID),
-                }
+            // A unipolar code at full scale means the excitation found no path: open.
+            Some(RtdFault::Adc(AdcError::Saturated)) => {
+                status.set(Status::RTD_OPEN | Status::ADC_SATURATED)
             }
+            Some(RtdFault::Adc(e)) => {
+                adc_fault(e, &mut status);
+                status.set(Status::RTD_INVALID);
+            }
+            Some(RtdFault::Rtd(RtdError::Open)) => status.set(Status::RTD_OPEN),
+            Some(RtdFault::Rtd(RtdError::Short)) => status.set(Status::RTD_SHORT),
+            Some(RtdFault::Rtd(_)) => status.set(Status::RTD_INVALID),
         }
     }
 

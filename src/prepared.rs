@@ -225,9 +225,6 @@ struct ThermalTerms {
     /// What c loses per accelerometer code: (volts per code)/K1(T), [`G_BITS`] +
     /// [`CODE_FACTOR_BITS`]. c = c0 − code·this + sign·sin(φ − φ0).
     c_per_code: i64,
-    /// The temperature the terms are for (clamped), [`CELSIUS_BITS`]: the tilt's f64 path
-    /// evaluates K1 at it.
-    t_used: i64,
     /// K1(T), V/g: the tilt correction in volts for the linearized output.
     k1_v_per_g32: f32,
     /// K2(T), g/g².
@@ -239,13 +236,19 @@ struct ThermalTerms {
     dt: f32,
 }
 
-/// One RTD code's results: its conversion and the temperature terms of the compensation.
+/// One RTD code's results: its conversion and the temperature terms of the compensation. Kept
+/// to 64 bytes: copied in and out of the cache, a larger one costs a library `memcpy` (≈ 80
+/// instructions) instead of a few load/store-multiples.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct Temperature {
     /// The AD7124 code these results are for (the cache key).
     code: u32,
-    /// (R in Ω, T in °C), or why there is no temperature (with the ohms when known).
-    pub(crate) rtd: RtdResult,
+    /// Why there is no temperature; None when `ohms` and `t_c` hold one.
+    pub(crate) fault: Option<RtdFault>,
+    /// R in Ω; NaN when unknown (a conversion-level fault).
+    pub(crate) ohms: f64,
+    /// T in °C; NaN with a fault.
+    pub(crate) t_c: f64,
     /// The mixed-precision path's terms; None for an all-f64 table, or when a term does not fit
     /// the fixed-point range (that sample then takes the f64 path).
     terms: Option<ThermalTerms>,
@@ -702,14 +705,24 @@ impl PreparedCalibration {
     #[inline(never)]
     fn temperature_uncached(&self, code: u32) -> Temperature {
         let (rtd, t_fixed) = self.rtd.convert(code);
-        let terms = match (&self.fast, rtd) {
+        let (ohms, t_c, fault) = match rtd {
+            Ok((ohms, t_c)) => (ohms, t_c, None),
+            Err((ohms, fault)) => (ohms.unwrap_or(f64::NAN), f64::NAN, Some(fault)),
+        };
+        let terms = match &self.fast {
             // Below 0 °C (the f64 inverse) T reaches the fixed-point terms rounded to 2^-40 °C.
-            (Some(fast), Ok((_, t_c))) => t_fixed
+            Some(fast) if fault.is_none() => t_fixed
                 .or_else(|| from_f64(t_c, CELSIUS_BITS))
                 .and_then(|t| fast.terms(t)),
             _ => None,
         };
-        Temperature { code, rtd, terms }
+        Temperature {
+            code,
+            fault,
+            ohms,
+            t_c,
+            terms,
+        }
     }
 
     /// Tilt correction (eq. 5) and both compensations for an accelerometer code (E = `e_v` volts)
@@ -728,11 +741,12 @@ impl PreparedCalibration {
             (false, None) => return Err(CompensateFault::TiltNeeded),
             (false, Some(code)) => Some(code),
         };
-        let Ok((_, t_c)) = temperature.rtd else {
+        if temperature.fault.is_some() {
             return Err(CompensateFault::Failed);
-        };
+        }
+        let t_c = temperature.t_c;
         match (&self.fast, &temperature.terms) {
-            (Some(fast), Some(terms)) => fast.compensate(terms, accel_code, phi, &self.tilt),
+            (Some(fast), Some(terms)) => fast.compensate(terms, t_c, accel_code, phi, &self.tilt),
             _ => self.compensate_f64(e_v, t_c, phi),
         }
     }
@@ -962,7 +976,6 @@ impl FastThermal {
             // c = K0 − E/K1 with E = code·per_code − offset.
             c0_g: bias + mul_hi(self.offset_g_center, ratio),
             c_per_code: mul_hi(self.c_per_code_center, ratio),
-            t_used: t,
             k1_v_per_g32: self.k1_center32 * (1.0 + eta32),
             k2,
             lin_offset_v: mul_hi(dt << (DT_BITS - CELSIUS_BITS), self.lin_offset_v_per_c),
@@ -970,10 +983,10 @@ impl FastThermal {
         })
     }
 
-    /// K1 at the terms' temperature in f64, for the tilt's f64 path.
-    fn k1_v_per_g(&self, terms: &ThermalTerms) -> f64 {
-        let t = to_f64(terms.t_used, CELSIUS_BITS);
-        self.k1_v_per_g.eval((t - self.center_c) / self.half_span_c)
+    /// K1 at T (clamped to the calibrated range) in f64, for the tilt's f64 path.
+    fn k1_v_per_g(&self, t_c: f64) -> f64 {
+        let x = (t_c - self.center_c) / self.half_span_c;
+        self.k1_v_per_g.eval(x.clamp(-1.0, 1.0))
     }
 
     /// Both compensations of one accelerometer code with the temperature's terms. Fixed point
@@ -983,6 +996,7 @@ impl FastThermal {
     fn compensate(
         &self,
         terms: &ThermalTerms,
+        t_c: f64,
         accel_code: i32,
         tilt_code: Option<i32>,
         tilt: &PreparedTilt,
@@ -1010,7 +1024,7 @@ impl FastThermal {
                     let s = tilt.sign * sin;
                     (
                         from_f64(s, G_BITS),
-                        from_f64(self.k1_v_per_g(terms) * s, VOLT_BITS),
+                        from_f64(self.k1_v_per_g(t_c) * s, VOLT_BITS),
                     )
                 }
             }
@@ -1071,6 +1085,11 @@ mod tests {
     use super::*;
     use crate::table::tests::paper_table;
     use crate::units::Volts;
+
+    #[test]
+    fn a_temperature_fits_in_64_bytes_so_the_cache_copies_it_inline() {
+        assert!(core::mem::size_of::<Option<Temperature>>() <= 64);
+    }
 
     #[test]
     fn the_root_series_matches_the_closed_form_to_f32_precision() {
@@ -1195,7 +1214,7 @@ mod tests {
             .0;
         let e = p.accel_volts(accel).unwrap();
         let temperature = p.temperature(rtd);
-        let (_, t_c) = temperature.rtd.unwrap();
+        let t_c = temperature.t_c;
         let (a, lin, clamped) = p.compensate(accel, e, &temperature, Some(0)).unwrap();
         let tilt0 = p.tilt.phi_rad_f64(0);
         let (k, _) = t.thermal.coefficients_at(Celsius(t_c)).unwrap();
