@@ -89,9 +89,10 @@ pub(crate) fn from_f32(v: f32, bits: u32) -> Option<i64> {
 }
 
 /// Fixed (`bits` ≤ 64 fraction bits) → f64, correctly rounded (to nearest, ties to even: the
-/// bits of `raw as f64 / 2^bits`). Integer operations only: compiler-builtins' i64 → f64
-/// conversion costs ≈ 42 instructions on the M4F, this ≈ 25, and the per-sample path makes
-/// several; the scale by 2^-bits goes straight into the exponent field.
+/// bits of `raw as f64 / 2^bits`). Integer operations only, and no rounding work for |raw| < 2^53
+/// (a_i, T and R on the per-sample path), where the conversion is exact: compiler-builtins'
+/// i64 → f64 conversion costs ≈ 42 instructions on the M4F, and the per-sample path makes five.
+/// The scale by 2^-bits goes straight into the exponent field.
 #[inline]
 pub(crate) fn to_f64(raw: i64, bits: u32) -> f64 {
     if raw == 0 {
@@ -100,17 +101,20 @@ pub(crate) fn to_f64(raw: i64, bits: u32) -> f64 {
     let sign = (raw as u64) & (1 << 63);
     let magnitude = raw.unsigned_abs();
     let zeros = magnitude.leading_zeros();
-    // The leading one at bit 63; its 53 bits are the significand, the 11 below are rounded off.
-    let normalized = magnitude << zeros;
-    let mut significand = normalized >> 11;
-    let rest = normalized & 0x7FF;
-    if rest > 0x400 || (rest == 0x400 && significand & 1 != 0) {
-        significand += 1; // a carry into bit 53 moves the exponent up by one: still right
-    }
-    // Value = normalized·2^-(63 + bits − (63 − zeros))… the leading bit is 2^(63 − zeros − bits):
-    // biased exponent 1023 + 63 − zeros − bits ≥ 1023 − 64 > 0. The significand's own leading
-    // bit (2^52) adds one to the exponent field, hence the − 1.
+    // The leading one of the 53-bit significand at bit 52: the value is significand·2^(e − 52)
+    // with e = 63 − zeros − bits; the significand's own leading bit adds one to the exponent
+    // field, hence 1023 − 1 (biased e ≥ 1023 − 64 > 0: always normal).
     let exponent_field = u64::from(1023 + 63 - 1 - zeros - bits);
+    let significand = if zeros >= 11 {
+        magnitude << (zeros - 11)
+    } else {
+        let shift = 11 - zeros; // 1..=11 bits rounded off
+        let kept = magnitude >> shift;
+        let rest = magnitude & ((1 << shift) - 1);
+        let half = 1 << (shift - 1);
+        // A carry into bit 53 moves the exponent up by one through the addition below.
+        kept + u64::from(rest > half || (rest == half && kept & 1 != 0))
+    };
     f64::from_bits(sign | ((exponent_field << 52) + significand))
 }
 

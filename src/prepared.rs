@@ -726,7 +726,8 @@ impl PreparedCalibration {
     }
 
     /// Tilt correction (eq. 5) and both compensations for an accelerometer code (E = `e_v` volts)
-    /// at a valid temperature. `tilt_code` is None when the tilt channel is invalid.
+    /// at a valid temperature. `tilt_code` is None when the tilt channel is invalid. Both values
+    /// of an `Ok` are finite (a non-finite result is `Failed`).
     #[inline]
     pub(crate) fn compensate(
         &self,
@@ -1068,7 +1069,9 @@ impl FastThermal {
             .zip(from_f32(small, VOLT_BITS))
             .and_then(|(e, small)| e.checked_sub(small))
             .ok_or(Failed)?;
-        finite((a_i, to_f64(lin, VOLT_BITS), terms.clamped))
+        // Finite by construction (fixed point converted, or the f64 root of a non-negative
+        // discriminant over a finite c): no check needed.
+        Ok((a_i, to_f64(lin, VOLT_BITS), terms.clamped))
     }
 }
 
