@@ -7,7 +7,8 @@
 //! need more than f32's 24 bits (E, c, a_i, the linearized output, all needed to ~1e-10
 //! relative) are carried as i64 with a fixed binary point, and the small corrections stay f32.
 //!
-//! Formats: volts with [`VOLT_BITS`] fraction bits (±128 V, 1.4e-17 V resolution), g with
+//! Formats: volts with [`VOLT_BITS`] fraction bits (±2048 V, 2.2e-16 V resolution: E below 2 V is
+//! then under 2^53 and converts to f64 without rounding work), g with
 //! [`G_BITS`] (±32768 g, 3.6e-15 g). A per-code factor carries 32 more fraction bits than its
 //! product so that [`mul_code`] keeps ~2^-60 relative precision.
 //!
@@ -15,7 +16,7 @@
 //! and the firmware compute the same bits.
 
 /// Fraction bits of a fixed-point voltage.
-pub(crate) const VOLT_BITS: u32 = 56;
+pub(crate) const VOLT_BITS: u32 = 52;
 /// Fraction bits of a fixed-point acceleration in g.
 pub(crate) const G_BITS: u32 = 48;
 /// Extra fraction bits of a per-code factor over its product ([`mul_code`]).
@@ -85,6 +86,19 @@ pub(crate) fn from_f32(v: f32, bits: u32) -> Option<i64> {
         Some(i64::from(scaled as i32) << (bits - F32_FRACTION_BITS))
     } else {
         from_f64(f64::from(v), bits)
+    }
+}
+
+/// f32 → fixed with `bits` (≥ `fast_bits`) fraction bits, truncated towards zero to
+/// 2^-`fast_bits` when |v| < 2^(31 − `fast_bits`) (one VMUL and one VCVT), exactly
+/// ([`from_f32_exact`]) beyond. None when not finite or out of range.
+#[inline]
+pub(crate) fn from_f32_truncated(v: f32, fast_bits: u32, bits: u32) -> Option<i64> {
+    let scaled = v * (pow2(fast_bits) as f32);
+    if scaled.abs() < 2_147_483_648.0 {
+        Some(i64::from(scaled as i32) << (bits - fast_bits))
+    } else {
+        from_f32_exact(v, bits)
     }
 }
 
@@ -267,7 +281,7 @@ mod tests {
             }
         }
         assert_eq!(to_f64(0, G_BITS).to_bits(), 0.0f64.to_bits());
-        assert_eq!(to_f64(i64::MIN, VOLT_BITS), -128.0);
+        assert_eq!(to_f64(i64::MIN, VOLT_BITS), -2048.0);
     }
 
     #[test]
@@ -286,6 +300,25 @@ mod tests {
         assert_eq!(from_f32(f32::NAN, G_BITS), None);
         assert_eq!(from_f32(f32::INFINITY, G_BITS), None);
         assert_eq!(from_f32(-1.5, G_BITS), Some(-3 << (G_BITS - 1)));
+    }
+
+    #[test]
+    fn from_f32_truncated_is_within_its_fast_resolution_and_exact_beyond() {
+        for a in numbers(43).take(100_000) {
+            let v = f32::from_bits((a as u32) & 0xC3FF_FFFF); // |v| < 2^8
+            if !v.is_finite() {
+                continue;
+            }
+            let got = to_f64(from_f32_truncated(v, 26, 40).unwrap(), 40);
+            let exact = f64::from(v);
+            if exact.abs() < 32.0 {
+                assert!((got - exact).abs() < pow2(26).recip(), "{v:e}");
+                assert!(got.abs() <= exact.abs(), "towards zero: {v:e}");
+            } else {
+                assert_eq!(got, exact, "{v:e}");
+            }
+        }
+        assert_eq!(from_f32_truncated(f32::NAN, 26, 40), None);
     }
 
     #[test]

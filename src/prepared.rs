@@ -19,7 +19,7 @@ use crate::adc::AdcError;
 use crate::adc::AdcScale;
 use crate::compensation::ThermalCompensator;
 use crate::fixed::{
-    from_f32, from_f32_exact, from_f64, mul_code, mul_hi, sqrt_f32, to_f32, to_f64,
+    from_f32, from_f32_truncated, from_f64, mul_code, mul_hi, sqrt_f32, to_f32, to_f64,
     CODE_FACTOR_BITS, G_BITS, VOLT_BITS,
 };
 use crate::frontend::{
@@ -113,8 +113,6 @@ const X_BITS: u32 = 30;
 const DIFF_BITS: u32 = 24;
 /// Fraction bits of a ratio near 1 (K1(Tc)/K1(T)) and of η = K1(T)/K1(Tc) − 1.
 const RATIO_BITS: u32 = 62;
-/// Fraction bits of T − T0 for the linearized offset's [`mul_hi`] (|T − T0| < 2^8 °C).
-const DT_BITS: u32 = 54;
 
 /// 2^-n as f64.
 fn ulp(n: u32) -> f64 {
@@ -165,12 +163,13 @@ struct FastThermal {
     /// (volts per code)/K1(Tc), [`G_BITS`] + [`CODE_FACTOR_BITS`] + 2 (a [`mul_hi`] by a
     /// [`RATIO_BITS`] ratio gives [`G_BITS`] + [`CODE_FACTOR_BITS`]).
     c_per_code_center: i64,
-    /// ADC offset/K1(Tc), g, [`G_BITS`] + 2.
+    /// ADC offset/K1(Tc), g, [`G_BITS`].
     offset_g_center: i64,
     /// K2 in f32 throughout: it only multiplies a², ≤ 2.25 g², and is ≤ 1e-4 g/g².
     k2: [f32; N_COEFFS],
     /// K1(T0)·(K0' + δo'·a_p − δp'·a_o)(T0), V/°C: the part of ΔE/ΔT independent of E,
-    /// [`VOLT_BITS`] + 64 − [`DT_BITS`].
+    /// [`VOLT_BITS`] + [`CODE_FACTOR_BITS`] − [`DIFF_BITS`] (a [`mul_code`] by T − T0 at
+    /// 2^-24 °C).
     lin_offset_v_per_c: i64,
     /// K1 in f64 and its scale, for the tilt's f64 path (tilts beyond [`MAX_F32_TILT_RAD`]).
     k1_v_per_g: TempPoly,
@@ -410,7 +409,8 @@ impl PreparedRtd {
         }
         let root = 1.0 + sqrt_f32(one_plus_u);
         let delta = -u / (root * root);
-        let Some(correction) = from_f32_exact(q_over_a32 * delta, CELSIUS_BITS) else {
+        // |(q/A)·δ| < 32 °C up to ≈ 250 °C: one VCVT, truncated to 2^-26 °C; exact beyond.
+        let Some(correction) = from_f32_truncated(q_over_a32 * delta, 26, CELSIUS_BITS) else {
             return (self.convert_f64(code as u32), None);
         };
         let t = q_over_a + correction;
@@ -445,8 +445,9 @@ impl PreparedRtd {
 
     /// Bound of |T − the exact CVD inverse of the code's resistance| at T ≥ 0 °C on the fixed
     /// path: the f32 correction's 10 roundings (10u·|(q/A)·δ|), q/A's truncation to 2^-20 °C
-    /// before it (through d((q/A)·δ)/d(q/A) ≈ 2δ: 2^-19·|δ|), and the fixed-point q/A (its
-    /// floor, the per-code factor's rounding times 2^24 codes, 1/A's rounding: < 2^-38 °C).
+    /// before it (through d((q/A)·δ)/d(q/A) ≈ 2δ: 2^-19·|δ|), the correction's truncation to
+    /// 2^-26 °C, and the fixed-point q/A (its floor, the per-code factor's rounding times 2^24
+    /// codes, 1/A's rounding: < 2^-38 °C).
     fn error_bound_c(&self, t: f64) -> f64 {
         let (q_over_a, correction) = self.correction_c(libm::fmax(t, 0.0));
         let delta = if q_over_a > 0.0 {
@@ -454,7 +455,10 @@ impl PreparedRtd {
         } else {
             0.0
         };
-        10.0 * U32 * libm::fabs(correction) + 2.0 * delta * ulp(Q_OVER_A_F32_BITS) + ulp(38)
+        10.0 * U32 * libm::fabs(correction)
+            + 2.0 * delta * ulp(Q_OVER_A_F32_BITS)
+            + ulp(26)
+            + ulp(38)
     }
 }
 
@@ -837,12 +841,13 @@ impl FastThermal {
         let bias_err = FixedPoly::ROUNDING_ULPS * ulp(G_BITS) + slope_x(&bias) * dx;
         // ρ: the series' truncation; η's own rounding (Horner) and its x error; the f32 second
         // order η²(1 − η) (η truncated to 2^-32 and rounded: 2|η|·(2^-32 + u|η|); three
-        // roundings: 4u·η²; its conversion's truncation 2^-62).
+        // roundings: 4u·η²; its conversion's truncation 2^-40).
         let ratio_err = eps * eps * eps * eps / (1.0 - eps)
             + (FixedPoly::ROUNDING_ULPS + 2.0) * ulp(RATIO_BITS)
             + slope_x(&eta_poly) * dx
             + 2.0 * eps * (ulp(32) + U32 * eps)
-            + 4.0 * U32 * eps * eps;
+            + 4.0 * U32 * eps * eps
+            + ulp(40);
         let k1_err = 2.0 * ratio_err * c_max;
         // Plain Horner: up to 9 roundings for c4, hence 10u = 1.25 × 8u.
         let k2_err = 1.25 * f32_poly_bound(&k2, 0, dx32) * c_max * c_max;
@@ -862,7 +867,10 @@ impl FastThermal {
         let t_err = rtd.error_bound_c(s.max.0);
         let slope = |p: &TempPoly| slope_x(p) / ts;
         let t_err_g = t_err * (slope(&bias) + c_max * slope(&k1) / k1_min);
-        let a_i_g = bias_err + k1_err + k2_err + root_err + tilt_err + t_err_g + fixed_err;
+        // offset/K1 through ratio − 1 at 2^-32 (the rest of its error is in k1_err's ρ).
+        let offset_err = libm::fabs(accel.offset / k1_center) * ulp(32);
+        let a_i_g =
+            bias_err + k1_err + k2_err + root_err + tilt_err + t_err_g + offset_err + fixed_err;
 
         // Linearized: ΔE = dt·(s0 + E·s1 + s2·a²); s0·dt in fixed point, the rest in f32 with
         // ≤ 6u relative error; |dt| ≤ span, |E| ≤ the ADC's full scale.
@@ -889,8 +897,11 @@ impl FastThermal {
         let e32_err = U32
             * span
             * (libm::fabs(lin_gain) + 2.0 * libm::fabs(lin_k2) * c_max / libm::fabs(k1_t0));
-        // dt reaches f32 truncated to 2^-24 °C.
-        let dt32_err = U32 * (e_max * libm::fabs(lin_gain) + libm::fabs(lin_k2) * c_max * c_max);
+        // dt is truncated to 2^-24 °C (for the offset term's product and for f32).
+        let dt32_err = U32
+            * (libm::fabs(lin_offset_v_per_c)
+                + e_max * libm::fabs(lin_gain)
+                + libm::fabs(lin_k2) * c_max * c_max);
         // The tilt correction in volts: K1 (3u: K1(Tc) and 1 + η rounded, η truncated) times
         // sign·sin φ (6u) in f32, then fixed.
         let tilt_v_err = 9.0 * U32 * upper_bound_abs(&k1) * f64::from(MAX_F32_TILT_RAD);
@@ -928,9 +939,12 @@ impl FastThermal {
                     accel.per_code / k1_center,
                     G_BITS + CODE_FACTOR_BITS + 2,
                 )?,
-                offset_g_center: from_f64(accel.offset / k1_center, G_BITS + 2)?,
+                offset_g_center: from_f64(accel.offset / k1_center, G_BITS)?,
                 k2: k2.coeffs.map(|c| c as f32),
-                lin_offset_v_per_c: from_f64(lin_offset_v_per_c, VOLT_BITS + 64 - DT_BITS)?,
+                lin_offset_v_per_c: from_f64(
+                    lin_offset_v_per_c,
+                    VOLT_BITS + CODE_FACTOR_BITS - DIFF_BITS,
+                )?,
                 k1_v_per_g: k1,
                 center_c: tc,
                 half_span_c: ts,
@@ -965,22 +979,26 @@ impl FastThermal {
         // ≈ 1e-13 of the ratio; the activation's bound has the general case).
         let eta = self.k1_ratio.eval(x);
         let eta32 = ((eta >> (RATIO_BITS - 32)) as i32) as f32 * (1.0 / 4_294_967_296.0);
-        let second = from_f32_exact(eta32 * eta32 * (1.0 - eta32), RATIO_BITS)?;
+        // η²(1 − η) ≤ 2^-8: truncated to 2^-40 (one VCVT) below 2^-9, exact above.
+        let second = from_f32_truncated(eta32 * eta32 * (1.0 - eta32), 40, RATIO_BITS)?;
         let ratio = (1i64 << RATIO_BITS) - eta + second;
         let x32 = x as f32 * (1.0 / (1u32 << X_BITS) as f32);
         let [k2_0, k2_1, k2_2, k2_3, k2_4] = self.k2;
         let k2 = (((k2_4 * x32 + k2_3) * x32 + k2_2) * x32 + k2_1) * x32 + k2_0;
-        // |T − T0| < 128 °C (checked at activation): both shifts stay in range.
-        let dt = t - self.t0;
+        // |T − T0| < 128 °C (checked at activation): the i32 holds it at 2^-24 °C.
+        let dt = ((t - self.t0) >> (CELSIUS_BITS - DIFF_BITS)) as i32;
+        // ratio − 1 = −η + η²(1 − η), |·| < 1/8: an i32 at 2^-32 for the offset term (offset/K1
+        // is small: its product needs no more).
+        let ratio_minus_one = ((ratio - (1i64 << RATIO_BITS)) >> (RATIO_BITS - 32)) as i32;
         Some(ThermalTerms {
             clamped,
-            // c = K0 − E/K1 with E = code·per_code − offset.
-            c0_g: bias + mul_hi(self.offset_g_center, ratio),
+            // c = K0 − E/K1 with E = code·per_code − offset: offset/K1 = (offset/K1(Tc))·ratio.
+            c0_g: bias + self.offset_g_center + mul_code(ratio_minus_one, self.offset_g_center),
             c_per_code: mul_hi(self.c_per_code_center, ratio),
             k1_v_per_g32: self.k1_center32 * (1.0 + eta32),
             k2,
-            lin_offset_v: mul_hi(dt << (DT_BITS - CELSIUS_BITS), self.lin_offset_v_per_c),
-            dt: ((dt >> (CELSIUS_BITS - DIFF_BITS)) as i32) as f32 * (U32 as f32),
+            lin_offset_v: mul_code(dt, self.lin_offset_v_per_c),
+            dt: dt as f32 * (U32 as f32),
         })
     }
 
