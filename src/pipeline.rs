@@ -288,18 +288,18 @@ pub fn process_prepared(
     }
 
     // RTD: ratiometric ohms → °C, with the compensation's temperature terms (cached per code).
-    let mut temperature = None;
-    if driver_faults(raw.rtd_flags, &mut status) {
+    // (Held in place: a move of the 64-byte Temperature is ≈ 17 instructions.)
+    let temperature = if driver_faults(raw.rtd_flags, &mut status) {
         status.set(Status::RTD_INVALID);
+        None
     } else {
-        let temp = table.temperature(raw.rtd);
+        Some(table.temperature(raw.rtd))
+    };
+    if let Some(temp) = &temperature {
         // NaN when unknown: the frame's value then stays NaN.
         frame.rtd_ohms = temp.ohms;
         match temp.fault {
-            None => {
-                frame.temperature_c = temp.t_c;
-                temperature = Some(temp);
-            }
+            None => frame.temperature_c = temp.t_c,
             // A unipolar code at full scale means the excitation found no path: open.
             Some(RtdFault::Adc(AdcError::Saturated)) => {
                 status.set(Status::RTD_OPEN | Status::ADC_SATURATED)
@@ -347,14 +347,17 @@ pub fn process_prepared(
         status.set(Status::RTD_INVALID);
     }
     let (e, t) = (frame.output_v, frame.temperature_c);
-    let Some(temperature) = temperature.filter(|_| !(fixed::is_nan(e) || fixed::is_nan(t))) else {
+    let Some(temperature) = temperature
+        .as_ref()
+        .filter(|temp| temp.fault.is_none() && !(fixed::is_nan(e) || fixed::is_nan(t)))
+    else {
         // Already flagged above; the compensated values stay NaN.
         frame.status = status;
         return frame;
     };
     // An Ok of `compensate` is finite (its contract; the f64 path checks, the fixed-point path
     // cannot produce anything else).
-    match table.compensate(raw.accel, e, &temperature, tilt_code) {
+    match table.compensate(raw.accel, e, temperature, tilt_code) {
         Ok((a_i, lin, clamped)) => {
             frame.a_i_exact_g = a_i;
             frame.output_linearized_v = lin;

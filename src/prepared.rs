@@ -852,9 +852,10 @@ impl FastThermal {
         // Plain Horner: up to 9 roundings for c4, hence 10u = 1.25 × 8u.
         let k2_err = 1.25 * f32_poly_bound(&k2, 0, dx32) * c_max * c_max;
         // The series: g ≈ w/4 with w = 4K2c in f32 (K2 and c rounded, one product, the series)
-        // and c·g in f32 (one more rounding of c, one product): 10u·|c·g|; plus c's truncation
-        // to 2^-24 before its conversion to f32, which moves c·g by K2·c·2^-24.
-        let root_err = 10.0 * U32 * c_max * k2_max * c_max + c_max * k2_max * U32;
+        // and c·g in f32 (one more rounding of c, one product): 10u·|c·g|; plus c's conversion
+        // to f32 ([`to_f32`]: 2u·|c| + 2^-40), which moves c·g by K2·c times as much.
+        let root_err =
+            10.0 * U32 * c_max * k2_max * c_max + c_max * k2_max * (2.0 * U32 * c_max + ulp(40));
         // Tilt: sign·sin φ in f32, ≤ 6u relative (φ from the code 2u, the series 2u) of at most
         // MAX_F32_TILT_RAD, in g directly (c takes it without a division by K1).
         let tilt_err = 6.0 * U32 * f64::from(MAX_F32_TILT_RAD);
@@ -893,8 +894,9 @@ impl FastThermal {
             libm::fabs(accel.per_code) * ADS1262_HALF_SCALE + libm::fabs(accel.offset),
         );
         let span = s.max.0 - s.min.0;
-        // E reaches f32 truncated to 2^-24 V (then rounded): through E·s1 and a_est² = (E/K1 − K0)².
-        let e32_err = U32
+        // E reaches f32 within 2u·|E| + 2^-44 V ([`to_f32`]): through E·s1 and
+        // a_est² = (E/K1 − K0)².
+        let e32_err = (2.0 * U32 * e_max + ulp(VOLT_BITS - 8))
             * span
             * (libm::fabs(lin_gain) + 2.0 * libm::fabs(lin_k2) * c_max / libm::fabs(k1_t0));
         // dt is truncated to 2^-24 °C (for the offset term's product and for f32).
