@@ -274,12 +274,16 @@ pub fn process_prepared(
         return frame;
     };
 
-    // Accelerometer output E.
+    // Accelerometer output E (and in fixed point for the compensation).
+    let mut e_fixed = 0;
     if driver_faults(raw.accel_flags, &mut status) {
         status.set(Status::OUTPUT_INVALID);
     } else {
         match table.accel_volts(raw.accel) {
-            Ok(v) => frame.output_v = v,
+            Ok((v, fixed)) => {
+                frame.output_v = v;
+                e_fixed = fixed;
+            }
             Err(e) => {
                 adc_fault(e, &mut status);
                 status.set(Status::OUTPUT_INVALID);
@@ -357,7 +361,7 @@ pub fn process_prepared(
     };
     // An Ok of `compensate` is finite (its contract; the f64 path checks, the fixed-point path
     // cannot produce anything else).
-    match table.compensate(raw.accel, e, temperature, tilt_code) {
+    match table.compensate(raw.accel, e, e_fixed, temperature, tilt_code) {
         Ok((a_i, lin, clamped)) => {
             frame.a_i_exact_g = a_i;
             frame.output_linearized_v = lin;

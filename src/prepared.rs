@@ -147,6 +147,10 @@ fn upper_bound_abs(p: &TempPoly) -> f64 {
 /// The thermal compensation's table-only quantities for the mixed-precision path.
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct FastThermal {
+    /// The first RTD code at or above the calibrated range's minimum, and the first above its
+    /// maximum: the range check is two u32 comparisons (T is monotone in the code).
+    in_range_from: u32,
+    above_range_from: u32,
     /// The calibrated range, its centre Tc and T0, [`CELSIUS_BITS`].
     t_min: i64,
     t_max: i64,
@@ -383,13 +387,20 @@ impl PreparedRtd {
         if code == AD7124_MAX_CODE {
             return (Err((None, RtdFault::Adc(AdcError::Saturated))), None);
         }
-        let Some(fixed) = self
-            .fixed
-            .as_ref()
-            .filter(|_| code >= self.closed_form_from && code < self.open_from)
-        else {
-            return (self.convert_f64(code), None);
-        };
+        match self.convert_fixed(code) {
+            Some((ohms, t)) => (Ok((ohms, to_f64(t, CELSIUS_BITS))), Some(t)),
+            None => (self.convert_f64(code), None),
+        }
+    }
+
+    /// (R in Ω, T in fixed point) on the closed form's fixed path (see [`Self::convert`]);
+    /// None outside it: below 0 °C, at the fault thresholds, for constants that do not fit.
+    #[inline]
+    fn convert_fixed(&self, code: u32) -> Option<(f64, i64)> {
+        let fixed = self.fixed.as_ref()?;
+        if code < self.closed_form_from || code >= self.open_from || code >= AD7124_MAX_CODE {
+            return None;
+        }
         // code < 2^24: the i32 is exact.
         let code = code as i32;
         let ohms = to_f64(mul_code(code, fixed.ohms_per_code), OHM_BITS);
@@ -400,21 +411,28 @@ impl PreparedRtd {
         // u itself, not 1 − (1 + u): the subtraction would cost 6e-8/|u| relative.
         let u = fixed.u_per_q_over_a * q_over_a32;
         let one_plus_u = 1.0 + u;
+        // Cannot fail for validated constants inside the open threshold (u ≥ −0.8); the f64
+        // path names what went wrong if it does.
         if one_plus_u.is_nan() || one_plus_u <= 0.0 {
-            // Cannot happen for validated constants inside the open threshold (u ≥ −0.8).
-            return (
-                Err((Some(ohms), RtdFault::Rtd(RtdError::InvalidConstants))),
-                None,
-            );
+            return None;
         }
         let root = 1.0 + sqrt_f32(one_plus_u);
         let delta = -u / (root * root);
         // |(q/A)·δ| < 32 °C up to ≈ 250 °C: one VCVT, truncated to 2^-26 °C; exact beyond.
-        let Some(correction) = from_f32_truncated(q_over_a32 * delta, 26, CELSIUS_BITS) else {
-            return (self.convert_f64(code as u32), None);
-        };
-        let t = q_over_a + correction;
-        (Ok((ohms, to_f64(t, CELSIUS_BITS))), Some(t))
+        let correction = from_f32_truncated(q_over_a32 * delta, 26, CELSIUS_BITS)?;
+        Some((ohms, q_over_a + correction))
+    }
+
+    /// T of a code in fixed point as the temperature terms get it, or for a code without a
+    /// temperature whether it lies above the valid codes (open, saturated: true) or below
+    /// (short: false): a predicate on it is monotone in the code.
+    fn t_fixed_or_side(&self, code: u32) -> Result<i64, bool> {
+        match self.convert(code) {
+            (_, Some(t)) => Ok(t),
+            (Ok((_, t_c)), None) => from_f64(t_c, CELSIUS_BITS).ok_or(true),
+            (Err((_, RtdFault::Rtd(RtdError::Short))), _) => Err(false),
+            (Err(_), _) => Err(true),
+        }
     }
 
     /// The conversion in f64: below 0 °C, at the fault thresholds, and for tables whose
@@ -659,15 +677,19 @@ impl PreparedCalibration {
         self.bounds
     }
 
-    /// Accelerometer output E in volts, or saturation.
+    /// Accelerometer output E in volts and in fixed point ([`VOLT_BITS`]; 0 for an all-f64
+    /// table), or saturation. The fixed value goes back into [`Self::compensate`].
     #[inline]
-    pub(crate) fn accel_volts(&self, code: i32) -> Result<f64, AdcError> {
+    pub(crate) fn accel_volts(&self, code: i32) -> Result<(f64, i64), AdcError> {
         if ads1262_saturated(code) {
             return Err(AdcError::Saturated);
         }
         Ok(match &self.fast {
-            Some(fast) => to_f64(fast.accel.volts(code), VOLT_BITS),
-            None => f64::from(code) * self.accel.per_code - self.accel.offset,
+            Some(fast) => {
+                let e = fast.accel.volts(code);
+                (to_f64(e, VOLT_BITS), e)
+            }
+            None => (f64::from(code) * self.accel.per_code - self.accel.offset, 0),
         })
     }
 
@@ -706,8 +728,24 @@ impl PreparedCalibration {
         self.cache.0.get().map(|t| t.code)
     }
 
+    /// A new RTD code: the closed form and the terms in fixed point, straight through.
     #[inline(never)]
     fn temperature_uncached(&self, code: u32) -> Temperature {
+        if let (Some(fast), Some((ohms, t))) = (&self.fast, self.rtd.convert_fixed(code)) {
+            return Temperature {
+                code,
+                fault: None,
+                ohms,
+                t_c: to_f64(t, CELSIUS_BITS),
+                terms: fast.terms_for_code(code, t),
+            };
+        }
+        self.temperature_general(code)
+    }
+
+    /// A new RTD code off the fixed path: faults, below 0 °C, all-f64 tables.
+    #[inline(never)]
+    fn temperature_general(&self, code: u32) -> Temperature {
         let (rtd, t_fixed) = self.rtd.convert(code);
         let (ohms, t_c, fault) = match rtd {
             Ok((ohms, t_c)) => (ohms, t_c, None),
@@ -717,7 +755,7 @@ impl PreparedCalibration {
             // Below 0 °C (the f64 inverse) T reaches the fixed-point terms rounded to 2^-40 °C.
             Some(fast) if fault.is_none() => t_fixed
                 .or_else(|| from_f64(t_c, CELSIUS_BITS))
-                .and_then(|t| fast.terms(t)),
+                .and_then(|t| fast.terms_for_code(code, t)),
             _ => None,
         };
         Temperature {
@@ -737,6 +775,7 @@ impl PreparedCalibration {
         &self,
         accel_code: i32,
         e_v: f64,
+        e_fixed: i64,
         temperature: &Temperature,
         tilt_code: Option<i32>,
     ) -> Result<Compensated, CompensateFault> {
@@ -751,7 +790,9 @@ impl PreparedCalibration {
         }
         let t_c = temperature.t_c;
         match (&self.fast, &temperature.terms) {
-            (Some(fast), Some(terms)) => fast.compensate(terms, t_c, accel_code, phi, &self.tilt),
+            (Some(fast), Some(terms)) => {
+                fast.compensate(terms, t_c, accel_code, e_fixed, phi, &self.tilt)
+            }
             _ => self.compensate_f64(e_v, t_c, phi),
         }
     }
@@ -928,9 +969,16 @@ impl FastThermal {
             && libm::fabs(s.min.0 - t0.0) < 128.0
             && eps <= 1.0 / 16.0;
         let fast = || -> Option<FastThermal> {
+            let (t_min, t_max) = (t_fixed(s.min.0)?, t_fixed(s.max.0)?);
             Some(FastThermal {
-                t_min: t_fixed(s.min.0)?,
-                t_max: t_fixed(s.max.0)?,
+                in_range_from: first_code(|c| {
+                    rtd.t_fixed_or_side(c).map_or_else(|a| a, |t| t >= t_min)
+                }),
+                above_range_from: first_code(|c| {
+                    rtd.t_fixed_or_side(c).map_or_else(|a| a, |t| t > t_max)
+                }),
+                t_min,
+                t_max,
                 center: t_fixed(tc)?,
                 t0: t_fixed(t0.0)?,
                 inv_half_span: from_f64(1.0 / ts, X_BITS + CODE_FACTOR_BITS - DIFF_BITS)?,
@@ -961,13 +1009,14 @@ impl FastThermal {
         (if ok { fast() } else { None }, bounds)
     }
 
-    /// The temperature terms at T ([`CELSIUS_BITS`], clamped to the calibrated range): integer
-    /// arithmetic and a few f32 operations, no soft-float call. None when a term does not fit
-    /// its fixed-point format (then the sample takes the f64 path).
-    fn terms(&self, t: i64) -> Option<ThermalTerms> {
-        let (t, clamped) = if t < self.t_min {
+    /// The temperature terms for an RTD code of temperature T ([`CELSIUS_BITS`]), clamped to the
+    /// calibrated range: integer arithmetic and a few f32 operations, no soft-float call. None
+    /// when a term does not fit its fixed-point format (then the sample takes the f64 path).
+    #[inline]
+    fn terms_for_code(&self, code: u32, t: i64) -> Option<ThermalTerms> {
+        let (t, clamped) = if code < self.in_range_from {
             (self.t_min, true)
-        } else if t > self.t_max {
+        } else if code >= self.above_range_from {
             (self.t_max, true)
         } else {
             (t, false)
@@ -1019,11 +1068,11 @@ impl FastThermal {
         terms: &ThermalTerms,
         t_c: f64,
         accel_code: i32,
+        e: i64,
         tilt_code: Option<i32>,
         tilt: &PreparedTilt,
     ) -> Result<Compensated, CompensateFault> {
         use CompensateFault::Failed;
-        let e = self.accel.volts(accel_code);
 
         // Equation (5): E − sign·K1(T)·sin(φ − φ0). Divided by K1 the correction is sign·sin φ
         // itself, so c takes it in g and the linearized output in volts.
@@ -1108,6 +1157,25 @@ mod tests {
     use super::*;
     use crate::table::tests::paper_table;
     use crate::units::Volts;
+
+    #[test]
+    fn the_range_check_by_code_agrees_with_comparing_the_temperature() {
+        let t = paper_table();
+        let p = PreparedCalibration::new(&t).unwrap();
+        let fast = p.fast.as_ref().unwrap();
+        for edge in [fast.in_range_from, fast.above_range_from] {
+            for code in edge - 300..edge + 300 {
+                let temperature = p.temperature(code);
+                let t_c = temperature.t_c;
+                let outside = t_c < t.thermal.scale.min.0 || t_c > t.thermal.scale.max.0;
+                assert_eq!(temperature.terms.unwrap().clamped, outside, "{code}: {t_c}");
+            }
+        }
+        // The edges are where they should be: 30 °C and 65 °C are a code apart from them.
+        let t_at = |code: u32| p.temperature(code).t_c;
+        assert!(t_at(fast.in_range_from - 1) < 30.0 && t_at(fast.in_range_from) >= 30.0);
+        assert!(t_at(fast.above_range_from - 1) <= 65.0 && t_at(fast.above_range_from) > 65.0);
+    }
 
     #[test]
     fn a_temperature_fits_in_64_bytes_so_the_cache_copies_it_inline() {
@@ -1235,10 +1303,12 @@ mod tests {
         let rtd = crate::frontend::celsius_to_ad7124(&t, Celsius(47.0))
             .unwrap()
             .0;
-        let e = p.accel_volts(accel).unwrap();
+        let (e, e_fixed) = p.accel_volts(accel).unwrap();
         let temperature = p.temperature(rtd);
         let t_c = temperature.t_c;
-        let (a, lin, clamped) = p.compensate(accel, e, &temperature, Some(0)).unwrap();
+        let (a, lin, clamped) = p
+            .compensate(accel, e, e_fixed, &temperature, Some(0))
+            .unwrap();
         let tilt0 = p.tilt.phi_rad_f64(0);
         let (k, _) = t.thermal.coefficients_at(Celsius(t_c)).unwrap();
         let e_c = Volts(e - k.scale_factor_v_per_g * tilt_sin(tilt0).unwrap());
