@@ -46,8 +46,9 @@ pub(crate) fn mul_code(code: i32, factor: i64) -> i64 {
 /// f64 → fixed with `bits` (≤ 96) fraction bits, rounded to nearest (ties away from zero, like
 /// `libm::round`); None when the value is not finite or |v|·2^bits ≥ 2^61 (so that four such
 /// values cannot overflow a sum; the caller then takes the f64 path). Done on the bit pattern:
-/// a soft-float multiply, round and conversion would cost ≈ 150 instructions on the M4F.
-#[inline]
+/// a soft-float multiply, round and conversion would cost ≈ 150 instructions on the M4F. Not
+/// inlined: off the per-sample path it is called from a dozen places at activation (flash).
+#[inline(never)]
 pub(crate) fn from_f64(v: f64, bits: u32) -> Option<i64> {
     let pattern = v.to_bits();
     let biased = ((pattern >> 52) & 0x7FF) as i32;
@@ -85,8 +86,14 @@ pub(crate) fn from_f32(v: f32, bits: u32) -> Option<i64> {
     if scaled.abs() < 2_147_483_648.0 {
         Some(i64::from(scaled as i32) << (bits - F32_FRACTION_BITS))
     } else {
-        from_f64(f64::from(v), bits)
+        from_f32_wide(v, bits)
     }
+}
+
+/// [`from_f32`] beyond 2^-9, through f64 and rounded: out of line (the rare side; flash).
+#[inline(never)]
+fn from_f32_wide(v: f32, bits: u32) -> Option<i64> {
+    from_f64(f64::from(v), bits)
 }
 
 /// f32 → fixed with `bits` (≥ `fast_bits`) fraction bits, truncated towards zero to
@@ -127,7 +134,9 @@ pub(crate) fn to_f64(raw: i64, bits: u32) -> f64 {
     to_f64_rounded(raw, bits)
 }
 
-/// [`to_f64`] for |raw| < 2^32 or ≥ 2^53 (with rounding to nearest, ties to even).
+/// [`to_f64`] for |raw| < 2^32 or ≥ 2^53 (with rounding to nearest, ties to even). Not inlined:
+/// five call sites on the per-sample path, and the fast case above is the common one (flash).
+#[inline(never)]
 fn to_f64_rounded(raw: i64, bits: u32) -> f64 {
     if raw == 0 {
         return 0.0;
@@ -187,8 +196,8 @@ pub(crate) fn mul_hi(a: i64, b: i64) -> i64 {
 
 /// f32 → fixed with `bits` fraction bits from the bit pattern: exact when v is a multiple of
 /// 2^-bits, else truncated towards zero (error < 2^-bits); integer operations only. None when v
-/// is not finite or |v|·2^bits ≥ 2^61.
-#[inline]
+/// is not finite or |v|·2^bits ≥ 2^61. Not inlined: the slow side of [`from_f32_truncated`].
+#[inline(never)]
 pub(crate) fn from_f32_exact(v: f32, bits: u32) -> Option<i64> {
     let pattern = v.to_bits();
     let biased = ((pattern >> 23) & 0xFF) as i32;

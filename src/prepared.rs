@@ -29,7 +29,7 @@ use crate::model::CrossAxis;
 use crate::poly::{TempPoly, N_COEFFS};
 use crate::rtd::{CallendarVanDusen, RtdError};
 use crate::table::{CalibrationTable, TableError, TiltAxis};
-use crate::units::{Celsius, RtdOhms, RAD_PER_ARCSEC};
+use crate::units::{Celsius, RAD_PER_ARCSEC};
 
 /// Unit roundoff of f32 (round to nearest): 2^-24.
 const U32: f64 = 1.0 / 16_777_216.0;
@@ -41,11 +41,11 @@ pub const BUDGET_G: f64 = 1e-9;
 pub const BUDGET_LINEARIZED_V: f64 = 3e-9;
 /// |a_i| up to which the error bounds are computed (the specified input range).
 pub const MAX_INPUT_G: f64 = 1.5;
-/// Largest |φ − φ0| (rad, ≈ 103") for which the tilt correction is evaluated in f32; larger tilts
-/// take the f64 `sin` (slow, exact). Stability tests see a few arcseconds.
+/// Largest |φ − φ0| (rad, ≈ 103") for which the tilt correction is evaluated in f32; a sample with
+/// a larger tilt takes the all-f64 path (slow, exact). Stability tests see a few arcseconds.
 pub const MAX_F32_TILT_RAD: f32 = 5e-4;
 /// Largest |4·K2·c| for which the root of equation (1) uses the f32 series (K2 ≤ 1e-4 g/g² at
-/// 2 g gives 8e-4); beyond it the f64 square root.
+/// 2 g gives 8e-4); beyond it the sample takes the all-f64 path.
 const MAX_SERIES_W: f32 = 1e-2;
 
 /// How the thermal compensation of this table is evaluated.
@@ -88,7 +88,7 @@ impl FixedPoly {
             sum += libm::fabs(src * four_k);
             four_k *= 4.0;
         }
-        (sum * libm::ldexp(1.0, bits as i32) < libm::ldexp(1.0, 62)).then_some(FixedPoly(c))
+        (sum < ulp(bits as i32 - 62)).then_some(FixedPoly(c))
     }
 
     /// p(x) for x with [`X_BITS`] fraction bits, |x| ≤ 1 (+2^-20): within
@@ -114,9 +114,9 @@ const DIFF_BITS: u32 = 24;
 /// Fraction bits of a ratio near 1 (K1(Tc)/K1(T)) and of η = K1(T)/K1(Tc) − 1.
 const RATIO_BITS: u32 = 62;
 
-/// 2^-n as f64.
-fn ulp(n: u32) -> f64 {
-    libm::ldexp(1.0, -(n as i32))
+/// 2^-n as f64 (|n| ≤ 1022), built in the exponent field (no libm call).
+const fn ulp(n: i32) -> f64 {
+    f64::from_bits(((1023 - n) as u64) << 52)
 }
 
 /// Bound of |f32 evaluation − exact| for Σ_{k≥first} c_k·x^k with |x| ≤ 1 and x itself off by
@@ -134,12 +134,24 @@ fn f32_poly_bound(p: &TempPoly, first: usize, dx: f64) -> f64 {
 }
 
 /// Smallest |p(x)| over [−1, 1] guaranteed by |c0| − Σ_{k≥1}|c_k| (a lower bound).
+#[inline(never)]
 fn lower_bound_abs(p: &TempPoly) -> f64 {
     let rest: f64 = p.coeffs.iter().skip(1).map(|c| libm::fabs(*c)).sum();
     libm::fabs(p.coeffs[0]) - rest
 }
 
+/// Largest |dp/dx| over [−1, 1], bounded by Σ k·|c_k|. Activation only (flash: not inlined).
+#[inline(never)]
+fn slope_x(p: &TempPoly) -> f64 {
+    p.coeffs
+        .iter()
+        .enumerate()
+        .map(|(k, c)| k as f64 * libm::fabs(*c))
+        .sum::<f64>()
+}
+
 /// Largest |p(x)| over [−1, 1], bounded by Σ|c_k|.
+#[inline(never)]
 fn upper_bound_abs(p: &TempPoly) -> f64 {
     p.coeffs.iter().map(|c| libm::fabs(*c)).sum()
 }
@@ -175,10 +187,6 @@ struct FastThermal {
     /// [`VOLT_BITS`] + [`CODE_FACTOR_BITS`] − [`DIFF_BITS`] (a [`mul_code`] by T − T0 at
     /// 2^-24 °C).
     lin_offset_v_per_c: i64,
-    /// K1 in f64 and its scale, for the tilt's f64 path (tilts beyond [`MAX_F32_TILT_RAD`]).
-    k1_v_per_g: TempPoly,
-    center_c: f64,
-    half_span_c: f64,
     /// K1'(T0)/K1(T0), 1/°C: ΔE/ΔT per volt of E.
     lin_gain_per_c: f32,
     /// K1(T0)·K2'(T0), V/(g²·°C).
@@ -322,8 +330,10 @@ const OHM_BITS: u32 = 42;
 const Q_OVER_A_F32_BITS: u32 = 20;
 
 /// Smallest code in 0..=2^24 with `pred(code)`, for a predicate monotone in the code (binary
-/// search: the thresholds then follow the very same f64 expressions the samples use).
-fn first_code(pred: impl Fn(u32) -> bool) -> u32 {
+/// search: the thresholds then follow the very same expressions the samples use). Activation
+/// only: one copy for its five predicates (flash).
+#[inline(never)]
+fn first_code(pred: &dyn Fn(u32) -> bool) -> u32 {
     let (mut lo, mut hi) = (0u32, AD7124_FULL_SCALE as u32);
     if pred(lo) {
         return lo;
@@ -364,9 +374,9 @@ impl PreparedRtd {
             cvd,
             ohms_per_code,
             fixed: FixedRtd::new(&cvd, ohms_per_code),
-            normal_from: first_code(|c| ohms(c) >= r_min),
-            open_from: first_code(|c| ohms(c) > r_max),
-            closed_form_from: first_code(|c| ohms(c) >= cvd.r0),
+            normal_from: first_code(&|c| ohms(c) >= r_min),
+            open_from: first_code(&|c| ohms(c) > r_max),
+            closed_form_from: first_code(&|c| ohms(c) >= cvd.r0),
         }
     }
 
@@ -446,8 +456,13 @@ impl PreparedRtd {
         if code < self.normal_from {
             return Err((Some(ohms), RtdFault::Rtd(RtdError::Short)));
         }
-        match self.cvd.temperature(RtdOhms(ohms)) {
-            Ok(t) => Ok((ohms, t.0)),
+        // The table's constants were validated at activation and R lies inside the fault
+        // thresholds (the code checks above): the inverse without its own checks.
+        if !crate::fixed::is_finite(ohms) {
+            return Err((Some(ohms), RtdFault::Rtd(RtdError::NonFinite)));
+        }
+        match self.cvd.temperature_of_ratio(ohms / self.cvd.r0 - 1.0) {
+            Ok(t) => Ok((ohms, t)),
             Err(e) => Err((Some(ohms), RtdFault::Rtd(e))),
         }
     }
@@ -474,7 +489,7 @@ impl PreparedRtd {
             0.0
         };
         10.0 * U32 * libm::fabs(correction)
-            + 2.0 * delta * ulp(Q_OVER_A_F32_BITS)
+            + 2.0 * delta * ulp(Q_OVER_A_F32_BITS as i32)
             + ulp(26)
             + ulp(38)
     }
@@ -638,6 +653,16 @@ pub(crate) enum CompensateFault {
     Failed,
 }
 
+/// Why the fixed-point compensation did not give a result.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum FastFault {
+    /// Overflow of a fixed-point format.
+    Failed,
+    /// Outside what its error bound covers (a tilt beyond [`MAX_F32_TILT_RAD`], a nonlinearity
+    /// beyond the root's series): this sample takes the all-f64 path.
+    Double,
+}
+
 impl PreparedCalibration {
     /// Prepares a table; refuses one that does not pass [`CalibrationTable::validate`].
     pub fn new(table: &CalibrationTable) -> Result<Self, TableError> {
@@ -791,7 +816,11 @@ impl PreparedCalibration {
         let t_c = temperature.t_c;
         match (&self.fast, &temperature.terms) {
             (Some(fast), Some(terms)) => {
-                fast.compensate(terms, t_c, accel_code, e_fixed, phi, &self.tilt)
+                match fast.compensate(terms, accel_code, e_fixed, phi, &self.tilt) {
+                    Ok(c) => Ok(c),
+                    Err(FastFault::Failed) => Err(CompensateFault::Failed),
+                    Err(FastFault::Double) => self.compensate_f64(e_v, t_c, phi),
+                }
             }
             _ => self.compensate_f64(e_v, t_c, phi),
         }
@@ -857,19 +886,12 @@ impl FastThermal {
 
         // x = (T − Tc)/Ts in fixed point: T − Tc truncated to 2^-24 °C, 1/Ts rounded to 2^-38,
         // the product floored to 2^-30 (|T − Tc| ≤ Ts, so 1/Ts's rounding adds < 2^-38·Ts).
-        let dx = ulp(DIFF_BITS) / ts + ulp(X_BITS) + ulp(38) * ts;
+        let dx = ulp(DIFF_BITS as i32) / ts + ulp(X_BITS as i32) + ulp(38) * ts;
         // The f32 copy of x (K2's Horner) adds its conversion's rounding.
         let dx32 = dx + U32;
         let k1_min = lower_bound_abs(&k1);
         let c_max = MAX_INPUT_G + upper_bound_abs(&bias);
         let k2_max = upper_bound_abs(&k2);
-        let slope_x = |p: &TempPoly| {
-            p.coeffs
-                .iter()
-                .enumerate()
-                .map(|(k, c)| k as f64 * libm::fabs(*c))
-                .sum::<f64>()
-        };
         // K1(T) = K1(Tc)·(1 + η(x)); 1/(1 + η) = 1 − η + η²·(1 − η) + η⁴/(1 + η).
         let k1_center = k1.coeffs[0];
         let mut eta_poly = TempPoly::default();
@@ -879,12 +901,12 @@ impl FastThermal {
         let eps = upper_bound_abs(&eta_poly);
         // a = −c·(1 + g): ∂a/∂bias = −1, ∂a/∂(1/K1) = −E·… : a relative error ρ of 1/K1 moves c
         // by ρ·|E/K1| ≤ ρ·(c_max + |bias|) ≤ 2ρ·c_max; ∂a/∂K2 ≈ −c².
-        let bias_err = FixedPoly::ROUNDING_ULPS * ulp(G_BITS) + slope_x(&bias) * dx;
+        let bias_err = FixedPoly::ROUNDING_ULPS * ulp(G_BITS as i32) + slope_x(&bias) * dx;
         // ρ: the series' truncation; η's own rounding (Horner) and its x error; the f32 second
         // order η²(1 − η) (η truncated to 2^-32 and rounded: 2|η|·(2^-32 + u|η|); three
         // roundings: 4u·η²; its conversion's truncation 2^-40).
         let ratio_err = eps * eps * eps * eps / (1.0 - eps)
-            + (FixedPoly::ROUNDING_ULPS + 2.0) * ulp(RATIO_BITS)
+            + (FixedPoly::ROUNDING_ULPS + 2.0) * ulp(RATIO_BITS as i32)
             + slope_x(&eta_poly) * dx
             + 2.0 * eps * (ulp(32) + U32 * eps)
             + 4.0 * U32 * eps * eps
@@ -937,7 +959,7 @@ impl FastThermal {
         let span = s.max.0 - s.min.0;
         // E reaches f32 within 2u·|E| + 2^-44 V ([`to_f32`]): through E·s1 and
         // a_est² = (E/K1 − K0)².
-        let e32_err = (2.0 * U32 * e_max + ulp(VOLT_BITS - 8))
+        let e32_err = (2.0 * U32 * e_max + ulp(VOLT_BITS as i32 - 8))
             * span
             * (libm::fabs(lin_gain) + 2.0 * libm::fabs(lin_k2) * c_max / libm::fabs(k1_t0));
         // dt is truncated to 2^-24 °C (for the offset term's product and for f32).
@@ -971,10 +993,10 @@ impl FastThermal {
         let fast = || -> Option<FastThermal> {
             let (t_min, t_max) = (t_fixed(s.min.0)?, t_fixed(s.max.0)?);
             Some(FastThermal {
-                in_range_from: first_code(|c| {
+                in_range_from: first_code(&|c| {
                     rtd.t_fixed_or_side(c).map_or_else(|a| a, |t| t >= t_min)
                 }),
-                above_range_from: first_code(|c| {
+                above_range_from: first_code(&|c| {
                     rtd.t_fixed_or_side(c).map_or_else(|a| a, |t| t > t_max)
                 }),
                 t_min,
@@ -995,9 +1017,6 @@ impl FastThermal {
                     lin_offset_v_per_c,
                     VOLT_BITS + CODE_FACTOR_BITS - DIFF_BITS,
                 )?,
-                k1_v_per_g: k1,
-                center_c: tc,
-                half_span_c: ts,
                 lin_gain_per_c: lin_gain as f32,
                 lin_k2_v_per_c: lin_k2 as f32,
                 inv_k1_t0: (1.0 / k1_t0) as f32,
@@ -1053,12 +1072,6 @@ impl FastThermal {
         })
     }
 
-    /// K1 at T (clamped to the calibrated range) in f64, for the tilt's f64 path.
-    fn k1_v_per_g(&self, t_c: f64) -> f64 {
-        let x = (t_c - self.center_c) / self.half_span_c;
-        self.k1_v_per_g.eval(x.clamp(-1.0, 1.0))
-    }
-
     /// Both compensations of one accelerometer code with the temperature's terms. Fixed point
     /// for the values (E, c, a_i, the linearized output), f32 for the corrections; no soft-float
     /// operation unless the tilt or the root leaves the f32 series' range.
@@ -1066,13 +1079,12 @@ impl FastThermal {
     fn compensate(
         &self,
         terms: &ThermalTerms,
-        t_c: f64,
         accel_code: i32,
         e: i64,
         tilt_code: Option<i32>,
         tilt: &PreparedTilt,
-    ) -> Result<Compensated, CompensateFault> {
-        use CompensateFault::Failed;
+    ) -> Result<Compensated, FastFault> {
+        use FastFault::Failed;
 
         // Equation (5): E − sign·K1(T)·sin(φ − φ0). Divided by K1 the correction is sign·sin φ
         // itself, so c takes it in g and the linearized output in volts.
@@ -1080,23 +1092,16 @@ impl FastThermal {
             None => (Some(0), Some(0)),
             Some(code) => {
                 let phi = tilt.phi_rad(code);
-                if phi.abs() <= MAX_F32_TILT_RAD {
-                    // The sign (±1) is applied in f32, where it is exact.
-                    let s = tilt.sign32 * small_sin(phi);
-                    (
-                        from_f32(s, G_BITS),
-                        from_f32(terms.k1_v_per_g32 * s, VOLT_BITS),
-                    )
-                } else {
-                    let Some(sin) = tilt_sin(tilt.phi_rad_f64(code)) else {
-                        return Err(Failed);
-                    };
-                    let s = tilt.sign * sin;
-                    (
-                        from_f64(s, G_BITS),
-                        from_f64(self.k1_v_per_g(t_c) * s, VOLT_BITS),
-                    )
+                if !(phi.abs() <= MAX_F32_TILT_RAD) {
+                    // Beyond ≈ 103" (or a code far off): the whole sample in f64.
+                    return Err(FastFault::Double);
                 }
+                // The sign (±1) is applied in f32, where it is exact.
+                let s = tilt.sign32 * small_sin(phi);
+                (
+                    from_f32(s, G_BITS),
+                    from_f32(terms.k1_v_per_g32 * s, VOLT_BITS),
+                )
             }
         };
         let (Some(tilt_g), Some(tilt_v)) = (tilt_g, tilt_v) else {
@@ -1111,21 +1116,16 @@ impl FastThermal {
             .ok_or(Failed)?;
         let c32 = to_f32(c, G_BITS);
         let w = 4.0 * terms.k2 * c32;
-        let a_i = if w.abs() <= MAX_SERIES_W {
-            let cg = from_f32(c32 * root_series(w), G_BITS).ok_or(Failed)?;
-            let a = c
-                .checked_neg()
-                .and_then(|a| a.checked_sub(cg))
-                .ok_or(Failed)?;
-            to_f64(a, G_BITS)
-        } else {
-            let c = to_f64(c, G_BITS);
-            let disc = 1.0 - 4.0 * f64::from(terms.k2) * c;
-            if disc.is_nan() || disc < 0.0 {
-                return Err(Failed);
-            }
-            -2.0 * c / (1.0 + libm::sqrt(disc))
-        };
+        if !(w.abs() <= MAX_SERIES_W) {
+            // A nonlinearity the series does not cover (|4·K2·c| > 1e-2): the sample in f64.
+            return Err(FastFault::Double);
+        }
+        let cg = from_f32(c32 * root_series(w), G_BITS).ok_or(Failed)?;
+        let a = c
+            .checked_neg()
+            .and_then(|a| a.checked_sub(cg))
+            .ok_or(Failed)?;
+        let a_i = to_f64(a, G_BITS);
 
         // Linearized (eq. 3/4): ΔE = dt·(s0 + E·s1 + s2·a²), a estimated at T0; dt·s0 is a
         // temperature term.
@@ -1138,8 +1138,7 @@ impl FastThermal {
             .zip(from_f32(small, VOLT_BITS))
             .and_then(|(e, small)| e.checked_sub(small))
             .ok_or(Failed)?;
-        // Finite by construction (fixed point converted, or the f64 root of a non-negative
-        // discriminant over a finite c): no check needed.
+        // Finite by construction (fixed point converted): no check needed.
         Ok((a_i, to_f64(lin, VOLT_BITS), terms.clamped))
     }
 }
@@ -1156,7 +1155,7 @@ fn unusable_bounds() -> ErrorBounds {
 mod tests {
     use super::*;
     use crate::table::tests::paper_table;
-    use crate::units::Volts;
+    use crate::units::{RtdOhms, Volts};
 
     #[test]
     fn the_range_check_by_code_agrees_with_comparing_the_temperature() {
