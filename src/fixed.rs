@@ -90,6 +90,32 @@ pub(crate) fn from_f32(v: f32, bits: u32) -> Option<i64> {
     }
 }
 
+/// [`from_f32`] for a value the caller has bounded below 2^-9 in magnitude (from the table, at
+/// activation): one VMUL and one VCVT, truncated to 2^-40, no range check. Outside that bound the
+/// result would be wrong (VCVT saturates), so it is only for values bounded by construction.
+#[inline]
+pub(crate) fn from_f32_small(v: f32, bits: u32) -> i64 {
+    i64::from((v * (pow2(F32_FRACTION_BITS) as f32)) as i32) << (bits - F32_FRACTION_BITS)
+}
+
+/// f32 → f64 (exact) on the bit pattern for normal numbers and zero: compiler-builtins'
+/// `__aeabi_f2d` costs ≈ 14 instructions and a call; subnormals, ±∞ and NaN go through it.
+#[inline]
+pub(crate) fn f32_to_f64(v: f32) -> f64 {
+    let bits = v.to_bits();
+    let exponent = (bits >> 23) & 0xFF;
+    if exponent == 0 || exponent == 0xFF {
+        return if bits << 1 == 0 {
+            f64::from_bits(u64::from(bits) << 32)
+        } else {
+            f64::from(v)
+        };
+    }
+    // Rebias 127 → 1023 (+896) in the high word; 29 more fraction bits below.
+    let high = (bits & 0x8000_0000) | ((bits & 0x7FFF_FFFF) >> 3) + (896 << 20);
+    f64::from_bits((u64::from(high) << 32) | u64::from(bits << 29))
+}
+
 /// [`from_f32`] beyond 2^-9, through f64 and rounded: out of line (the rare side; flash).
 #[inline(never)]
 fn from_f32_wide(v: f32, bits: u32) -> Option<i64> {
@@ -343,6 +369,42 @@ mod tests {
             }
         }
         assert_eq!(from_f32_truncated(f32::NAN, 26, 40), None);
+    }
+
+    #[test]
+    fn f32_to_f64_is_the_exact_widening_for_every_class() {
+        for a in numbers(47).take(200_000) {
+            let v = f32::from_bits(a as u32);
+            let got = f32_to_f64(v);
+            if v.is_nan() {
+                assert!(got.is_nan());
+            } else {
+                assert_eq!(got.to_bits(), f64::from(v).to_bits(), "{v:e}");
+            }
+        }
+        for v in [
+            0.0f32,
+            -0.0,
+            f32::MIN_POSITIVE,
+            1e-40,
+            f32::MAX,
+            f32::INFINITY,
+            -1.5,
+        ] {
+            assert_eq!(f32_to_f64(v).to_bits(), f64::from(v).to_bits(), "{v:e}");
+        }
+    }
+
+    #[test]
+    fn from_f32_small_truncates_to_2_pow_minus_40_below_2_pow_minus_9() {
+        for a in numbers(53).take(100_000) {
+            let v = f32::from_bits(a as u32);
+            if !(v.abs() < 1.0 / 512.0) {
+                continue;
+            }
+            let got = to_f64(from_f32_small(v, G_BITS), G_BITS);
+            assert!((got - f64::from(v)).abs() < pow2(40).recip(), "{v:e}");
+        }
     }
 
     #[test]

@@ -19,8 +19,8 @@ use crate::adc::AdcError;
 use crate::adc::AdcScale;
 use crate::compensation::ThermalCompensator;
 use crate::fixed::{
-    from_f32, from_f32_truncated, from_f64, mul_code, mul_hi, sqrt_f32, to_f32, to_f64,
-    CODE_FACTOR_BITS, G_BITS, VOLT_BITS,
+    from_f32, from_f32_small, from_f32_truncated, from_f64, mul_code, mul_hi, sqrt_f32, to_f32,
+    to_f64, CODE_FACTOR_BITS, G_BITS, VOLT_BITS,
 };
 use crate::frontend::{
     accel_scale, rtd_scale, tilt_scale, AD7124_FULL_SCALE, AD7124_MAX_CODE, ADS1262_HALF_SCALE,
@@ -568,7 +568,7 @@ impl PreparedTilt {
 
     #[inline]
     fn arcsec(&self, code: i32) -> f64 {
-        f64::from(code as f32 * self.arcsec_per_code - self.offset_arcsec)
+        crate::fixed::f32_to_f64(code as f32 * self.arcsec_per_code - self.offset_arcsec)
     }
 
     /// φ − φ0 in radians, f32; the code difference is exact below 2^24 codes.
@@ -986,10 +986,22 @@ impl FastThermal {
         // The formats' ranges: |T − Tc| ≤ Ts < 64 °C (an i32 at 2^-24), |T − T0| < 128 °C (the
         // same for dt), |η| ≤ 1/16 (an i32 at 2^-32, and the series converging fast).
         let t_fixed = |t: f64| from_f64(t, CELSIUS_BITS);
+        // And the sums of the compensation (no checked arithmetic there): |c| < 2^60 in G_BITS
+        // (4096 g), |E| and the linearized offset < 2^60 in VOLT_BITS (256 V); K1 < 3.5 V/g keeps
+        // the tilt in volts below 2^-9 ([`from_f32_small`]).
+        let full_scale_codes = 2_147_483_648.0;
+        let c_range = upper_bound_abs(&bias)
+            + (libm::fabs(accel.per_code) * full_scale_codes + libm::fabs(accel.offset)) / k1_min;
+        let e_range = libm::fabs(accel.per_code) * full_scale_codes
+            + libm::fabs(accel.offset)
+            + 128.0 * libm::fabs(lin_offset_v_per_c);
         let in_formats = ts < 64.0
             && libm::fabs(s.max.0 - t0.0) < 128.0
             && libm::fabs(s.min.0 - t0.0) < 128.0
-            && eps <= 1.0 / 16.0;
+            && eps <= 1.0 / 16.0
+            && c_range < 4000.0
+            && e_range < 250.0
+            && upper_bound_abs(&k1) < 3.5;
         let fast = || -> Option<FastThermal> {
             let (t_min, t_max) = (t_fixed(s.min.0)?, t_fixed(s.max.0)?);
             Some(FastThermal {
@@ -1089,31 +1101,30 @@ impl FastThermal {
         // Equation (5): E − sign·K1(T)·sin(φ − φ0). Divided by K1 the correction is sign·sin φ
         // itself, so c takes it in g and the linearized output in volts.
         let (tilt_g, tilt_v) = match tilt_code {
-            None => (Some(0), Some(0)),
+            None => (0, 0),
             Some(code) => {
                 let phi = tilt.phi_rad(code);
                 if !(phi.abs() <= MAX_F32_TILT_RAD) {
                     // Beyond ≈ 103" (or a code far off): the whole sample in f64.
                     return Err(FastFault::Double);
                 }
-                // The sign (±1) is applied in f32, where it is exact.
+                // The sign (±1) is applied in f32, where it is exact. |sin φ| ≤ 5e-4 and
+                // K1 < 3.5 V/g (activation): both below 2^-9.
                 let s = tilt.sign32 * small_sin(phi);
                 (
-                    from_f32(s, G_BITS),
-                    from_f32(terms.k1_v_per_g32 * s, VOLT_BITS),
+                    from_f32_small(s, G_BITS),
+                    from_f32_small(terms.k1_v_per_g32 * s, VOLT_BITS),
                 )
             }
         };
-        let (Some(tilt_g), Some(tilt_v)) = (tilt_g, tilt_v) else {
-            return Err(Failed);
-        };
 
         // Equation (1) inverted: a = −2c/(1 + √(1 − 4K2c)) = −c·(1 + g), c = K0 − E/K1.
+        // |c0| and |code·c_per_code| < 2^60, the tilt and c·g below 2^-9 g (activation, and the
+        // series' range): the sums cannot overflow, hence no checked arithmetic.
         let c = terms
             .c0_g
-            .checked_sub(mul_code(accel_code, terms.c_per_code))
-            .and_then(|c| c.checked_add(tilt_g))
-            .ok_or(Failed)?;
+            .wrapping_sub(mul_code(accel_code, terms.c_per_code))
+            .wrapping_add(tilt_g);
         let c32 = to_f32(c, G_BITS);
         let w = 4.0 * terms.k2 * c32;
         if !(w.abs() <= MAX_SERIES_W) {
@@ -1121,23 +1132,17 @@ impl FastThermal {
             return Err(FastFault::Double);
         }
         let cg = from_f32(c32 * root_series(w), G_BITS).ok_or(Failed)?;
-        let a = c
-            .checked_neg()
-            .and_then(|a| a.checked_sub(cg))
-            .ok_or(Failed)?;
-        let a_i = to_f64(a, G_BITS);
+        let a_i = to_f64(c.wrapping_neg().wrapping_sub(cg), G_BITS);
 
         // Linearized (eq. 3/4): ΔE = dt·(s0 + E·s1 + s2·a²), a estimated at T0; dt·s0 is a
-        // temperature term.
-        let e = e.checked_sub(tilt_v).ok_or(Failed)?;
+        // temperature term. |E|, |dt·s0| < 2^60 (activation): no overflow either.
+        let e = e.wrapping_sub(tilt_v);
         let e32 = to_f32(e, VOLT_BITS);
         let a_est = e32 * self.inv_k1_t0 - self.k0_t0_g;
         let small = terms.dt * (e32 * self.lin_gain_per_c + self.lin_k2_v_per_c * a_est * a_est);
         let lin = e
-            .checked_sub(terms.lin_offset_v)
-            .zip(from_f32(small, VOLT_BITS))
-            .and_then(|(e, small)| e.checked_sub(small))
-            .ok_or(Failed)?;
+            .wrapping_sub(terms.lin_offset_v)
+            .wrapping_sub(from_f32(small, VOLT_BITS).ok_or(Failed)?);
         // Finite by construction (fixed point converted): no check needed.
         Ok((a_i, to_f64(lin, VOLT_BITS), terms.clamped))
     }
