@@ -172,7 +172,7 @@ struct FastThermal {
     inv_half_span: i64,
     /// K0 + δo·a_p − δp·a_o with the table's fixed cross-axis inputs folded in, g, [`G_BITS`].
     bias_g: FixedPoly,
-    /// η(x) = K1(T)/K1(Tc) − 1, [`RATIO_BITS`]; |η| ≤ 1/16 (checked at activation).
+    /// η(x) = K1(T)/K1(Tc) − 1, [`RATIO_BITS`]; |η| ≤ 1/32 (checked at activation).
     k1_ratio: FixedPoly,
     /// K1(Tc), V/g.
     k1_center32: f32,
@@ -984,7 +984,8 @@ impl FastThermal {
         };
 
         // The formats' ranges: |T − Tc| ≤ Ts < 64 °C (an i32 at 2^-24), |T − T0| < 128 °C (the
-        // same for dt), |η| ≤ 1/16 (an i32 at 2^-32, and the series converging fast).
+        // same for dt), |η| ≤ 1/32 (an i32 at 2^-32, its second order below 2^-9, and the series
+        // converging fast; the bound refuses far smaller ε anyway: ε⁴ must stay below 1e-10).
         let t_fixed = |t: f64| from_f64(t, CELSIUS_BITS);
         // And the sums of the compensation (no checked arithmetic there): |c| < 2^60 in G_BITS
         // (4096 g), |E| and the linearized offset < 2^60 in VOLT_BITS (256 V); K1 < 3.5 V/g keeps
@@ -998,7 +999,7 @@ impl FastThermal {
         let in_formats = ts < 64.0
             && libm::fabs(s.max.0 - t0.0) < 128.0
             && libm::fabs(s.min.0 - t0.0) < 128.0
-            && eps <= 1.0 / 16.0
+            && eps <= 1.0 / 32.0
             && c_range < 4000.0
             && e_range < 250.0
             && upper_bound_abs(&k1) < 3.5;
@@ -1056,20 +1057,20 @@ impl FastThermal {
         let diff = ((t - self.center) >> (CELSIUS_BITS - DIFF_BITS)) as i32;
         let x = mul_code(diff, self.inv_half_span) as i32;
         let bias = self.bias_g.eval(x);
-        // K1(T) = K1(Tc)·(1 + η), |η| ≤ 1/16: K1(Tc)/K1(T) = 1 − η + η²(1 − η) + O(η⁴), η in
+        // K1(T) = K1(Tc)·(1 + η), |η| ≤ 1/32: K1(Tc)/K1(T) = 1 − η + η²(1 − η) + O(η⁴), η in
         // fixed point, the second order in f32 (for a fitted K1, η ≈ 1e-3: its f32 rounding is
         // ≈ 1e-13 of the ratio; the activation's bound has the general case).
         let eta = self.k1_ratio.eval(x);
         let eta32 = ((eta >> (RATIO_BITS - 32)) as i32) as f32 * (1.0 / 4_294_967_296.0);
-        // η²(1 − η) ≤ 2^-8: truncated to 2^-40 (one VCVT) below 2^-9, exact above.
-        let second = from_f32_truncated(eta32 * eta32 * (1.0 - eta32), 40, RATIO_BITS)?;
+        // η²(1 − η) ≤ (1/32)²·(33/32) < 2^-9 (|η| ≤ 1/32 at activation): one VCVT, to 2^-40.
+        let second = from_f32_small(eta32 * eta32 * (1.0 - eta32), RATIO_BITS);
         let ratio = (1i64 << RATIO_BITS) - eta + second;
         let x32 = x as f32 * (1.0 / (1u32 << X_BITS) as f32);
         let [k2_0, k2_1, k2_2, k2_3, k2_4] = self.k2;
         let k2 = (((k2_4 * x32 + k2_3) * x32 + k2_2) * x32 + k2_1) * x32 + k2_0;
         // |T − T0| < 128 °C (checked at activation): the i32 holds it at 2^-24 °C.
         let dt = ((t - self.t0) >> (CELSIUS_BITS - DIFF_BITS)) as i32;
-        // ratio − 1 = −η + η²(1 − η), |·| < 1/8: an i32 at 2^-32 for the offset term (offset/K1
+        // ratio − 1 = −η + η²(1 − η), |·| < 1/16: an i32 at 2^-32 for the offset term (offset/K1
         // is small: its product needs no more).
         let ratio_minus_one = ((ratio - (1i64 << RATIO_BITS)) >> (RATIO_BITS - 32)) as i32;
         Some(ThermalTerms {
