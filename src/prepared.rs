@@ -428,8 +428,9 @@ impl PreparedRtd {
         }
         let root = 1.0 + sqrt_f32(one_plus_u);
         let delta = -u / (root * root);
-        // |(q/A)·δ| < 32 °C up to ≈ 250 °C: one VCVT, truncated to 2^-26 °C; exact beyond.
-        let correction = from_f32_truncated(q_over_a32 * delta, 26, CELSIUS_BITS)?;
+        // (q/A)·δ ≈ 1.5e-4·T² °C: below 4 °C up to ≈ 160 °C, one VCVT truncating to 2^-29 °C;
+        // exact beyond.
+        let correction = from_f32_truncated(q_over_a32 * delta, 29, CELSIUS_BITS)?;
         Some((ohms, q_over_a + correction))
     }
 
@@ -479,7 +480,7 @@ impl PreparedRtd {
     /// Bound of |T − the exact CVD inverse of the code's resistance| at T ≥ 0 °C on the fixed
     /// path: the f32 correction's 10 roundings (10u·|(q/A)·δ|), q/A's truncation to 2^-20 °C
     /// before it (through d((q/A)·δ)/d(q/A) ≈ 2δ: 2^-19·|δ|), the correction's truncation to
-    /// 2^-26 °C, and the fixed-point q/A (its floor, the per-code factor's rounding times 2^24
+    /// 2^-29 °C, and the fixed-point q/A (its floor, the per-code factor's rounding times 2^24
     /// codes, 1/A's rounding: < 2^-38 °C).
     fn error_bound_c(&self, t: f64) -> f64 {
         let (q_over_a, correction) = self.correction_c(libm::fmax(t, 0.0));
@@ -490,7 +491,7 @@ impl PreparedRtd {
         };
         10.0 * U32 * libm::fabs(correction)
             + 2.0 * delta * ulp(Q_OVER_A_F32_BITS as i32)
-            + ulp(26)
+            + ulp(29)
             + ulp(38)
     }
 }
@@ -1161,7 +1162,117 @@ fn unusable_bounds() -> ErrorBounds {
 mod tests {
     use super::*;
     use crate::table::tests::paper_table;
+    use crate::table::CalibrationTable;
     use crate::units::{RtdOhms, Volts};
+
+    /// The paper's table with everything the prepared path folds in made non-trivial: ADC gain
+    /// and offset corrections, cross-axis inputs, x³ and x⁴ terms, T0 off the centre.
+    fn busy_table() -> CalibrationTable {
+        let mut t = paper_table();
+        t.accel.adc_gain_correction = 1.0001;
+        t.accel.adc_offset = Volts(-3e-6);
+        t.rtd.adc_gain_correction = 0.9998;
+        t.orientation.cross = CrossAxis {
+            a_p: crate::units::Gs(0.3),
+            a_o: crate::units::Gs(-0.2),
+        };
+        let m = &mut t.thermal.models;
+        m.bias_g.coeffs[3] = 2e-5;
+        m.bias_g.coeffs[4] = -1e-5;
+        m.scale_factor_v_per_g.coeffs[3] = -2e-5;
+        m.scale_factor_v_per_g.coeffs[4] = 1.5e-5;
+        m.misalignment_o_rad.coeffs = [3e-4, 2e-5, -1e-5, 0.0, 0.0];
+        t.thermal.reference = Celsius(41.0);
+        t
+    }
+
+    /// The f64 reference of the RTD inverse: R = code·(ohms per code), T from the quadratic root.
+    fn reference_t(p: &PreparedCalibration, code: u32) -> (f64, f64) {
+        let ohms = f64::from(code) * p.rtd.ohms_per_code;
+        (ohms, p.rtd.cvd.temperature(RtdOhms(ohms)).unwrap().0)
+    }
+
+    #[test]
+    fn the_fixed_rtd_inverse_is_within_its_bound_for_every_code_from_0_to_300_c() {
+        let t = busy_table();
+        let p = PreparedCalibration::new(&t).unwrap();
+        let code_at = |c: f64| (t.rtd.cvd.resistance(Celsius(c)).0 / p.rtd.ohms_per_code) as u32;
+        let (lo, hi) = (code_at(30.0), code_at(65.0));
+        let mut worst = 0.0f64; // error / bound
+                                // Every code of the calibrated range, every 7th from 0 °C to 300 °C.
+        let codes = (lo..=hi).chain((p.rtd.closed_form_from..code_at(300.0)).step_by(7));
+        for code in codes {
+            let (ohms_ref, t_ref) = reference_t(&p, code);
+            let (ohms, t_c) = p.rtd(code).unwrap();
+            // The product's floor at 2^-42 Ω and two f64 roundings.
+            assert!(
+                (ohms - ohms_ref).abs() <= 2.3e-13 + 4.5e-16 * ohms_ref,
+                "{code}"
+            );
+            let bound = p.rtd.error_bound_c(t_ref);
+            worst = worst.max((t_c - t_ref).abs() / bound);
+        }
+        assert!(worst <= 1.0, "worst error/bound {worst}");
+        // The bound itself at the top of the calibrated range, as documented.
+        assert!(p.rtd.error_bound_c(65.0) < 6e-7);
+    }
+
+    #[test]
+    fn the_fixed_point_terms_are_within_the_a_i_bound_for_every_code_of_the_range() {
+        let t = busy_table();
+        let p = PreparedCalibration::new(&t).unwrap();
+        assert_eq!(p.precision(), Precision::Mixed);
+        let bounds = p.error_bounds();
+        let fast = p.fast.as_ref().unwrap();
+        let th = &t.thermal;
+        let cross = t.orientation.cross;
+        let accel = &p.accel;
+        let accel_codes: [i32; 5] = [
+            -2_000_000_000,
+            -900_000_000,
+            0,
+            1_100_000_000,
+            2_000_000_000,
+        ];
+        let (mut worst_c, mut worst_lin) = (0.0f64, 0.0f64);
+        // Every code of the range and 2000 beyond each end (clamped).
+        for code in fast.in_range_from - 2000..fast.above_range_from + 2000 {
+            let temperature = p.temperature_uncached(code);
+            let terms = temperature.terms.unwrap();
+            let (_, t_ref) = reference_t(&p, code);
+            let t_used = t_ref.clamp(th.scale.min.0, th.scale.max.0);
+            let (k, _) = th.coefficients_at(Celsius(t_used)).unwrap();
+            let bias =
+                k.bias_g + k.misalignment_o.0 * cross.a_p.0 - k.misalignment_p.0 * cross.a_o.0;
+            for code_a in accel_codes {
+                let e = f64::from(code_a) * accel.per_code - accel.offset;
+                let c_ref = bias - e / k.scale_factor_v_per_g;
+                let c = to_f64(terms.c0_g - mul_code(code_a, terms.c_per_code), G_BITS);
+                worst_c = worst_c.max((c - c_ref).abs());
+            }
+            let s0 = fast.lin_offset_v_per_c as f64
+                / libm::ldexp(1.0, (VOLT_BITS + CODE_FACTOR_BITS - DIFF_BITS) as i32);
+            let lin_ref = s0 * (t_used - th.reference.0);
+            let lin = to_f64(terms.lin_offset_v, VOLT_BITS);
+            worst_lin = worst_lin.max((lin - lin_ref).abs());
+            let k2_err = (f64::from(terms.k2) - k.nonlinearity_g_per_g2).abs();
+            assert!(k2_err <= 1e-12, "{code}: K2 off by {k2_err:e}");
+            let k1_rel = (f64::from(terms.k1_v_per_g32) / k.scale_factor_v_per_g - 1.0).abs();
+            assert!(k1_rel <= 4.0 * U32, "{code}: K1 off by {k1_rel:e}");
+        }
+        // c carries every temperature term of a_i; the linearized offset those of ΔE.
+        assert!(
+            worst_c <= bounds.a_i_g,
+            "c off by {worst_c:e}, bound {bounds:?}"
+        );
+        assert!(
+            worst_lin <= bounds.linearized_v,
+            "ΔE off by {worst_lin:e}, bound {bounds:?}"
+        );
+        // What the sweep measures, far inside the bound (which also covers E's, the tilt's and
+        // the root's f32 errors): T's 5e-7 °C through the slopes, a few 1e-11 g.
+        assert!(worst_c < 1e-10, "c off by {worst_c:e}");
+    }
 
     #[test]
     fn the_range_check_by_code_agrees_with_comparing_the_temperature() {
