@@ -1106,7 +1106,7 @@ impl FastThermal {
             None => (0, 0),
             Some(code) => {
                 let phi = tilt.phi_rad(code);
-                if !(phi.abs() <= MAX_F32_TILT_RAD) {
+                if phi.is_nan() || phi.abs() > MAX_F32_TILT_RAD {
                     // Beyond ≈ 103" (or a code far off): the whole sample in f64.
                     return Err(FastFault::Double);
                 }
@@ -1129,7 +1129,7 @@ impl FastThermal {
             .wrapping_add(tilt_g);
         let c32 = to_f32(c, G_BITS);
         let w = 4.0 * terms.k2 * c32;
-        if !(w.abs() <= MAX_SERIES_W) {
+        if w.is_nan() || w.abs() > MAX_SERIES_W {
             // A nonlinearity the series does not cover (|4·K2·c| > 1e-2): the sample in f64.
             return Err(FastFault::Double);
         }
