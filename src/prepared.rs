@@ -2,10 +2,11 @@
 //! table is computed once at activation, and the per-sample arithmetic is mixed precision.
 //!
 //! Recipe (docs/numerics.md, "Mixed precision on the firmware path"): base values, the output
-//! sums and every quantity that needs more than ~1e-7 relative precision stay in f64 (software
-//! double on the M4F); corrections whose magnitude is small against the value they correct are
+//! sums and every quantity that needs more than ~1e-7 relative precision are fixed point (i64
+//! with a binary point, [`crate::fixed`]: the M4F has no double precision, every f64 operation is
+//! a software routine); corrections whose magnitude is small against the value they correct are
 //! evaluated in f32 (the M4F's hardware single precision), so their f32 rounding is scaled down
-//! by their smallness. Whether a table's corrections are small enough is decided here, at
+//! by their smallness. A clean sample, a new RTD code included, calls no soft-float routine. Whether a table's corrections are small enough is decided here, at
 //! activation, from a worst-case error bound: a table whose bound exceeds the 1e-9 g budget is
 //! compensated with the all-f64 reference code instead ([`Precision::Double`]).
 //!
@@ -51,7 +52,7 @@ const MAX_SERIES_W: f32 = 1e-2;
 /// How the thermal compensation of this table is evaluated.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Precision {
-    /// f64 base values and sums, f32 corrections: the bound below is within the budget.
+    /// Fixed-point base values and sums, f32 corrections: the bound below is within the budget.
     Mixed,
     /// The all-f64 reference code ([`ThermalCompensator`]): the table's corrections are too large
     /// for f32 within the budget (or a temperature is outside the fast path's domain).
