@@ -9,6 +9,7 @@ pub mod discover;
 pub mod fit;
 pub mod log;
 pub mod numerics;
+pub mod outputs;
 pub mod plot;
 pub mod sim;
 pub mod stability;

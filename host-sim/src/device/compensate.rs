@@ -108,6 +108,12 @@ pub fn compensate_streaming(
             let mut conn = Connection::open(target, firmware)?;
             let info = conn.client.info()?;
             if info.active_table != Some(table.id()) {
+                // The upload activates it: the board keeps it, as `load` would leave it.
+                eprintln!(
+                    "activating table {:#010x} on the device (it stays active after this run; \
+                     the previous one becomes the rollback table)",
+                    table.id()
+                );
                 conn.client
                     .load(table_bytes, |sent, total| progress("upload", sent, total))?;
             }
@@ -128,9 +134,7 @@ pub fn compensate_streaming(
                 return Err(e);
             }
             streamed?;
-            if let Some(q) = conn.qemu.take() {
-                q.shutdown();
-            }
+            conn.close()?;
         }
     }
     Ok(())
