@@ -40,10 +40,12 @@ pub struct FitArgs {
 }
 
 fn read(path: &Path) -> Result<String, FitError> {
-    std::fs::read_to_string(path).map_err(|error| FitError::Io {
-        path: path.to_owned(),
-        error,
-    })
+    crate::log::reader::read_text_limited(path, crate::log::reader::MAX_SMALL_TEXT_BYTES).map_err(
+        |e| FitError::Io {
+            path: path.to_owned(),
+            error: e.into_io(),
+        },
+    )
 }
 
 /// `accomp fit`.

@@ -54,7 +54,8 @@ pub fn run(args: TumbleArgs) -> anyhow::Result<()> {
     let mut parsed = Vec::new();
     for path in &logs {
         let text =
-            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+            crate::log::reader::read_text_limited(path, crate::log::reader::MAX_SMALL_TEXT_BYTES)
+                .with_context(|| format!("reading {}", path.display()))?;
         parsed.push(tumble::parse_log(&text).with_context(|| format!("{}", path.display()))?);
     }
     let opts = TumbleOptions {

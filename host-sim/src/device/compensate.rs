@@ -153,8 +153,9 @@ pub fn run_to_file(
     use anyhow::Context as _;
     use std::io::Write as _;
     let table = crate::calibration_file::read_table_bytes(calibration)?;
-    let text =
-        std::fs::read_to_string(input).with_context(|| format!("reading {}", input.display()))?;
+    let (_, max_bytes) = crate::log::reader::limits();
+    let text = crate::log::reader::read_text_limited(input, max_bytes)
+        .with_context(|| format!("reading {}", input.display()))?;
     let file = super::samples_csv::parse(&text)?;
     let out =
         std::fs::File::create(output).with_context(|| format!("creating {}", output.display()))?;

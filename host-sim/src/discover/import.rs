@@ -121,9 +121,10 @@ pub fn format_utc(unix_s: f64) -> String {
 }
 
 fn read_text(path: &Path) -> Result<String, ImportError> {
-    std::fs::read_to_string(path).map_err(|source| ImportError::Io {
+    let (_, max_bytes) = crate::log::reader::limits();
+    crate::log::reader::read_text_limited(path, max_bytes).map_err(|e| ImportError::Io {
         path: path.display().to_string(),
-        source,
+        source: e.into_io(),
     })
 }
 
@@ -284,16 +285,25 @@ fn first_nonblank_line(path: &Path) -> Result<String, ImportError> {
     };
     let mut r = std::io::BufReader::new(std::fs::File::open(path).map_err(io)?);
     let mut buf = Vec::new();
-    loop {
+    let limit = crate::log::reader::MAX_LINE_BYTES;
+    for _ in 0..limit {
         buf.clear();
-        if r.read_until(b'\n', &mut buf).map_err(io)? == 0 {
+        let n = std::io::Read::take(&mut r, limit as u64 + 1)
+            .read_until(b'\n', &mut buf)
+            .map_err(io)?;
+        if n == 0 {
             return Ok(String::new());
+        }
+        if n > limit {
+            // Not a text file of lines: the reader of the guessed format says why.
+            return Ok(String::from_utf8_lossy(&buf[..256]).into_owned());
         }
         let line = String::from_utf8_lossy(&buf);
         if !line.trim().is_empty() {
             return Ok(line.into_owned());
         }
     }
+    Ok(String::new())
 }
 
 /// Reads our log format (the columns `keep` accepts, all without it). The log reader refuses a
