@@ -41,7 +41,8 @@ pub struct DiscoverArgs {
     #[arg(long, requires = "simulate")]
     pub scenario: Option<PathBuf>,
     /// Ensemble size of the twin (seeds 1..=N).
-    #[arg(long, default_value_t = simulate::DEFAULT_ENSEMBLE, requires = "simulate")]
+    #[arg(long, default_value_t = simulate::DEFAULT_ENSEMBLE, requires = "simulate",
+          value_parser = simulate::parse_ensemble)]
     pub ensemble: usize,
     /// Write the extended scenario (TOML that `accomp simulate` runs) here.
     #[arg(long, requires = "simulate")]

@@ -41,6 +41,9 @@ pub struct TumbleArgs {
 
 /// Runs `accomp tumble`.
 pub fn run(args: TumbleArgs) -> anyhow::Result<()> {
+    if let Some(p) = &args.output {
+        crate::outputs::check_file(p)?;
+    }
     let TumbleArgs {
         logs,
         json,
@@ -72,8 +75,7 @@ pub fn run(args: TumbleArgs) -> anyhow::Result<()> {
         print!("{}", tumble::render_text(&report));
     }
     if let Some(path) = output {
-        std::fs::write(&path, tumble::table_csv(&report, with_se)?)
-            .with_context(|| format!("writing {}", path.display()))?;
+        crate::outputs::write_file(&path, tumble::table_csv(&report, with_se)?.as_bytes())?;
     }
 
     Ok(())

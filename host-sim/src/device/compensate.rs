@@ -152,6 +152,7 @@ pub fn run_to_file(
 ) -> anyhow::Result<()> {
     use anyhow::Context as _;
     use std::io::Write as _;
+    crate::outputs::check_file(output)?;
     let table = crate::calibration_file::read_table_bytes(calibration)?;
     let (_, max_bytes) = crate::log::reader::limits();
     let text = crate::log::reader::read_text_limited(input, max_bytes)
@@ -201,10 +202,10 @@ pub fn run_to_file(
             Ok(())
         },
     );
-    out.flush()
-        .with_context(|| format!("writing {}", output.display()))?;
+    let finished = crate::outputs::finish(out, output);
     bar.finish_and_clear();
     result?;
+    finished?;
     eprintln!(
         "{written} samples through {target:?} in {:.2} s ({:.0} samples/s), written to {}",
         started.elapsed().as_secs_f64(),

@@ -136,6 +136,7 @@ pub fn gmetrology_from_str(text: &str) -> Result<(Log, Vec<BadRow>), ImportError
     let mut unix = Vec::new();
     let mut g = Vec::new();
     let mut p = Vec::new();
+    let mut backwards = 0usize;
     for (i, line) in text.lines().enumerate() {
         let line_no = i + 1;
         let trimmed = line.trim();
@@ -181,6 +182,7 @@ pub fn gmetrology_from_str(text: &str) -> Result<(Log, Vec<BadRow>), ImportError
         // Beijing time is UTC+8: UTC = local − 8 h.
         let u = local - (BEIJING_UTC_OFFSET_H * 3600) as f64;
         if unix.last().is_some_and(|&last: &f64| u <= last) {
+            backwards += 1;
             bad.push(BadRow {
                 line: line_no,
                 reason: "time not increasing".into(),
@@ -192,6 +194,16 @@ pub fn gmetrology_from_str(text: &str) -> Result<(Log, Vec<BadRow>), ImportError
         unix.push(u);
         g.push(if ok(gv) { gv } else { f64::NAN });
         p.push(if ok(pv) && pv > 0.0 { pv } else { f64::NAN });
+    }
+    // A file in reverse order keeps its first row and refuses every other one as "not
+    // increasing": said for what it is.
+    if backwards > unix.len() {
+        return Err(ImportError::Shape(format!(
+            "time runs backwards: {backwards} rows are not later than the row before and only \
+             {} are; the file looks reversed (newest first): sort it by time, oldest first \
+             (e.g. `tac`)",
+            unix.len()
+        )));
     }
     let Some(&t0) = unix.first() else {
         return Err(ImportError::Shape("no readable rows".into()));

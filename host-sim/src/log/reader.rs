@@ -83,6 +83,15 @@ pub enum ReadError {
         /// 1-based line.
         line: usize,
     },
+    /// The file is UTF-16 (with or without its byte-order mark): every other byte of its text
+    /// is NUL. Read as UTF-8 it would be garbage; said as such.
+    #[error("line {line}: the file is UTF-16 text ({endian}), not UTF-8: save it as UTF-8 (or CSV UTF-8)")]
+    Utf16 {
+        /// 1-based line.
+        line: usize,
+        /// "little-endian" or "big-endian".
+        endian: &'static str,
+    },
     /// A line longer than any record: not a log (`/dev/zero`, a binary file).
     #[error("line {line}: longer than {limit} bytes, the limit of one line: not a log")]
     LineTooLong {
@@ -127,6 +136,9 @@ impl ReadError {
             Self::CommentAfterHeader { .. } => {
                 "comment line after the header (two files concatenated?)".into()
             }
+            Self::Utf16 { endian, .. } => {
+                format!("the file is UTF-16 text ({endian}), not UTF-8: save it as UTF-8")
+            }
             Self::LineTooLong { limit, .. } => {
                 format!("longer than {limit} bytes, the limit of one line: not a log")
             }
@@ -157,6 +169,7 @@ impl ReadError {
             | Self::CommentAfterHeader { line }
             | Self::LineTooLong { line, .. }
             | Self::TooLarge { line, .. }
+            | Self::Utf16 { line, .. }
             | Self::Csv { line, .. } => Some(*line),
         }
     }
@@ -240,6 +253,11 @@ pub fn read_text_limited(path: &std::path::Path, max_bytes: u64) -> Result<Strin
             break;
         }
         line += 1;
+        if line == 1 {
+            if let Some(endian) = utf16_endianness(&all) {
+                return Err(ReadError::Utf16 { line, endian });
+            }
+        }
         if n > MAX_LINE_BYTES && all.last() != Some(&b'\n') {
             return Err(ReadError::LineTooLong {
                 line,
@@ -261,6 +279,30 @@ pub fn read_text_limited(path: &std::path::Path, max_bytes: u64) -> Result<Strin
             line: 1 + memchr::memchr_iter(b'\n', &bytes[..at]).count(),
         }
     })
+}
+
+/// Whether a line is UTF-16 text: a UTF-16 byte-order mark, or (without one) NUL in every
+/// other byte of a line of ASCII text — which no UTF-8 log has (a UTF-8 text holds no NUL).
+/// Returns the byte order.
+fn utf16_endianness(line: &[u8]) -> Option<&'static str> {
+    if line.starts_with(b"\xFF\xFE") {
+        return Some("little-endian");
+    }
+    if line.starts_with(b"\xFE\xFF") {
+        return Some("big-endian");
+    }
+    let text = line.strip_suffix(b"\n").unwrap_or(line);
+    let text = text.strip_suffix(b"\0").unwrap_or(text);
+    if text.len() < 2 || !text.contains(&0) {
+        return None;
+    }
+    let even_nul = text.iter().step_by(2).all(|&b| b == 0);
+    let odd_nul = text.iter().skip(1).step_by(2).all(|&b| b == 0);
+    match (even_nul, odd_nul) {
+        (false, true) => Some("little-endian"),
+        (true, false) => Some("big-endian"),
+        _ => None,
+    }
 }
 
 /// Bytes of complete lines one worker of [`Records::for_each_block`] parses at a time.
@@ -685,6 +727,9 @@ impl<R: BufRead> Records<R> {
             } else {
                 &buf[..]
             };
+            if let Some(endian) = utf16_endianness(bytes) {
+                return Err(ReadError::Utf16 { line, endian });
+            }
             if bytes.iter().all(u8::is_ascii_whitespace) {
                 continue;
             }
