@@ -69,7 +69,7 @@ impl ProgressLines {
 
     /// One step done; prints a line when the interval has passed.
     pub fn inc(&self) {
-        let done = self.done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+        self.done.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         let Some(every) = self.every else {
             return;
         };
@@ -77,6 +77,7 @@ impl ProgressLines {
             return;
         };
         if last.elapsed() >= every {
+            let done = self.done.load(std::sync::atomic::Ordering::Relaxed);
             *last = std::time::Instant::now();
             eprintln!(
                 "{}: {done}/{} {} ({:.0} s)",
