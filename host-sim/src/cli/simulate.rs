@@ -104,7 +104,12 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
     if let Some(days) = args.days {
         sc.run.duration_s = days * 86_400.0;
     }
-    sc.validate()?;
+    // An absurd size is said as such (with the estimate) even when it also puts the run's end
+    // outside the calendar the scenario checks.
+    if let Err(e) = sc.validate() {
+        check_size(&sc, args.seed, args.codes, args.allow_large)?;
+        return Err(e.into());
+    }
     check_size(&sc, args.seed, args.codes, args.allow_large)?;
     let file =
         File::create(output).with_context(|| format!("cannot create {}", output.display()))?;
