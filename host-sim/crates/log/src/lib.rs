@@ -44,6 +44,7 @@ use std::path::Path;
 use accomp::tide::STANDARD_GRAVITY_M_S2;
 
 pub mod calibration_file;
+pub mod outputs;
 pub mod reader;
 pub mod time;
 pub mod writer;
@@ -61,6 +62,9 @@ pub enum LogError {
     /// The file ended before a header row.
     #[error("log has no header row")]
     MissingHeader,
+    /// The file is beyond a limit of the reader (size, rows, line length).
+    #[error("log refused: {0}")]
+    Limit(String),
     /// The header has no `time_s` column.
     #[error("log header (line {line}) has no `time_s` column")]
     MissingTime {
@@ -110,6 +114,9 @@ impl From<ReadError> for LogError {
         match e {
             ReadError::Io(e) => LogError::Io(e),
             ReadError::NoHeader => LogError::MissingHeader,
+            e @ (ReadError::TooLarge { .. } | ReadError::LineTooLong { .. }) => {
+                LogError::Limit(e.to_string())
+            }
             ReadError::BadHeader { line, reason } => LogError::BadHeader { line, reason },
             other => LogError::BadRow {
                 line: other.line().unwrap_or(0),
@@ -422,6 +429,7 @@ impl Log {
 
     /// Reads a log from a file.
     pub fn read_path(path: impl AsRef<Path>) -> Result<Self, LogError> {
+        reader::check_file_size(path.as_ref())?;
         let f = File::open(path)?;
         Self::read(BufReader::with_capacity(1 << 20, f))
     }
@@ -447,6 +455,7 @@ impl Log {
         path: impl AsRef<Path>,
         keep: &(dyn Fn(&str) -> bool + Sync),
     ) -> Result<Self, LogError> {
+        reader::check_file_size(path.as_ref())?;
         let f = File::open(path)?;
         Self::read_selected(BufReader::with_capacity(1 << 20, f), keep)
     }
