@@ -19,7 +19,7 @@ pub const M_S2_PER_MGAL: f64 = 1.0e-5;
 pub enum Format {
     /// Guess from the extension and the header.
     Auto,
-    /// Our stability-test log (design/architecture.md).
+    /// Our stability-test log (docs/log-format.md).
     Log,
     /// gMetrology relative gravimeter, whitespace columns, Beijing time.
     GmetrologyTsf,
