@@ -22,7 +22,7 @@ use semihosting::io::{Read as _, Seek as _, SeekFrom, Write as _};
 /// Board reported in READY and Info.
 pub const BOARD: Board = Board::Qemu;
 
-/// QEMU clocks SysTick at 168 MHz whatever RCC says (qemu-notes.md), so that is the figure the
+/// QEMU clocks SysTick at 168 MHz whatever RCC says (docs/architecture.md), so that is the figure the
 /// monotonic needs to count milliseconds.
 pub const SYSTICK_HZ: u32 = 168_000_000;
 
