@@ -27,7 +27,7 @@ use embedded_hal::spi::{Mode, Phase, Polarity, SpiDevice};
 use crate::drivers::ad7124::{self, Ad7124};
 use crate::drivers::ads1262::{self, registers::POWER_RESET, Ads1262, Channel, DataRate};
 use crate::drivers::Error;
-use crate::pipeline::{ChannelFlags, RawSample};
+use crate::pipeline::{ChannelFlags, LossFlags, RawSample};
 
 /// The SPI mode and clock a bus actually runs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -192,6 +192,12 @@ pub struct AdsReading {
     pub tilt_flags: ChannelFlags,
     /// Firmware time of the accelerometer DRDY edge (or of the timeout), µs.
     pub time_us: u64,
+    /// Sequence number: one per reading slot of the pair clock. Readings the core could not
+    /// take in time (a stall longer than a pair period) leave a gap here.
+    pub seq: u32,
+    /// Why readings are missing before this one ([`LossFlags::STALL`] from the sequencer; the
+    /// firmware adds the losses it sees later).
+    pub lost: LossFlags,
 }
 
 /// Counters for Info and the logs.
@@ -237,6 +243,11 @@ pub struct AdsSequencer<SPI, DRDY, D> {
     diagnosis: u8,
     pending_rate: Option<DataRate>,
     counters: SequencerCounters,
+    /// Sequence number of the next reading.
+    next_seq: u32,
+    /// DRDY time of the previous pair's accelerometer half, while the pair clock is steady
+    /// (None after a (re)start or a change of rate).
+    last_pair_us: Option<u64>,
 }
 
 impl<SPI, DRDY, D> AdsSequencer<SPI, DRDY, D>
@@ -263,6 +274,8 @@ where
                 reinits: 0,
                 errors: 0,
             },
+            next_seq: 0,
+            last_pair_us: None,
         }
     }
 
@@ -326,6 +339,34 @@ where
         self.converting = Some(Channel::Accelerometer);
         self.accel = None;
         self.last_progress_us = now_us;
+        self.last_pair_us = None;
+    }
+
+    /// Gives `reading` the next sequence number. A pair that comes more than half a pair
+    /// period late (the core did not serve DRDY: a flash erase, interrupts off) skips the
+    /// numbers of the pairs that would have come meanwhile and says STALL.
+    fn numbered(&mut self, mut reading: AdsReading, pair: bool) -> AdsReading {
+        if pair {
+            if let Some(prev) = self.last_pair_us {
+                // 32-bit arithmetic (one UDIV in the DRDY handler): pair periods are below
+                // 2³² µs, and a stall of more than 71 minutes saturates to u32::MAX numbers.
+                let period = u32::try_from(self.pair_period_us())
+                    .unwrap_or(u32::MAX)
+                    .max(1);
+                let dt = u32::try_from(reading.time_us.saturating_sub(prev)).unwrap_or(u32::MAX);
+                let missed = (dt.saturating_add(period / 2) / period).saturating_sub(1);
+                if missed > 0 {
+                    self.next_seq = self.next_seq.wrapping_add(missed);
+                    reading.lost = LossFlags(reading.lost.0 | LossFlags::STALL);
+                }
+            }
+            self.last_pair_us = Some(reading.time_us);
+        } else {
+            self.last_pair_us = None;
+        }
+        reading.seq = self.next_seq;
+        self.next_seq = self.next_seq.wrapping_add(1);
+        reading
     }
 
     /// DRDY fell at `now_us`: read what it announced, switch the mux, and return the pair when
@@ -371,13 +412,16 @@ where
                     now_us,
                 ));
                 self.switch_to(Channel::Accelerometer);
-                Some(AdsReading {
+                let reading = AdsReading {
                     accel,
                     accel_flags,
                     tilt: code,
                     tilt_flags: flags,
                     time_us,
-                })
+                    seq: 0,
+                    lost: LossFlags(0),
+                };
+                Some(self.numbered(reading, true))
             }
             None => {
                 // A conversion of an input we cannot name: start the pair again.
@@ -450,14 +494,17 @@ where
         Some(self.fault_reading(now_us, self.timeout_flags()))
     }
 
-    fn fault_reading(&self, now_us: u64, flags: ChannelFlags) -> AdsReading {
-        AdsReading {
+    fn fault_reading(&mut self, now_us: u64, flags: ChannelFlags) -> AdsReading {
+        let reading = AdsReading {
             accel: 0,
             accel_flags: flags,
             tilt: 0,
             tilt_flags: flags,
             time_us: now_us,
-        }
+            seq: 0,
+            lost: LossFlags(0),
+        };
+        self.numbered(reading, false)
     }
 
     /// Why did DRDY stop? POWER.RESET = 1 means the chip reset (brown-out: START1 was lost with
@@ -489,6 +536,8 @@ where
 
     fn switch_to(&mut self, channel: Channel) {
         if let Some(rate) = self.pending_rate.take() {
+            // The pair clock changes: the next pair starts it afresh.
+            self.last_pair_us = None;
             if self.ads.set_data_rate(rate).is_err() {
                 self.counters.errors = self.counters.errors.wrapping_add(1);
             }
@@ -859,6 +908,8 @@ mod tests {
             tilt: 6,
             tilt_flags: ChannelFlags::default(),
             time_us: 5_000_000,
+            seq: 0,
+            lost: LossFlags(0),
         };
         assert!(a.assemble(&pair).rtd_flags.has(ChannelFlags::DRDY_TIMEOUT));
         a.rtd(RtdReading {

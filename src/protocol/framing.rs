@@ -6,6 +6,9 @@
 //!
 //! COBS removes every 0x00 from the frame so that 0x00 is an unambiguous delimiter: a receiver
 //! that starts in the middle of a frame, or sees garbage, resynchronises at the next 0x00. The
+//! delimiter before the frame ends whatever garbage (line noise, a half-received frame) the
+//! receiver holds, so the frame itself is never merged into it; two delimiters in a row are an
+//! empty frame and ignored. The
 //! CRC sits inside the COBS frame so that a corrupted byte is caught before postcard sees it.
 
 use heapless::Vec;
@@ -15,8 +18,8 @@ use super::codes::{ErrorCode, ErrorReply};
 
 /// Largest postcard message body (before CRC and COBS).
 pub const MAX_MESSAGE_LEN: usize = 120;
-/// Largest frame on the wire: body + CRC + COBS overhead (1 per 254) + delimiter.
-pub const MAX_FRAME_LEN: usize = MAX_MESSAGE_LEN + 2 + 2 + 1;
+/// Largest frame on the wire: body + CRC + COBS overhead (1 per 254) + two delimiters.
+pub const MAX_FRAME_LEN: usize = MAX_MESSAGE_LEN + 2 + 2 + 2;
 
 /// CRC of the frame body: CRC-16/IBM-SDLC (X.25), Hamming distance 4 for frames this short.
 pub const CRC16: crc::Crc<u16> = crc::Crc::<u16>::new(&crc::CRC_16_IBM_SDLC);
@@ -74,8 +77,8 @@ pub fn cobs_decode_in_place(buf: &mut [u8]) -> Result<usize, FrameError> {
     cobs::decode_in_place(buf).map_err(|_| FrameError::Cobs)
 }
 
-/// Serializes `msg`, appends the CRC, COBS-encodes and appends the 0x00 delimiter into `out`.
-/// Returns the number of bytes to send.
+/// Serializes `msg`, appends the CRC, COBS-encodes and puts a 0x00 delimiter before and after
+/// it into `out`. Returns the number of bytes to send.
 pub fn encode_frame<T: Serialize>(msg: &T, out: &mut [u8]) -> Result<usize, FrameError> {
     let mut body = [0u8; MAX_MESSAGE_LEN + 2];
     let n = postcard::to_slice(msg, body.get_mut(..MAX_MESSAGE_LEN).unwrap_or(&mut []))
@@ -85,9 +88,13 @@ pub fn encode_frame<T: Serialize>(msg: &T, out: &mut [u8]) -> Result<usize, Fram
     body.get_mut(n..n + 2)
         .ok_or(FrameError::MessageTooLong)?
         .copy_from_slice(&crc.to_le_bytes());
-    let m = cobs_encode(body.get(..n + 2).unwrap_or(&[]), out)?;
-    *out.get_mut(m).ok_or(FrameError::BufferTooSmall)? = 0;
-    Ok(m + 1)
+    *out.first_mut().ok_or(FrameError::BufferTooSmall)? = 0;
+    let m = cobs_encode(
+        body.get(..n + 2).unwrap_or(&[]),
+        out.get_mut(1..).unwrap_or(&mut []),
+    )?;
+    *out.get_mut(m + 1).ok_or(FrameError::BufferTooSmall)? = 0;
+    Ok(m + 2)
 }
 
 /// Checks the CRC of a COBS-decoded frame and returns its message body.
@@ -184,7 +191,7 @@ impl<const N: usize> FrameDecoder<N> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::pipeline::{ChannelFlags, Frame, RawSample, Status};
+    use crate::pipeline::{ChannelFlags, Frame, LossFlags, RawSample, Status};
     use crate::protocol::messages::*;
     use proptest::prelude::*;
 
@@ -297,7 +304,8 @@ mod tests {
         for r in &reqs {
             let bytes = wire(r);
             assert!(bytes.len() <= MAX_FRAME_LEN);
-            assert_eq!(bytes.iter().filter(|b| **b == 0).count(), 1);
+            assert_eq!(bytes.iter().filter(|b| **b == 0).count(), 2);
+            assert_eq!((bytes[0], bytes[bytes.len() - 1]), (0, 0));
             assert_eq!(feed(&mut d, &bytes), (vec![r.clone()], 0));
         }
         let sample = DeviceMessage::Sample {
@@ -305,6 +313,7 @@ mod tests {
             frame: Frame {
                 seq: 1,
                 time_us: u64::MAX,
+                lost: LossFlags(0xFF),
                 output_v: 1.25,
                 temperature_c: f64::NAN,
                 rtd_ohms: -0.0,
@@ -352,9 +361,20 @@ mod tests {
                 protocol: u16::MAX,
                 active_table: Some(u32::MAX),
                 previous_table: Some(u32::MAX),
-                uptime_ms: u64::MAX,
+                uptime_us: u64::MAX,
                 frames_dropped: u32::MAX,
                 samples: u32::MAX,
+                losses: LossCounters {
+                    conversions_lost: u32::MAX,
+                    queue_full: u32::MAX,
+                    uart_rx_overrun: u32::MAX,
+                    uart_framing_noise: u32::MAX,
+                    tx_frames_dropped: u32::MAX,
+                    erase_stalls: u32::MAX,
+                    erase_stall_us: u64::MAX,
+                    watchdog_resets: u16::MAX,
+                    brownout_resets: u16::MAX,
+                },
                 streaming: true,
                 rate_hz: u32::MAX,
                 boot: BootReport {
@@ -377,6 +397,17 @@ mod tests {
         let (good, bad) = feed(&mut d, &line);
         assert_eq!(good, vec![sample_request(1), sample_request(2)]);
         assert!(bad >= 2, "garbage frames must be reported, got {bad}");
+    }
+
+    #[test]
+    fn garbage_right_before_a_frame_without_a_delimiter_does_not_hide_it() {
+        // The frame's own leading 0x00 ends the garbage.
+        let mut d = Decoder::new();
+        let mut line = vec![0x13, 0x37, 0x42];
+        line.extend(wire(&sample_request(1)));
+        let (good, bad) = feed(&mut d, &line);
+        assert_eq!(good, vec![sample_request(1)]);
+        assert_eq!(bad, 1);
     }
 
     #[test]
