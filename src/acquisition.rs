@@ -26,7 +26,6 @@ use embedded_hal::spi::{Mode, Phase, Polarity, SpiDevice};
 
 use crate::drivers::ad7124::{self, Ad7124};
 use crate::drivers::ads1262::{self, registers::POWER_RESET, Ads1262, Channel, DataRate};
-use crate::drivers::Error;
 use crate::pipeline::{ChannelFlags, LossFlags, RawSample};
 
 /// The SPI mode and clock a bus actually runs.
@@ -129,35 +128,61 @@ pub mod board {
     const _: () = assert!(ADS1262_SPI.accepts(&ADS1262_BUS) && AD7124_SPI.accepts(&AD7124_BUS));
 }
 
-/// The pipeline's channel flag for a driver error: every error names at least one bit.
-pub fn flags_for<S, P>(e: &Error<S, P>) -> ChannelFlags {
-    let bits = match e {
-        // The bytes arrived but cannot be trusted (or the bus itself failed).
-        Error::Checksum { .. } | Error::CrcMismatch { .. } | Error::Spi(_) => {
-            ChannelFlags::CHECKSUM
-        }
-        Error::AdcError(f) => {
-            let mut b = 0;
-            if f.reference_missing() {
-                b |= ChannelFlags::OPEN_CIRCUIT;
+/// A converter error as the pipeline's channel flags: every error names at least one bit.
+pub trait ChannelFault {
+    /// The flags this error gives the channel it happened on.
+    fn channel_flags(&self) -> ChannelFlags;
+}
+
+impl<S, P> ChannelFault for ads1262::Error<S, P> {
+    fn channel_flags(&self) -> ChannelFlags {
+        use ads1262::Error as E;
+        ChannelFlags(match self {
+            // The bytes arrived but cannot be trusted (or the bus itself failed).
+            E::Checksum { .. } | E::CrcMismatch { .. } | E::Spi(_) => ChannelFlags::CHECKSUM,
+            E::UnexpectedReset => ChannelFlags::RESET,
+            E::NotResponding { .. } => ChannelFlags::NOT_RESPONDING,
+            // No fresh, valid conversion: timeout, stale data, or a chip that does not take its
+            // configuration.
+            E::DrdyTimeout
+            | E::StaleData
+            | E::Pin(_)
+            | E::InvalidConfig
+            | E::DeviceId { .. }
+            | E::ReadBack { .. } => ChannelFlags::DRDY_TIMEOUT,
+        })
+    }
+}
+
+impl<S, P> ChannelFault for ad7124::Error<S, P> {
+    fn channel_flags(&self) -> ChannelFlags {
+        use ad7124::Error as E;
+        ChannelFlags(match self {
+            E::CrcMismatch { .. } | E::Spi(_) => ChannelFlags::CHECKSUM,
+            E::AdcError(f) => {
+                let mut b = 0;
+                if f.reference_missing() {
+                    b |= ChannelFlags::OPEN_CIRCUIT;
+                }
+                if f.saturated() || f.input_out_of_range() || f.conversion() || b == 0 {
+                    b |= ChannelFlags::SATURATION;
+                }
+                b
             }
-            if f.saturated() || f.input_out_of_range() || f.conversion() || b == 0 {
-                b |= ChannelFlags::SATURATION;
-            }
-            b
-        }
-        Error::UnexpectedReset => ChannelFlags::RESET,
-        Error::NotResponding { .. } => ChannelFlags::NOT_RESPONDING,
-        // No fresh, valid conversion: timeout, stale data, or a chip that does not take its
-        // configuration.
-        Error::DrdyTimeout
-        | Error::StaleData
-        | Error::Pin(_)
-        | Error::InvalidConfig
-        | Error::DeviceId { .. }
-        | Error::ReadBack { .. } => ChannelFlags::DRDY_TIMEOUT,
-    };
-    ChannelFlags(bits)
+            E::UnexpectedReset => ChannelFlags::RESET,
+            E::NotResponding { .. } => ChannelFlags::NOT_RESPONDING,
+            E::DrdyTimeout
+            | E::Pin(_)
+            | E::InvalidConfig
+            | E::DeviceId { .. }
+            | E::ReadBack { .. } => ChannelFlags::DRDY_TIMEOUT,
+        })
+    }
+}
+
+/// The pipeline's channel flags for a driver error of either converter.
+pub fn flags_for<E: ChannelFault>(e: &E) -> ChannelFlags {
+    e.channel_flags()
 }
 
 /// The drivers' data-ready input when the firmware does not poll a pin (the ADS1262's DRDY is
@@ -388,7 +413,10 @@ where
             Err(e) => {
                 self.counters.errors = self.counters.errors.wrapping_add(1);
                 let flags = flags_for(&e);
-                if matches!(e, Error::UnexpectedReset | Error::NotResponding { .. }) {
+                if matches!(
+                    e,
+                    ads1262::Error::UnexpectedReset | ads1262::Error::NotResponding { .. }
+                ) {
                     // The configuration is gone or nobody answers: the pair in progress is lost;
                     // say why in a reading and re-initialise in steps from the tick.
                     self.diagnosis = flags.0;
@@ -738,19 +766,23 @@ where
                 self.diagnosis = 0;
                 Some(self.reading(now_us, code.0, 0))
             }
-            Err(Error::AdcError(f))
+            Err(ad7124::Error::AdcError(f))
                 if !(f.spi() || f.spi_crc() || f.register_map_crc() || f.supply()) =>
             {
                 // An analog condition of the measurement (open RTD, saturation): the part works
                 // and keeps converting; the reading carries the flag.
                 self.last_result_us = now_us;
-                Some(self.reading(now_us, 0, flags_for::<(), ()>(&Error::AdcError(f)).0))
+                Some(self.reading(
+                    now_us,
+                    0,
+                    flags_for(&ad7124::Error::<(), ()>::AdcError(f)).0,
+                ))
             }
             Err(e) => Some(self.transport_error(now_us, &e)),
         }
     }
 
-    fn transport_error<S, P>(&mut self, now_us: u64, e: &Error<S, P>) -> RtdReading {
+    fn transport_error<S, P>(&mut self, now_us: u64, e: &ad7124::Error<S, P>) -> RtdReading {
         self.counters.errors = self.counters.errors.wrapping_add(1);
         let flags = flags_for(e).0;
         if flags & ChannelFlags::NOT_RESPONDING != 0 {
@@ -864,37 +896,59 @@ mod tests {
 
     #[test]
     fn every_driver_error_names_a_flag() {
-        type E = Error<(), ()>;
-        let all: [E; 12] = [
-            Error::Spi(()),
-            Error::Pin(()),
-            Error::DrdyTimeout,
-            Error::Checksum {
+        use ads1262::Error as A;
+        let ads: [A<(), ()>; 11] = [
+            A::Spi(()),
+            A::Pin(()),
+            A::DrdyTimeout,
+            A::Checksum {
                 expected: 0,
                 received: 1,
             },
-            Error::CrcMismatch {
+            A::CrcMismatch {
                 expected: 0,
                 received: 1,
             },
-            Error::InvalidConfig,
-            Error::DeviceId { found: 3 },
-            Error::NotResponding { found: 0xFF },
-            Error::ReadBack {
+            A::InvalidConfig,
+            A::DeviceId { found: 3 },
+            A::NotResponding { found: 0xFF },
+            A::ReadBack {
                 register: 1,
                 written: 1,
                 read: 0,
             },
-            Error::StaleData,
-            Error::UnexpectedReset,
-            Error::AdcError(ad7124::ErrorFlags(0)),
+            A::StaleData,
+            A::UnexpectedReset,
         ];
-        for e in all {
+        for e in ads {
+            assert_ne!(flags_for(&e).0, 0, "{e:?}");
+        }
+        use ad7124::Error as R;
+        let rtd: [R<(), ()>; 10] = [
+            R::Spi(()),
+            R::Pin(()),
+            R::DrdyTimeout,
+            R::CrcMismatch {
+                expected: 0,
+                received: 1,
+            },
+            R::InvalidConfig,
+            R::DeviceId { found: 3 },
+            R::NotResponding { found: 0xFF },
+            R::ReadBack {
+                register: 1,
+                written: 1,
+                read: 0,
+            },
+            R::UnexpectedReset,
+            R::AdcError(ad7124::ErrorFlags(0)),
+        ];
+        for e in rtd {
             assert_ne!(flags_for(&e).0, 0, "{e:?}");
         }
         let open = ad7124::ErrorFlags(1 << 11);
         assert_eq!(
-            flags_for::<(), ()>(&Error::AdcError(open)).0,
+            flags_for(&R::<(), ()>::AdcError(open)).0,
             ChannelFlags::OPEN_CIRCUIT
         );
     }

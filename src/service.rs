@@ -15,17 +15,16 @@
 //! (load of another table, activate of the previous one, rollback) makes the table active
 //! before it the rollback table; rollback and activate swap back; all of it survives a reboot.
 
-use crate::drivers::stm32f4_flash::{FlashError, FlashRegisters, Stm32f4Flash};
 use crate::pipeline::{self, LossFlags, RawSample};
 use crate::prepared::PreparedCalibration;
 use crate::protocol::{
     decode_message, peek_request_id, upload_body_crc32, Board, BootReport, DeviceInfo,
-    DeviceMessage, ErrorCode, ErrorReply, FrameError, HostFrame, LossCounters, Request, Response,
-    CHUNK_LEN, MAX_BENCH_COUNT, MAX_RATE_HZ, PROTOCOL_VERSION, SET_RATES_SPS,
+    DeviceMessage, ErrorCode, ErrorReply, FlashErrorReply, FrameError, HostFrame, LossCounters,
+    Request, Response, CHUNK_LEN, MAX_BENCH_COUNT, MAX_RATE_HZ, PROTOCOL_VERSION, SET_RATES_SPS,
 };
 use crate::storage::{CalibrationStore, SlotLayout, StorageError, ValidSlots};
 use crate::table::{CalibrationTable, ENCODED_LEN};
-use embedded_storage::nor_flash::{NorFlash, NorFlashError, NorFlashErrorKind};
+use embedded_storage::nor_flash::NorFlash;
 
 /// Default acquisition rate in samples per second.
 pub const DEFAULT_RATE_HZ: u32 = 10;
@@ -84,38 +83,20 @@ pub struct Service<F> {
     erase_pending: bool,
 }
 
-/// A calibration flash whose driver errors have protocol codes. The default maps a driver
-/// error to FlashFailed with its `NorFlashErrorKind` (0 not aligned, 1 out of bounds, 2 other);
-/// the STM32 flash names each FLASH_SR error flag (63–68).
+/// A calibration flash: any embedded-storage NOR flash whose error has a protocol code
+/// ([`FlashErrorReply`]: each driver says how its errors read on the wire, the service names
+/// no driver).
 pub trait CalibrationFlash: NorFlash {
     /// The reply for a driver error.
-    fn error_reply(e: &Self::Error) -> ErrorReply {
-        ErrorCode::FlashFailed.reply(match e.kind() {
-            NorFlashErrorKind::NotAligned => 0,
-            NorFlashErrorKind::OutOfBounds => 1,
-            _ => 2,
-        })
-    }
+    fn error_reply(e: &Self::Error) -> ErrorReply;
 }
 
-impl<const N: usize, const ERASE: usize, const WRITE: usize> CalibrationFlash
-    for crate::storage::RamFlash<N, ERASE, WRITE>
+impl<F: NorFlash> CalibrationFlash for F
+where
+    F::Error: FlashErrorReply,
 {
-}
-
-impl<R: FlashRegisters> CalibrationFlash for Stm32f4Flash<R> {
-    fn error_reply(e: &FlashError) -> ErrorReply {
-        let code = match e {
-            FlashError::NotAligned => return ErrorCode::FlashFailed.reply(0),
-            FlashError::OutOfBounds => return ErrorCode::FlashFailed.reply(1),
-            FlashError::ProgramSequence => ErrorCode::FlashProgramSequence,
-            FlashError::ProgramParallelism => ErrorCode::FlashProgramParallelism,
-            FlashError::ProgramAlignment => ErrorCode::FlashProgramAlignment,
-            FlashError::WriteProtected => ErrorCode::FlashWriteProtected,
-            FlashError::Operation => ErrorCode::FlashOperation,
-            FlashError::Locked => ErrorCode::FlashLocked,
-        };
-        code.reply(0)
+    fn error_reply(e: &Self::Error) -> ErrorReply {
+        e.reply()
     }
 }
 
@@ -990,8 +971,6 @@ mod tests {
         erases: std::rc::Rc<core::cell::Cell<u32>>,
         fail_writes: bool,
     }
-
-    impl CalibrationFlash for Probe {}
 
     impl embedded_storage::nor_flash::ErrorType for Probe {
         type Error = crate::storage::RamFlashError;

@@ -25,7 +25,8 @@ use accomp::protocol::{
     upload_body_crc32, Board, DeviceMessage, HostFrame, Request, Response, CHUNK_LEN,
 };
 use accomp::reference::paper_order2_table;
-use accomp::service::{CalibrationFlash, Service};
+use accomp::protocol::FlashErrorReply;
+use accomp::service::Service;
 use accomp::storage::{RamFlash, RamFlashError, SlotLayout};
 use accomp::table::{CalibrationDate, CalibrationTable, ENCODED_LEN};
 use embedded_storage::nor_flash::{
@@ -65,7 +66,7 @@ impl NorFlashError for CutError {
 }
 
 /// Its errors answer as FlashFailed (kind 2, "other").
-impl CalibrationFlash for CutFlash {}
+impl FlashErrorReply for CutError {}
 
 impl ErrorType for CutFlash {
     type Error = CutError;

@@ -3,6 +3,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use embedded_storage::nor_flash::{NorFlashError, NorFlashErrorKind};
+
 use crate::table::{Coefficient, Field, TableError};
 
 /// A failure: a stable numeric code plus one number of detail (documented per code).
@@ -222,6 +224,20 @@ impl From<TableError> for ErrorReply {
             TableError::Reserved(v) => C::TableReserved.reply(u32::from(v)),
             TableError::OutOfBounds(f) => C::TableOutOfBounds.reply(field_code(f)),
         }
+    }
+}
+
+/// A flash driver's error as the protocol reports it. The default is FlashFailed with the
+/// embedded-storage kind as detail (0 not aligned, 1 out of bounds, 2 other); a driver that can
+/// say more (the STM32 flash controller's FLASH_SR flags, codes 63–68) overrides it.
+pub trait FlashErrorReply: NorFlashError {
+    /// The reply for this error.
+    fn reply(&self) -> ErrorReply {
+        ErrorCode::FlashFailed.reply(match self.kind() {
+            NorFlashErrorKind::NotAligned => 0,
+            NorFlashErrorKind::OutOfBounds => 1,
+            _ => 2,
+        })
     }
 }
 
