@@ -166,9 +166,6 @@ fn read_cut_at() -> Option<(u32, u32)> {
     Some((op, quarters))
 }
 
-/// RamFlash errors reported as FlashFailed with their kind.
-impl accomp::service::CalibrationFlash for PersistentFlash {}
-
 impl ErrorType for PersistentFlash {
     type Error = RamFlashError;
 }
