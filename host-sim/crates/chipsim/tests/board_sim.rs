@@ -1,0 +1,557 @@
+//! The front-end board on the host: the real drivers, the real acquisition sequencer and the
+//! real pipeline, wired to register-level models of the ADS1262 and the AD7124-4 that answer
+//! SPI the way their datasheets say (this crate's `ads1262` and `ad7124` modules) and refuse a bus in the wrong
+//! mode or too fast. A compact physical station (thermostat cycle, tide-like tilt, the core's
+//! own accelerometer model equation) drives the analog inputs over simulated days while faults
+//! are switched on and off; every fault must come out as a named status bit, every clean frame
+//! must be right, and the stream must go on.
+//!
+//! The station is generated here from the core (the chip models and this test need nothing
+//! above it). Run: `cargo test -p accomp-chipsim --test board_sim`.
+
+use std::cell::RefCell;
+use std::rc::Rc;
+
+use accomp::acquisition::{
+    board, AdsReading, AdsSequencer, InterruptDrdy, RtdSequencer, SampleAssembler, SpiSettings,
+};
+use accomp::drivers::ad7124::{self, Ad7124, Ad7124Config};
+use accomp::drivers::ads1262::{self, Ads1262, Ads1262Config, DataRate};
+use accomp::model::StaticCoefficients;
+use accomp::pipeline::{process_prepared, Frame, Status};
+use accomp::prepared::PreparedCalibration;
+use accomp::reference::paper_order2_table;
+use accomp::table::CalibrationTable;
+use accomp::units::{Celsius, Gs, RAD_PER_ARCSEC};
+use embedded_hal::spi::{MODE_1, MODE_3};
+
+use accomp_chipsim::{Ad7124Model, Ads1262Model, BusRefusal, Clock, SimDelay, SimSpi};
+
+type AdsSeq = AdsSequencer<SimSpi<Ads1262Model>, InterruptDrdy, SimDelay>;
+type RtdSeq = RtdSequencer<SimSpi<Ad7124Model>, InterruptDrdy, SimDelay>;
+
+const S: u64 = 1_000_000;
+const H: u64 = 3600 * S;
+/// Supervisor tick of the ADS1262 sequencer in the firmware (board/frontend.rs).
+const ADS_TICK_US: u64 = 20_000;
+
+/// The thermostat, the foundation and the accelerometer: physical values at time t.
+struct Station {
+    table: CalibrationTable,
+}
+
+impl Station {
+    /// Thermostat: 45 °C set point, a daily ±0.2 °C cycle of the room leaking through and a
+    /// 30-minute ±0.02 °C controller limit cycle.
+    fn temperature_c(&self, t_us: u64) -> f64 {
+        let t = t_us as f64 / 1e6;
+        45.0 + 0.2 * (2.0 * std::f64::consts::PI * t / 86_400.0).sin()
+            + 0.02 * (2.0 * std::f64::consts::PI * t / 1_800.0).sin()
+    }
+
+    /// Foundation tilt about the input axis: a semidiurnal tide (M2, 12.42 h, ±1.5") and a
+    /// slow settlement drift of 0.3"/day.
+    fn tilt_arcsec(&self, t_us: u64) -> f64 {
+        let t = t_us as f64 / 1e6;
+        1.5 * (2.0 * std::f64::consts::PI * t / 44_712.0).sin() + 0.3 * t / 86_400.0
+    }
+
+    /// The accelerometer's output with 1 g on its input axis, tilted by φ: equation (1) at the
+    /// temperature with the core's own coefficient models, plus K1·sin φ along the input axis.
+    fn output_v(&self, t_us: u64) -> f64 {
+        let (k, _) = self
+            .table
+            .thermal
+            .coefficients_at(Celsius(self.temperature_c(t_us)))
+            .expect("inside the table range");
+        let k: StaticCoefficients = k;
+        let phi = self.tilt_arcsec(t_us) * RAD_PER_ARCSEC;
+        k.output(Gs(1.0), self.table.orientation.cross).0 + k.scale_factor_v_per_g * phi.sin()
+    }
+
+    fn rtd_ohms(&self, t_us: u64) -> f64 {
+        self.table
+            .rtd
+            .cvd
+            .resistance(Celsius(self.temperature_c(t_us)))
+            .0
+    }
+}
+
+/// The board on the bench: two chip models, the sequencers, the assembler and the pipeline.
+struct Bench {
+    clock: Clock,
+    ads: Rc<RefCell<Ads1262Model>>,
+    rtd: Rc<RefCell<Ad7124Model>>,
+    ads_seq: AdsSeq,
+    rtd_seq: RtdSeq,
+    assembler: SampleAssembler,
+    prepared: PreparedCalibration,
+    station: Station,
+    frames: Vec<Frame>,
+    next_ads_tick: u64,
+    next_rtd_tick: u64,
+    /// Physics overrides while a fault is on.
+    accel_override_v: Option<f64>,
+    rtd_override_ohms: Option<f64>,
+}
+
+impl Bench {
+    fn with_buses(ads_bus: SpiSettings, rtd_bus: SpiSettings) -> Self {
+        let clock = Clock::default();
+        clock.set(1_000);
+        let ads = Rc::new(RefCell::new(Ads1262Model::new(clock.clone())));
+        let rtd = Rc::new(RefCell::new(Ad7124Model::new(clock.clone())));
+        let ads_driver = Ads1262::new(
+            SimSpi {
+                chip: ads.clone(),
+                bus: ads_bus,
+            },
+            InterruptDrdy,
+            SimDelay(clock.clone()),
+            Ads1262Config::board_default(),
+        );
+        let rtd_driver = Ad7124::new(
+            SimSpi {
+                chip: rtd.clone(),
+                bus: rtd_bus,
+            },
+            InterruptDrdy,
+            SimDelay(clock.clone()),
+            Ad7124Config::board_default(),
+        );
+        let table = paper_order2_table();
+        let prepared = PreparedCalibration::new(&table).expect("the paper table prepares");
+        let mut b = Bench {
+            clock,
+            ads,
+            rtd,
+            ads_seq: AdsSequencer::new(ads_driver),
+            rtd_seq: RtdSequencer::new(rtd_driver),
+            assembler: SampleAssembler::new(S),
+            prepared,
+            station: Station { table },
+            frames: Vec::new(),
+            next_ads_tick: 0,
+            next_rtd_tick: 0,
+            accel_override_v: None,
+            rtd_override_ohms: None,
+        };
+        b.apply_physics();
+        b
+    }
+
+    fn new() -> Self {
+        Self::with_buses(board::ADS1262_BUS, board::AD7124_BUS)
+    }
+
+    fn now(&self) -> u64 {
+        self.clock.now()
+    }
+
+    /// Power-up as the firmware does it: no blocking init, the sequencers bring their chips up
+    /// in steps from their first ticks. Runs 1.5 s and says whether both are running.
+    fn boot(&mut self) -> (bool, bool) {
+        let now = self.now();
+        self.next_ads_tick = now + ADS_TICK_US;
+        self.next_rtd_tick = now + self.rtd_seq.period_us();
+        self.run_until(now + 1_500_000);
+        (
+            self.ads_seq.is_running(),
+            self.rtd_seq.counters().reinits == 1,
+        )
+    }
+
+    fn apply_physics(&mut self) {
+        let t = self.now();
+        let accel = self
+            .accel_override_v
+            .unwrap_or_else(|| self.station.output_v(t));
+        let tilt = self.station.tilt_arcsec(t) / self.station.table.tilt.scale_arcsec_per_v;
+        let ohms = self
+            .rtd_override_ohms
+            .unwrap_or_else(|| self.station.rtd_ohms(t));
+        {
+            let mut a = self.ads.borrow_mut();
+            a.advance();
+            a.accel_v = accel;
+            a.tilt_v = tilt;
+        }
+        let mut r = self.rtd.borrow_mut();
+        r.advance();
+        r.rtd_ohms = ohms;
+    }
+
+    fn emit(&mut self, reading: AdsReading) {
+        let raw = self.assembler.assemble(&reading);
+        let seq = self.frames.len() as u32;
+        let frame = process_prepared(seq, reading.time_us, &raw, Some(&self.prepared));
+        self.frames.push(frame);
+    }
+
+    /// Event-driven run: DRDY edges of the ADS1262 model (the EXTI interrupt), the ADS1262
+    /// supervisor tick, and the RTD task's tick, in time order.
+    fn run_until(&mut self, end_us: u64) {
+        loop {
+            let drdy = self.ads.borrow().next_drdy().unwrap_or(u64::MAX);
+            let t = drdy.min(self.next_ads_tick).min(self.next_rtd_tick);
+            if t > end_us {
+                self.clock.set(end_us);
+                self.apply_physics();
+                return;
+            }
+            self.clock.set(t);
+            self.apply_physics();
+            if t == drdy {
+                if let Some(r) = self.ads_seq.on_drdy(t) {
+                    self.emit(r);
+                }
+            }
+            if t == self.next_rtd_tick {
+                if let Some(r) = self.rtd_seq.on_tick(t) {
+                    self.assembler.rtd(r);
+                }
+                self.next_rtd_tick = t + self.rtd_seq.period_us();
+            }
+            if t == self.next_ads_tick {
+                if let Some(r) = self.ads_seq.on_tick(t) {
+                    self.emit(r);
+                }
+                self.next_ads_tick = t + ADS_TICK_US;
+            }
+        }
+    }
+}
+
+/// What a clean frame must say about the station at its timestamp.
+fn check_clean_frame(station: &Station, f: &Frame) -> Result<(), String> {
+    let t = f.time_us;
+    let dt = (f.temperature_c - station.temperature_c(t)).abs();
+    let dtilt = (f.tilt_arcsec - station.tilt_arcsec(t)).abs();
+    let da = (f.a_i_exact_g - 1.0).abs();
+    // The tilt is converted one channel latency (0.4 s) after the accelerometer, and the RTD up
+    // to a few tenths of a second away from it: the station moves < 1e-4 °C and < 1e-4" in that
+    // time. Quantisation: 49 µK (RTD), 0.9 ng and 1e-8" (ADS1262).
+    if dt > 2e-3 || dtilt > 1e-3 || da > 2e-7 || f.output_v.is_nan() {
+        return Err(format!(
+            "frame {} at {:.1} s: ΔT {dt:.2e} °C, Δtilt {dtilt:.2e}\", Δa {da:.2e} g",
+            f.seq,
+            t as f64 / 1e6
+        ));
+    }
+    Ok(())
+}
+
+fn names(status: Status) -> String {
+    Status::NAMES
+        .iter()
+        .filter(|(bit, _)| status.has(*bit))
+        .map(|(_, n)| *n)
+        .collect::<Vec<_>>()
+        .join("|")
+}
+
+#[test]
+fn both_chips_come_up_on_the_board_buses_in_their_own_modes() {
+    let mut b = Bench::new();
+    assert_eq!(b.boot(), (true, true));
+    assert_eq!(board::ADS1262_BUS.mode, MODE_1);
+    assert_eq!(board::AD7124_BUS.mode, MODE_3);
+    let at_boot = b.frames.len();
+    b.run_until(b.now() + 10 * S);
+    assert_eq!(b.ads.borrow().refusals + b.rtd.borrow().refusals, 0);
+    // sinc4 at 10 SPS: each channel settles in 4 periods, a pair every 0.8 s.
+    let n = b.frames.len() - at_boot;
+    assert!((12..=13).contains(&n), "{n} frames in 10 s");
+    // From the very first frame on (the RTD is up before the first pair).
+    for f in &b.frames {
+        assert_eq!(f.status, Status::default(), "{}", names(f.status));
+        check_clean_frame(&b.station, f).unwrap();
+    }
+}
+
+#[test]
+fn a_wrong_spi_mode_or_clock_is_refused_and_every_frame_says_so() {
+    // The old shared bus: mode 1 at 5.25 MHz for both chips.
+    let old = SpiSettings {
+        mode: MODE_1,
+        sclk_hz: 5_250_000,
+    };
+    let mut b = Bench::with_buses(board::ADS1262_BUS, old);
+    let boot_result = {
+        let now = b.now();
+        b.rtd_seq.boot(now)
+    };
+    assert_eq!(
+        boot_result.err(),
+        Some(ad7124::Error::Spi(BusRefusal::WrongMode))
+    );
+    assert!(b.rtd.borrow().refusals > 0);
+    // The right mode, but faster than the AD7124's 100 ns SCLK pulse widths allow.
+    let fast = SpiSettings {
+        mode: MODE_3,
+        sclk_hz: 5_250_000,
+    };
+    let mut c = Bench::with_buses(board::ADS1262_BUS, fast);
+    let now = c.now();
+    assert_eq!(
+        c.rtd_seq.boot(now).err(),
+        Some(ad7124::Error::Spi(BusRefusal::ClockTooFast))
+    );
+    // The ADS1262 in mode 3.
+    let mut d = Bench::with_buses(old_with(MODE_3), board::AD7124_BUS);
+    let now = d.now();
+    assert_eq!(
+        d.ads_seq.boot(now).err(),
+        Some(ads1262::Error::Spi(BusRefusal::WrongMode))
+    );
+
+    // Running anyway with the AD7124 on the wrong bus: the ADS1262 half streams, every frame
+    // flags the RTD channel, no temperature or acceleration is ever given.
+    b.boot();
+    b.run_until(b.now() + 20 * S);
+    assert!(b.frames.len() >= 20);
+    for f in &b.frames {
+        assert!(f.status.has(Status::RTD_INVALID), "{}", names(f.status));
+        assert!(f.temperature_c.is_nan() && f.a_i_exact_g.is_nan());
+    }
+}
+
+fn old_with(mode: embedded_hal::spi::Mode) -> SpiSettings {
+    SpiSettings {
+        mode,
+        sclk_hz: board::ADS1262_BUS.sclk_hz,
+    }
+}
+
+#[test]
+fn set_rate_reprograms_the_ads1262_data_rate() {
+    let mut b = Bench::new();
+    b.boot();
+    b.run_until(b.now() + 5 * S);
+    b.ads_seq.request_rate(DataRate::Sps50);
+    let from = b.now() + 2 * S;
+    b.run_until(b.now() + 12 * S);
+    // sinc4 at 50 SPS: 4 × 20 ms per channel, a pair every 160 ms.
+    let times: Vec<u64> = b
+        .frames
+        .iter()
+        .filter(|f| f.time_us > from)
+        .map(|f| f.time_us)
+        .collect();
+    let gaps: Vec<u64> = times.windows(2).map(|w| w[1] - w[0]).collect();
+    assert!(gaps.len() > 50, "{} frames", gaps.len());
+    for g in gaps {
+        assert!((155_000..=165_000).contains(&g), "pair interval {g} µs");
+    }
+    assert!(b.frames.iter().all(|f| f.status == Status::default()));
+}
+
+/// A fault switched on for a while; frames between `on` and `off + RECOVERY` must show `bit`.
+struct Injected {
+    name: &'static str,
+    on: u64,
+    off: u64,
+    bit: u16,
+}
+
+/// Time after a fault is cleared within which the stream must be clean again.
+const RECOVERY_US: u64 = 6 * S;
+
+#[test]
+fn a_multi_day_stability_run_names_every_fault_and_recovers() {
+    let mut b = Bench::new();
+    assert_eq!(b.boot(), (true, true));
+    let mut faults: Vec<Injected> = Vec::new();
+    let start = b.now();
+    let days = 2;
+
+    // Each fault: switch on at `at`, off after `dur`.
+    type Switch = fn(&mut Bench, bool);
+    let schedule: [(&'static str, u64, u64, u16, Switch); 12] = [
+        (
+            "ADS1262 DRDY stuck",
+            2 * H,
+            5 * S,
+            Status::DRDY_TIMEOUT,
+            |b, on| b.ads.borrow_mut().stuck_drdy = on,
+        ),
+        (
+            "ADS1262 MISO 0xFF",
+            4 * H,
+            4 * S,
+            Status::ADC_NOT_RESPONDING,
+            |b, on| b.ads.borrow_mut().miso_high = on,
+        ),
+        (
+            "ADS1262 checksum error",
+            6 * H,
+            S,
+            Status::ADC_CHECKSUM,
+            |b, on| {
+                if on {
+                    b.ads.borrow_mut().corrupt_reads = 1
+                }
+            },
+        ),
+        (
+            "ADS1262 reset mid-run",
+            8 * H,
+            S,
+            Status::ADC_RESET,
+            |b, on| {
+                if on {
+                    b.ads.borrow_mut().power_glitch()
+                }
+            },
+        ),
+        (
+            "accelerometer input saturated",
+            10 * H,
+            3 * S,
+            Status::ADC_SATURATED,
+            |b, on| b.accel_override_v = on.then_some(3.1),
+        ),
+        ("RTD open", 12 * H, 5 * S, Status::RTD_OPEN, |b, on| {
+            b.rtd_override_ohms = on.then_some(f64::INFINITY)
+        }),
+        ("RTD shorted", 14 * H, 5 * S, Status::RTD_SHORT, |b, on| {
+            b.rtd_override_ohms = on.then_some(0.0)
+        }),
+        (
+            "AD7124 MISO 0xFF",
+            16 * H,
+            4 * S,
+            Status::ADC_NOT_RESPONDING,
+            |b, on| b.rtd.borrow_mut().miso_high = on,
+        ),
+        (
+            "AD7124 CRC error",
+            18 * H,
+            S,
+            Status::ADC_CHECKSUM,
+            |b, on| {
+                if on {
+                    b.rtd.borrow_mut().corrupt_reads = 1
+                }
+            },
+        ),
+        (
+            "AD7124 reset mid-run",
+            20 * H,
+            S,
+            Status::ADC_RESET,
+            |b, on| {
+                if on {
+                    b.rtd.borrow_mut().power_glitch()
+                }
+            },
+        ),
+        (
+            "AD7124 conversions stuck",
+            22 * H,
+            4 * S,
+            Status::DRDY_TIMEOUT,
+            |b, on| b.rtd.borrow_mut().stuck = on,
+        ),
+        // The second day again at a faster ADS1262 rate (SetRate 20 SPS), with a DRDY stall.
+        (
+            "ADS1262 DRDY stuck at 20 SPS",
+            30 * H,
+            3 * S,
+            Status::DRDY_TIMEOUT,
+            |b, on| b.ads.borrow_mut().stuck_drdy = on,
+        ),
+    ];
+    let rate_change_at = start + 26 * H;
+    let mut rate_changed = false;
+    for (name, at, dur, bit, switch) in schedule {
+        let on = start + at;
+        if !rate_changed && on > rate_change_at {
+            b.run_until(rate_change_at);
+            b.ads_seq.request_rate(DataRate::Sps20);
+            rate_changed = true;
+        }
+        b.run_until(on);
+        switch(&mut b, true);
+        b.run_until(on + dur);
+        switch(&mut b, false);
+        faults.push(Injected {
+            name,
+            on,
+            off: on + dur,
+            bit,
+        });
+    }
+    let end = start + days * 24 * H;
+    b.run_until(end);
+
+    let frames = &b.frames;
+    // 0.8 s pairs the first 26 h, 0.4 s after SetRate 20 (the model adds 0.3 ms of fixed
+    // latency per channel, −0.1 %; the fault windows lose a few more).
+    let expected = (26 * H) as f64 / 0.8e6 + ((days * 24 - 26) * H) as f64 / 0.4e6;
+    assert!(
+        (frames.len() as f64 - expected).abs() < 0.003 * expected,
+        "{} frames, expected ≈ {expected:.0}",
+        frames.len()
+    );
+    assert_eq!(b.ads.borrow().refusals + b.rtd.borrow().refusals, 0);
+
+    // 1. Never a silent number: every frame without a status bit is right.
+    let mut clean = 0;
+    for f in frames.iter().filter(|f| f.status == Status::default()) {
+        check_clean_frame(&b.station, f).unwrap();
+        clean += 1;
+    }
+    // 2. Outside the fault windows every frame is clean, the first one after power-up included.
+    let in_window = |t: u64| {
+        faults
+            .iter()
+            .any(|w| t + S >= w.on && t <= w.off + RECOVERY_US)
+    };
+    for f in frames.iter().filter(|f| !in_window(f.time_us)) {
+        assert_eq!(
+            f.status,
+            Status::default(),
+            "frame {} at {:.1} h: {}",
+            f.seq,
+            f.time_us as f64 / H as f64,
+            names(f.status)
+        );
+    }
+    // 3. Each fault is named in its window, and clean frames come back after it.
+    for w in &faults {
+        let window: Vec<&Frame> = frames
+            .iter()
+            .filter(|f| f.time_us + S >= w.on && f.time_us <= w.off + RECOVERY_US)
+            .collect();
+        let named = window.iter().filter(|f| f.status.has(w.bit)).count();
+        assert!(
+            named > 0,
+            "{}: no frame flagged {}; seen: {:?}",
+            w.name,
+            names(Status(w.bit)),
+            window.iter().map(|f| names(f.status)).collect::<Vec<_>>()
+        );
+        let recovered = frames.iter().any(|f| {
+            f.time_us > w.off && f.time_us <= w.off + RECOVERY_US && f.status == Status::default()
+        });
+        assert!(
+            recovered,
+            "{}: no clean frame within {} s",
+            w.name,
+            RECOVERY_US / S
+        );
+    }
+    // 4. The stream never stops: during a fault, readings flagged DRDY_TIMEOUT keep coming at
+    //    about the pair rate (0.8 s), re-initialisation included.
+    let max_gap = frames
+        .windows(2)
+        .map(|p| p[1].time_us - p[0].time_us)
+        .max()
+        .unwrap_or(0);
+    assert!(max_gap <= 2 * S, "longest gap {max_gap} µs");
+    assert!(clean as f64 > 0.999 * frames.len() as f64);
+    let c = b.ads_seq.counters();
+    assert!(c.reinits >= 4 && c.timeouts >= 4, "{c:?}");
+}
