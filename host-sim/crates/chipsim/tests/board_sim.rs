@@ -184,9 +184,26 @@ impl Bench {
 
     fn emit(&mut self, reading: AdsReading) {
         let raw = self.assembler.assemble(&reading);
-        let seq = self.frames.len() as u32;
-        let frame = process_prepared(seq, reading.time_us, &raw, Some(&self.prepared));
+        let mut frame = process_prepared(reading.seq, reading.time_us, &raw, Some(&self.prepared));
+        frame.lost = reading.lost;
         self.frames.push(frame);
+    }
+
+    /// The core stalls for `duration_us` (a flash erase: no instruction fetch, no handler runs)
+    /// while the converters go on converting. Then the DRDY interrupt that became pending during
+    /// the stall runs first (EXTI4 has the highest priority), then the overdue ticks.
+    fn stall(&mut self, duration_us: u64) {
+        let edges = self.ads.borrow().drdy_edges;
+        let end = self.now() + duration_us;
+        self.clock.set(end);
+        self.apply_physics();
+        if self.ads.borrow().drdy_edges != edges {
+            if let Some(r) = self.ads_seq.on_drdy(end) {
+                self.emit(r);
+            }
+        }
+        self.next_ads_tick = self.next_ads_tick.max(end);
+        self.next_rtd_tick = self.next_rtd_tick.max(end);
     }
 
     /// Event-driven run: DRDY edges of the ADS1262 model (the EXTI interrupt), the ADS1262
@@ -554,4 +571,53 @@ fn a_multi_day_stability_run_names_every_fault_and_recovers() {
     assert!(clean as f64 > 0.999 * frames.len() as f64);
     let c = b.ads_seq.counters();
     assert!(c.reinits >= 4 && c.timeouts >= 4, "{c:?}");
+}
+
+/// A 2 s stall of the core (the worst-case 128 KiB sector erase at x32, DS8626) in the middle of
+/// a stream at the default rate: every pair slot of the ADC's conversion clock is either a frame
+/// or a number skipped in `seq`, the gap sits on the first frame after the stall and says STALL,
+/// and no frame before or after says so.
+#[test]
+fn a_core_stall_longer_than_a_pair_leaves_a_seq_gap_flagged_stall_and_nothing_else_is_lost() {
+    use accomp::pipeline::LossFlags;
+    let mut b = Bench::new();
+    assert_eq!(b.boot(), (true, true));
+    b.run_until(b.now() + 20 * S);
+    let pair_us = b.ads_seq.pair_period_us();
+    let first = b.frames.len();
+    b.stall(2 * S);
+    b.run_until(b.now() + 20 * S);
+    let frames = &b.frames[first.saturating_sub(5)..];
+    let mut gaps = Vec::new();
+    for w in frames.windows(2) {
+        assert!(w[1].seq > w[0].seq, "seq runs forward");
+        let gap = w[1].seq - w[0].seq - 1;
+        assert_eq!(
+            gap > 0,
+            w[1].lost.has(LossFlags::STALL),
+            "frame {}: gap {gap}, lost {:?}",
+            w[1].seq,
+            w[1].lost
+        );
+        if gap > 0 {
+            gaps.push((gap, w[1].time_us - w[0].time_us));
+        }
+    }
+    assert_eq!(gaps.len(), 1, "one gap, at the stall: {gaps:?}");
+    let (gap, dt) = gaps[0];
+    // The slots the pair clock had between the two frames, all accounted for.
+    let slots = (dt + pair_us / 2) / pair_us;
+    assert_eq!(
+        u64::from(gap) + 1,
+        slots,
+        "gap {gap} over {dt} µs of {pair_us} µs pairs"
+    );
+    assert!(
+        gap >= 2,
+        "a 2 s stall at {pair_us} µs per pair loses at least 2 pairs"
+    );
+    // Every frame is clean: the stall cost readings, not values.
+    for f in frames {
+        check_clean_frame(&b.station, f).unwrap();
+    }
 }
