@@ -33,7 +33,7 @@ pub fn time_base_count() -> Option<u32> {
     None
 }
 
-/// QEMU clocks SysTick at 168 MHz whatever RCC says (qemu-notes.md), so that is the figure the
+/// QEMU clocks SysTick at 168 MHz whatever RCC says (docs/architecture.md), so that is the figure the
 /// monotonic needs to count milliseconds.
 pub const SYSTICK_HZ: u32 = 168_000_000;
 

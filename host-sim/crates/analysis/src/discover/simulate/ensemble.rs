@@ -1,0 +1,150 @@
+//! The ensemble: the twin run N times with the simulator's noise (seeds 1..=N, so a run is
+//! reproducible), each member's own residual (member − deterministic part, offset and linear
+//! drift removed like the measured residual's) reduced to its [`Views`] as soon as it is made,
+//! on all cores (std threads), with a progress bar on stderr.
+
+use super::spectra::{ChannelSpectra, RegularGrid, Views, Welch};
+use super::TwinModel;
+use crate::discover::import::Dataset;
+
+/// What every residual of one comparison is measured against: the record's grid, the Welch
+/// set-up, the measured channels' spectra and the trend that is removed.
+pub struct Yardstick<'a> {
+    /// The record.
+    pub ds: &'a Dataset,
+    /// Its regular grid.
+    pub grid: RegularGrid,
+    /// Welch set-up (None: too short for a spectrum).
+    pub welch: Option<Welch>,
+    /// Measured channels (name, spectra on the Welch segments).
+    pub channels: Vec<(String, ChannelSpectra)>,
+}
+
+impl<'a> Yardstick<'a> {
+    /// Set-up for a record.
+    pub fn new(ds: &'a Dataset) -> Self {
+        let grid = RegularGrid::new(ds);
+        let probe = grid.place(&ds.y);
+        let welch = Welch::new(&probe, grid.dt_s);
+        let channels = match &welch {
+            Some(w) => ds
+                .channels
+                .iter()
+                .filter(|c| c.kind != crate::discover::import::ChannelKind::Input)
+                .map(|c| (c.name.clone(), w.channel_spectra(&grid.place(&c.values))))
+                .collect(),
+            None => Vec::new(),
+        };
+        Yardstick {
+            ds,
+            grid,
+            welch,
+            channels,
+        }
+    }
+
+    /// Offset and linear drift (least squares, per record) removed: the level and the linear
+    /// drift rate of an instrument are calibration constants, not predictions of the simulation.
+    pub fn detrend(&self, r: &[f64]) -> Vec<f64> {
+        let t = &self.ds.t_s;
+        let n = r.len().min(t.len());
+        if n < 2 {
+            return r.to_vec();
+        }
+        let mt = t[..n].iter().sum::<f64>() / n as f64;
+        let mr = r[..n].iter().sum::<f64>() / n as f64;
+        let (mut sxy, mut sxx) = (0.0, 0.0);
+        for i in 0..n {
+            sxy += (t[i] - mt) * (r[i] - mr);
+            sxx += (t[i] - mt) * (t[i] - mt);
+        }
+        let b = if sxx > 0.0 { sxy / sxx } else { 0.0 };
+        (0..n).map(|i| r[i] - mr - b * (t[i] - mt)).collect()
+    }
+
+    /// The views of a residual (already detrended).
+    pub fn views(&self, r: &[f64]) -> Views {
+        let placed = self.grid.place(r);
+        let adev = super::spectra::adev(&placed, self.grid.dt_s);
+        let (psd, coherence) = match &self.welch {
+            Some(w) => (
+                w.psd(&placed),
+                self.channels
+                    .iter()
+                    .map(|(_, s)| w.coherence_to(&placed, s))
+                    .collect(),
+            ),
+            None => (Vec::new(), Vec::new()),
+        };
+        Views {
+            adev,
+            psd,
+            coherence,
+        }
+    }
+}
+
+/// The members' views.
+pub fn run<T: TwinModel>(
+    twin: &T,
+    det: &[f64],
+    n: usize,
+    yard: &Yardstick,
+    label: &str,
+) -> Result<Vec<Views>, String> {
+    let bar = indicatif::ProgressBar::new(n as u64);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} members ({elapsed})")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+            .progress_chars("=> "),
+    );
+    bar.set_message(format!("twin ensemble ({label})"));
+    let threads = std::thread::available_parallelism()
+        .map(|p| p.get())
+        .unwrap_or(1)
+        .clamp(1, n.max(1));
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    // The bar is drawn on a terminal only: elsewhere (a log file, CI) a line at most every
+    // PROGRESS_EVERY says where a long run is.
+    let log = crate::numerics::parallel::ProgressLines::new(
+        format!("twin ensemble ({label})"),
+        n,
+        "members",
+    );
+    let mut out: Vec<Option<Result<Views, String>>> = vec![None; n];
+    std::thread::scope(|s| {
+        let handles: Vec<_> = (0..threads)
+            .map(|_| {
+                s.spawn(|| {
+                    let mut mine = Vec::new();
+                    loop {
+                        let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                        if k >= n {
+                            break;
+                        }
+                        let v = twin.run(Some(k as u64 + 1)).map(|m| {
+                            let r: Vec<f64> = m.iter().zip(det).map(|(a, b)| a - b).collect();
+                            yard.views(&yard.detrend(&r))
+                        });
+                        bar.inc(1);
+                        log.inc();
+                        mine.push((k, v));
+                    }
+                    mine
+                })
+            })
+            .collect();
+        for h in handles {
+            if let Ok(v) = h.join() {
+                for (k, r) in v {
+                    out[k] = Some(r);
+                }
+            }
+        }
+    });
+    bar.finish_and_clear();
+    out.into_iter()
+        .enumerate()
+        .map(|(k, r)| r.unwrap_or_else(|| Err(format!("ensemble member {} did not finish", k + 1))))
+        .collect()
+}

@@ -1,0 +1,1217 @@
+//! The one reader of the project's CSV files: `# key: value` metadata, one header row, then rows.
+//!
+//! Every command reads through it — stability logs ([`super::Log`]), Table 1 and the printed
+//! models (`fit`), tumble logs (`tumble`), `compensate` sample files (`device::samples_csv`) — so
+//! the rules below hold everywhere, and every error names its 1-based line (comments included):
+//!
+//! - A UTF-8 byte-order mark at the very start of the file is stripped (spreadsheet exports
+//!   write one; it would otherwise glue itself to the first key or column name).
+//! - Before the header, a line starting with `#` is metadata when it reads `# key: value` (the
+//!   first `:` splits; key and value trimmed; an empty key makes it a comment) and a free comment
+//!   otherwise. **A repeated key is refused** ([`ReadError::RepeatedMeta`], both lines named):
+//!   one file with two values for `input_g` is usually two files pasted together, and which one
+//!   wins would otherwise depend on the reader.
+//! - The first other non-blank line is the header: comma-separated names, none empty, none
+//!   repeated. Fields are parsed by the `csv` crate (RFC 4180 quoting), trimmed of whitespace.
+//! - Then one record per line, exactly as many fields as the header. Blank lines are skipped; a
+//!   `#` line after the header is refused ([`ReadError::CommentAfterHeader`]): a comment in the
+//!   middle of the samples means two logs were concatenated.
+//!
+//! What a field means (number, gap, text) is the caller's business: [`Row`] hands out the
+//! trimmed bytes or text of each field with the line they came from.
+
+use std::collections::VecDeque;
+use std::io::{BufRead, Chain, Cursor, Read};
+
+/// The UTF-8 byte-order mark.
+const BOM: &[u8] = b"\xEF\xBB\xBF";
+
+/// Why a file is refused, with the 1-based line where it happened.
+#[derive(Debug, thiserror::Error)]
+pub enum ReadError {
+    /// The file could not be read.
+    #[error("I/O: {0}")]
+    Io(#[from] std::io::Error),
+    /// The file ended before a header row.
+    #[error("no header row (the file holds only comments and blank lines)")]
+    NoHeader,
+    /// A line is not UTF-8.
+    #[error("line {line}: not UTF-8")]
+    NotUtf8 {
+        /// 1-based line.
+        line: usize,
+    },
+    /// A metadata key appears twice before the header.
+    #[error("line {line}: metadata key `{key}` repeated (first given on line {first_line})")]
+    RepeatedMeta {
+        /// The key.
+        key: String,
+        /// Line of the repetition.
+        line: usize,
+        /// Line of the first occurrence.
+        first_line: usize,
+    },
+    /// The header is malformed.
+    #[error("header (line {line}): {reason}")]
+    BadHeader {
+        /// Header line.
+        line: usize,
+        /// What is wrong with it.
+        reason: String,
+    },
+    /// A column the caller requires is not in the header.
+    #[error("header (line {line}) has no `{column}` column")]
+    MissingColumn {
+        /// Header line.
+        line: usize,
+        /// The column.
+        column: String,
+    },
+    /// A record has more or fewer fields than the header.
+    #[error("line {line}: wrong column count: {found} fields, header has {expected}")]
+    FieldCount {
+        /// 1-based line.
+        line: usize,
+        /// Fields in the header.
+        expected: usize,
+        /// Fields in this record.
+        found: usize,
+    },
+    /// A `#` line after the header.
+    #[error("line {line}: comment line after the header (two files concatenated?)")]
+    CommentAfterHeader {
+        /// 1-based line.
+        line: usize,
+    },
+    /// The file is UTF-16 (with or without its byte-order mark): every other byte of its text
+    /// is NUL. Read as UTF-8 it would be garbage; said as such.
+    #[error("line {line}: the file is UTF-16 text ({endian}), not UTF-8: save it as UTF-8 (or CSV UTF-8)")]
+    Utf16 {
+        /// 1-based line.
+        line: usize,
+        /// "little-endian" or "big-endian".
+        endian: &'static str,
+    },
+    /// A line longer than any record: not a log (`/dev/zero`, a binary file).
+    #[error("line {line}: longer than {limit} bytes, the limit of one line: not a log")]
+    LineTooLong {
+        /// 1-based line.
+        line: usize,
+        /// [`MAX_LINE_BYTES`].
+        limit: usize,
+    },
+    /// More lines or bytes than the reader takes.
+    #[error("{what}, above the limit of {limit}: refused (--allow-large lifts it)")]
+    TooLarge {
+        /// 1-based line where the limit was passed.
+        line: usize,
+        /// "more than N data lines", "more than N bytes".
+        what: String,
+        /// The limit, with its unit.
+        limit: String,
+    },
+    /// The CSV layer refused the record (e.g. an unterminated quote).
+    #[error("line {line}: {reason}")]
+    Csv {
+        /// 1-based line.
+        line: usize,
+        /// What the csv crate said.
+        reason: String,
+    },
+}
+
+impl ReadError {
+    /// What is wrong, without the line number (for callers that print the line themselves).
+    pub fn what(&self) -> String {
+        match self {
+            Self::NotUtf8 { .. } => "not UTF-8".into(),
+            Self::RepeatedMeta {
+                key, first_line, ..
+            } => format!("metadata key `{key}` repeated (first given on line {first_line})"),
+            Self::BadHeader { reason, .. } | Self::Csv { reason, .. } => reason.clone(),
+            Self::MissingColumn { column, .. } => format!("header has no `{column}` column"),
+            Self::FieldCount {
+                expected, found, ..
+            } => format!("wrong column count: {found} fields, header has {expected}"),
+            Self::CommentAfterHeader { .. } => {
+                "comment line after the header (two files concatenated?)".into()
+            }
+            Self::Utf16 { endian, .. } => {
+                format!("the file is UTF-16 text ({endian}), not UTF-8: save it as UTF-8")
+            }
+            Self::LineTooLong { limit, .. } => {
+                format!("longer than {limit} bytes, the limit of one line: not a log")
+            }
+            Self::TooLarge { what, limit, .. } => {
+                format!("{what}, above the limit of {limit}: refused (--allow-large lifts it)")
+            }
+            Self::Io(_) | Self::NoHeader => self.to_string(),
+        }
+    }
+
+    /// As an I/O error (for readers whose errors carry one), the message kept.
+    pub fn into_io(self) -> std::io::Error {
+        match self {
+            Self::Io(e) => e,
+            other => std::io::Error::other(other.to_string()),
+        }
+    }
+
+    /// The line the error points at, if any.
+    pub fn line(&self) -> Option<usize> {
+        match self {
+            Self::Io(_) | Self::NoHeader => None,
+            Self::NotUtf8 { line }
+            | Self::RepeatedMeta { line, .. }
+            | Self::BadHeader { line, .. }
+            | Self::MissingColumn { line, .. }
+            | Self::FieldCount { line, .. }
+            | Self::CommentAfterHeader { line }
+            | Self::LineTooLong { line, .. }
+            | Self::TooLarge { line, .. }
+            | Self::Utf16 { line, .. }
+            | Self::Csv { line, .. } => Some(*line),
+        }
+    }
+}
+
+/// The longest line any reader takes (a log's record is a few hundred bytes): `/dev/zero` or a
+/// binary file is refused after this much, not read until memory runs out.
+pub const MAX_LINE_BYTES: usize = 1 << 20;
+/// Data lines a file may have without `--allow-large`: what `accomp simulate` writes without it
+/// (231 days at 1 s).
+pub const MAX_ROWS: u64 = 20_000_000;
+/// Bytes a file may have without `--allow-large`: what `accomp simulate` writes without it.
+pub const MAX_FILE_BYTES: u64 = 4 << 30;
+/// Bytes of metadata and comments before the header.
+const MAX_PREAMBLE_BYTES: usize = 16 << 20;
+
+/// Whether this process reads files above [`MAX_ROWS`] / [`MAX_FILE_BYTES`] (`--allow-large`).
+static ALLOW_LARGE: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// Lifts the row and byte limits of every reader of this process (the commands'
+/// `--allow-large`); the line limit stays.
+pub fn set_allow_large(allow: bool) {
+    ALLOW_LARGE.store(allow, std::sync::atomic::Ordering::Relaxed);
+}
+
+/// The (rows, bytes) limits in force.
+pub fn limits() -> (u64, u64) {
+    if ALLOW_LARGE.load(std::sync::atomic::Ordering::Relaxed) {
+        (u64::MAX, u64::MAX)
+    } else {
+        (MAX_ROWS, MAX_FILE_BYTES)
+    }
+}
+
+fn too_many_bytes(line: usize, bytes: u64) -> ReadError {
+    ReadError::TooLarge {
+        line,
+        what: format!("more than {bytes} bytes read by line {line}"),
+        limit: format!("{} bytes", limits().1),
+    }
+}
+
+/// Refuses a file whose size alone is above the byte limit, before anything is read.
+pub fn check_file_size(path: &std::path::Path) -> Result<(), ReadError> {
+    let len = std::fs::metadata(path)?.len();
+    let (_, max) = limits();
+    if len > max {
+        return Err(ReadError::TooLarge {
+            line: 0,
+            what: format!("{}: {len} bytes", path.display()),
+            limit: format!("{max} bytes"),
+        });
+    }
+    Ok(())
+}
+
+/// Bytes of the small text files read whole (Table 1 and model CSVs, tumble logs).
+pub const MAX_SMALL_TEXT_BYTES: u64 = 64 << 20;
+
+/// Reads a whole text file of at most `max_bytes`, line by line with no line longer than
+/// [`MAX_LINE_BYTES`]: for the small files read whole (tables, tumble logs, sample files), so
+/// that `/dev/zero` or a huge file is refused with the limit named instead of filling memory.
+pub fn read_text_limited(path: &std::path::Path, max_bytes: u64) -> Result<String, ReadError> {
+    let f = std::fs::File::open(path)?;
+    let len = f.metadata()?.len();
+    if len > max_bytes {
+        return Err(ReadError::TooLarge {
+            line: 0,
+            what: format!("{}: {len} bytes", path.display()),
+            limit: format!("{max_bytes} bytes"),
+        });
+    }
+    let mut r = std::io::BufReader::with_capacity(1 << 16, f);
+    let mut all = Vec::new();
+    let mut line = 0usize;
+    loop {
+        let n = (&mut r)
+            .take(MAX_LINE_BYTES as u64 + 1)
+            .read_until(b'\n', &mut all)?;
+        if n == 0 {
+            break;
+        }
+        line += 1;
+        if line == 1 {
+            if let Some(endian) = utf16_endianness(&all) {
+                return Err(ReadError::Utf16 { line, endian });
+            }
+        }
+        if n > MAX_LINE_BYTES && all.last() != Some(&b'\n') {
+            return Err(ReadError::LineTooLong {
+                line,
+                limit: MAX_LINE_BYTES,
+            });
+        }
+        if all.len() as u64 > max_bytes {
+            return Err(ReadError::TooLarge {
+                line,
+                what: format!("more than {max_bytes} bytes by line {line}"),
+                limit: format!("{max_bytes} bytes"),
+            });
+        }
+    }
+    String::from_utf8(all).map_err(|e| {
+        let at = e.utf8_error().valid_up_to();
+        let bytes = e.as_bytes();
+        ReadError::NotUtf8 {
+            line: 1 + memchr::memchr_iter(b'\n', &bytes[..at]).count(),
+        }
+    })
+}
+
+/// Whether a line is UTF-16 text: a UTF-16 byte-order mark, or (without one) NUL in every
+/// other byte of a line of ASCII text — which no UTF-8 log has (a UTF-8 text holds no NUL).
+/// Returns the byte order.
+fn utf16_endianness(line: &[u8]) -> Option<&'static str> {
+    if line.starts_with(b"\xFF\xFE") {
+        return Some("little-endian");
+    }
+    if line.starts_with(b"\xFE\xFF") {
+        return Some("big-endian");
+    }
+    let text = line.strip_suffix(b"\n").unwrap_or(line);
+    let text = text.strip_suffix(b"\0").unwrap_or(text);
+    if text.len() < 2 || !text.contains(&0) {
+        return None;
+    }
+    let even_nul = text.iter().step_by(2).all(|&b| b == 0);
+    let odd_nul = text.iter().skip(1).step_by(2).all(|&b| b == 0);
+    match (even_nul, odd_nul) {
+        (false, true) => Some("little-endian"),
+        (true, false) => Some("big-endian"),
+        _ => None,
+    }
+}
+
+/// Bytes of complete lines one worker of [`Records::for_each_block`] parses at a time.
+/// (A few lines in the unit tests, so that their logs span many blocks.)
+const BLOCK_BYTES: usize = if cfg!(test) { 256 } else { 4 << 20 };
+/// Bytes asked of the underlying reader per read while lines are split here.
+const READ_BYTES: usize = 1 << 20;
+
+/// An open file: metadata and header read, records on demand.
+///
+/// Lines without a quote are split on commas here (what the csv crate makes of such a line,
+/// without its per-record buffer work); from the first line with a quote (or a carriage return
+/// that does not end the line) on, the csv crate reads the rest (RFC 4180 quoting, quoted
+/// fields across lines). Both give the same fields and the same line numbers.
+pub struct Records<R: Read> {
+    meta: Vec<(String, String)>,
+    header: Vec<String>,
+    header_line: usize,
+    source: Source<R>,
+    /// Trimmed field bounds of the current line (split lines).
+    bounds: Vec<(usize, usize)>,
+    /// The current record (csv crate).
+    record: csv::ByteRecord,
+}
+
+/// Where the records come from.
+enum Source<R: Read> {
+    /// Every data line so far was free of quotes and stray carriage returns.
+    Lines(Lines<R>),
+    /// The csv crate, from the first line that needs it.
+    Csv(CsvSource<R>),
+    /// Only while switching from one to the other.
+    Switching,
+}
+
+/// The csv crate's reader over the rest of the file.
+struct CsvSource<R: Read> {
+    csv: csv::Reader<NewlineOffsets<Chain<Cursor<Vec<u8>>, R>>>,
+    /// File line of the csv stream's first byte.
+    first_line: usize,
+    /// Newlines of the csv stream before the current record.
+    newlines_before: usize,
+    /// The last file line the row limit allows.
+    last_line: usize,
+}
+
+/// The last file line the row limit allows after a header on `header_line`.
+fn last_line(header_line: usize) -> usize {
+    usize::try_from(limits().0)
+        .unwrap_or(usize::MAX)
+        .saturating_add(header_line)
+}
+
+fn too_many_rows(line: usize) -> ReadError {
+    ReadError::TooLarge {
+        line,
+        what: format!("more than {} data lines (line {line})", limits().0),
+        limit: format!("{} data lines", limits().0),
+    }
+}
+
+/// Raw lines of the data section, read in large pieces.
+struct Lines<R> {
+    r: R,
+    buf: Vec<u8>,
+    /// Start of the unread bytes of `buf`.
+    pos: usize,
+    /// File line of the line starting at `pos`.
+    line: usize,
+    eof: bool,
+    /// Bytes of the file read so far (for the byte limit).
+    read: u64,
+    /// The last file line the row limit allows.
+    last_line: usize,
+}
+
+impl<R: Read> Lines<R> {
+    /// Appends up to [`READ_BYTES`] to `buf` (after dropping the bytes before `pos`).
+    fn refill(&mut self) -> Result<(), ReadError> {
+        if self.pos > 0 {
+            self.buf.drain(..self.pos);
+            self.pos = 0;
+        }
+        let old = self.buf.len();
+        self.buf.resize(old + READ_BYTES, 0);
+        let n = loop {
+            match self.r.read(&mut self.buf[old..]) {
+                Ok(n) => break n,
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+                Err(e) => {
+                    self.buf.truncate(old);
+                    return Err(e.into());
+                }
+            }
+        };
+        self.buf.truncate(old + n);
+        self.eof = n == 0;
+        self.read += n as u64;
+        if self.read > limits().1 {
+            return Err(too_many_bytes(self.line, self.read));
+        }
+        Ok(())
+    }
+
+    /// The end (index of its `\n`, or the end of the file) of the line at `pos`; `None` at the
+    /// end of the file. A line longer than [`MAX_LINE_BYTES`] is refused.
+    fn line_end(&mut self) -> Result<Option<usize>, ReadError> {
+        let mut scanned = 0;
+        loop {
+            let from = self.pos + scanned;
+            if let Some(i) = memchr::memchr(b'\n', &self.buf[from..]) {
+                if from + i - self.pos > MAX_LINE_BYTES {
+                    break;
+                }
+                return Ok(Some(from + i));
+            }
+            if self.eof {
+                return Ok((self.pos < self.buf.len()).then_some(self.buf.len()));
+            }
+            scanned = self.buf.len() - self.pos;
+            if scanned > MAX_LINE_BYTES {
+                break;
+            }
+            self.refill()?;
+        }
+        Err(ReadError::LineTooLong {
+            line: self.line,
+            limit: MAX_LINE_BYTES,
+        })
+    }
+}
+
+/// Splits one line (without its `\n`) on commas into trimmed field bounds, exactly as the csv
+/// crate does a line without quotes: `None` when the line has a quote or a carriage return
+/// before its end (the csv crate's rules apply from there), `Some(false)` for an empty line
+/// (which the csv crate skips), `Some(true)` for a record.
+fn split_line(line: &[u8], bounds: &mut Vec<(usize, usize)>) -> Option<bool> {
+    let line = line.strip_suffix(b"\r").unwrap_or(line);
+    if line.is_empty() {
+        return Some(false);
+    }
+    if memchr::memchr2(b'"', b'\r', line).is_some() {
+        return None;
+    }
+    bounds.clear();
+    let mut start = 0;
+    for end in memchr::memchr_iter(b',', line).chain(std::iter::once(line.len())) {
+        let (mut a, mut b) = (start, end);
+        while a < b && line[a].is_ascii_whitespace() {
+            a += 1;
+        }
+        while b > a && line[b - 1].is_ascii_whitespace() {
+            b -= 1;
+        }
+        bounds.push((a, b));
+        start = end + 1;
+    }
+    Some(true)
+}
+
+/// True when every line of `bytes` can be split by [`split_line`]: no quote, and every
+/// carriage return ends a line (or the bytes).
+fn splittable(bytes: &[u8]) -> bool {
+    memchr::memchr(b'"', bytes).is_none()
+        && memchr::memchr_iter(b'\r', bytes).all(|i| bytes.get(i + 1).is_none_or(|&b| b == b'\n'))
+}
+
+/// The rules every record passes, whoever split it: no `#` line after the header, a line of
+/// spaces is blank (`Ok(false)`: skipped), exactly as many fields as the header.
+fn check_record(
+    line: usize,
+    first: &[u8],
+    fields: usize,
+    expected: usize,
+) -> Result<bool, ReadError> {
+    if first.starts_with(b"#") {
+        return Err(ReadError::CommentAfterHeader { line });
+    }
+    if fields == 1 && first.is_empty() {
+        return Ok(false);
+    }
+    if fields != expected {
+        return Err(ReadError::FieldCount {
+            line,
+            expected,
+            found: fields,
+        });
+    }
+    Ok(true)
+}
+
+/// The csv crate's reader over `start` then `r`; `before`: bytes of the file before `start`.
+fn csv_reader<R: Read>(
+    start: Vec<u8>,
+    r: R,
+    before: u64,
+) -> csv::Reader<NewlineOffsets<Chain<Cursor<Vec<u8>>, R>>> {
+    csv::ReaderBuilder::new()
+        .has_headers(false)
+        .flexible(true)
+        .trim(csv::Trim::All)
+        .from_reader(NewlineOffsets {
+            inner: Cursor::new(start).chain(r),
+            offset: 0,
+            pending: VecDeque::new(),
+            before,
+            since_newline: 0,
+        })
+}
+
+/// Remembers the byte offsets of the newlines that pass through, so that a record's byte
+/// position gives its line exactly: csv's own line counter skips blank lines. Only the newlines
+/// read ahead of the current record are kept (a buffer's worth).
+/// Also where the csv crate's reading is bounded: no line (a quoted field included) longer
+/// than [`MAX_LINE_BYTES`], no more than the byte limit in all.
+struct NewlineOffsets<R> {
+    inner: R,
+    offset: u64,
+    pending: VecDeque<u64>,
+    /// Bytes of the file before this stream.
+    before: u64,
+    /// Bytes since the last newline.
+    since_newline: usize,
+}
+
+impl<R: Read> Read for NewlineOffsets<R> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let n = self.inner.read(buf)?;
+        let mut last = None;
+        for i in memchr::memchr_iter(b'\n', &buf[..n]) {
+            self.pending.push_back(self.offset + i as u64);
+            last = Some(i);
+        }
+        self.since_newline = match last {
+            Some(i) => n - i - 1,
+            None => self.since_newline + n,
+        };
+        self.offset += n as u64;
+        if self.since_newline > MAX_LINE_BYTES {
+            return Err(std::io::Error::other(format!(
+                "a line longer than {MAX_LINE_BYTES} bytes, the limit of one line: not a log"
+            )));
+        }
+        let total = self.before + self.offset;
+        if total > limits().1 {
+            return Err(std::io::Error::other(format!(
+                "more than {total} bytes, above the limit of {} bytes (--allow-large lifts it)",
+                limits().1
+            )));
+        }
+        Ok(n)
+    }
+}
+
+/// The fields of one record.
+#[derive(Debug, Clone, Copy)]
+enum Fields<'a> {
+    /// Split here: the line and the trimmed bounds of its fields.
+    Split {
+        line: &'a [u8],
+        bounds: &'a [(usize, usize)],
+    },
+    /// Read by the csv crate (trimmed).
+    Csv(&'a csv::ByteRecord),
+}
+
+/// One record and the line it starts on.
+#[derive(Debug, Clone, Copy)]
+pub struct Row<'a> {
+    /// 1-based line in the file.
+    pub line: usize,
+    fields: Fields<'a>,
+}
+
+impl<'a> Row<'a> {
+    /// Number of fields (always the header's).
+    pub fn len(&self) -> usize {
+        match self.fields {
+            Fields::Split { bounds, .. } => bounds.len(),
+            Fields::Csv(r) => r.len(),
+        }
+    }
+
+    /// True for a record without fields (never returned by [`Records::next_row`]).
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The trimmed bytes of field `i` (empty past the end).
+    pub fn bytes(&self, i: usize) -> &'a [u8] {
+        match self.fields {
+            Fields::Split { line, bounds } => bounds.get(i).map_or(b"", |&(a, b)| &line[a..b]),
+            Fields::Csv(r) => r.get(i).unwrap_or(b""),
+        }
+    }
+
+    /// The trimmed text of field `i`.
+    pub fn text(&self, i: usize) -> Result<&'a str, ReadError> {
+        std::str::from_utf8(self.bytes(i)).map_err(|_| ReadError::NotUtf8 { line: self.line })
+    }
+}
+
+/// Something that hands out records in file order: an open file ([`Records`]) or one block of
+/// it ([`BlockRows`], on a worker thread of [`Records::for_each_block`]).
+pub trait RowStream {
+    /// The next record, `None` at the end.
+    fn next_row(&mut self) -> Result<Option<Row<'_>>, ReadError>;
+}
+
+/// Complete data lines, none needing the csv crate, with the file line of the first.
+struct Block {
+    bytes: Vec<u8>,
+    first_line: usize,
+}
+
+impl Block {
+    fn rows(&self, expected: usize) -> BlockRows<'_> {
+        BlockRows {
+            bytes: &self.bytes,
+            pos: 0,
+            line: self.first_line,
+            expected,
+            bounds: Vec::new(),
+        }
+    }
+}
+
+/// The records of one block.
+pub struct BlockRows<'a> {
+    bytes: &'a [u8],
+    pos: usize,
+    line: usize,
+    expected: usize,
+    bounds: Vec<(usize, usize)>,
+}
+
+impl RowStream for BlockRows<'_> {
+    fn next_row(&mut self) -> Result<Option<Row<'_>>, ReadError> {
+        while self.pos < self.bytes.len() {
+            let rest = &self.bytes[self.pos..];
+            let len = memchr::memchr(b'\n', rest).unwrap_or(rest.len());
+            let text = &rest[..len];
+            let line = self.line;
+            self.pos += len + 1;
+            self.line += 1;
+            match split_line(text, &mut self.bounds) {
+                Some(true) => {}
+                Some(false) => continue,
+                // `splittable` was checked on the whole block.
+                None => {
+                    return Err(ReadError::Csv {
+                        line,
+                        reason: "a quote in a block that was checked to have none".into(),
+                    })
+                }
+            }
+            let first = self.bounds.first().map_or(&b""[..], |&(a, b)| &text[a..b]);
+            if check_record(line, first, self.bounds.len(), self.expected)? {
+                return Ok(Some(Row {
+                    line,
+                    fields: Fields::Split {
+                        line: text,
+                        bounds: &self.bounds,
+                    },
+                }));
+            }
+        }
+        Ok(None)
+    }
+}
+
+/// What [`Records::take_block`] found.
+enum Taken {
+    Block(Block),
+    /// The file is read.
+    End,
+    /// The next lines need the csv crate (or a line is longer than a block): read on.
+    Sequential,
+}
+
+impl<'s> Records<&'s [u8]> {
+    /// Opens a file held in a string.
+    pub fn from_text(text: &'s str) -> Result<Self, ReadError> {
+        Self::new(text.as_bytes())
+    }
+}
+
+impl<R: BufRead> Records<R> {
+    /// Reads the metadata and the header; records follow with [`Records::next_row`].
+    pub fn new(mut r: R) -> Result<Self, ReadError> {
+        let mut buf = Vec::with_capacity(256);
+        let mut line = 0usize;
+        let mut meta: Vec<(String, String, usize)> = Vec::new();
+        let mut preamble = 0usize;
+        let header_bytes = loop {
+            buf.clear();
+            let n = (&mut r)
+                .take(MAX_LINE_BYTES as u64 + 1)
+                .read_until(b'\n', &mut buf)?;
+            if n == 0 {
+                return Err(ReadError::NoHeader);
+            }
+            line += 1;
+            if n > MAX_LINE_BYTES && buf.last() != Some(&b'\n') {
+                return Err(ReadError::LineTooLong {
+                    line,
+                    limit: MAX_LINE_BYTES,
+                });
+            }
+            preamble += n;
+            if preamble > MAX_PREAMBLE_BYTES {
+                return Err(ReadError::Csv {
+                    line,
+                    reason: format!(
+                        "no header row in the first {MAX_PREAMBLE_BYTES} bytes (the limit of \
+                         metadata and comments)"
+                    ),
+                });
+            }
+            let bytes = if line == 1 {
+                buf.strip_prefix(BOM).unwrap_or(&buf)
+            } else {
+                &buf[..]
+            };
+            if let Some(endian) = utf16_endianness(bytes) {
+                return Err(ReadError::Utf16 { line, endian });
+            }
+            if bytes.iter().all(u8::is_ascii_whitespace) {
+                continue;
+            }
+            let text = std::str::from_utf8(bytes).map_err(|_| ReadError::NotUtf8 { line })?;
+            let text = text.trim();
+            let Some(comment) = text.strip_prefix('#') else {
+                break bytes.to_vec();
+            };
+            let Some((k, v)) = comment.split_once(':') else {
+                continue;
+            };
+            let k = k.trim();
+            if k.is_empty() {
+                continue;
+            }
+            if let Some((_, _, first_line)) = meta.iter().find(|(mk, ..)| mk == k) {
+                return Err(ReadError::RepeatedMeta {
+                    key: k.to_owned(),
+                    line,
+                    first_line: *first_line,
+                });
+            }
+            meta.push((k.to_owned(), v.trim().to_owned(), line));
+        };
+        let header_line = line;
+        let mut bounds = Vec::new();
+        let mut record = csv::ByteRecord::new();
+        let header_text = header_bytes.strip_suffix(b"\n").unwrap_or(&header_bytes);
+        let (names, source): (Vec<&[u8]>, Source<R>) = match split_line(header_text, &mut bounds) {
+            Some(_) => (
+                bounds.iter().map(|&(a, b)| &header_text[a..b]).collect(),
+                Source::Lines(Lines {
+                    r,
+                    buf: Vec::new(),
+                    pos: 0,
+                    line: header_line + 1,
+                    eof: false,
+                    read: preamble as u64,
+                    last_line: last_line(header_line),
+                }),
+            ),
+            None => {
+                // A quoted header: the csv crate reads it and everything after.
+                let mut csv = csv_reader(header_bytes.clone(), r, preamble as u64);
+                let more = csv
+                    .read_byte_record(&mut record)
+                    .map_err(|e| ReadError::Csv {
+                        line: header_line,
+                        reason: e.to_string(),
+                    })?;
+                if !more {
+                    return Err(ReadError::NoHeader);
+                }
+                (
+                    record.iter().collect(),
+                    Source::Csv(CsvSource {
+                        csv,
+                        first_line: header_line,
+                        newlines_before: 0,
+                        last_line: last_line(header_line),
+                    }),
+                )
+            }
+        };
+        let mut header = Vec::with_capacity(names.len());
+        for (i, name) in names.into_iter().enumerate() {
+            let name = std::str::from_utf8(name)
+                .map_err(|_| ReadError::NotUtf8 { line: header_line })?
+                .to_owned();
+            if name.is_empty() {
+                return Err(ReadError::BadHeader {
+                    line: header_line,
+                    reason: format!("column {} has an empty name", i + 1),
+                });
+            }
+            if header.contains(&name) {
+                return Err(ReadError::BadHeader {
+                    line: header_line,
+                    reason: format!("duplicate column {name:?}"),
+                });
+            }
+            header.push(name);
+        }
+        Ok(Self {
+            meta: meta.into_iter().map(|(k, v, _)| (k, v)).collect(),
+            header,
+            header_line,
+            source,
+            bounds,
+            record: csv::ByteRecord::new(),
+        })
+    }
+
+    /// `# key: value` metadata in file order (keys unique).
+    pub fn meta(&self) -> &[(String, String)] {
+        &self.meta
+    }
+
+    /// The value of one metadata key.
+    pub fn meta_value(&self, key: &str) -> Option<&str> {
+        self.meta
+            .iter()
+            .find(|(k, _)| k == key)
+            .map(|(_, v)| v.as_str())
+    }
+
+    /// Takes the metadata out (the records stay readable).
+    pub fn take_meta(&mut self) -> Vec<(String, String)> {
+        std::mem::take(&mut self.meta)
+    }
+
+    /// The column names.
+    pub fn header(&self) -> &[String] {
+        &self.header
+    }
+
+    /// 1-based line of the header.
+    pub fn header_line(&self) -> usize {
+        self.header_line
+    }
+
+    /// Index of a column, if present.
+    pub fn column(&self, name: &str) -> Option<usize> {
+        self.header.iter().position(|c| c == name)
+    }
+
+    /// Index of a column the caller cannot do without.
+    pub fn require(&self, name: &str) -> Result<usize, ReadError> {
+        self.column(name).ok_or_else(|| ReadError::MissingColumn {
+            line: self.header_line,
+            column: name.to_owned(),
+        })
+    }
+
+    /// Hands the rest of the file, from the line at the split position on, to the csv crate.
+    fn switch_to_csv(&mut self) {
+        if let Source::Lines(l) = std::mem::replace(&mut self.source, Source::Switching) {
+            let rest = l.buf[l.pos..].to_vec();
+            let before = l.read - rest.len() as u64;
+            self.source = Source::Csv(CsvSource {
+                csv: csv_reader(rest, l.r, before),
+                first_line: l.line,
+                newlines_before: 0,
+                last_line: l.last_line,
+            });
+        }
+    }
+
+    /// Takes the next [`BLOCK_BYTES`] or so of whole lines if none of them needs the csv crate.
+    fn take_block(&mut self) -> Result<Taken, ReadError> {
+        let Source::Lines(l) = &mut self.source else {
+            return Ok(Taken::Sequential);
+        };
+        while l.buf.len() - l.pos < BLOCK_BYTES && !l.eof {
+            l.refill()?;
+        }
+        let avail = &l.buf[l.pos..];
+        if avail.is_empty() {
+            return Ok(Taken::End);
+        }
+        let take = if l.eof && avail.len() <= BLOCK_BYTES {
+            avail.len()
+        } else {
+            match memchr::memrchr(b'\n', &avail[..BLOCK_BYTES.min(avail.len())]) {
+                Some(i) => i + 1,
+                None => return Ok(Taken::Sequential),
+            }
+        };
+        let bytes = &avail[..take];
+        if !splittable(bytes) {
+            return Ok(Taken::Sequential);
+        }
+        let block = Block {
+            bytes: bytes.to_vec(),
+            first_line: l.line,
+        };
+        l.line += memchr::memchr_iter(b'\n', bytes).count();
+        l.pos += take;
+        if l.line > l.last_line.saturating_add(1) {
+            return Err(too_many_rows(l.line - 1));
+        }
+        Ok(Taken::Block(block))
+    }
+
+    /// Reads every remaining record: blocks of lines that need no csv crate are parsed by
+    /// `work` on up to [`std::thread::available_parallelism`] threads at once, and their results
+    /// handed to `merge` in file order on this thread; from the first line that needs the csv
+    /// crate on, `work` reads the rest of the file here (one last result). `merge` stops the
+    /// reading by returning an error; a worker reports its own errors inside its result (it
+    /// stops at its first), so `merge` decides which comes first in the file.
+    pub fn for_each_block<T: Send, E: From<ReadError>>(
+        &mut self,
+        work: impl Fn(&mut dyn RowStream) -> T + Sync,
+        mut merge: impl FnMut(T) -> Result<(), E>,
+    ) -> Result<(), E> {
+        let threads = std::thread::available_parallelism().map_or(1, |n| n.get().min(8));
+        let expected = self.header.len();
+        loop {
+            let mut blocks = Vec::with_capacity(threads);
+            let mut sequential = false;
+            while blocks.len() < threads {
+                match self.take_block()? {
+                    Taken::Block(b) => blocks.push(b),
+                    Taken::End => break,
+                    Taken::Sequential => {
+                        sequential = true;
+                        break;
+                    }
+                }
+            }
+            let full = blocks.len() == threads && !sequential;
+            let results: Vec<T> = match blocks.split_first() {
+                None => Vec::new(),
+                Some((first, rest)) => std::thread::scope(|s| {
+                    let handles: Vec<_> = rest
+                        .iter()
+                        .map(|b| s.spawn(|| work(&mut b.rows(expected))))
+                        .collect();
+                    let mut out = vec![work(&mut first.rows(expected))];
+                    for h in handles {
+                        out.push(h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)));
+                    }
+                    out
+                }),
+            };
+            for t in results {
+                merge(t)?;
+            }
+            if sequential {
+                return merge(work(self));
+            }
+            if !full {
+                return Ok(());
+            }
+        }
+    }
+}
+
+impl<R: BufRead> RowStream for Records<R> {
+    fn next_row(&mut self) -> Result<Option<Row<'_>>, ReadError> {
+        Records::next_row(self)
+    }
+}
+
+impl<R: BufRead> Records<R> {
+    /// The next record, `None` at the end of the file.
+    pub fn next_row(&mut self) -> Result<Option<Row<'_>>, ReadError> {
+        let expected = self.header.len();
+        // Where the record is, found first; the row borrowing it is made after the loop.
+        let split: Option<(usize, usize, usize)> = loop {
+            match &mut self.source {
+                Source::Lines(l) => {
+                    let Some(end) = l.line_end()? else {
+                        return Ok(None);
+                    };
+                    let (start, line) = (l.pos, l.line);
+                    let split = split_line(&l.buf[start..end], &mut self.bounds);
+                    if split.is_none() {
+                        self.switch_to_csv();
+                        continue;
+                    }
+                    l.pos = (end + 1).min(l.buf.len());
+                    l.line += 1;
+                    if line > l.last_line {
+                        return Err(too_many_rows(line));
+                    }
+                    if split == Some(false) {
+                        continue;
+                    }
+                    let text = &l.buf[start..end];
+                    let first = self.bounds.first().map_or(&b""[..], |&(a, b)| &text[a..b]);
+                    if check_record(line, first, self.bounds.len(), expected)? {
+                        break Some((start, end, line));
+                    }
+                }
+                Source::Csv(c) => {
+                    let read = c.csv.read_byte_record(&mut self.record);
+                    let more = match read {
+                        Ok(more) => more,
+                        Err(e) => {
+                            let at = e.position().map_or(u64::MAX, |p| p.byte());
+                            return Err(ReadError::Csv {
+                                line: c.line_at(at),
+                                reason: e.to_string(),
+                            });
+                        }
+                    };
+                    if !more {
+                        return Ok(None);
+                    }
+                    // csv's record position counts skipped blank lines into the record; the
+                    // reader's position just after it does not: the record's last byte is the
+                    // one before.
+                    let end = c.csv.position().byte();
+                    let line = c.line_at(end.saturating_sub(1));
+                    if line > c.last_line {
+                        return Err(too_many_rows(line));
+                    }
+                    let first = self.record.get(0).unwrap_or(b"");
+                    if check_record(line, first, self.record.len(), expected)? {
+                        break Some((0, 0, line));
+                    }
+                }
+                Source::Switching => break None,
+            }
+        };
+        Ok(match (split, &self.source) {
+            (Some((start, end, line)), Source::Lines(l)) => Some(Row {
+                line,
+                fields: Fields::Split {
+                    line: &l.buf[start..end],
+                    bounds: &self.bounds,
+                },
+            }),
+            (Some((_, _, line)), _) => Some(Row {
+                line,
+                fields: Fields::Csv(&self.record),
+            }),
+            (None, _) => None,
+        })
+    }
+}
+
+impl<R: Read> CsvSource<R> {
+    /// The file line of the byte at `offset` of the csv stream.
+    fn line_at(&mut self, offset: u64) -> usize {
+        let pending = &mut self.csv.get_mut().pending;
+        while pending.front().is_some_and(|&nl| nl < offset) {
+            pending.pop_front();
+            self.newlines_before += 1;
+        }
+        self.first_line + self.newlines_before
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn rows(text: &str) -> Result<Vec<(usize, Vec<String>)>, ReadError> {
+        let mut r = Records::from_text(text)?;
+        let mut out = Vec::new();
+        while let Some(row) = r.next_row()? {
+            let fields = (0..row.len())
+                .map(|i| row.text(i).map(str::to_owned))
+                .collect::<Result<_, _>>()?;
+            out.push((row.line, fields));
+        }
+        Ok(out)
+    }
+
+    #[test]
+    fn metadata_header_and_records_keep_their_line_numbers() {
+        let text = "# instrument: JN-06\n# a free comment\n\n# input_g: 1\ntime_s, output_v\n\
+                    0, 1.5\n\n1,\"2\"\n";
+        let r = Records::from_text(text).unwrap();
+        assert_eq!(r.meta_value("instrument"), Some("JN-06"));
+        assert_eq!(r.meta_value("input_g"), Some("1"));
+        assert_eq!(r.meta().len(), 2);
+        assert_eq!(r.header(), ["time_s", "output_v"]);
+        assert_eq!(r.header_line(), 5);
+        let rows = rows(text).unwrap();
+        assert_eq!(rows[0], (6, vec!["0".into(), "1.5".into()]));
+        assert_eq!(rows[1], (8, vec!["1".into(), "2".into()]));
+    }
+
+    #[test]
+    fn a_byte_order_mark_is_stripped_before_metadata_or_header() {
+        let r = Records::from_text("\u{feff}temperature_c,k0_g\n30,1\n").unwrap();
+        assert_eq!(r.header()[0], "temperature_c");
+        let r = Records::from_text("\u{feff}# input_g: 1\ntime_s,output_v\n").unwrap();
+        assert_eq!(r.meta_value("input_g"), Some("1"));
+    }
+
+    #[test]
+    fn a_repeated_metadata_key_is_refused_with_both_lines() {
+        let e = Records::from_text("# input_g: 1\n# other: x\n# input_g: 0\ntime_s,v\n")
+            .err()
+            .unwrap();
+        assert!(
+            matches!(e, ReadError::RepeatedMeta { line: 3, first_line: 1, ref key } if key == "input_g"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn malformed_files_name_the_line_and_the_problem() {
+        let count = rows("time_s,v\n0,1\n1,2,3\n").unwrap_err();
+        assert!(matches!(
+            count,
+            ReadError::FieldCount {
+                line: 3,
+                expected: 2,
+                found: 3
+            }
+        ));
+        let comment = rows("time_s,v\n0,1\n# second log\n1,2\n").unwrap_err();
+        assert!(matches!(comment, ReadError::CommentAfterHeader { line: 3 }));
+        assert!(matches!(
+            Records::from_text("# only: meta\n\n"),
+            Err(ReadError::NoHeader)
+        ));
+        assert!(matches!(
+            Records::from_text("time_s,v,v\n"),
+            Err(ReadError::BadHeader { line: 1, .. })
+        ));
+        assert!(matches!(
+            Records::from_text("time_s,,v\n"),
+            Err(ReadError::BadHeader { line: 1, .. })
+        ));
+        let r = Records::from_text("a,b\n").unwrap();
+        assert!(matches!(
+            r.require("time_s"),
+            Err(ReadError::MissingColumn { line: 1, .. })
+        ));
+        let bad = Records::new(&b"# k: \xff\na,b\n"[..]).err().unwrap();
+        assert!(matches!(bad, ReadError::NotUtf8 { line: 1 }));
+    }
+
+    #[test]
+    fn a_quote_hands_the_rest_to_the_csv_crate_with_the_same_fields_and_lines() {
+        let body = "0,1\n\n  \n1, 2 \r\n2,\"3\n4\"\n3,\"a,b\"\n4,5\n";
+        // Split here until line 5, the csv crate after; against the csv crate from the
+        // (quoted) header on.
+        let split = rows(&format!("# k: v\ntime_s,v\n{body}")).unwrap();
+        let csv = rows(&format!("# k: v\n\"time_s\",v\n{body}")).unwrap();
+        assert_eq!(split, csv);
+        assert_eq!(
+            split,
+            vec![
+                (3, vec!["0".into(), "1".into()]),
+                (6, vec!["1".into(), "2".into()]),
+                (8, vec!["2".into(), "3\n4".into()]),
+                (9, vec!["3".into(), "a,b".into()]),
+                (10, vec!["4".into(), "5".into()]),
+            ]
+        );
+        // A carriage return inside a line is a record end to the csv crate: handed over too.
+        let cr = rows("time_s,v\n0,1\r1,2\n").unwrap();
+        assert_eq!(cr.len(), 2);
+    }
+
+    #[test]
+    fn blocks_on_worker_threads_keep_file_order_and_lines() {
+        let mut text = String::from("time_s,v\n");
+        for i in 0..500 {
+            text.push_str(&format!("{i},{}\n", i * 3));
+            if i % 37 == 0 {
+                text.push('\n');
+            }
+        }
+        let want = rows(&text).unwrap();
+        let mut r = Records::from_text(&text).unwrap();
+        let mut got = Vec::new();
+        r.for_each_block(
+            |rows| {
+                let mut out = Vec::new();
+                while let Some(row) = rows.next_row().unwrap() {
+                    out.push((
+                        row.line,
+                        vec![
+                            row.text(0).unwrap().to_owned(),
+                            row.text(1).unwrap().to_owned(),
+                        ],
+                    ));
+                }
+                out
+            },
+            |part| -> Result<(), ReadError> {
+                got.extend(part);
+                Ok(())
+            },
+        )
+        .unwrap();
+        assert!(text.len() > 10 * BLOCK_BYTES);
+        assert_eq!(got, want);
+    }
+
+    #[test]
+    fn crlf_line_ends_and_blank_lines_are_accepted() {
+        let rows = rows("# k: v\r\ntime_s,v\r\n0,1\r\n   \r\n1,2\r\n").unwrap();
+        assert_eq!(rows.len(), 2);
+        assert_eq!(rows[1].0, 5);
+    }
+}
