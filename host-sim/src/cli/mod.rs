@@ -5,8 +5,10 @@
 //! (`plot::Format`, `plot::Kind`, `discover::import::Format`) derive `clap::ValueEnum` there
 //! rather than being mirrored here.
 
+pub mod board_sim;
 pub mod compensate;
 pub mod demo;
+pub mod device;
 pub mod discover;
 pub mod fit;
 pub mod load;
