@@ -13,6 +13,7 @@ pub mod discover;
 pub mod fit;
 pub mod load;
 pub mod plot;
+pub mod record;
 pub mod simulate;
 pub mod simulate_tumble;
 pub mod stability;

@@ -5,6 +5,7 @@ pub mod board_sim;
 pub mod client;
 pub mod compensate;
 pub mod qemu;
+pub mod record;
 pub mod samples_csv;
 pub mod transport;
 
