@@ -1,7 +1,7 @@
 //! The virtual front-end board behind `accomp board-sim`: the firmware's real core — the
 //! protocol [`Service`] with its calibration store, the acquisition sequencers, the sample
 //! assembler and the pipeline — running on the register-level models of the ADS1262 and the
-//! AD7124-4 (the same models the core's board tests use), whose analog inputs follow the station
+//! AD7124-4 (the `accomp-chipsim` crate, which the core's board tests use too), whose analog inputs follow the station
 //! simulator's physics for a scenario: the accelerometer's output voltage, the RTD's resistance
 //! and the tiltmeter's voltage.
 //!
@@ -13,12 +13,6 @@
 //! order: ADS1262 DRDY edges, the supervisor tick, the RTD task's tick; requests are handled
 //! between events, as the worker does.
 
-#[path = "../../../../tests/board_sim/ad7124_model.rs"]
-mod ad7124_model;
-#[path = "../../../../tests/board_sim/ads1262_model.rs"]
-mod ads1262_model;
-#[path = "../../../../tests/board_sim/bus.rs"]
-mod bus;
 pub mod flash;
 pub mod pty;
 
@@ -34,9 +28,7 @@ use accomp::protocol::{
 use accomp::service::Service;
 
 use crate::sim::{scenario::Scenario, Sample, SimError, Simulator};
-use ad7124_model::Ad7124Model;
-use ads1262_model::Ads1262Model;
-use bus::{Clock, SimDelay, SimSpi};
+use accomp_chipsim::{Ad7124Model, Ads1262Model, Clock, SimDelay, SimSpi};
 use flash::BoardFlash;
 
 type AdsSeq = AdsSequencer<SimSpi<Ads1262Model>, InterruptDrdy, SimDelay>;
