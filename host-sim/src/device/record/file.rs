@@ -487,6 +487,52 @@ mod tests {
         );
     }
 
+    fn frame(seq: u32) -> Frame {
+        Frame {
+            seq,
+            time_us: u64::from(seq) * 1_000_000,
+            output_v: 1.25,
+            temperature_c: 45.0,
+            rtd_ohms: f64::INFINITY,
+            tilt_arcsec: 0.5,
+            a_i_exact_g: 1.0,
+            output_linearized_v: 1.25,
+            status: accomp::pipeline::Status(accomp::pipeline::Status::RTD_OPEN),
+        }
+    }
+
+    #[test]
+    fn daily_files_split_at_utc_midnight_and_read_back_as_one_record() {
+        let dir = std::env::temp_dir().join(format!("accomp-rec-daily-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        // 23:59:58 UTC: rows at +0, +1, +2 (midnight), +3 s.
+        let start = Utc::parse("2026-03-01T23:59:58Z").unwrap().0;
+        let meta = vec![("start_utc".to_string(), Utc(start).to_string())];
+        let mut f = RecordFile::create(Layout::Daily(dir.clone()), meta, start, false).unwrap();
+        for k in 0..4u32 {
+            f.row(f64::from(k), &frame(k)).unwrap();
+            if k == 1 {
+                f.event(start + 1.5, "link_lost", "a \"quoted\" reason")
+                    .unwrap();
+            }
+        }
+        f.sync().unwrap();
+        let mut names: Vec<String> = std::fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        names.sort();
+        assert_eq!(names, ["2026-03-01.csv", "2026-03-02.csv"]);
+        let day2 = std::fs::read_to_string(dir.join("2026-03-02.csv")).unwrap();
+        assert!(day2.starts_with("# start_utc: 2026-03-01T23:59:58Z\n"));
+        let log = crate::log::Log::read_path(&dir).unwrap();
+        assert_eq!(log.time_s(), &[0.0, 1.0, 2.0, 3.0]);
+        // An open RTD's infinite resistance is written as a gap.
+        assert!(log.column("rtd_ohms").unwrap().iter().all(|v| v.is_nan()));
+        assert_eq!(log.column("seq").unwrap(), &[0.0, 1.0, 2.0, 3.0]);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
     #[test]
     fn days_are_named_in_utc() {
         assert_eq!(day_name(0.0), "1970-01-01");
