@@ -143,15 +143,20 @@ impl ClockModel {
 
     /// Record time of a frame stamped `board_us` that arrived at PC time `pc_s` (Unix seconds),
     /// for a record starting at `start_unix_s`; events noticed on the way go to `events`.
+    /// `arrived_now`: false for a frame that waited in a buffer for an unknown time (read
+    /// during the connection's handshake): its arrival says nothing about the board's clock.
     pub fn record_time(
         &mut self,
         board_us: u64,
         pc_s: f64,
         start_unix_s: f64,
+        arrived_now: bool,
         events: &mut Vec<ClockEvent>,
     ) -> f64 {
         let b = board_us as f64 * 1e-6;
-        self.observe(b, pc_s, events);
+        if arrived_now {
+            self.observe(b, pc_s, events);
+        }
         let t = match (self.last, self.anchored) {
             (Some(l), true) if board_us > l.board_us => {
                 l.record_s + (board_us - l.board_us) as f64 * 1e-6 * (1.0 - self.drift)
@@ -298,7 +303,10 @@ mod tests {
                 + if k % 50 == 7 { 0.3 } else { 0.0 };
             let step = pc_step_at.map_or(0.0, |(at, s)| if true_s >= at { s } else { 0.0 });
             let pc = start + true_s + delay + step;
-            out.push((board_us, m.record_time(board_us, pc, start, &mut events)));
+            out.push((
+                board_us,
+                m.record_time(board_us, pc, start, true, &mut events),
+            ));
             k += 1;
         }
         (out, events)
@@ -349,7 +357,7 @@ mod tests {
         for k in 0..2000u64 {
             let board_us = k * 800_000;
             let pc = start + k as f64 * 0.8e-3 + 0.001;
-            last = m.record_time(board_us, pc, start, &mut events);
+            last = m.record_time(board_us, pc, start, true, &mut events);
         }
         assert!(matches!(
             events.as_slice(),
@@ -358,7 +366,13 @@ mod tests {
         assert!((last - 1999.0 * 0.8).abs() < 0.01, "{last}");
         // A reboot 1 PC second later: the gap is 1000 board seconds.
         m.new_boot();
-        let t = m.record_time(1_000, start + 1999.0 * 0.8e-3 + 1.001, start, &mut events);
+        let t = m.record_time(
+            1_000,
+            start + 1999.0 * 0.8e-3 + 1.001,
+            start,
+            true,
+            &mut events,
+        );
         assert!((t - (last + 1000.0)).abs() < 5.0, "{t}");
     }
 }

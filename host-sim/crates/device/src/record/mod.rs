@@ -290,7 +290,7 @@ impl Recorder<'_> {
         Ok(())
     }
 
-    fn frame(&mut self, dev: &Device, frame: &Frame) -> anyhow::Result<()> {
+    fn frame(&mut self, dev: &Device, frame: &Frame, arrived_now: bool) -> anyhow::Result<()> {
         let pc = (self.pc)();
         if self.file.is_none() {
             self.open_file(dev, pc)?;
@@ -324,7 +324,9 @@ impl Recorder<'_> {
             }
         }
         let mut evs = Vec::new();
-        let t = self.clock.record_time(frame.time_us, pc, start, &mut evs);
+        let t = self
+            .clock
+            .record_time(frame.time_us, pc, start, arrived_now, &mut evs);
         self.clock_events(evs, start + t)?;
         if self.last_status != Some(frame.status) {
             if let Some(old) = self.last_status {
@@ -588,6 +590,15 @@ pub fn record(
                     last_msg = Instant::now();
                     last_info = Instant::now();
                     r.bad_frames = newdev.client.bad_frames;
+                    let mut newdev = newdev;
+                    // Frames that streamed in during the handshake (a stream left running by
+                    // an earlier recorder): recorded, but their arrival times are not clock
+                    // information.
+                    for m in newdev.client.take_inbox() {
+                        if let DeviceMessage::Sample { id: 0, frame } = m {
+                            r.frame(&newdev, &frame, false)?;
+                        }
+                    }
                     dev = Some(newdev);
                 }
                 Err(e) => {
@@ -608,7 +619,7 @@ pub fn record(
             Ok(DeviceMessage::Sample { id: 0, frame }) => {
                 last_msg = Instant::now();
                 let dref = &*d;
-                r.frame(dref, &frame)?;
+                r.frame(dref, &frame, true)?;
                 None
             }
             Ok(DeviceMessage::Ready { .. }) => {
