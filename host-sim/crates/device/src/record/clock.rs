@@ -15,6 +15,10 @@
 //! virtual board at `--speed N`): it is announced once and no drift is applied; record time
 //! then is the board's own clock.
 //!
+//! The first frame of a boot anchors the record time at its arrival, delay included; the
+//! minimum-delay line then says where the board clock really sits, and the difference is slewed
+//! in at most [`MAX_SLEW`] of the elapsed time (never a jump, never backwards).
+//!
 //! Only a new boot (or a new recorder on a board of unknown state) anchors the board clock
 //! again: at the previous frame's record time plus the PC time since, scaled by the measured
 //! rate of the board clock, and never at or before the previous frame.
@@ -29,6 +33,9 @@ pub const BLOCKS_KEPT: usize = 240;
 pub const STEP_S: f64 = 0.5;
 /// Largest drift of a board crystal against the PC's clock that is applied (1000 ppm).
 pub const MAX_CRYSTAL_DRIFT: f64 = 1e-3;
+/// Fastest slewing of the record time toward the minimum-delay line, as a fraction of the
+/// elapsed time (500 ppm: a 0.1 s anchor error is absorbed in 200 s).
+pub const MAX_SLEW: f64 = 5e-4;
 /// A drift change that is reported as an event, ppm.
 pub const DRIFT_REPORT_PPM: f64 = 1.0;
 
@@ -84,6 +91,10 @@ pub struct ClockModel {
     /// (board s, offset s, jump s).
     pending: Option<(f64, f64, f64)>,
     not_crystal_reported: bool,
+    /// Record time still to be slewed in (s): the difference between where the minimum-delay
+    /// line puts the board clock and where the record's anchor put it.
+    correction_s: f64,
+    start_unix_s: f64,
     last: Option<Last>,
     /// The board clock is anchored: frames of this boot follow it.
     anchored: bool,
@@ -101,6 +112,8 @@ impl Default for ClockModel {
             reported_ppm: None,
             pending: None,
             not_crystal_reported: false,
+            correction_s: 0.0,
+            start_unix_s: 0.0,
             last: None,
             anchored: false,
         }
@@ -154,12 +167,17 @@ impl ClockModel {
         events: &mut Vec<ClockEvent>,
     ) -> f64 {
         let b = board_us as f64 * 1e-6;
+        self.start_unix_s = start_unix_s;
         if arrived_now {
             self.observe(b, pc_s, events);
         }
         let t = match (self.last, self.anchored) {
             (Some(l), true) if board_us > l.board_us => {
-                l.record_s + (board_us - l.board_us) as f64 * 1e-6 * (1.0 - self.drift)
+                let dt = (board_us - l.board_us) as f64 * 1e-6 * (1.0 - self.drift);
+                // Slewed in at most MAX_SLEW of the elapsed time: never a jump, never back.
+                let slew = self.correction_s.clamp(-MAX_SLEW * dt, MAX_SLEW * dt);
+                self.correction_s -= slew;
+                l.record_s + dt + slew
             }
             (Some(l), _) => {
                 // A new anchor: the PC time since the previous frame at the board's rate, or
@@ -261,6 +279,14 @@ impl ClockModel {
         self.crystal = true;
         self.rate = 1.0;
         self.drift = -slope;
+        // Where the block's least-delayed frame arrived against where the record put it: the
+        // anchor (the first frame's arrival) carried that frame's delay, the line does not.
+        if let (Some(l), true) = (self.last, self.anchored) {
+            let mapped = l.record_s - (l.board_us as f64 * 1e-6 - b) * (1.0 - self.drift);
+            // The offsets have the PC's steps taken out: the PC time as if it had not stepped.
+            let arrived = offset + b - self.start_unix_s;
+            self.correction_s = arrived - mapped;
+        }
         let ppm = self.drift * 1e6;
         if self
             .reported_ppm
@@ -329,6 +355,35 @@ mod tests {
         let truth = i as f64 * 0.8;
         assert!((t - truth).abs() < 0.02, "record {t} vs true {truth}");
         assert!(rows.windows(2).all(|w| w[1].1 > w[0].1));
+    }
+
+    #[test]
+    fn a_late_first_frame_is_slewed_out_without_a_jump() {
+        let mut m = ClockModel::new(None);
+        let start = 1.7e9;
+        let mut events = Vec::new();
+        let mut rows = Vec::new();
+        for k in 0..20_000u64 {
+            let true_s = k as f64 * 0.8;
+            // The first frame waited 0.4 s in a buffer (the record starts at its arrival);
+            // every other one arrives within 1–3 ms.
+            let delay = if k == 0 {
+                0.4
+            } else {
+                0.001 + 0.002 * ((k % 7) as f64 / 7.0)
+            };
+            let pc = start + true_s + delay;
+            rows.push(m.record_time((true_s * 1e6) as u64, pc, start, true, &mut events));
+        }
+        // Record time of frame k should be its true time plus the 1 ms minimum delay; the
+        // anchor put the first frame 0.4 s late.
+        let err = |k: usize| rows[k] - (k as f64 * 0.8 + 0.001);
+        assert!((err(0) - 0.399).abs() < 1e-6);
+        assert!(err(rows.len() - 1).abs() < 2e-3, "{}", err(rows.len() - 1));
+        for w in rows.windows(2) {
+            let dt = w[1] - w[0];
+            assert!((dt - 0.8).abs() <= 0.8 * MAX_SLEW + 1e-9, "step {dt}");
+        }
     }
 
     #[test]
