@@ -68,6 +68,28 @@ impl Drop for BoardSim {
     }
 }
 
+/// A recorder process, killed on drop (a failed assertion must not leave it running).
+struct Recorder(Child);
+
+impl Recorder {
+    fn spawn(mut c: Command) -> Recorder {
+        Recorder(c.spawn().unwrap())
+    }
+    fn wait_success(&mut self) -> bool {
+        self.0.wait().unwrap().success()
+    }
+    fn kill(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+impl Drop for Recorder {
+    fn drop(&mut self) {
+        self.kill();
+    }
+}
+
 fn port(dir: &Path) -> String {
     format!("serial:{}", dir.join("board").display())
 }
@@ -240,14 +262,12 @@ fn the_record_goes_on_when_the_board_is_killed_and_restarted_on_the_same_link() 
     let board = BoardSim::start(&dir, 1000, 1);
     load_table(&dir);
     let out = dir.join("rec.csv");
-    let mut rec = record_cmd(&dir, &out, &["--samples", "3000"])
-        .spawn()
-        .unwrap();
+    let mut rec = Recorder::spawn(record_cmd(&dir, &out, &["--samples", "3000"]));
     wait_rows(&out, 800);
     board.kill();
     std::thread::sleep(Duration::from_millis(800));
     let _board = BoardSim::start(&dir, 1000, 1);
-    assert!(rec.wait().unwrap().success());
+    assert!(rec.wait_success());
     let r = read_rec(&out);
     assert_eq!(r.rows.len(), 3000);
     let k = kinds(&r);
@@ -268,10 +288,9 @@ fn a_killed_recorder_is_continued_with_append() {
     let _board = BoardSim::start(&dir, 1000, 2);
     load_table(&dir);
     let out = dir.join("rec.csv");
-    let mut rec = record_cmd(&dir, &out, &[]).spawn().unwrap();
+    let mut rec = Recorder::spawn(record_cmd(&dir, &out, &[]));
     wait_rows(&out, 400);
-    rec.kill().unwrap();
-    rec.wait().unwrap();
+    rec.kill();
     let before = read_rec(&out);
     // A crash cuts the last line on top of it.
     {
@@ -308,14 +327,12 @@ fn a_board_reset_and_garbage_on_the_line_are_events_and_lose_nothing_else() {
     let mut board = BoardSim::start(&dir, 1000, 3);
     load_table(&dir);
     let out = dir.join("rec.csv");
-    let mut rec = record_cmd(&dir, &out, &["--samples", "2500"])
-        .spawn()
-        .unwrap();
+    let mut rec = Recorder::spawn(record_cmd(&dir, &out, &["--samples", "2500"]));
     wait_rows(&out, 500);
     board.command("garbage=300");
     wait_rows(&out, 1000);
     board.command("reset");
-    assert!(rec.wait().unwrap().success());
+    assert!(rec.wait_success());
     let r = read_rec(&out);
     let k = kinds(&r);
     for kind in ["line_noise", "board_reset"] {
@@ -325,6 +342,63 @@ fn a_board_reset_and_garbage_on_the_line_are_events_and_lose_nothing_else() {
     assert_time_increases(&r);
     let restart = r.rows.windows(2).position(|w| w[1].1 < w[0].1).unwrap();
     assert_eq!(r.rows[restart + 1].1, 0);
+}
+
+#[test]
+fn an_unplugged_link_keeps_the_boot_and_flag_changes_are_events() {
+    let dir = temp_dir("unplug");
+    let mut board = BoardSim::start(&dir, 1000, 5);
+    load_table(&dir);
+    let out = dir.join("rec.csv");
+    let mut rec = Recorder::spawn(record_cmd(&dir, &out, &["--samples", "3000"]));
+    wait_rows(&out, 400);
+    // ≈ 375 frames with the loop open (the file shows rows half a second late: waiting for
+    // a row count would not separate the two commands).
+    board.command("rtd-open");
+    std::thread::sleep(Duration::from_millis(300));
+    board.command("rtd-open=off");
+    std::thread::sleep(Duration::from_millis(300));
+    board.command("unplug=1");
+    assert!(rec.wait_success());
+    let r = read_rec(&out);
+    let k = kinds(&r);
+    for kind in ["link_lost", "reconnected", "seq_gap"] {
+        assert!(k.contains(&kind), "no {kind} event in {k:?}");
+    }
+    assert!(!k.contains(&"board_reset"), "{k:?}");
+    let status: Vec<&str> = r
+        .events
+        .iter()
+        .filter(|(k, _)| k == "status")
+        .map(|(_, d)| d.as_str())
+        .collect();
+    assert!(
+        status
+            .first()
+            .is_some_and(|d| d.starts_with("OK -> ") && d.contains("RTD_OPEN")),
+        "{status:?}"
+    );
+    assert!(status.iter().any(|d| d.ends_with("-> OK")), "{status:?}");
+    // The open loop's rows are flagged and carry no resistance.
+    assert!(r
+        .rows
+        .iter()
+        .any(|row| row.6.contains("RTD_OPEN") && row.4.is_nan()));
+    // One boot: seq only grows, and across the gap time_s follows the board clock.
+    let gap = r
+        .rows
+        .windows(2)
+        .position(|w| w[1].1 != w[0].1 + 1)
+        .unwrap();
+    let (a, b) = (&r.rows[gap], &r.rows[gap + 1]);
+    assert!(b.1 > a.1);
+    assert!(((b.0 - a.0) - (b.2 - a.2) as f64 * 1e-6).abs() < 1e-3);
+    let lost = r.events.iter().find(|(k, _)| k == "seq_gap").unwrap();
+    assert!(
+        lost.1.starts_with(&format!("lost={} ", b.1 - a.1 - 1)),
+        "{lost:?}"
+    );
+    assert_time_increases(&r);
 }
 
 #[test]

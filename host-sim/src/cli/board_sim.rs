@@ -203,11 +203,13 @@ pub fn run(args: &BoardSimArgs) -> anyhow::Result<()> {
             }
             match cmd.parse::<Fault>() {
                 Ok(f) => faults.push(f),
-                Err(e) => eprintln!("board-sim: {e}"),
+                Err(e) => {
+                    let _ = writeln!(std::io::stderr(), "board-sim: {e}");
+                }
             }
         }
         for f in faults {
-            eprintln!("board-sim: fault {f:?}");
+            let _ = writeln!(std::io::stderr(), "board-sim: fault {f:?}");
             match f {
                 Fault::Unplug(d) => {
                     line = None;
@@ -237,8 +239,11 @@ pub fn run(args: &BoardSimArgs) -> anyhow::Result<()> {
         if plugged_again.is_some_and(|t| now >= t) {
             plugged_again = None;
             let l = open_line(args.link.as_deref())?;
-            println!("port: {}", l.path.display());
-            let _ = std::io::stdout().flush();
+            // Whoever started us may have stopped reading stdout after the first line: a closed
+            // pipe must not end the board.
+            let mut out = std::io::stdout().lock();
+            let _ = writeln!(out, "port: {}", l.path.display());
+            let _ = out.flush();
             line = Some(l);
         }
 
@@ -270,7 +275,11 @@ pub fn run(args: &BoardSimArgs) -> anyhow::Result<()> {
     if let (Some(l), Some(_)) = (&args.link, &line) {
         let _ = std::fs::remove_file(l);
     }
-    eprintln!("board-sim: stopped after {} frames", board.frames_sent);
+    let _ = writeln!(
+        std::io::stderr(),
+        "board-sim: stopped after {} frames",
+        board.frames_sent
+    );
     Ok(())
 }
 
