@@ -260,10 +260,12 @@ pub fn run(args: &BoardSimArgs) -> anyhow::Result<()> {
                 }
                 let sent = l.write(&board.tx);
                 board.tx.drain(..sent);
-                // A UART never waits for the PC: what the line does not take in time is lost
-                // (the recorder sees the gap in seq).
+                // A UART never waits for the PC: what the PC side does not take in time is lost
+                // there (the recorder sees the gap in seq). Whole frames: the one being
+                // written stays.
                 if board.tx.len() > 1 << 16 {
-                    board.tx.clear();
+                    let keep = board.tx.iter().position(|&b| b == 0).map_or(0, |i| i + 1);
+                    board.tx.truncate(keep);
                 }
             }
             // Unplugged: the board talks into the void.

@@ -166,7 +166,7 @@ pub fn info_json(i: &DeviceInfo) -> serde_json::Value {
         "firmware": i.firmware.as_str(),
         "protocol": i.protocol,
         "board": format!("{:?}", i.board),
-        "uptime_ms": i.uptime_ms,
+        "uptime_us": i.uptime_us,
         "reset_cause": i.boot.reset_cause,
         "reset_causes": reset_causes(&i.boot),
         "clock_fallback": i.boot.clock_fallback,
@@ -176,6 +176,10 @@ pub fn info_json(i: &DeviceInfo) -> serde_json::Value {
         "streaming": i.streaming,
         "samples": i.samples,
         "frames_dropped": i.frames_dropped,
+        "losses": crate::device::record::counter_values(i)
+            .into_iter()
+            .skip(1)
+            .collect::<std::collections::BTreeMap<_, _>>(),
     })
 }
 
@@ -191,11 +195,11 @@ pub fn info_text(i: &DeviceInfo) -> String {
         "firmware        {}\nprotocol        {}\nboard           {:?}\nuptime          {:.3} s\n\
          reset cause     {cause} ({:#04x}){}\nactive table    {}\nprevious table  {}\n\
          rate            {} samples/s\nstreaming       {}\nsamples         {}\n\
-         frames dropped  {}\n",
+         frames dropped  {}\n{}",
         i.firmware,
         i.protocol,
         i.board,
-        i.uptime_ms as f64 / 1e3,
+        i.uptime_us as f64 / 1e6,
         i.boot.reset_cause,
         if i.boot.clock_fallback {
             ", clock on HSI fallback"
@@ -208,6 +212,11 @@ pub fn info_text(i: &DeviceInfo) -> String {
         i.streaming,
         i.samples,
         i.frames_dropped,
+        crate::device::record::counter_values(i)
+            .into_iter()
+            .skip(1)
+            .map(|(k, v)| format!("{:<16}{v}\n", k.replace('_', " ")))
+            .collect::<String>(),
     )
 }
 

@@ -44,14 +44,19 @@ pub struct FitArgs {
 }
 
 fn read(path: &Path) -> Result<String, FitError> {
-    std::fs::read_to_string(path).map_err(|error| FitError::Io {
-        path: path.to_owned(),
-        error,
-    })
+    crate::log::reader::read_text_limited(path, crate::log::reader::MAX_SMALL_TEXT_BYTES).map_err(
+        |e| FitError::Io {
+            path: path.to_owned(),
+            error: e.into_io(),
+        },
+    )
 }
 
 /// `accomp fit`.
 pub fn run(args: &FitArgs) -> anyhow::Result<()> {
+    if let Some(p) = &args.output {
+        crate::outputs::check_file(p)?;
+    }
     let at = Celsius(args.at);
     let table = parse_coefficient_table(&read(&args.input)?).map_err(|error| FitError::Csv {
         path: args.input.clone(),
@@ -98,8 +103,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
             calibration_table(&report, scale, Celsius(args.reference), &args.serial, date)?,
             orientation,
         )?;
-        std::fs::write(out, cal.encode())
-            .map_err(|e| anyhow::anyhow!("cannot write {}: {e}", out.display()))?;
+        crate::outputs::write_file(out, &cal.encode())?;
         // stderr, so that `--json` output stays a single JSON document on stdout.
         eprintln!(
             "wrote calibration table {} (id {:08x}, orders K0 {} K1 {} K2 {} δp {} δo {}, T0 {} °C, \

@@ -1,6 +1,6 @@
 //! Stability-test logs: the CSV the board streams, the CLI records and every analysis reads.
 //!
-//! # Format (design/architecture.md, "Log format")
+//! # Format (docs/log-format.md)
 //!
 //! ```text
 //! # instrument: JN-06 A12124
@@ -44,6 +44,7 @@ use std::path::Path;
 use accomp::tide::STANDARD_GRAVITY_M_S2;
 
 pub mod calibration_file;
+pub mod outputs;
 pub mod reader;
 pub mod time;
 pub mod writer;
@@ -55,6 +56,7 @@ use reader::{ReadError, Records};
 /// `time_s` runs on), or the directory is refused naming the file.
 pub fn open_record(path: &Path) -> Result<Box<dyn BufRead + Send>, LogError> {
     if !path.is_dir() {
+        reader::check_file_size(path)?;
         let f = File::open(path)?;
         return Ok(Box::new(BufReader::with_capacity(1 << 20, f)));
     }
@@ -66,6 +68,7 @@ pub fn open_record(path: &Path) -> Result<Box<dyn BufRead + Send>, LogError> {
     let mut first: Option<(String, Option<String>)> = None;
     let mut chain: Box<dyn Read + Send> = Box::new(std::io::empty());
     for f in files {
+        reader::check_file_size(&f)?;
         let mut r = BufReader::with_capacity(1 << 20, File::open(&f)?);
         // The preamble: `#` lines and blank lines up to the header row.
         let mut preamble = Vec::new();
@@ -126,6 +129,9 @@ pub enum LogError {
     /// The file ended before a header row.
     #[error("log has no header row")]
     MissingHeader,
+    /// The file is beyond a limit of the reader (size, rows, line length).
+    #[error("log refused: {0}")]
+    Limit(String),
     /// The header has no `time_s` column.
     #[error("log header (line {line}) has no `time_s` column")]
     MissingTime {
@@ -175,6 +181,9 @@ impl From<ReadError> for LogError {
         match e {
             ReadError::Io(e) => LogError::Io(e),
             ReadError::NoHeader => LogError::MissingHeader,
+            e @ (ReadError::TooLarge { .. } | ReadError::LineTooLong { .. }) => {
+                LogError::Limit(e.to_string())
+            }
             ReadError::BadHeader { line, reason } => LogError::BadHeader { line, reason },
             other => LogError::BadRow {
                 line: other.line().unwrap_or(0),

@@ -72,8 +72,6 @@ impl BoardFlash {
     }
 }
 
-impl accomp::service::CalibrationFlash for BoardFlash {}
-
 impl ErrorType for BoardFlash {
     type Error = RamFlashError;
 }

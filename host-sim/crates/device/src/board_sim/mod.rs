@@ -272,8 +272,11 @@ impl VirtualBoard {
 
     fn emit(&mut self, reading: accomp::acquisition::AdsReading) {
         let raw = self.assembler.assemble(&reading);
-        if self.service.streaming() {
-            let msg = self.service.sample(0, &raw, reading.time_us);
+        // The firmware's worker: seq and STALL losses from the sequencer.
+        if let Some(msg) = self
+            .service
+            .acquired(reading.seq, reading.lost, &raw, reading.time_us)
+        {
             self.send(&msg);
             self.frames_sent += 1;
         }

@@ -491,6 +491,7 @@ mod tests {
         Frame {
             seq,
             time_us: u64::from(seq) * 1_000_000,
+            lost: accomp::pipeline::LossFlags::default(),
             output_v: 1.25,
             temperature_c: 45.0,
             rtd_ohms: f64::INFINITY,

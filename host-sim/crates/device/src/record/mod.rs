@@ -16,7 +16,7 @@ use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use accomp::pipeline::{Frame, Status};
+use accomp::pipeline::{Frame, LossFlags, Status};
 use accomp::protocol::{DeviceInfo, DeviceMessage, Request, Response};
 use accomp::table::CalibrationTable;
 
@@ -99,6 +99,23 @@ pub struct Summary {
     pub reason: String,
     /// The file written last.
     pub path: PathBuf,
+}
+
+/// Every counter of Info, by name (the recorder writes an event for any rise).
+pub fn counter_values(i: &DeviceInfo) -> Vec<(&'static str, u64)> {
+    let l = &i.losses;
+    vec![
+        ("frames_dropped", u64::from(i.frames_dropped)),
+        ("conversions_lost", u64::from(l.conversions_lost)),
+        ("queue_full", u64::from(l.queue_full)),
+        ("uart_rx_overrun", u64::from(l.uart_rx_overrun)),
+        ("uart_framing_noise", u64::from(l.uart_framing_noise)),
+        ("tx_frames_dropped", u64::from(l.tx_frames_dropped)),
+        ("erase_stalls", u64::from(l.erase_stalls)),
+        ("erase_stall_us", l.erase_stall_us),
+        ("watchdog_resets", u64::from(l.watchdog_resets)),
+        ("brownout_resets", u64::from(l.brownout_resets)),
+    ]
 }
 
 /// How often the device's counters are read while streaming.
@@ -212,6 +229,8 @@ struct Recorder<'a> {
     last_seq: Option<u32>,
     last_status: Option<Status>,
     frames_dropped: Option<u32>,
+    /// The device's counters as last read (None: not yet on this connection).
+    counters: Option<Vec<(&'static str, u64)>>,
     bad_frames: u64,
     first_record_s: Option<f64>,
     summary: Summary,
@@ -303,10 +322,24 @@ impl Recorder<'_> {
                 if frame.seq > last && lost < u32::MAX / 2 {
                     self.summary.lost += u64::from(lost);
                     let t = start + self.clock.last().map_or(0.0, |l| l.record_s);
+                    let why: Vec<&str> = LossFlags::NAMES
+                        .iter()
+                        .filter(|(bit, _)| frame.lost.has(*bit))
+                        .map(|(_, n)| *n)
+                        .collect();
+                    let why = if why.is_empty() {
+                        "not flagged by the board: lost on the link or in the PC".to_string()
+                    } else {
+                        format!("board: {}", why.join("|"))
+                    };
                     self.event(
                         t,
                         "seq_gap",
-                        format!("lost={lost} seq {}..={} missing", expected, frame.seq - 1),
+                        format!(
+                            "lost={lost} seq {}..={} missing ({why})",
+                            expected,
+                            frame.seq - 1
+                        ),
                     )?;
                 } else {
                     // seq went back without a READY: the board restarted unseen.
@@ -350,20 +383,17 @@ impl Recorder<'_> {
     /// Device counters: any rise is an event.
     fn counters(&mut self, info: &DeviceInfo) -> Result<(), RecordFileError> {
         let pc = (self.pc)();
-        if let Some(old) = self.frames_dropped {
-            if info.frames_dropped > old {
-                self.event(
-                    pc,
-                    "counter",
-                    format!(
-                        "frames_dropped +{} (total {})",
-                        info.frames_dropped - old,
-                        info.frames_dropped
-                    ),
-                )?;
+        let now = counter_values(info);
+        if let Some(old) = self.counters.take() {
+            for ((name, was), (_, is)) in old.iter().zip(&now) {
+                if is > was {
+                    let d = is - was;
+                    self.event(pc, "counter", format!("{name} +{d} (total {is})"))?;
+                }
             }
         }
         self.frames_dropped = Some(info.frames_dropped);
+        self.counters = Some(now);
         Ok(())
     }
 
@@ -462,6 +492,7 @@ pub fn record(
         last_seq: existing.as_ref().and_then(|e| e.last.map(|l| l.1)),
         last_status: None,
         frames_dropped: None,
+        counters: None,
         bad_frames: 0,
         first_record_s: None,
         summary: Summary {
@@ -519,7 +550,7 @@ pub fn record(
             match connect(&opts.port, opts.rate_hz) {
                 Ok(newdev) => {
                     let t = pc();
-                    let uptime_us = newdev.info.uptime_ms.saturating_mul(1000);
+                    let uptime_us = newdev.info.uptime_us;
                     if first_connect {
                         if let Some(e) = &r.existing {
                             let now_meta = metadata(opts, &newdev, e.start_unix_s);
@@ -566,7 +597,7 @@ pub fn record(
                             "board_reset",
                             format!(
                                 "uptime {:.3} s, reset cause {:#04x}: a new boot",
-                                newdev.info.uptime_ms as f64 / 1e3,
+                                newdev.info.uptime_us as f64 / 1e6,
                                 newdev.info.boot.reset_cause
                             ),
                         )?;
@@ -583,7 +614,7 @@ pub fn record(
                             }
                         }
                     }
-                    r.frames_dropped = None;
+                    r.counters = None;
                     r.counters(&newdev.info)?;
                     first_connect = false;
                     down_since = None;
@@ -595,6 +626,9 @@ pub fn record(
                     // an earlier recorder): recorded, but their arrival times are not clock
                     // information.
                     for m in newdev.client.take_inbox() {
+                        if r.done() {
+                            break;
+                        }
                         if let DeviceMessage::Sample { id: 0, frame } = m {
                             r.frame(&newdev, &frame, false)?;
                         }
@@ -646,7 +680,7 @@ pub fn record(
                                 info.boot.reset_cause
                             ),
                         )?;
-                        r.frames_dropped = None;
+                        r.counters = None;
                         r.counters(&info)?;
                         None
                     }
