@@ -6,8 +6,8 @@ use std::path::{Path, PathBuf};
 use accomp::units::Celsius;
 
 use crate::fit::{
-    calibration_table, fit_table, parse_coefficient_table, parse_date, parse_printed_models,
-    render_text, today_utc, FitError, PAPER_MODELS_FILE,
+    calibration_table, fit_table, parse_coefficient_table, parse_date, parse_orientation,
+    parse_printed_models, render_text, today_utc, with_orientation, FitError, PAPER_MODELS_FILE,
 };
 
 /// Arguments of `accomp fit`.
@@ -37,6 +37,10 @@ pub struct FitArgs {
     /// Calibration date stored in the table, YYYY-MM-DD (default: today, UTC).
     #[arg(long)]
     pub date: Option<String>,
+    /// Test orientation stored in the table: 1g (input axis vertical), 0g (input axis
+    /// horizontal, gravity on the pendulum axis) or a_i,a_p,a_o in g.
+    #[arg(long, default_value = "1g")]
+    pub orientation: String,
 }
 
 fn read(path: &Path) -> Result<String, FitError> {
@@ -94,11 +98,16 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
             path: args.input.clone(),
             error,
         })?;
-        let cal = calibration_table(&report, scale, Celsius(args.reference), &args.serial, date)?;
+        let orientation = parse_orientation(&args.orientation)?;
+        let cal = with_orientation(
+            calibration_table(&report, scale, Celsius(args.reference), &args.serial, date)?,
+            orientation,
+        )?;
         crate::outputs::write_file(out, &cal.encode())?;
         // stderr, so that `--json` output stays a single JSON document on stdout.
         eprintln!(
-            "wrote calibration table {} (id {:08x}, orders K0 {} K1 {} K2 {} δp {} δo {}, T0 {} °C)",
+            "wrote calibration table {} (id {:08x}, orders K0 {} K1 {} K2 {} δp {} δo {}, T0 {} °C, \
+             orientation a_i {} g, a_p {} g, a_o {} g)",
             out.display(),
             cal.id(),
             cal.thermal.models.bias_g.order(),
@@ -106,7 +115,10 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
             cal.thermal.models.nonlinearity_g_per_g2.order(),
             cal.thermal.models.misalignment_p_rad.order(),
             cal.thermal.models.misalignment_o_rad.order(),
-            args.reference
+            args.reference,
+            cal.orientation.nominal_input.0,
+            cal.orientation.cross.a_p.0,
+            cal.orientation.cross.a_o.0,
         );
     }
     Ok(())

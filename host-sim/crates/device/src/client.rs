@@ -188,6 +188,12 @@ impl Client {
         }
     }
 
+    /// Takes the messages received while waiting for answers and not handed out yet (samples
+    /// that streamed in during a request/response exchange).
+    pub fn take_inbox(&mut self) -> Vec<DeviceMessage> {
+        self.inbox.drain(..).collect()
+    }
+
     /// Waits for READY (sent once by the firmware when its receiver is live).
     pub fn wait_ready(&mut self, timeout: Duration) -> Result<(), ClientError> {
         let deadline = Instant::now() + timeout;

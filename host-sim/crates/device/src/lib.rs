@@ -1,9 +1,11 @@
 //! Talking to the firmware: transports (serial port, QEMU's TCP serial), the QEMU launcher, a
 //! request/response client with a pipelined sample stream, and `compensate` end to end.
 
+pub mod board_sim;
 pub mod client;
 pub mod compensate;
 pub mod qemu;
+pub mod record;
 pub mod samples_csv;
 pub mod transport;
 

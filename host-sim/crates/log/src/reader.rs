@@ -14,7 +14,9 @@
 //! - The first other non-blank line is the header: comma-separated names, none empty, none
 //!   repeated. Fields are parsed by the `csv` crate (RFC 4180 quoting), trimmed of whitespace.
 //! - Then one record per line, exactly as many fields as the header. Blank lines are skipped; a
-//!   `#` line after the header is refused ([`ReadError::CommentAfterHeader`]): a comment in the
+//!   `#` line after the header is refused ([`ReadError::CommentAfterHeader`]) unless it is an
+//!   event line, `# event: <UTC> <kind> <details>` (what `accomp record` writes in place for a
+//!   gap, a reset, a reconnection …; skipped here, the rows around it are the data): a comment in the
 //!   middle of the samples means two logs were concatenated.
 //!
 //! What a field means (number, gap, text) is the caller's business: [`Row`] hands out the
@@ -22,6 +24,9 @@
 
 use std::collections::VecDeque;
 use std::io::{BufRead, Chain, Cursor, Read};
+
+/// The start of an event line, allowed among the rows.
+pub const EVENT_PREFIX: &[u8] = b"# event:";
 
 /// The UTF-8 byte-order mark.
 const BOM: &[u8] = b"\xEF\xBB\xBF";
@@ -478,6 +483,9 @@ fn check_record(
     fields: usize,
     expected: usize,
 ) -> Result<bool, ReadError> {
+    if first.starts_with(EVENT_PREFIX) {
+        return Ok(false);
+    }
     if first.starts_with(b"#") {
         return Err(ReadError::CommentAfterHeader { line });
     }
@@ -1128,6 +1136,12 @@ mod tests {
         ));
         let comment = rows("time_s,v\n0,1\n# second log\n1,2\n").unwrap_err();
         assert!(matches!(comment, ReadError::CommentAfterHeader { line: 3 }));
+        // An event line of a record is no comment: skipped, the rows around it kept.
+        let events = rows("time_s,v\n0,1\n# event: 2026-01-01T00:00:00Z seq_gap lost=2, x\n1,2\n");
+        assert_eq!(
+            events.unwrap().iter().map(|r| r.0).collect::<Vec<_>>(),
+            vec![2, 4]
+        );
         assert!(matches!(
             Records::from_text("# only: meta\n\n"),
             Err(ReadError::NoHeader)
