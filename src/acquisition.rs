@@ -96,38 +96,6 @@ pub const fn stm32_sclk_within(pclk_hz: u32, max_hz: u32) -> Option<u32> {
     None
 }
 
-/// The front-end board's buses: one per converter, each in its chip's mode (docs/drivers.md).
-pub mod board {
-    use super::{stm32_sclk_within, SpiSettings, AD7124_SPI, ADS1262_SPI};
-
-    /// APB2 clock (SPI1) with the PLL at 168 MHz, from the crystal or from the HSI fallback.
-    pub const APB2_HZ: u32 = 84_000_000;
-    /// APB1 clock (SPI2).
-    pub const APB1_HZ: u32 = 42_000_000;
-
-    const fn sclk(pclk: u32, max: u32) -> u32 {
-        match stm32_sclk_within(pclk, max) {
-            Some(f) => f,
-            None => 0,
-        }
-    }
-
-    /// SPI1 → ADS1262: mode 1, 84 MHz / 16 = 5.25 MHz (≤ 8 MHz).
-    pub const ADS1262_BUS: SpiSettings = SpiSettings {
-        mode: ADS1262_SPI.mode,
-        sclk_hz: sclk(APB2_HZ, ADS1262_SPI.max_sclk_hz),
-    };
-
-    /// SPI2 → AD7124-4: mode 3, 42 MHz / 16 = 2.625 MHz (/8 would be 5.25 MHz > 5 MHz).
-    pub const AD7124_BUS: SpiSettings = SpiSettings {
-        mode: AD7124_SPI.mode,
-        sclk_hz: sclk(APB1_HZ, AD7124_SPI.max_sclk_hz),
-    };
-
-    // The board configuration meets both datasheets, or the firmware does not build.
-    const _: () = assert!(ADS1262_SPI.accepts(&ADS1262_BUS) && AD7124_SPI.accepts(&AD7124_BUS));
-}
-
 /// A converter error as the pipeline's channel flags: every error names at least one bit.
 pub trait ChannelFault {
     /// The flags this error gives the channel it happened on.
@@ -864,10 +832,10 @@ mod tests {
 
     #[test]
     fn the_board_buses_meet_both_datasheets_and_the_old_shared_mode_1_bus_did_not() {
-        assert_eq!(board::ADS1262_BUS.sclk_hz, 5_250_000);
-        assert_eq!(board::AD7124_BUS.sclk_hz, 2_625_000);
-        assert!(ADS1262_SPI.accepts(&board::ADS1262_BUS));
-        assert!(AD7124_SPI.accepts(&board::AD7124_BUS));
+        assert_eq!(crate::board::ADS1262_BUS.sclk_hz, 5_250_000);
+        assert_eq!(crate::board::AD7124_BUS.sclk_hz, 2_625_000);
+        assert!(ADS1262_SPI.accepts(&crate::board::ADS1262_BUS));
+        assert!(AD7124_SPI.accepts(&crate::board::AD7124_BUS));
         let old = SpiSettings {
             mode: MODE_1,
             sclk_hz: 5_250_000,

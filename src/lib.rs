@@ -9,10 +9,10 @@
 
 pub mod acquisition;
 pub mod adc;
+pub mod board;
 pub mod compensation;
 pub mod drivers;
 mod fixed;
-pub mod frontend;
 pub mod model;
 pub mod pipeline;
 pub mod poly;

@@ -19,8 +19,11 @@
 #[cfg(all(target_os = "none", feature = "board-qemu", feature = "board-frontend"))]
 compile_error!("choose exactly one board: `board-qemu` (default) or `board-frontend`");
 
+// The per-board glue (board support package: HAL types, clocks, interrupts). The board's
+// description — pins, buses, channel map, driver configurations — is the core's
+// `accomp::board`, which the host shares; the glue builds the hardware from it.
 #[cfg(target_os = "none")]
-mod board;
+mod bsp;
 
 // 1 kHz ticks: ms timestamps suffice, and faster ticks starved QEMU's UART (tried 20 kHz and
 // 100 kHz: requests went unanswered).
@@ -46,7 +49,7 @@ mod app {
     use rtic_sync::channel::{Receiver, Sender};
     use rtic_sync::make_channel;
 
-    use crate::board;
+    use crate::bsp;
     use crate::Mono;
 
     /// Frames, readings and heartbeats waiting for the worker. Bounded: when full, frames are
@@ -89,34 +92,34 @@ mod app {
     struct Shared {
         /// Read by the DRDY interrupt (priority 3) and the supervisor (priority 2, short locks:
         /// a few SPI transactions, never a wait).
-        ads: board::AdsAcquisition,
+        ads: bsp::AdsAcquisition,
     }
 
     #[local]
     struct Local {
-        rx: board::UartRx,
-        tx: board::UartTx,
+        rx: bsp::UartRx,
+        tx: bsp::UartTx,
         decoder: FrameDecoder<MAX_FRAME_LEN>,
         rx_to_worker: Sender<'static, Inbound, INBOUND_CAPACITY>,
-        drdy_pin: board::DrdyPin,
+        drdy_pin: bsp::DrdyPin,
         drdy_to_worker: Sender<'static, Inbound, INBOUND_CAPACITY>,
         supervisor_to_worker: Sender<'static, Inbound, INBOUND_CAPACITY>,
-        rtd: board::RtdAcquisition,
+        rtd: bsp::RtdAcquisition,
         rtd_to_worker: Sender<'static, Inbound, INBOUND_CAPACITY>,
-        watchdog: board::Watchdog,
+        watchdog: bsp::Watchdog,
         watchdog_to_worker: Sender<'static, Inbound, INBOUND_CAPACITY>,
-        service: Service<board::Flash>,
+        service: Service<bsp::Flash>,
         assembler: SampleAssembler,
     }
 
     #[init]
     fn init(cx: init::Context) -> (Shared, Local) {
-        let parts = board::init(cx.device);
-        Mono::start(cx.core.SYST, board::SYSTICK_HZ);
+        let parts = bsp::init(cx.device);
+        Mono::start(cx.core.SYST, bsp::SYSTICK_HZ);
         // Boot restores the newest valid calibration slot (none: samples flag NO_CALIBRATION).
-        let mut service = Service::new(board::BOARD, parts.flash, board::SLOT_LAYOUT);
+        let mut service = Service::new(bsp::BOARD, parts.flash, bsp::SLOT_LAYOUT);
         service.set_boot_report(parts.boot);
-        let (watchdog_resets, brownout_resets) = board::count_resets(parts.boot);
+        let (watchdog_resets, brownout_resets) = bsp::count_resets(parts.boot);
         service.losses_mut().watchdog_resets = watchdog_resets;
         service.losses_mut().brownout_resets = brownout_resets;
         defmt::info!(
@@ -138,10 +141,10 @@ mod app {
         }
         let (rx_to_worker, inbound) = make_channel!(Inbound, INBOUND_CAPACITY);
         if worker::spawn(inbound).is_err() || watchdog::spawn().is_err() {
-            board::fatal(board::Fatal::Spawn);
+            bsp::fatal(bsp::Fatal::Spawn);
         }
-        if board::HAS_ADCS && (ads_supervisor::spawn().is_err() || rtd_task::spawn().is_err()) {
-            board::fatal(board::Fatal::Spawn);
+        if bsp::HAS_ADCS && (ads_supervisor::spawn().is_err() || rtd_task::spawn().is_err()) {
+            bsp::fatal(bsp::Fatal::Spawn);
         }
         defmt::info!("accomp-fw {} up", env!("CARGO_PKG_VERSION"));
         (
@@ -167,7 +170,7 @@ mod app {
     /// Drains the UART receiver into the frame decoder; complete frames go to the worker.
     #[task(binds = USART1, priority = 2, local = [rx, decoder, rx_to_worker])]
     fn uart_rx(cx: uart_rx::Context) {
-        while let Some(byte) = board::read_byte(cx.local.rx) {
+        while let Some(byte) = bsp::read_byte(cx.local.rx) {
             if let Some(frame) = cx.local.decoder.push(byte) {
                 let item = Inbound::Frame(
                     frame.and_then(|body| Vec::from_slice(body).map_err(|_| FrameError::TooLong)),
@@ -185,7 +188,7 @@ mod app {
     #[task(binds = EXTI4, priority = 3, shared = [ads], local = [drdy_pin, drdy_to_worker])]
     fn drdy(mut cx: drdy::Context) {
         let now = now_us();
-        board::acknowledge_drdy(cx.local.drdy_pin);
+        bsp::acknowledge_drdy(cx.local.drdy_pin);
         ACQ_PROGRESS.fetch_add(1, Ordering::Relaxed);
         if let Some(reading) = cx.shared.ads.lock(|ads| ads.on_drdy(now)) {
             // A full queue loses this reading: counted, and flagged on the next one.
@@ -253,7 +256,7 @@ mod app {
             Mono::delay(WATCHDOG_CHECK_MS.millis()).await;
             let a = ACQ_PROGRESS.load(Ordering::Relaxed);
             let w = WORKER_PROGRESS.load(Ordering::Relaxed);
-            let acquisition_alive = !board::HAS_ADCS || a != acquisition;
+            let acquisition_alive = !bsp::HAS_ADCS || a != acquisition;
             let worker_alive = w != worker;
             if acquisition_alive && worker_alive {
                 cx.local.watchdog.feed();
@@ -284,7 +287,7 @@ mod app {
         mut inbound: Receiver<'static, Inbound, INBOUND_CAPACITY>,
     ) {
         let ready = DeviceMessage::Ready {
-            board: board::BOARD,
+            board: bsp::BOARD,
             protocol: PROTOCOL_VERSION,
         };
         send(cx.local.tx, &ready);
@@ -295,12 +298,12 @@ mod app {
             for _ in 0..QUEUE_DROPS.swap(0, Ordering::Relaxed) {
                 service.count_dropped();
             }
-            if board::clock_failed() {
+            if bsp::clock_failed() {
                 service.clock_fell_back();
             }
             let losses = service.losses_mut();
-            losses.uart_rx_overrun = board::UART_OVERRUNS.load(Ordering::Relaxed);
-            losses.uart_framing_noise = board::UART_LINE_ERRORS.load(Ordering::Relaxed);
+            losses.uart_rx_overrun = bsp::UART_OVERRUNS.load(Ordering::Relaxed);
+            losses.uart_framing_noise = bsp::UART_LINE_ERRORS.load(Ordering::Relaxed);
             let reply = match item {
                 Inbound::Frame(frame) => {
                     service.handle_frame(frame.as_deref().map_err(|e| *e), &now_us)
@@ -351,20 +354,20 @@ mod app {
     /// Firmware time in µs: the board's hardware time base (front-end: TIM2 at 1 MHz, which
     /// counts on through a flash-erase stall), or the SysTick monotonic where there is none.
     fn now_us() -> u64 {
-        match board::time_base_count() {
+        match bsp::time_base_count() {
             // A few instructions with interrupts masked: the count and the extension agree.
             Some(_) => cortex_m::interrupt::free(|cs| {
-                let count = board::time_base_count().unwrap_or(0);
+                let count = bsp::time_base_count().unwrap_or(0);
                 TIME_BASE.borrow(cs).borrow_mut().extend(count)
             }),
             None => Mono::now().duration_since_epoch().as_micros(),
         }
     }
 
-    fn send(tx: &mut board::UartTx, msg: &DeviceMessage) {
+    fn send(tx: &mut bsp::UartTx, msg: &DeviceMessage) {
         let mut out = [0u8; MAX_FRAME_LEN];
         match encode_frame(msg, &mut out) {
-            Ok(n) => board::write_all(tx, out.get(..n).unwrap_or(&[])),
+            Ok(n) => bsp::write_all(tx, out.get(..n).unwrap_or(&[])),
             // Every message is sized to fit (tested in the core); this is a bug, log it.
             Err(_) => defmt::error!("frame too long to send"),
         }

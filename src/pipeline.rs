@@ -8,7 +8,7 @@
 //! frame *and* the reason is set in [`Status`]. Values that depend on a NaN are NaN as well.
 //!
 //! [`raw_from_physical`] builds the raw sample for physical values with the front-end's inverse
-//! conversions ([`crate::frontend`]), so that the host can inject samples that the firmware
+//! conversions ([`crate::board`]), so that the host can inject samples that the firmware
 //! converts back to the same physics.
 
 use serde::{Deserialize, Serialize};
@@ -22,8 +22,8 @@ use crate::units::{Celsius, TiltArcsec, Volts};
 
 // The front-end's scales and value → code conversions, re-exported for the callers that build
 // raw samples next to the pipeline (host injection, tests); they are defined once, in
-// `crate::frontend`.
-pub use crate::frontend::{
+// `crate::board`.
+pub use crate::board::{
     accel_scale, arcsec_to_ads1262, celsius_to_ad7124, ohms_to_ad7124, tilt_scale, volts_to_ads1262,
 };
 

@@ -18,13 +18,13 @@ use core::cell::Cell;
 
 use crate::adc::AdcError;
 use crate::adc::AdcScale;
+use crate::board::{
+    accel_scale, rtd_scale, tilt_scale, AD7124_FULL_SCALE, AD7124_MAX_CODE, ADS1262_HALF_SCALE,
+};
 use crate::compensation::ThermalCompensator;
 use crate::fixed::{
     from_f32, from_f32_small, from_f32_truncated, from_f64, mul_code, mul_hi, sqrt_f32, to_f32,
     to_f64, CODE_FACTOR_BITS, G_BITS, VOLT_BITS,
-};
-use crate::frontend::{
-    accel_scale, rtd_scale, tilt_scale, AD7124_FULL_SCALE, AD7124_MAX_CODE, ADS1262_HALF_SCALE,
 };
 use crate::model::CrossAxis;
 use crate::poly::{TempPoly, N_COEFFS};
@@ -508,7 +508,7 @@ struct Ads1262Linear {
 }
 
 impl Ads1262Linear {
-    /// The map of a front-end scale ([`crate::frontend`]), in `unit_per_v` units per volt.
+    /// The map of a front-end scale ([`crate::board`]), in `unit_per_v` units per volt.
     fn new(scale: &AdcScale, unit_per_v: f64) -> Self {
         Ads1262Linear {
             per_code: scale.vref.0 / ADS1262_HALF_SCALE / scale.pga_gain
@@ -1414,10 +1414,10 @@ mod tests {
         let mut t = paper_table();
         t.thermal.models.scale_factor_v_per_g.coeffs[2] = 0.2;
         let p = PreparedCalibration::new(&t).unwrap();
-        let accel = crate::frontend::volts_to_ads1262(&accel_scale(Some(&t)), Volts(1.3))
+        let accel = crate::board::volts_to_ads1262(&accel_scale(Some(&t)), Volts(1.3))
             .unwrap()
             .0;
-        let rtd = crate::frontend::celsius_to_ad7124(&t, Celsius(47.0))
+        let rtd = crate::board::celsius_to_ad7124(&t, Celsius(47.0))
             .unwrap()
             .0;
         let (e, e_fixed) = p.accel_volts(accel).unwrap();

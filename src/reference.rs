@@ -11,10 +11,10 @@ use crate::table::{
 };
 use crate::units::{Celsius, Gs, Ohms, TiltArcsec, Volts, RAD_PER_ARCMIN};
 
-/// Nominal values of the front-end board's channels: those of [`crate::frontend`], named here
+/// Nominal values of the front-end board's channels: those of [`crate::board`], named here
 /// for the tables built from them.
 pub mod board {
-    pub use crate::frontend::{
+    pub use crate::board::{
         RTD_PGA_GAIN, RTD_REFERENCE_OHMS, SENSE_RESISTOR_OHMS, TILT_SCALE_ARCSEC_PER_V,
     };
 }

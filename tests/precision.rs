@@ -292,7 +292,7 @@ mod firmware_path {
         prop_assert_eq!(f.status.0 & !Status::TEMP_OUT_OF_RANGE, 0);
 
         // Physical inputs from the codes, f64 from the ADC definitions.
-        let accel = accomp::frontend::accel_scale(Some(&table));
+        let accel = accomp::board::accel_scale(Some(&table));
         let e_ref = accel.volts(raw.accel as u32).unwrap().0;
         prop_assert!(
             (f.output_v - e_ref).abs() <= 1e-15,
@@ -300,7 +300,7 @@ mod firmware_path {
             f.output_v,
             e_ref
         );
-        let ohms_ref = accomp::frontend::rtd_scale(&table)
+        let ohms_ref = accomp::board::rtd_scale(&table)
             .ratiometric_ohms(raw.rtd, table.rtd.reference_resistor)
             .unwrap()
             .0;
@@ -313,7 +313,7 @@ mod firmware_path {
             t_ref,
             f.temperature_c - t_ref
         );
-        let tilt_ref = accomp::frontend::tilt_scale(&table)
+        let tilt_ref = accomp::board::tilt_scale(&table)
             .volts(raw.tilt as u32)
             .unwrap()
             .0

@@ -10,7 +10,7 @@
 //! [`embedded_hal::delay::DelayNs`] for the reset waits. Each knows only its chip: its registers,
 //! its coding, and its own error type ([`ads1262::Error`], [`ad7124::Error`]) generic over the
 //! bus and pin errors; where a chip sits and how the board uses it is the board's business
-//! ([`crate::frontend`], [`crate::acquisition`]). Nothing allocates and nothing panics: every
+//! ([`crate::board`], [`crate::acquisition`]). Nothing allocates and nothing panics: every
 //! failure comes back as the chip's error, and every conversion comes back as the core's code
 //! newtypes ([`crate::adc::Ads1262Code`], [`crate::adc::Ad7124Code`]) so the maths layer never
 //! sees a bare integer.

@@ -3,7 +3,7 @@
 //! parallelism, 3.5.3 sector erase, 3.5.4 programming) and §3.8 "Flash interface registers"
 //! (FLASH_KEYR, FLASH_SR, FLASH_CR). Section numbers as in RM0090 Rev 4 (Doc ID 018909); later
 //! revisions insert a section before them and number them §3.6 and §3.9. Generic over [`FlashRegisters`], so the same
-//! sequence runs on the board (PAC registers, `board/internal_flash.rs`) and on the host against
+//! sequence runs on the board (PAC registers, `bsp/internal_flash.rs`) and on the host against
 //! a register-level model of the controller (`stm32f4_flash/model.rs`).
 //!
 //! Why not the HAL's `UnlockedFlash`: it never clears FLASH_SR's error flags. They are sticky

@@ -117,7 +117,7 @@ impl Status {
     }
 }
 
-/// Complete AD7124-4 configuration; [`Ad7124Config::board_default`] is the board's setting.
+/// Complete AD7124-4 configuration (the board's is `crate::board::ad7124_config`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Ad7124Config {
     /// Power mode (ADC_CONTROL.POWER_MODE).
@@ -160,34 +160,6 @@ pub struct Ad7124Config {
 }
 
 impl Ad7124Config {
-    /// The board: 4-wire Pt100, 250 µA from IOUT0 on AIN0, sense leads on AIN1(+)/AIN2(−),
-    /// 5.11 kΩ reference resistor on REFIN1 with buffers, gain 16, unipolar, full power, sinc4
-    /// at FS = 1920 (10 SPS, notches at every multiple of 10 Hz), STATUS appended, CRC on.
-    /// Reasons in `docs/drivers.md`. The DRDY bound is 1 s (20 000 × 50 µs), well above the
-    /// 400 ms sinc4 settling at 10 SPS.
-    pub const fn board_default() -> Self {
-        Self {
-            power_mode: PowerMode::Full,
-            internal_reference: false,
-            data_status: true,
-            cs_en: false,
-            excitation: Excitation::Ua250,
-            excitation_pin: IoutPin::Ain0,
-            positive: AnalogInput::Ain1,
-            negative: AnalogInput::Ain2,
-            bipolar: false,
-            reference: Reference::Refin1,
-            reference_buffers: true,
-            input_buffers: true,
-            gain: Gain::G16,
-            filter: FilterType::Sinc4,
-            filter_fs: 1920,
-            crc: true,
-            drdy_poll_limit: 20_000,
-            drdy_poll_interval_us: 50,
-        }
-    }
-
     /// Output data rate in hertz for this power mode and filter word (sinc3/sinc4, no post filter).
     pub fn output_data_rate_hz(&self) -> f64 {
         f64::from(self.power_mode.clock_hz()) / (32.0 * f64::from(self.filter_fs.max(1)))

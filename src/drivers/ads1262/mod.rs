@@ -89,7 +89,7 @@ impl BoardChannels {
     }
 }
 
-/// Complete ADS1262 configuration. [`Ads1262Config::board_default`] is the board's setting.
+/// Complete ADS1262 configuration (the board's is `crate::board::ads1262_config`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Ads1262Config {
     /// Digital filter (MODE1).
@@ -119,42 +119,6 @@ pub struct Ads1262Config {
 }
 
 impl Ads1262Config {
-    /// The board's configuration (reasons in `docs/drivers.md`): sinc4 at 10 SPS (notches on
-    /// every multiple of 10 Hz, so 50 and 60 Hz both fall in one), chop off (it would halve the
-    /// throughput of the two multiplexed channels; at gain 1 and 1.33 V/g even 100 nV/°C of
-    /// offset drift is 75 ng/°C), internal 2.5 V reference, status byte + checksum,
-    /// accelerometer on AIN0−AIN1 and tiltmeter on AIN2−AIN3, both at gain 1.
-    ///
-    /// The DRDY bound is 1 s (20 000 polls of 50 µs): the first sinc4 conversion at 10 SPS after
-    /// a restart takes about 4 data periods (≈ 400 ms).
-    pub const fn board_default() -> Self {
-        Self {
-            filter: Filter::Sinc4,
-            data_rate: DataRate::Sps10,
-            chop: Chop::Off,
-            delay_code: 0,
-            ref_positive: RefPositive::Internal,
-            ref_negative: RefNegative::Internal,
-            internal_reference: true,
-            status_byte: true,
-            integrity: Integrity::Checksum,
-            channels: BoardChannels {
-                accelerometer: ChannelConfig {
-                    positive: Input::Ain0,
-                    negative: Input::Ain1,
-                    pga: Pga::Enabled(Gain::G1),
-                },
-                tiltmeter: ChannelConfig {
-                    positive: Input::Ain2,
-                    negative: Input::Ain3,
-                    pga: Pga::Enabled(Gain::G1),
-                },
-            },
-            drdy_poll_limit: 20_000,
-            drdy_poll_interval_us: 50,
-        }
-    }
-
     /// How [`crate::adc::AdcScale`] must read a channel's codes: 32-bit two's complement, the
     /// channel's PGA gain (1 when bypassed) and `vref` (2.5 V for the internal reference).
     pub fn scale(&self, channel: Channel, vref: Volts) -> AdcScale {

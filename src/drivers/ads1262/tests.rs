@@ -11,6 +11,36 @@ use embedded_hal_mock::eh1::digital::{Mock as PinMock, State, Transaction as Pin
 use embedded_hal_mock::eh1::spi::{Mock as SpiMock, Transaction as SpiT};
 use embedded_hal_mock::eh1::MockError;
 
+/// The configuration the register values below are worked out for (the front-end board's,
+/// re-declared here: the driver does not know the board).
+fn config() -> Ads1262Config {
+    Ads1262Config {
+        filter: Filter::Sinc4,
+        data_rate: DataRate::Sps10,
+        chop: Chop::Off,
+        delay_code: 0,
+        ref_positive: RefPositive::Internal,
+        ref_negative: RefNegative::Internal,
+        internal_reference: true,
+        status_byte: true,
+        integrity: Integrity::Checksum,
+        channels: BoardChannels {
+            accelerometer: ChannelConfig {
+                positive: Input::Ain0,
+                negative: Input::Ain1,
+                pga: Pga::Enabled(Gain::G1),
+            },
+            tiltmeter: ChannelConfig {
+                positive: Input::Ain2,
+                negative: Input::Ain3,
+                pga: Pga::Enabled(Gain::G1),
+            },
+        },
+        drdy_poll_limit: 20_000,
+        drdy_poll_interval_us: 50,
+    }
+}
+
 // SBAS661C opcodes and addresses, written out again.
 const RESET: u8 = 0x06;
 const START1: u8 = 0x08;
@@ -108,7 +138,7 @@ fn finish(d: Driver) {
 
 #[test]
 fn init_resets_identifies_writes_verifies_and_starts() {
-    let mut d = driver(&board_init(), &[], Ads1262Config::board_default());
+    let mut d = driver(&board_init(), &[], config());
     assert_eq!(
         d.init(),
         Ok(DeviceInfo {
@@ -130,7 +160,7 @@ fn chop_delay_fir_and_external_reference_are_encoded_as_the_datasheet_says() {
         ref_negative: RefNegative::Ain5,
         internal_reference: false,
         integrity: Integrity::Crc,
-        ..Ads1262Config::board_default()
+        ..config()
     };
     // POWER 0x00 (INTREF off); INTERFACE STATUS | CRC=10 → 0x06; MODE0 CHOP=01, DELAY=0011 →
     // 0x13; MODE1 FILTER=100 → 0x80; MODE2 gain 1, DR=0100 (20 SPS) → 0x04; INPMUX 0x01.
@@ -162,7 +192,7 @@ fn init_reports_the_register_that_did_not_read_back() {
         rreg(POWER, &back),
     ]
     .concat();
-    let mut d = driver(&spi, &[], Ads1262Config::board_default());
+    let mut d = driver(&spi, &[], config());
     assert_eq!(
         d.init(),
         Err(Error::ReadBack {
@@ -177,7 +207,7 @@ fn init_reports_the_register_that_did_not_read_back() {
 #[test]
 fn init_rejects_a_foreign_device_id() {
     let spi = [command(RESET), rreg(ID, &[0b010_00001, 0x11])].concat();
-    let mut d = driver(&spi, &[], Ads1262Config::board_default());
+    let mut d = driver(&spi, &[], config());
     assert_eq!(d.init(), Err(Error::DeviceId { found: 0x41 }));
     finish(d);
 }
@@ -186,7 +216,7 @@ fn init_rejects_a_foreign_device_id() {
 fn init_accepts_the_ads1263() {
     let mut spi = board_init();
     spi.splice(3..6, rreg(ID, &[0b001_00010, POWER_AFTER_RESET]));
-    let mut d = driver(&spi, &[], Ads1262Config::board_default());
+    let mut d = driver(&spi, &[], config());
     assert_eq!(d.init().map(|i| i.part), Ok(Part::Ads1263));
     finish(d);
 }
@@ -195,7 +225,7 @@ fn init_accepts_the_ads1263() {
 fn init_reports_an_idle_bus_as_not_responding() {
     for idle in [0x00u8, 0xFF] {
         let spi = [command(RESET), rreg(ID, &[idle, idle])].concat();
-        let mut d = driver(&spi, &[], Ads1262Config::board_default());
+        let mut d = driver(&spi, &[], config());
         assert_eq!(d.init(), Err(Error::NotResponding { found: idle }));
         finish(d);
     }
@@ -205,14 +235,14 @@ fn init_reports_an_idle_bus_as_not_responding() {
 fn init_notices_a_reset_command_that_did_not_arrive() {
     // POWER without its RESET flag right after RESET: the command was lost.
     let spi = [command(RESET), rreg(ID, &[ID_ADS1262_REV3, 0x01])].concat();
-    let mut d = driver(&spi, &[], Ads1262Config::board_default());
+    let mut d = driver(&spi, &[], config());
     assert_eq!(d.init(), Err(Error::NotResponding { found: 0x01 }));
     finish(d);
 }
 
 #[test]
 fn init_refuses_impossible_configurations_without_touching_the_bus() {
-    let base = Ads1262Config::board_default();
+    let base = config();
     let fir_fast = Ads1262Config {
         filter: Filter::Fir,
         data_rate: DataRate::Sps100,
@@ -241,7 +271,7 @@ fn init_refuses_impossible_configurations_without_touching_the_bus() {
 fn conversion_with_good_checksum_is_decoded() {
     // 0x12+0x34+0x56+0x78 = 0x114; + 0x9B = 0x1AF → checksum 0xAF.
     let spi = rdata1(&[0x40, 0x12, 0x34, 0x56, 0x78, 0xAF]);
-    let mut d = driver(&spi, &[], Ads1262Config::board_default());
+    let mut d = driver(&spi, &[], config());
     assert_eq!(
         d.read_conversion().map(|s| (s.code, s.status)),
         Ok((Ads1262Code(0x1234_5678), Some(Status(0x40))))
@@ -253,7 +283,7 @@ fn conversion_with_good_checksum_is_decoded() {
 fn negative_conversion_is_sign_extended() {
     // 0xFF+0xFF+0xFF+0xFE = 0x3FB; + 0x9B = 0x496 → 0x96.
     let spi = rdata1(&[0x40, 0xFF, 0xFF, 0xFF, 0xFE, 0x96]);
-    let mut d = driver(&spi, &[], Ads1262Config::board_default());
+    let mut d = driver(&spi, &[], config());
     assert_eq!(d.read_conversion().map(|s| s.code), Ok(Ads1262Code(-2)));
     finish(d);
 }
@@ -261,7 +291,7 @@ fn negative_conversion_is_sign_extended() {
 #[test]
 fn corrupted_frame_fails_the_checksum() {
     let spi = rdata1(&[0x40, 0x12, 0x34, 0x56, 0x78, 0xAE]);
-    let mut d = driver(&spi, &[], Ads1262Config::board_default());
+    let mut d = driver(&spi, &[], config());
     assert_eq!(
         d.read_conversion(),
         Err(Error::Checksum {
@@ -276,7 +306,7 @@ fn corrupted_frame_fails_the_checksum() {
 fn crc_mode_accepts_a_good_crc_and_rejects_a_bad_one() {
     let cfg = Ads1262Config {
         integrity: Integrity::Crc,
-        ..Ads1262Config::board_default()
+        ..config()
     };
     let data = [0x00, 0x80, 0x00, 0x01];
     let crc = crc8_reference(&data);
@@ -303,7 +333,7 @@ fn frame_without_status_and_check_byte_is_four_bytes() {
     let cfg = Ads1262Config {
         status_byte: false,
         integrity: Integrity::None,
-        ..Ads1262Config::board_default()
+        ..config()
     };
     let spi = rdata1(&[0x7F, 0x00, 0x00, 0x00]);
     let mut d = driver(&spi, &[], cfg);
@@ -318,7 +348,7 @@ fn frame_without_status_and_check_byte_is_four_bytes() {
 fn status_alarms_are_reported_with_the_code() {
     // ADC1 new data + REF_ALM + PGAD_ALM; checksum of 00 00 01 00 = 0x01 + 0x9B = 0x9C.
     let spi = rdata1(&[0x40 | 0x10 | 0x02, 0x00, 0x00, 0x01, 0x00, 0x9C]);
-    let mut d = driver(&spi, &[], Ads1262Config::board_default());
+    let mut d = driver(&spi, &[], config());
     let status = d.read_conversion().map(|s| s.status);
     let Ok(Some(st)) = status else {
         panic!("no status byte decoded: {status:?}");
@@ -331,7 +361,7 @@ fn status_alarms_are_reported_with_the_code() {
 #[test]
 fn status_reset_flag_is_an_unexpected_reset() {
     let spi = rdata1(&[0x41, 0x00, 0x00, 0x00, 0x00, 0x9B]);
-    let mut d = driver(&spi, &[], Ads1262Config::board_default());
+    let mut d = driver(&spi, &[], config());
     assert_eq!(d.read_conversion(), Err(Error::UnexpectedReset));
     finish(d);
 }
@@ -339,7 +369,7 @@ fn status_reset_flag_is_an_unexpected_reset() {
 #[test]
 fn conversion_without_new_data_flag_is_stale() {
     let spi = rdata1(&[0x00, 0x00, 0x00, 0x00, 0x00, 0x9B]);
-    let mut d = driver(&spi, &[], Ads1262Config::board_default());
+    let mut d = driver(&spi, &[], config());
     assert_eq!(d.read_conversion(), Err(Error::StaleData));
     finish(d);
 }
@@ -362,7 +392,7 @@ fn read_channel_switches_the_mux_restarts_and_waits_for_drdy() {
         PinT::get(State::Low),
         PinT::get(State::Low),
     ];
-    let mut d = driver(&spi, &pin, Ads1262Config::board_default());
+    let mut d = driver(&spi, &pin, config());
     assert!(d.init().is_ok());
     assert_eq!(
         d.read_channel(Channel::Tiltmeter)
@@ -378,7 +408,7 @@ fn read_channel_switches_the_mux_restarts_and_waits_for_drdy() {
 
 #[test]
 fn read_channel_rewrites_the_gain_when_channels_differ() {
-    let mut cfg = Ads1262Config::board_default();
+    let mut cfg = config();
     cfg.channels.tiltmeter.pga = Pga::Enabled(Gain::G8);
     // MODE2 gain 8 = GAIN 011 at [6:4], DR 10 SPS → 0x32; accelerometer back at gain 1 → 0x02.
     let spi = [
@@ -414,11 +444,7 @@ fn failed_mux_switch_is_retried_on_the_next_read() {
         rdata1(&[0x40, 0x00, 0x00, 0x00, 0x00, 0x9B]),
     ]
     .concat();
-    let mut d = driver(
-        &spi,
-        &[PinT::get(State::Low)],
-        Ads1262Config::board_default(),
-    );
+    let mut d = driver(&spi, &[PinT::get(State::Low)], config());
     assert!(d.init().is_ok());
     assert_eq!(
         d.read_channel(Channel::Tiltmeter),
@@ -436,7 +462,7 @@ fn failed_mux_switch_is_retried_on_the_next_read() {
 fn drdy_that_never_falls_times_out_after_the_poll_limit() {
     let cfg = Ads1262Config {
         drdy_poll_limit: 3,
-        ..Ads1262Config::board_default()
+        ..config()
     };
     let pin = [
         PinT::get(State::High),
@@ -452,7 +478,7 @@ fn drdy_that_never_falls_times_out_after_the_poll_limit() {
 fn drdy_pin_failure_is_a_pin_error() {
     let err = MockError::Io(std::io::ErrorKind::Other);
     let pin = [PinT::get(State::Low).with_error(err.clone())];
-    let mut d = driver(&[], &pin, Ads1262Config::board_default());
+    let mut d = driver(&[], &pin, config());
     assert_eq!(d.wait_drdy(), Err(Error::Pin(err)));
     finish(d);
 }
@@ -460,7 +486,7 @@ fn drdy_pin_failure_is_a_pin_error() {
 #[test]
 fn start_and_stop_send_their_opcodes() {
     let spi = [command(START1), command(STOP1)].concat();
-    let mut d = driver(&spi, &[], Ads1262Config::board_default());
+    let mut d = driver(&spi, &[], config());
     assert_eq!(d.start(), Ok(()));
     assert_eq!(d.stop(), Ok(()));
     finish(d);
@@ -469,12 +495,7 @@ fn start_and_stop_send_their_opcodes() {
 /// An SPI device whose every transfer fails, as a broken bus would.
 #[test]
 fn bus_failure_is_reported_as_spi_error() {
-    let mut d = Ads1262::new(
-        BrokenBus,
-        PinMock::new(&[]),
-        NoopDelay::new(),
-        Ads1262Config::board_default(),
-    );
+    let mut d = Ads1262::new(BrokenBus, PinMock::new(&[]), NoopDelay::new(), config());
     assert_eq!(d.init(), Err(Error::Spi(ErrorKind::Other)));
     assert_eq!(d.read_conversion(), Err(Error::Spi(ErrorKind::Other)));
     let (_, mut pin, _) = d.release();
@@ -483,7 +504,7 @@ fn bus_failure_is_reported_as_spi_error() {
 
 #[test]
 fn scale_uses_the_channel_gain_and_reads_one_g_as_1_33_volts() {
-    let mut cfg = Ads1262Config::board_default();
+    let mut cfg = config();
     cfg.channels.tiltmeter.pga = Pga::Enabled(Gain::G8);
     let acc = cfg.scale(Channel::Accelerometer, crate::units::Volts(2.5));
     let tilt = cfg.scale(Channel::Tiltmeter, crate::units::Volts(2.5));

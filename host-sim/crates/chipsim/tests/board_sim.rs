@@ -13,10 +13,11 @@ use std::cell::RefCell;
 use std::rc::Rc;
 
 use accomp::acquisition::{
-    board, AdsReading, AdsSequencer, InterruptDrdy, RtdSequencer, SampleAssembler, SpiSettings,
+    AdsReading, AdsSequencer, InterruptDrdy, RtdSequencer, SampleAssembler, SpiSettings,
 };
-use accomp::drivers::ad7124::{self, Ad7124, Ad7124Config};
-use accomp::drivers::ads1262::{self, Ads1262, Ads1262Config, DataRate};
+use accomp::board;
+use accomp::drivers::ad7124::{self, Ad7124};
+use accomp::drivers::ads1262::{self, Ads1262, DataRate};
 use accomp::model::StaticCoefficients;
 use accomp::pipeline::{process_prepared, Frame, Status};
 use accomp::prepared::PreparedCalibration;
@@ -32,7 +33,7 @@ type RtdSeq = RtdSequencer<SimSpi<Ad7124Model>, InterruptDrdy, SimDelay>;
 
 const S: u64 = 1_000_000;
 const H: u64 = 3600 * S;
-/// Supervisor tick of the ADS1262 sequencer in the firmware (board/frontend.rs).
+/// Supervisor tick of the ADS1262 sequencer in the firmware (bsp/frontend.rs).
 const ADS_TICK_US: u64 = 20_000;
 
 /// The thermostat, the foundation and the accelerometer: physical values at time t.
@@ -109,7 +110,7 @@ impl Bench {
             },
             InterruptDrdy,
             SimDelay(clock.clone()),
-            Ads1262Config::board_default(),
+            board::ads1262_config(),
         );
         let rtd_driver = Ad7124::new(
             SimSpi {
@@ -118,7 +119,7 @@ impl Bench {
             },
             InterruptDrdy,
             SimDelay(clock.clone()),
-            Ad7124Config::board_default(),
+            board::ad7124_config(),
         );
         let table = paper_order2_table();
         let prepared = PreparedCalibration::new(&table).expect("the paper table prepares");

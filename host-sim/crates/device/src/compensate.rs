@@ -4,7 +4,7 @@
 use std::path::Path;
 
 use accomp::adc::AdcError;
-use accomp::frontend::{accel_scale, arcsec_to_ads1262, celsius_to_ad7124, volts_to_ads1262};
+use accomp::board::{accel_scale, arcsec_to_ads1262, celsius_to_ad7124, volts_to_ads1262};
 use accomp::pipeline::{self, ChannelFlags, Frame, RawSample};
 use accomp::table::CalibrationTable;
 use accomp::units::{Celsius, TiltArcsec, Volts};

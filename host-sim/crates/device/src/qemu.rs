@@ -532,7 +532,7 @@ impl Drop for Qemu {
     }
 }
 
-/// Bytes of the QEMU board's flash image: three 1 KiB slots (`src/board/qemu.rs`,
+/// Bytes of the QEMU board's flash image: three 1 KiB slots (`src/bsp/qemu.rs`,
 /// `RamCalibrationFlash`).
 pub const FLASH_IMAGE_LEN: usize = 3 * 1024;
 /// The lock file beside the flash image: held (flock, exclusive) by the one command using the

@@ -9,7 +9,7 @@
 //! in the measured columns.
 
 use accomp::adc::{AdcError, AdcScale};
-use accomp::frontend::{ad7124_rtd_scale, ads1262_scale_with_vref};
+use accomp::board::{ad7124_rtd_scale, ads1262_scale_with_vref};
 use accomp::units::{Ohms, RtdOhms, Volts};
 use serde::{Deserialize, Serialize};
 

@@ -451,10 +451,10 @@ pub(crate) fn pt100() -> RtdParams {
     }
 }
 
-/// The board's converters: nominal values from the core's front-end module (`accomp::frontend`),
+/// The board's converters: nominal values from the core's front-end module (`accomp::board`),
 /// imperfections (tempco, noise) of the simulated board.
 fn board() -> AdcParams {
-    use accomp::frontend as fe;
+    use accomp::board as fe;
     AdcParams {
         ads1262: Ads1262Params {
             vref_v: fe::ADS1262_VREF.0,

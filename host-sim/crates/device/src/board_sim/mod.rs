@@ -19,9 +19,10 @@ pub mod pty;
 use std::cell::RefCell;
 use std::rc::Rc;
 
-use accomp::acquisition::{board, AdsSequencer, InterruptDrdy, RtdSequencer, SampleAssembler};
-use accomp::drivers::ad7124::{Ad7124, Ad7124Config};
-use accomp::drivers::ads1262::{Ads1262, Ads1262Config, DataRate};
+use accomp::acquisition::{AdsSequencer, InterruptDrdy, RtdSequencer, SampleAssembler};
+use accomp::board;
+use accomp::drivers::ad7124::Ad7124;
+use accomp::drivers::ads1262::{Ads1262, DataRate};
 use accomp::protocol::{
     encode_frame, Board, BootReport, DeviceMessage, FrameDecoder, MAX_FRAME_LEN, PROTOCOL_VERSION,
 };
@@ -147,7 +148,7 @@ impl VirtualBoard {
             },
             InterruptDrdy,
             SimDelay(clock.clone()),
-            Ads1262Config::board_default(),
+            board::ads1262_config(),
         );
         let rtd_driver = Ad7124::new(
             SimSpi {
@@ -156,7 +157,7 @@ impl VirtualBoard {
             },
             InterruptDrdy,
             SimDelay(clock.clone()),
-            Ad7124Config::board_default(),
+            board::ad7124_config(),
         );
         let layout = flash::SLOT_LAYOUT;
         let mut service = Service::new(Board::Frontend, flash, layout);

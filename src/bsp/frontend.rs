@@ -14,7 +14,7 @@ use defmt_rtt as _;
 use embedded_hal::delay::DelayNs;
 use embedded_hal_bus::spi::ExclusiveDevice;
 use stm32f4xx_hal::{
-    gpio::{Edge, Input, Output, PushPull, PA4, PB12, PC4},
+    gpio::{Edge, Input, Output, Pin, PushPull},
     pac,
     prelude::*,
     rcc::Config,
@@ -23,9 +23,10 @@ use stm32f4xx_hal::{
 };
 
 use super::{Fatal, Parts};
-use accomp::acquisition::{board as bus, AdsSequencer, InterruptDrdy, RtdSequencer};
-use accomp::drivers::ad7124::{Ad7124, Ad7124Config};
-use accomp::drivers::ads1262::{Ads1262, Ads1262Config};
+use accomp::acquisition::{AdsSequencer, InterruptDrdy, RtdSequencer};
+use accomp::board::{self as bus, *};
+use accomp::drivers::ad7124::Ad7124;
+use accomp::drivers::ads1262::Ads1262;
 use accomp::protocol::{Board, BootReport};
 
 /// Board reported in READY and Info.
@@ -60,8 +61,17 @@ impl DelayNs for CycleDelay {
     }
 }
 
-type AdsDevice = ExclusiveDevice<Spi<pac::SPI1>, PA4<Output<PushPull>>, CycleDelay>;
-type RtdDevice = ExclusiveDevice<Spi<pac::SPI2>, PB12<Output<PushPull>>, CycleDelay>;
+/// The HAL pin the board description names (`accomp::board`): a pin moved there must move in
+/// `init` too, or the types disagree and the firmware does not build.
+macro_rules! board_pin {
+    ($pin:ident) => { Pin<{ $pin.port }, { $pin.number }> };
+    ($pin:ident, $mode:ty) => { Pin<{ $pin.port }, { $pin.number }, $mode> };
+}
+
+type AdsCs = board_pin!(ADS1262_CS, Output<PushPull>);
+type RtdCs = board_pin!(AD7124_CS, Output<PushPull>);
+type AdsDevice = ExclusiveDevice<Spi<pac::SPI1>, AdsCs, CycleDelay>;
+type RtdDevice = ExclusiveDevice<Spi<pac::SPI2>, RtdCs, CycleDelay>;
 
 /// The ADS1262 sequencer (shared by the DRDY interrupt and its supervisor task).
 pub type AdsAcquisition = AdsSequencer<AdsDevice, InterruptDrdy, CycleDelay>;
@@ -69,7 +79,7 @@ pub type AdsAcquisition = AdsSequencer<AdsDevice, InterruptDrdy, CycleDelay>;
 pub type RtdAcquisition = RtdSequencer<RtdDevice, InterruptDrdy, CycleDelay>;
 
 /// The ADS1262 DRDY input (PC4, EXTI4, falling edge).
-pub type DrdyPin = PC4<Input>;
+pub type DrdyPin = board_pin!(ADS1262_DRDY, Input);
 
 /// Clears the EXTI4 pending bit (first thing in the DRDY handler).
 pub fn acknowledge_drdy(pin: &mut DrdyPin) {
@@ -110,7 +120,7 @@ fn start_crystal(rcc: &pac::RCC) -> bool {
 }
 
 /// Clocks (crystal or HSI fallback), USART1 115200 8N1, SPI1 (ADS1262, mode 1) and SPI2
-/// (AD7124, mode 3) at the frequencies of [`accomp::acquisition::board`], the two sequencers
+/// (AD7124, mode 3) at the frequencies of [`accomp::board`], the two sequencers
 /// (they initialise their converters from their first tick), DRDY falling edge on PC4, TIM2 as
 /// the time base; the watchdog is started first, before the clocks.
 pub fn init(mut dp: pac::Peripherals) -> Parts {
@@ -152,25 +162,38 @@ pub fn init(mut dp: pac::Peripherals) -> Parts {
     let gpiob = dp.GPIOB.split(&mut rcc);
     let gpioc = dp.GPIOC.split(&mut rcc);
 
-    let (tx, rx) = super::uart1(dp.USART1, (gpioa.pa9, gpioa.pa10), &mut rcc);
+    let uart_pins: (board_pin!(UART_TX), board_pin!(UART_RX)) = (gpioa.pa9, gpioa.pa10);
+    let (tx, rx) = super::uart1(dp.USART1, uart_pins, &mut rcc);
 
     // One bus per converter, each in its datasheet's mode: no mode switching, no sharing, no
     // lock between the DRDY interrupt and the RTD task.
+    let spi1_pins: (
+        board_pin!(ADS1262_SCK),
+        board_pin!(ADS1262_MISO),
+        board_pin!(ADS1262_MOSI),
+    ) = (gpioa.pa5, gpioa.pa6, gpioa.pa7);
+    let spi2_pins: (
+        board_pin!(AD7124_SCK),
+        board_pin!(AD7124_MISO),
+        board_pin!(AD7124_MOSI),
+    ) = (gpiob.pb13, gpiob.pb14, gpiob.pb15);
     let spi1 = dp.SPI1.spi(
-        (Some(gpioa.pa5), Some(gpioa.pa6), Some(gpioa.pa7)),
+        (Some(spi1_pins.0), Some(spi1_pins.1), Some(spi1_pins.2)),
         bus::ADS1262_BUS.mode,
         bus::ADS1262_BUS.sclk_hz.Hz(),
         &mut rcc,
     );
     let spi2 = dp.SPI2.spi(
-        (Some(gpiob.pb13), Some(gpiob.pb14), Some(gpiob.pb15)),
+        (Some(spi2_pins.0), Some(spi2_pins.1), Some(spi2_pins.2)),
         bus::AD7124_BUS.mode,
         bus::AD7124_BUS.sclk_hz.Hz(),
         &mut rcc,
     );
     // CS pins are driven high here (GPIO writes are infallible).
-    let Ok(ads_dev) = ExclusiveDevice::new(spi1, gpioa.pa4.into_push_pull_output(), CycleDelay);
-    let Ok(rtd_dev) = ExclusiveDevice::new(spi2, gpiob.pb12.into_push_pull_output(), CycleDelay);
+    let ads_cs: AdsCs = gpioa.pa4.into_push_pull_output();
+    let rtd_cs: RtdCs = gpiob.pb12.into_push_pull_output();
+    let Ok(ads_dev) = ExclusiveDevice::new(spi1, ads_cs, CycleDelay);
+    let Ok(rtd_dev) = ExclusiveDevice::new(spi2, rtd_cs, CycleDelay);
 
     // Neither converter is touched here: each sequencer initialises its chip in steps from its
     // first tick (reset, then the configuration on a later tick), so nothing waits at boot
@@ -179,16 +202,16 @@ pub fn init(mut dp: pac::Peripherals) -> Parts {
         ads_dev,
         InterruptDrdy,
         CycleDelay,
-        Ads1262Config::board_default(),
+        ads1262_config(),
     ));
     let rtd = RtdSequencer::new(Ad7124::new(
         rtd_dev,
         InterruptDrdy,
         CycleDelay,
-        Ad7124Config::board_default(),
+        ad7124_config(),
     ));
 
-    let mut drdy = gpioc.pc4.into_pull_up_input();
+    let mut drdy: DrdyPin = gpioc.pc4.into_pull_up_input();
     drdy.make_interrupt_source(&mut syscfg);
     drdy.trigger_on_edge(&mut dp.EXTI, Edge::Falling);
     drdy.enable_interrupt(&mut dp.EXTI);

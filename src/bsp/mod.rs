@@ -1,4 +1,5 @@
-//! Board support: everything that differs between QEMU's netduinoplus2 and the real front-end.
+//! Board support package: the firmware glue for everything that differs between QEMU's
+//! netduinoplus2 and the real front-end (the front-end's description is `accomp::board`).
 //!
 //! Each board provides: `BOARD`, `SYSTICK_HZ`, `HAS_ADCS`, `UartRx`/`UartTx`, the acquisition
 //! types (`AdsAcquisition`, `RtdAcquisition`, `DrdyPin`, `acknowledge_drdy`), `Watchdog`, `init`
