@@ -20,6 +20,7 @@ pub mod prepared;
 pub mod protocol;
 pub mod reference;
 pub mod rtd;
+pub mod rx_ring;
 pub mod service;
 pub mod storage;
 pub mod table;

@@ -1,6 +1,6 @@
 //! Firmware entry point for the STM32F405 compensation front-end (RTIC 2).
 //!
-//! Thin on purpose: the board module sets up clocks, UART, acquisition and the watchdog; the
+//! Thin on purpose: the board support package (`bsp`) sets up clocks, UART, acquisition and the watchdog; the
 //! core's [`accomp::acquisition`] sequences the converters and [`accomp::service::Service`]
 //! answers requests and runs the per-sample pipeline. This file only moves bytes, readings and
 //! samples between them, at these priorities:
@@ -8,7 +8,7 @@
 //! | priority | task | may do |
 //! |---|---|---|
 //! | 3 | `drdy` (EXTI4) | timestamp, read one conversion, switch the mux: bounded SPI, no wait |
-//! | 2 | `uart_rx` (USART1) | drain the receiver into the frame decoder |
+//! | 2 | `uart_rx` (USART1) | drain the received bytes (front-end: the DMA ring) into the frame decoder |
 //! | 2 | `ads_supervisor`, `rtd_task` | one tick of a sequencer each: bounded SPI, no wait |
 //! | 1 | `worker`, `watchdog` | pipeline, protocol, flash; progress checks and IWDG feeding |
 //!
@@ -209,6 +209,9 @@ mod app {
     async fn ads_supervisor(mut cx: ads_supervisor::Context) {
         loop {
             Mono::delay(ADS_TICK_MS.millis()).await;
+            // The front-end's UART bytes arrive by DMA: wake the reader at least every tick, in
+            // case a byte's RXNE interrupt ran before the DMA had moved it into the ring.
+            rtic::pend(stm32f4xx_hal::pac::Interrupt::USART1);
             let now = now_us();
             let rate = DataRate::from_sps(REQUESTED_RATE.swap(0, Ordering::Relaxed));
             let reading = cx.shared.ads.lock(|ads| {

@@ -28,6 +28,7 @@ use accomp::board::{self as bus, *};
 use accomp::drivers::ad7124::Ad7124;
 use accomp::drivers::ads1262::Ads1262;
 use accomp::protocol::{Board, BootReport};
+use accomp::rx_ring::RxRing;
 
 /// Board reported in READY and Info.
 pub const BOARD: Board = Board::Frontend;
@@ -164,6 +165,7 @@ pub fn init(mut dp: pac::Peripherals) -> Parts {
 
     let uart_pins: (board_pin!(UART_TX), board_pin!(UART_RX)) = (gpioa.pa9, gpioa.pa10);
     let (tx, rx) = super::uart1(dp.USART1, uart_pins, &mut rcc);
+    let rx = start_rx_dma(&rcc, &dp.DMA2, rx);
 
     // One bus per converter, each in its datasheet's mode: no mode switching, no sharing, no
     // lock between the DRDY interrupt and the RTD task.
@@ -231,6 +233,91 @@ pub fn init(mut dp: pac::Peripherals) -> Parts {
             clock_fallback: !crystal,
         },
     }
+}
+
+/// Bytes of the UART receive ring. The DMA writes every received byte into it whatever the
+/// core does (DMA2 reads USART1 on APB2 and writes SRAM1: no flash access, so a flash erase
+/// that stalls the core does not stall it); bytes are lost only if the reader falls a whole
+/// ring behind. What the reader can fall behind by: while the core runs, the USART1 interrupt
+/// (priority 2) waits at most for the DRDY handler and a priority-2 task (an AD7124
+/// re-configuration, ≈ 200 µs ≈ 3 bytes at 115,200 Bd); across a flash-erase stall (≤ 2 s) the
+/// host can have sent only what it has in flight — at most 8 requests × 127 B (frame + leading
+/// delimiter) = 1,016 B, since it sends no more before answers come — and 2,048 B holds two
+/// such windows. At line rate 2,048 B is 178 ms of continuous input without a read.
+const RX_RING_LEN: usize = 2048;
+
+/// The ring the DMA writes (SRAM1, DMA-capable; memory.x leaves the CCM out).
+static mut RX_RING: [u8; RX_RING_LEN] = [0; RX_RING_LEN];
+
+/// DMA2 stream 2, channel 4: USART1_RX (RM0090 Table 43, "DMA2 request mapping").
+const RX_STREAM: usize = 2;
+
+/// UART receive half: USART1 → DMA2 stream 2 → [`RX_RING`], read by [`read_byte`]. The RXNE
+/// interrupt stays enabled only to wake the reader (the ISR never reads USART_DR, the DMA
+/// does); the ADS1262 supervisor also pends it every 20 ms, so a byte whose interrupt came
+/// before its DMA transfer is read at the latest then.
+pub struct UartRx {
+    _hal: super::HalRx,
+    ring: RxRing<RX_RING_LEN>,
+    /// Ring position when a line error was last counted (the USART_SR error flags stay set until
+    /// the DMA's next read of USART_DR, so one damaged byte is counted once).
+    error_head: usize,
+}
+
+/// Circular DMA from USART1_DR into [`RX_RING`] (RM0090 §10.3.9 circular mode, §10.5.5
+/// DMA_SxCR: CHSEL 4, priority high, byte to byte, memory increment, peripheral → memory),
+/// then USART_CR3.DMAR (§30.6.6) so every received byte is a DMA request.
+fn start_rx_dma(rcc: &pac::RCC, dma2: &pac::DMA2, hal: super::HalRx) -> UartRx {
+    rcc.ahb1enr().modify(|_, w| w.dma2en().set_bit());
+    let st = dma2.st(RX_STREAM);
+    // SAFETY: the USART1 data register's address (RM0090 §30.6.2) and a static buffer only the
+    // DMA writes; the stream is disabled (reset state) while it is configured.
+    unsafe {
+        st.par().write(|w| w.bits(pac::USART1::ptr() as u32 + 4));
+        st.m0ar()
+            .write(|w| w.bits(core::ptr::addr_of!(RX_RING) as u32));
+        st.ndtr().write(|w| w.bits(RX_RING_LEN as u32));
+        st.cr()
+            .write(|w| w.bits((4 << 25) | (0b10 << 16) | (1 << 10) | (1 << 8) | 1));
+        (*pac::USART1::ptr())
+            .cr3()
+            .modify(|r, w| w.bits(r.bits() | (1 << 6)));
+    }
+    UartRx {
+        _hal: hal,
+        ring: RxRing::new(),
+        error_head: 0,
+    }
+}
+
+/// The next received byte from the DMA ring, or None when all are read. Line errors (USART_SR
+/// ORE, FE, NF) are counted by kind, once per damaged stretch; the frame CRC refuses the
+/// damaged frame.
+pub fn read_byte(rx: &mut UartRx) -> Option<u8> {
+    // SAFETY: reads of USART1_SR and of the stream's NDTR: no side effect on the DMA (reading
+    // SR is half of the flag-clearing sequence, whose other half is the DMA's next DR read).
+    let (sr, ndtr) = unsafe {
+        (
+            (*pac::USART1::ptr()).sr().read().bits(),
+            (*pac::DMA2::ptr()).st(RX_STREAM).ndtr().read().bits(),
+        )
+    };
+    let head = RxRing::<RX_RING_LEN>::head(ndtr);
+    // ORE bit 3, NF bit 2, FE bit 1 (RM0090 §30.6.1).
+    if sr & 0b1110 != 0 && head != rx.error_head {
+        rx.error_head = head;
+        let counter = if sr & 0b1000 != 0 {
+            &super::UART_OVERRUNS
+        } else {
+            &super::UART_LINE_ERRORS
+        };
+        counter.fetch_add(1, Ordering::Relaxed);
+    }
+    rx.ring.next(ndtr, |i| {
+        // SAFETY: `i` < RX_RING_LEN (RxRing's read position); a volatile read of a byte the DMA
+        // wrote before it advanced NDTR past it.
+        unsafe { core::ptr::read_volatile(core::ptr::addr_of!(RX_RING).cast::<u8>().add(i)) }
+    })
 }
 
 /// TIM2's kernel clock: APB1 (42 MHz) × 2, since the APB1 prescaler is not 1 (RM0090 §6.2,

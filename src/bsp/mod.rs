@@ -7,7 +7,7 @@
 //! and the logger/panic plumbing (a panic never ends in a HardFault loop).
 //! The shared UART helpers are here because both boards use the HAL's USART1.
 
-use core::sync::atomic::{AtomicU32, Ordering};
+use core::sync::atomic::AtomicU32;
 
 use stm32f4xx_hal::prelude::*;
 
@@ -25,8 +25,9 @@ mod qemu;
 #[cfg(feature = "board-qemu")]
 pub use qemu::*;
 
-/// UART receive half (USART1 on both boards).
-pub type UartRx = stm32f4xx_hal::serial::Rx<stm32f4xx_hal::pac::USART1>;
+/// The HAL's UART receive half (USART1 on both boards); each board wraps it in its `UartRx`
+/// (QEMU: byte by byte from the interrupt; front-end: a DMA ring).
+pub type HalRx = stm32f4xx_hal::serial::Rx<stm32f4xx_hal::pac::USART1>;
 /// UART transmit half.
 pub type UartTx = stm32f4xx_hal::serial::Tx<stm32f4xx_hal::pac::USART1>;
 
@@ -66,7 +67,7 @@ pub(crate) fn uart1(
     usart1: stm32f4xx_hal::pac::USART1,
     pins: (stm32f4xx_hal::gpio::PA9, stm32f4xx_hal::gpio::PA10),
     rcc: &mut stm32f4xx_hal::rcc::Rcc,
-) -> (UartTx, UartRx) {
+) -> (UartTx, HalRx) {
     let config = stm32f4xx_hal::serial::Config::default().baudrate(115_200.bps());
     let serial = match stm32f4xx_hal::serial::Serial::new(usart1, pins, config, rcc) {
         Ok(s) => s,
@@ -91,25 +92,6 @@ pub(crate) fn log_panic(info: &core::panic::PanicInfo) {
 pub static UART_OVERRUNS: AtomicU32 = AtomicU32::new(0);
 /// UART bytes received with a framing or noise error (SR.FE / SR.NF) since boot.
 pub static UART_LINE_ERRORS: AtomicU32 = AtomicU32::new(0);
-
-/// Next received byte, or None when the receive register is empty. A line error (overrun,
-/// framing, noise) loses bytes: it is counted by kind (Info's loss counters) and the frame CRC
-/// refuses the damaged frame.
-pub fn read_byte(rx: &mut UartRx) -> Option<u8> {
-    use stm32f4xx_hal::serial::Error as E;
-    loop {
-        match rx.read() {
-            Ok(b) => return Some(b),
-            Err(stm32f4xx_hal::nb::Error::WouldBlock) => return None,
-            Err(stm32f4xx_hal::nb::Error::Other(E::Overrun)) => {
-                UART_OVERRUNS.fetch_add(1, Ordering::Relaxed);
-            }
-            Err(stm32f4xx_hal::nb::Error::Other(_)) => {
-                UART_LINE_ERRORS.fetch_add(1, Ordering::Relaxed);
-            }
-        }
-    }
-}
 
 /// Reset counts kept in RAM that survives a reset but not a power cycle: magic, then
 /// (watchdog, brown-out). Written once per boot, before interrupts run.

@@ -299,3 +299,26 @@ unsafe fn HardFault(frame: &ExceptionFrame) -> ! {
     defmt::error!("HardFault at pc={=u32:#x}", frame.pc());
     semihosting::process::exit(exit_code::HARD_FAULT)
 }
+
+/// UART receive half: read byte by byte from the USART1 interrupt. The front-end's DMA ring is
+/// not used here: whether QEMU 7.2's STM32F405 emulates the DMA controller is unverified.
+pub type UartRx = super::HalRx;
+
+/// Next received byte, or None when the receive register is empty. A line error (overrun,
+/// framing, noise) loses bytes: it is counted by kind (Info's loss counters) and the frame CRC
+/// refuses the damaged frame.
+pub fn read_byte(rx: &mut UartRx) -> Option<u8> {
+    use stm32f4xx_hal::serial::Error as E;
+    loop {
+        match rx.read() {
+            Ok(b) => return Some(b),
+            Err(stm32f4xx_hal::nb::Error::WouldBlock) => return None,
+            Err(stm32f4xx_hal::nb::Error::Other(E::Overrun)) => {
+                super::UART_OVERRUNS.fetch_add(1, core::sync::atomic::Ordering::Relaxed);
+            }
+            Err(stm32f4xx_hal::nb::Error::Other(_)) => {
+                super::UART_LINE_ERRORS.fetch_add(1, core::sync::atomic::Ordering::Relaxed);
+            }
+        }
+    }
+}
