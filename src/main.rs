@@ -59,7 +59,7 @@ mod app {
 
     /// How often the ADS1262 supervisor checks for a missing DRDY (and drives re-init steps).
     const ADS_TICK_MS: u64 = 20;
-    /// How often the watchdog task checks progress (the IWDG itself allows 8 s).
+    /// How often the watchdog task checks progress (the IWDG itself allows ≥ 10.9 s).
     const WATCHDOG_CHECK_MS: u64 = 1_000;
     /// An RTD reading further than this from a pair's timestamp is not joined to it.
     const RTD_MAX_AGE_US: u64 = 1_000_000;
@@ -249,7 +249,7 @@ mod app {
     /// Feeds the independent watchdog only when, since the last check, acquisition produced a
     /// reading (front-end) and the worker processed something (an idle worker gets a heartbeat
     /// to answer, so it feeds every other second). A stuck worker, a dead supervisor or a
-    /// lock-up stops the feeding and the IWDG (8 s) resets the MCU.
+    /// lock-up stops the feeding and the IWDG (16 s nominal) resets the MCU.
     #[task(priority = 1, local = [watchdog, watchdog_to_worker])]
     async fn watchdog(cx: watchdog::Context) {
         let mut acquisition = ACQ_PROGRESS.load(Ordering::Relaxed);

@@ -42,12 +42,13 @@ pub const SYSTICK_HZ: u32 = 168_000_000;
 /// How long the crystal gets to start (ST's HAL uses the same HSE_STARTUP_TIMEOUT, 100 ms).
 const HSE_TIMEOUT_MS: u32 = 100;
 
-/// Independent watchdog period. Longer than the slowest thing the firmware may legitimately do
-/// without progress: a 128 KiB flash sector erase stalls the CPU up to 4 s (STM32F405
-/// datasheet DS8626, t_ERASE128KB max at x8, the parallelism the flash driver uses), and a DRDY
-/// timeout plus re-init takes < 2 s at 5 SPS.
-/// The LSI (17–47 kHz) makes the real period 5.6–15 s.
-pub const WATCHDOG_MS: u32 = 8_000;
+/// Independent watchdog period, 16 s nominal (prescaler 128, reload 4000 at the LSI's nominal
+/// 32 kHz). Its shortest value, at the LSI's maximum 47 kHz (datasheet DS8626, "LSI oscillator
+/// characteristics"), is 16 s × 32/47 = 10.9 s, and half of that, 5.45 s, covers the longest
+/// stretch without a feed the firmware allows: 4.8 s (docs/drivers.md, "Faults, watchdog"),
+/// mostly a 128 KiB sector erase that stalls the core (≤ 2 s at x32), which no code running
+/// from flash can feed through. At the LSI's minimum 17 kHz a hang resets after ≤ 30 s.
+pub const WATCHDOG_MS: u32 = 16_000;
 
 /// Busy-wait delay from the core clock (SysTick belongs to the RTIC monotonic). Waits at least
 /// the requested time. The drivers take one, but the sequencers never ask it for the reset
@@ -393,7 +394,7 @@ pub fn fatal(reason: Fatal) -> ! {
     cortex_m::peripheral::SCB::sys_reset()
 }
 
-/// A panic resets the MCU (the watchdog would too, 8 s later); the next boot reports
+/// A panic resets the MCU (the watchdog would too, ≤ 30 s later); the next boot reports
 /// SFTRSTF in Info's reset cause.
 #[panic_handler]
 fn panic(info: &core::panic::PanicInfo) -> ! {
