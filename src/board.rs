@@ -189,6 +189,14 @@ pub const AD7124_MISO: Pin = pin('B', 14);
 pub const AD7124_MOSI: Pin = pin('B', 15);
 /// AD7124-4 chip select, push-pull, high when idle.
 pub const AD7124_CS: Pin = pin('B', 12);
+/// ADS1262 START, push-pull, held low: conversions are started by the START1 command, which
+/// SBAS661C ("Conversion Control", START pin) requires the pin low for; a floating START could
+/// start and stop conversions at random.
+pub const ADS1262_START: Pin = pin('C', 5);
+/// ADS1262 XTAL1/CLKIN, push-pull, held low: the ADC runs on its internal 7.3728 MHz oscillator,
+/// for which SBAS661C ("Clock Operation") wants CLKIN at DGND; a floating CLKIN could be taken
+/// for an external clock. PA8 is MCO1, so the MCU could later clock the ADC from here.
+pub const ADS1262_CLKIN: Pin = pin('A', 8);
 
 /// How an ADS1262 channel's codes read: 32-bit two's complement, the internal reference, the
 /// channel's PGA gain and the calibration's gain correction and offset.

@@ -14,7 +14,7 @@ use defmt_rtt as _;
 use embedded_hal::delay::DelayNs;
 use embedded_hal_bus::spi::ExclusiveDevice;
 use stm32f4xx_hal::{
-    gpio::{Edge, Input, Output, Pin, PushPull},
+    gpio::{Edge, Input, Output, Pin, PinState, PushPull},
     pac,
     prelude::*,
     rcc::Config,
@@ -193,8 +193,20 @@ pub fn init(mut dp: pac::Peripherals) -> Parts {
         &mut rcc,
     );
     // CS pins are driven high here (GPIO writes are infallible).
-    let ads_cs: AdsCs = gpioa.pa4.into_push_pull_output();
-    let rtd_cs: RtdCs = gpiob.pb12.into_push_pull_output();
+    // Chip selects high *before* the pins become outputs (ODR first, then MODER): the reset ODR
+    // is 0, so switching the mode first would pull CS low until `ExclusiveDevice::new` raised it
+    // — a CS pulse with no clocks, which frames nothing and resets the chips' serial interface
+    // in the middle of whatever they believe (SBAS661C "Chip Select (CS)"; AD7124 Rev. B
+    // "Serial Interface"). Between transactions the bus manager raises CS only after the last
+    // byte was received (the HAL's full-duplex write waits for RXNE of every byte), so no
+    // transaction is cut short.
+    let ads_cs: AdsCs = gpioa.pa4.into_push_pull_output_in_state(PinState::High);
+    let rtd_cs: RtdCs = gpiob.pb12.into_push_pull_output_in_state(PinState::High);
+    // START and CLKIN at a defined level from here on (see `accomp::board`): low.
+    let _start: board_pin!(ADS1262_START, Output<PushPull>) =
+        gpioc.pc5.into_push_pull_output_in_state(PinState::Low);
+    let _clkin: board_pin!(ADS1262_CLKIN, Output<PushPull>) =
+        gpioa.pa8.into_push_pull_output_in_state(PinState::Low);
     let Ok(ads_dev) = ExclusiveDevice::new(spi1, ads_cs, CycleDelay);
     let Ok(rtd_dev) = ExclusiveDevice::new(spi2, rtd_cs, CycleDelay);
 

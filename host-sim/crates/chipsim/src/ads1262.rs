@@ -94,7 +94,7 @@ impl Ads1262Model {
     }
 
     /// A supply glitch: every register back to its power-on value, conversions stopped (the
-    /// START pin is strapped low, so only a START1 command restarts them).
+    /// START pin is held low, so only a START1 command restarts them).
     pub fn power_glitch(&mut self) {
         self.regs = RESET_VALUES;
         self.running = false;
