@@ -290,8 +290,11 @@ fn start_rx_dma(rcc: &pac::RCC, dma2: &pac::DMA2, hal: super::HalRx) -> UartRx {
         st.m0ar()
             .write(|w| w.bits(core::ptr::addr_of!(RX_RING) as u32));
         st.ndtr().write(|w| w.bits(RX_RING_LEN as u32));
-        st.cr()
-            .write(|w| w.bits((4 << 25) | (0b10 << 16) | (1 << 10) | (1 << 8) | 1));
+        let cr = (4 << 25) | (0b10 << 16) | (1 << 10) | (1 << 8);
+        st.cr().write(|w| w.bits(cr));
+        // EN last, once the stream is configured (RM0090 §10.3.17, "Stream configuration
+        // procedure", step 9).
+        st.cr().write(|w| w.bits(cr | 1));
         (*pac::USART1::ptr())
             .cr3()
             .modify(|r, w| w.bits(r.bits() | (1 << 6)));
