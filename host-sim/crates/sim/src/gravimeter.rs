@@ -22,7 +22,7 @@ use super::noise::AllanParams;
 
 /// Gravity units the gravimeter can write: the record column suffixes `accomp discover` reads
 /// (`accomp_log::unit_per_g_for_suffix`).
-pub const UNITS: [&str; 4] = ["mgal", "ugal", "nm_s2", "m_s2"];
+pub use accomp_log::GRAVITY_UNITS as UNITS;
 
 /// The gravimeter.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

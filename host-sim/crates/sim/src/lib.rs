@@ -46,8 +46,8 @@ use tilt::{tiltmeter_reading, Foundation};
 use time::Utc;
 use writer::{Column, LogWriter};
 
-/// Standard gravity, m/s² (the tide's gravity change is turned into g with it).
-pub const STANDARD_GRAVITY_M_S2: f64 = 9.806_65;
+/// Standard gravity, m/s² (the tide's gravity change is turned into g with it): the core's.
+pub use accomp::tide::STANDARD_GRAVITY_M_S2;
 
 /// Random streams, one per part (see [`noise::stream`]).
 mod streams {

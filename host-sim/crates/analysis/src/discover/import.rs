@@ -376,15 +376,9 @@ pub struct Dataset {
     pub warnings: Vec<String>,
 }
 
+/// A column's unit (lower case, "" without a suffix), as `accomp_log` reads it.
 fn suffix_of(name: &str) -> String {
-    for s in ["nm_s2", "m_s2"] {
-        if name.ends_with(&format!("_{s}")) {
-            return s.into();
-        }
-    }
-    name.rsplit_once('_')
-        .map(|(_, s)| s.to_ascii_lowercase())
-        .unwrap_or_default()
+    accomp_log::unit_suffix(name).unwrap_or_default()
 }
 
 /// Picks the output column: `requested`, else the first whose name starts with `output`,
