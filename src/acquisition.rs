@@ -18,7 +18,7 @@
 //! The worker joins the two with [`SampleAssembler`]. Every driver error becomes a
 //! [`ChannelFlags`] bit ([`flags_for`]), so a fault reaches the frame as a named status bit and
 //! never as a number. The host runs all of this against register-level chip models
-//! (tests/board_sim.rs).
+//! (host-sim/crates/chipsim/tests/board_sim.rs).
 
 use embedded_hal::delay::DelayNs;
 use embedded_hal::digital::InputPin;

@@ -1,20 +1,13 @@
 //! The front-end board on the host: the real drivers, the real acquisition sequencer and the
 //! real pipeline, wired to register-level models of the ADS1262 and the AD7124-4 that answer
-//! SPI the way their datasheets say (tests/board_sim/*_model.rs) and refuse a bus in the wrong
+//! SPI the way their datasheets say (this crate's `ads1262` and `ad7124` modules) and refuse a bus in the wrong
 //! mode or too fast. A compact physical station (thermostat cycle, tide-like tilt, the core's
 //! own accelerometer model equation) drives the analog inputs over simulated days while faults
 //! are switched on and off; every fault must come out as a named status bit, every clean frame
 //! must be right, and the stream must go on.
 //!
-//! The station is generated here from the core (not from host-sim, which depends on the core:
-//! the dependency runs core ← host-sim only). Run: `cargo test -p accomp --test board_sim`.
-
-#[path = "board_sim/ad7124_model.rs"]
-mod ad7124_model;
-#[path = "board_sim/ads1262_model.rs"]
-mod ads1262_model;
-#[path = "board_sim/bus.rs"]
-mod bus;
+//! The station is generated here from the core (the chip models and this test need nothing
+//! above it). Run: `cargo test -p accomp-chipsim --test board_sim`.
 
 use std::cell::RefCell;
 use std::rc::Rc;
@@ -33,9 +26,7 @@ use accomp::table::CalibrationTable;
 use accomp::units::{Celsius, Gs, RAD_PER_ARCSEC};
 use embedded_hal::spi::{MODE_1, MODE_3};
 
-use ad7124_model::Ad7124Model;
-use ads1262_model::Ads1262Model;
-use bus::{BusRefusal, Clock, SimDelay, SimSpi};
+use accomp_chipsim::{Ad7124Model, Ads1262Model, BusRefusal, Clock, SimDelay, SimSpi};
 
 type AdsSeq = AdsSequencer<SimSpi<Ads1262Model>, InterruptDrdy, SimDelay>;
 type RtdSeq = RtdSequencer<SimSpi<Ad7124Model>, InterruptDrdy, SimDelay>;

@@ -12,7 +12,7 @@
 
 use accomp::acquisition::{SpiRequirement, AD7124_SPI};
 
-use super::bus::{crc8, Chip, Clock};
+use crate::bus::{crc8, Chip, Clock};
 
 const STATUS: u8 = 0x00;
 const ADC_CONTROL: u8 = 0x01;

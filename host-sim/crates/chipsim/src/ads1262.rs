@@ -8,7 +8,7 @@
 
 use accomp::acquisition::{SpiRequirement, ADS1262_SPI};
 
-use super::bus::{crc8, Chip, Clock};
+use crate::bus::{crc8, Chip, Clock};
 
 const ID: usize = 0x00;
 const POWER: usize = 0x01;
