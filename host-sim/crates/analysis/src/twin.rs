@@ -442,11 +442,14 @@ impl Twin {
         let offset = t.scenario.effects.len();
         let mut accepted = Vec::new();
         for (i, e) in effects.iter().enumerate() {
-            let ok = e.validate(offset + i).and_then(|()| {
-                EffectChain::new(std::slice::from_ref(e), setup.clone())
-                    .map(|_| ())
-                    .map_err(|x| x.to_string())
-            });
+            let ok = e
+                .validate(offset + i)
+                .map_err(|x| x.to_string())
+                .and_then(|()| {
+                    EffectChain::new(std::slice::from_ref(e), setup.clone())
+                        .map(|_| ())
+                        .map_err(|x| x.to_string())
+                });
             match ok {
                 Ok(()) => accepted.push(e.clone()),
                 Err(why) => t
@@ -1018,7 +1021,7 @@ pub fn scenario_effects_from_discovery(
         })();
         match e.and_then(|e| {
             let i = out.len();
-            e.validate(i).map(|()| e)
+            e.validate(i).map(|()| e).map_err(|x| x.to_string())
         }) {
             Ok(e) => out.push(e),
             Err(why) => refused.push((name.to_owned(), why)),

@@ -165,6 +165,20 @@ pub enum ScenarioEffect {
     },
 }
 
+/// A scenario effect out of its range: which entry, which field, why.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("effects[{index}] ({kind}): {field} {why}")]
+pub struct InvalidEffect {
+    /// Index in the scenario's `[[effects]]`.
+    pub index: usize,
+    /// The entry's kind.
+    pub kind: &'static str,
+    /// The field (or fields) at fault.
+    pub field: String,
+    /// What it must be.
+    pub why: String,
+}
+
 fn is_zero(v: &f64) -> bool {
     *v == 0.0
 }
@@ -195,10 +209,15 @@ impl ScenarioEffect {
         self.kind().name()
     }
 
-    /// Checks the ranges; the message names the entry (`effects[i] (kind)`) and the field.
-    pub fn validate(&self, index: usize) -> Result<(), String> {
+    /// Checks the ranges; the error names the entry (`effects[i] (kind)`) and the field.
+    pub fn validate(&self, index: usize) -> Result<(), InvalidEffect> {
         let at = |field: &str, why: &str| {
-            Err(format!("effects[{index}] ({}): {field} {why}", self.name()))
+            Err(InvalidEffect {
+                index,
+                kind: self.name(),
+                field: field.to_owned(),
+                why: why.to_owned(),
+            })
         };
         let finite = |v: f64| v.is_finite();
         let positive = |v: f64| v.is_finite() && v > 0.0;
@@ -864,7 +883,7 @@ mod tests {
             tau_s: -1.0,
             amplitude: 1.0,
         };
-        let m = e.validate(3).unwrap_err();
+        let m = e.validate(3).unwrap_err().to_string();
         assert!(m.contains("effects[3] (warmup): tau_s"), "{m}");
         let e = ScenarioEffect::TidalGravity {
             amplitude_factor: 0.0,
@@ -875,12 +894,12 @@ mod tests {
                 phase_deg: 0.0,
             }],
         };
-        assert!(e.validate(0).unwrap_err().contains("X9"));
+        assert!(e.validate(0).unwrap_err().to_string().contains("X9"));
         let e = ScenarioEffect::ChannelNoise {
             channel: "output_v".into(),
             noise: 1.0,
         };
-        assert!(e.validate(0).unwrap_err().contains("output_v"));
+        assert!(e.validate(0).unwrap_err().to_string().contains("output_v"));
         assert_eq!(group_band("P1K1+J1"), Some((0.986, 1.5)));
     }
 
