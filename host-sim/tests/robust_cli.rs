@@ -443,3 +443,40 @@ fn utf16_text_and_a_reversed_tsf_are_named_for_what_they_are() {
         stderr(&o)
     );
 }
+
+#[test]
+fn a_ten_year_gap_in_a_record_is_refused_naming_the_gap() {
+    let dir = Scratch::new("robust-gap");
+    let log = simulated_log(&dir);
+    let text = std::fs::read_to_string(&log).unwrap();
+    let mut rows = 0;
+    let shifted: Vec<String> = text
+        .lines()
+        .map(|l| {
+            if !l.starts_with(|c: char| c.is_ascii_digit()) {
+                return l.to_owned();
+            }
+            rows += 1;
+            if rows <= 1440 {
+                return l.to_owned();
+            }
+            let (t, rest) = l.split_once(',').unwrap();
+            let t: f64 = t.parse().unwrap();
+            format!("{},{rest}", t + 10.0 * 365.25 * 86_400.0)
+        })
+        .collect();
+    let gap = dir.path("gap.csv");
+    std::fs::write(&gap, shifted.join("\n") + "\n").unwrap();
+    for args in [
+        vec!["discover", gap.to_str().unwrap()],
+        vec!["discover", gap.to_str().unwrap(), "--simulate"],
+    ] {
+        let o = accomp(&args);
+        assert!(!o.status.success(), "{args:?} accepted a ten-year gap");
+        let e = stderr(&o);
+        assert!(
+            e.contains("a gap of 3653 days between rows 1440 and 1441"),
+            "{e}"
+        );
+    }
+}
