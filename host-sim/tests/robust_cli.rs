@@ -445,7 +445,10 @@ fn utf16_text_and_a_reversed_tsf_are_named_for_what_they_are() {
 }
 
 #[test]
-fn a_ten_year_gap_in_a_record_is_refused_naming_the_gap() {
+fn a_ten_year_gap_in_a_record_does_not_stall_discover() {
+    // Two days at 60 s, the second ten years after the first: the periodogram's frequency grid
+    // followed the ten-year span (1e7 frequencies × 2880 points, over 5 minutes); it follows
+    // the time the data cover.
     let dir = Scratch::new("robust-gap");
     let log = simulated_log(&dir);
     let text = std::fs::read_to_string(&log).unwrap();
@@ -467,16 +470,18 @@ fn a_ten_year_gap_in_a_record_is_refused_naming_the_gap() {
         .collect();
     let gap = dir.path("gap.csv");
     std::fs::write(&gap, shifted.join("\n") + "\n").unwrap();
-    for args in [
-        vec!["discover", gap.to_str().unwrap()],
-        vec!["discover", gap.to_str().unwrap(), "--simulate"],
-    ] {
-        let o = accomp(&args);
-        assert!(!o.status.success(), "{args:?} accepted a ten-year gap");
-        let e = stderr(&o);
-        assert!(
-            e.contains("a gap of 3653 days between rows 1440 and 1441"),
-            "{e}"
-        );
-    }
+    let started = Instant::now();
+    let o = accomp(&["discover", gap.to_str().unwrap(), "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stdout(&o).contains("gap"),
+        "the gap is not announced: {}",
+        stdout(&o)
+    );
+    // A hang guard, not a benchmark (the figure is in the report of the change).
+    assert!(
+        started.elapsed() < Duration::from_secs(120),
+        "{:?}",
+        started.elapsed()
+    );
 }

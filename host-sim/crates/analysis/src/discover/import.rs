@@ -537,11 +537,8 @@ impl Default for DatasetOptions {
     }
 }
 
-/// The longest gap a record may have (a year): a longer one makes two records.
-pub const MAX_GAP_S: f64 = 365.0 * 86_400.0;
-
 /// Reduces a log to a dataset: picks the output and channels, drops rows with gaps (counted),
-/// bins to at most `max_points`, marks segments. A gap above [`MAX_GAP_S`] is refused.
+/// bins to at most `max_points`, marks segments.
 pub fn dataset_from_log(log: &Log, opts: &DatasetOptions) -> Result<Dataset, ImportError> {
     if !(MIN_MAX_POINTS..=MAX_MAX_POINTS).contains(&opts.max_points) {
         return Err(ImportError::Shape(format!(
@@ -552,30 +549,6 @@ pub fn dataset_from_log(log: &Log, opts: &DatasetOptions) -> Result<Dataset, Imp
             memory_estimate_bytes(opts.max_points, 0, 0) / 1_000_000,
             opts.max_points
         )));
-    }
-    // A record with a gap of years is two records: analysed as one, its drift and tidal bases
-    // span the whole gap (a ten-year gap took minutes to fit nothing).
-    let t = log.time_s();
-    if let Some((i, gap)) = t
-        .windows(2)
-        .enumerate()
-        .map(|(i, w)| (i, w[1] - w[0]))
-        .filter(|(_, g)| g.is_finite())
-        .max_by(|a, b| a.1.total_cmp(&b.1))
-    {
-        if gap > MAX_GAP_S {
-            return Err(ImportError::Shape(format!(
-                "a gap of {:.0} days between rows {} and {} (time_s {} and {}): more than the \
-                 {:.0} days one record may have; analyse the parts before and after it as two \
-                 records",
-                gap / 86_400.0,
-                i + 1,
-                i + 2,
-                t[i],
-                t[i + 1],
-                MAX_GAP_S / 86_400.0
-            )));
-        }
     }
     let mut warnings = Vec::new();
     let out_name = output_column(log, opts.output.as_deref())
