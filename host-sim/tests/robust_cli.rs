@@ -313,6 +313,26 @@ fn parameters_out_of_range_are_refused_with_the_name_and_the_range() {
     let e = stderr(&o);
     assert!(e.contains("twin ensemble (base): 3/3 members"), "{e}");
     assert!(e.contains("twin ensemble (extended): 3/3 members"), "{e}");
+    let o = Command::new(env!("CARGO_BIN_EXE_accomp"))
+        .args([
+            "simulate",
+            "paper-0g",
+            "--days",
+            "1",
+            "--interval",
+            "1",
+            "-o",
+        ])
+        .arg(dir.path("p.csv"))
+        .env("ACCOMP_PROGRESS_EVERY_S", "0")
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("simulate paper-0g: 16384/86400 rows"),
+        "{}",
+        stderr(&o)
+    );
     // Scenario fields.
     let preset = stdout(&accomp(&["simulate", "--print-preset", "paper-1g"]));
     let out = dir.path("s.csv");
