@@ -34,6 +34,7 @@ mod app {
 
     use accomp::acquisition::{AdsReading, RtdReading, SampleAssembler};
     use accomp::drivers::ads1262::DataRate;
+    use accomp::pipeline::LossFlags;
     use accomp::protocol::{
         encode_frame, DeviceMessage, FrameDecoder, FrameError, MAX_FRAME_LEN, PROTOCOL_VERSION,
     };
@@ -73,6 +74,9 @@ mod app {
 
     /// Frames lost because the inbound queue was full (added to the service's counter).
     static QUEUE_DROPS: AtomicU32 = AtomicU32::new(0);
+    /// Readings lost because the inbound queue was full: their seq numbers are the gap, the
+    /// next reading says QUEUE_FULL, Info counts them.
+    static READINGS_DROPPED: AtomicU32 = AtomicU32::new(0);
     /// Readings produced by the ADS1262 sequencer (DRDY or timeout): acquisition progress.
     static ACQ_PROGRESS: AtomicU32 = AtomicU32::new(0);
     /// Items the worker has processed: worker progress.
@@ -111,6 +115,9 @@ mod app {
         // Boot restores the newest valid calibration slot (none: samples flag NO_CALIBRATION).
         let mut service = Service::new(board::BOARD, parts.flash, board::SLOT_LAYOUT);
         service.set_boot_report(parts.boot);
+        let (watchdog_resets, brownout_resets) = board::count_resets(parts.boot);
+        service.losses_mut().watchdog_resets = watchdog_resets;
+        service.losses_mut().brownout_resets = brownout_resets;
         defmt::info!(
             "reset cause {=u8:#x}, clock fallback {}",
             parts.boot.reset_cause,
@@ -180,8 +187,15 @@ mod app {
         board::acknowledge_drdy(cx.local.drdy_pin);
         ACQ_PROGRESS.fetch_add(1, Ordering::Relaxed);
         if let Some(reading) = cx.shared.ads.lock(|ads| ads.on_drdy(now)) {
-            // A full queue loses this reading; the frame's seq gap shows it on the host.
-            let _ = cx.local.drdy_to_worker.try_send(Inbound::Ads(reading));
+            // A full queue loses this reading: counted, and flagged on the next one.
+            if cx
+                .local
+                .drdy_to_worker
+                .try_send(Inbound::Ads(reading))
+                .is_err()
+            {
+                READINGS_DROPPED.fetch_add(1, Ordering::Relaxed);
+            }
         }
     }
 
@@ -201,10 +215,14 @@ mod app {
             });
             if let Some(reading) = reading {
                 ACQ_PROGRESS.fetch_add(1, Ordering::Relaxed);
-                let _ = cx
+                if cx
                     .local
                     .supervisor_to_worker
-                    .try_send(Inbound::Ads(reading));
+                    .try_send(Inbound::Ads(reading))
+                    .is_err()
+                {
+                    READINGS_DROPPED.fetch_add(1, Ordering::Relaxed);
+                }
             }
         }
     }
@@ -276,16 +294,24 @@ mod app {
             for _ in 0..QUEUE_DROPS.swap(0, Ordering::Relaxed) {
                 service.count_dropped();
             }
+            let losses = service.losses_mut();
+            losses.uart_rx_overrun = board::UART_OVERRUNS.load(Ordering::Relaxed);
+            losses.uart_framing_noise = board::UART_LINE_ERRORS.load(Ordering::Relaxed);
             let reply = match item {
                 Inbound::Frame(frame) => {
                     service.handle_frame(frame.as_deref().map_err(|e| *e), &now_us)
                 }
                 Inbound::Ads(reading) => {
+                    let mut lost = reading.lost;
+                    let dropped = READINGS_DROPPED.swap(0, Ordering::Relaxed);
+                    if dropped > 0 {
+                        lost.0 |= LossFlags::QUEUE_FULL;
+                        let losses = service.losses_mut();
+                        losses.queue_full = losses.queue_full.wrapping_add(dropped);
+                    }
                     let raw = cx.local.assembler.assemble(&reading);
                     // Timestamped at the DRDY edge, not now.
-                    service
-                        .streaming()
-                        .then(|| service.sample(0, &raw, reading.time_us))
+                    service.acquired(reading.seq, lost, &raw, reading.time_us)
                 }
                 Inbound::Rtd(reading) => {
                     cx.local.assembler.rtd(reading);

@@ -160,13 +160,47 @@ impl Status {
     }
 }
 
+/// Why readings are missing before a frame: the `seq` gap between it and the frame before is
+/// explained by these bits (several may be set). Zero: nothing was lost since the last frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct LossFlags(pub u8);
+
+impl LossFlags {
+    /// Readings dropped because the worker's queue was full.
+    pub const QUEUE_FULL: u8 = 1 << 0;
+    /// Conversions the core could not serve in time (a flash erase or a long interrupt-off
+    /// stretch): counted from the conversion clock, so the gap is the number missed.
+    pub const STALL: u8 = 1 << 1;
+    /// Frames the UART transmitter could not take (the link was full); their readings were
+    /// acquired and processed but never sent.
+    pub const TX_DROPPED: u8 = 1 << 2;
+
+    /// Names of the bits, in bit order, for logs and CSV output.
+    pub const NAMES: [(u8, &'static str); 3] = [
+        (Self::QUEUE_FULL, "QUEUE_FULL"),
+        (Self::STALL, "STALL"),
+        (Self::TX_DROPPED, "TX_DROPPED"),
+    ];
+
+    /// True when any bit in `mask` is set.
+    #[inline]
+    pub const fn has(self, mask: u8) -> bool {
+        self.0 & mask != 0
+    }
+}
+
 /// The output of one sample: what the board streams and the host records.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Frame {
-    /// Sequence number of processed samples since boot (gaps = lost frames).
+    /// Sequence number of the reading since boot: one per reading the acquisition produced
+    /// (or per injected sample), whether it reached the host or not. A gap is readings lost;
+    /// [`Frame::lost`] says why.
     pub seq: u32,
-    /// Firmware time of processing in µs since boot.
+    /// Time of the reading in µs since boot, from the board's time base (the DRDY edge on the
+    /// front-end, the arrival of the request on QEMU).
     pub time_us: u64,
+    /// Why readings are missing between the previous frame and this one ([`LossFlags`]).
+    pub lost: LossFlags,
     /// Accelerometer output E in volts, after the ADC gain/offset correction.
     pub output_v: f64,
     /// RTD temperature in °C (ITS-90, Callendar–Van Dusen).
@@ -241,6 +275,7 @@ pub fn process_prepared(
     let mut frame = Frame {
         seq,
         time_us,
+        lost: LossFlags(0),
         output_v: f64::NAN,
         temperature_c: f64::NAN,
         rtd_ohms: f64::NAN,

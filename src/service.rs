@@ -15,17 +15,16 @@
 //! (load of another table, activate of the previous one, rollback) makes the table active
 //! before it the rollback table; rollback and activate swap back; all of it survives a reboot.
 
-use crate::drivers::stm32f4_flash::{FlashError, FlashRegisters, Stm32f4Flash};
-use crate::pipeline::{self, RawSample};
+use crate::pipeline::{self, LossFlags, RawSample};
 use crate::prepared::PreparedCalibration;
 use crate::protocol::{
     decode_message, peek_request_id, upload_body_crc32, Board, BootReport, DeviceInfo,
-    DeviceMessage, ErrorCode, ErrorReply, FrameError, HostFrame, Request, Response, CHUNK_LEN,
-    MAX_BENCH_COUNT, MAX_RATE_HZ, PROTOCOL_VERSION, SET_RATES_SPS,
+    DeviceMessage, ErrorCode, ErrorReply, FlashErrorReply, FrameError, HostFrame, LossCounters,
+    Request, Response, CHUNK_LEN, MAX_BENCH_COUNT, MAX_RATE_HZ, PROTOCOL_VERSION, SET_RATES_SPS,
 };
 use crate::storage::{CalibrationStore, SlotLayout, StorageError, ValidSlots};
 use crate::table::{CalibrationTable, ENCODED_LEN};
-use embedded_storage::nor_flash::{NorFlash, NorFlashError, NorFlashErrorKind};
+use embedded_storage::nor_flash::NorFlash;
 
 /// Default acquisition rate in samples per second.
 pub const DEFAULT_RATE_HZ: u32 = 10;
@@ -68,8 +67,12 @@ pub struct Service<F> {
     /// The active table prepared for the per-sample path; rebuilt whenever `active` changes.
     prepared: Option<PreparedCalibration>,
     upload: Upload,
+    /// Sequence number the next reading is expected to carry.
     seq: u32,
     frames_dropped: u32,
+    losses: LossCounters,
+    /// Losses noticed here (a frame that could not be sent) to report on the next frame.
+    pending_lost: LossFlags,
     streaming: bool,
     rate_hz: u32,
     /// None when the store could not be opened at boot (layout does not fit the flash).
@@ -80,38 +83,20 @@ pub struct Service<F> {
     erase_pending: bool,
 }
 
-/// A calibration flash whose driver errors have protocol codes. The default maps a driver
-/// error to FlashFailed with its `NorFlashErrorKind` (0 not aligned, 1 out of bounds, 2 other);
-/// the STM32 flash names each FLASH_SR error flag (63–68).
+/// A calibration flash: any embedded-storage NOR flash whose error has a protocol code
+/// ([`FlashErrorReply`]: each driver says how its errors read on the wire, the service names
+/// no driver).
 pub trait CalibrationFlash: NorFlash {
     /// The reply for a driver error.
-    fn error_reply(e: &Self::Error) -> ErrorReply {
-        ErrorCode::FlashFailed.reply(match e.kind() {
-            NorFlashErrorKind::NotAligned => 0,
-            NorFlashErrorKind::OutOfBounds => 1,
-            _ => 2,
-        })
-    }
+    fn error_reply(e: &Self::Error) -> ErrorReply;
 }
 
-impl<const N: usize, const ERASE: usize, const WRITE: usize> CalibrationFlash
-    for crate::storage::RamFlash<N, ERASE, WRITE>
+impl<F: NorFlash> CalibrationFlash for F
+where
+    F::Error: FlashErrorReply,
 {
-}
-
-impl<R: FlashRegisters> CalibrationFlash for Stm32f4Flash<R> {
-    fn error_reply(e: &FlashError) -> ErrorReply {
-        let code = match e {
-            FlashError::NotAligned => return ErrorCode::FlashFailed.reply(0),
-            FlashError::OutOfBounds => return ErrorCode::FlashFailed.reply(1),
-            FlashError::ProgramSequence => ErrorCode::FlashProgramSequence,
-            FlashError::ProgramParallelism => ErrorCode::FlashProgramParallelism,
-            FlashError::ProgramAlignment => ErrorCode::FlashProgramAlignment,
-            FlashError::WriteProtected => ErrorCode::FlashWriteProtected,
-            FlashError::Operation => ErrorCode::FlashOperation,
-            FlashError::Locked => ErrorCode::FlashLocked,
-        };
-        code.reply(0)
+    fn error_reply(e: &Self::Error) -> ErrorReply {
+        e.reply()
     }
 }
 
@@ -148,6 +133,8 @@ impl<F: CalibrationFlash> Service<F> {
             },
             seq: 0,
             frames_dropped: 0,
+            losses: LossCounters::default(),
+            pending_lost: LossFlags(0),
             streaming: false,
             rate_hz: DEFAULT_RATE_HZ,
             store: None,
@@ -226,11 +213,51 @@ impl<F: CalibrationFlash> Service<F> {
             .and_then(|t| PreparedCalibration::new(t).ok());
     }
 
-    /// Runs one acquired or injected sample through the pipeline with the active table.
+    /// Runs one injected sample through the pipeline with the active table; it takes the
+    /// next sequence number.
     pub fn sample(&mut self, id: u32, raw: &RawSample, now_us: u64) -> DeviceMessage {
-        let frame = pipeline::process_prepared(self.seq, now_us, raw, self.prepared.as_ref());
-        self.seq = self.seq.wrapping_add(1);
+        let seq = self.seq;
+        self.seq = seq.wrapping_add(1);
+        let mut frame = pipeline::process_prepared(seq, now_us, raw, self.prepared.as_ref());
+        frame.lost = core::mem::take(&mut self.pending_lost);
         DeviceMessage::Sample { id, frame }
+    }
+
+    /// An acquired reading with sequence number `seq`, missing readings before it explained by
+    /// `lost`. Every number skipped since the last reading is counted as lost (and flagged on
+    /// this frame); the frame is returned while streaming.
+    pub fn acquired(
+        &mut self,
+        seq: u32,
+        lost: LossFlags,
+        raw: &RawSample,
+        time_us: u64,
+    ) -> Option<DeviceMessage> {
+        let gap = seq.wrapping_sub(self.seq);
+        self.seq = seq.wrapping_add(1);
+        self.losses.conversions_lost = self.losses.conversions_lost.wrapping_add(gap);
+        let lost = LossFlags(lost.0 | core::mem::take(&mut self.pending_lost).0);
+        if !self.streaming {
+            // Nothing is sent while not streaming: losses before the stream starts are
+            // counted, but flag no frame of it.
+            return None;
+        }
+        let mut frame = pipeline::process_prepared(seq, time_us, raw, self.prepared.as_ref());
+        frame.lost = lost;
+        Some(DeviceMessage::Sample { id: 0, frame })
+    }
+
+    /// A frame that could not be sent (the transmitter was full): counted, and flagged on the
+    /// next frame.
+    pub fn frame_not_sent(&mut self) {
+        self.losses.tx_frames_dropped = self.losses.tx_frames_dropped.wrapping_add(1);
+        self.pending_lost.0 |= LossFlags::TX_DROPPED;
+    }
+
+    /// The loss counters, for the board's own counts (UART errors, queue, erase stalls,
+    /// resets) to be added.
+    pub fn losses_mut(&mut self) -> &mut LossCounters {
+        &mut self.losses
     }
 
     /// Handles what the frame decoder produced. Frames with broken framing are counted and
@@ -517,9 +544,10 @@ impl<F: CalibrationFlash> Service<F> {
             protocol: PROTOCOL_VERSION,
             active_table: self.active.as_ref().map(CalibrationTable::id),
             previous_table: self.previous.as_ref().map(CalibrationTable::id),
-            uptime_ms: now_us / 1000,
+            uptime_us: now_us,
             frames_dropped: self.frames_dropped,
             samples: self.seq,
+            losses: self.losses,
             streaming: self.streaming,
             rate_hz: self.rate_hz,
             boot: self.boot_report,
@@ -943,8 +971,6 @@ mod tests {
         erases: std::rc::Rc<core::cell::Cell<u32>>,
         fail_writes: bool,
     }
-
-    impl CalibrationFlash for Probe {}
 
     impl embedded_storage::nor_flash::ErrorType for Probe {
         type Error = crate::storage::RamFlashError;

@@ -9,6 +9,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Duration;
 
+use accomp::protocol::model::TableHistory;
 use accomp::protocol::{upload_body_crc32, Request};
 use accomp::table::{CalibrationTable, ENCODED_LEN};
 use accomp_host::device::qemu::{QemuOptions, FLASH_IMAGE, STATE_ENV};
@@ -237,8 +238,14 @@ fn power_cut_at_every_step_of_an_upload_commit_and_erase_ahead_leaves_old_or_new
         std::fs::write(state.join(FLASH_IMAGE), &image).unwrap();
         let _ = std::fs::remove_file(state.join("accomp-power-cut.txt"));
     };
-    let old = (Some(t2.id()), Some(t1.id()));
-    let new = (Some(t3.id()), Some(t2.id()));
+    // What the user expects, from the protocol's reference model: t1 then t2 loaded (old),
+    // and t3 on top of them (new).
+    let mut model = TableHistory::default();
+    model.load(&t1.encode());
+    model.load(&t2.encode());
+    let old = model.ids();
+    model.load(&t3.encode());
+    let new = model.ids();
     let check = |what: &str| {
         let _ = std::fs::remove_file(state.join("accomp-power-cut.txt"));
         let after = tables_after_boot(&state);

@@ -122,6 +122,25 @@ pub enum FlashError {
     Operation,
 }
 
+/// Each FLASH_SR flag has its own protocol code (63–68), so the host names what the controller
+/// refused; the refusals made before the controller is touched are FlashFailed 0/1.
+impl crate::protocol::FlashErrorReply for FlashError {
+    fn reply(&self) -> crate::protocol::ErrorReply {
+        use crate::protocol::ErrorCode as C;
+        let code = match self {
+            FlashError::NotAligned => return C::FlashFailed.reply(0),
+            FlashError::OutOfBounds => return C::FlashFailed.reply(1),
+            FlashError::ProgramSequence => C::FlashProgramSequence,
+            FlashError::ProgramParallelism => C::FlashProgramParallelism,
+            FlashError::ProgramAlignment => C::FlashProgramAlignment,
+            FlashError::WriteProtected => C::FlashWriteProtected,
+            FlashError::Operation => C::FlashOperation,
+            FlashError::Locked => C::FlashLocked,
+        };
+        code.reply(0)
+    }
+}
+
 impl FlashError {
     /// The error named by the flags of `sr`, most specific first (None if no error flag is set).
     pub const fn from_sr(sr: u32) -> Option<Self> {

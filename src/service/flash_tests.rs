@@ -4,7 +4,7 @@
 
 use super::*;
 use crate::drivers::stm32f4_flash::model::FlashModel;
-use crate::drivers::stm32f4_flash::sr;
+use crate::drivers::stm32f4_flash::{sr, FlashRegisters, Stm32f4Flash};
 use crate::table::tests::paper_table;
 
 type BoardFlash = Stm32f4Flash<FlashModel>;

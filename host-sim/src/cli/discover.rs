@@ -10,7 +10,7 @@ use crate::discover::{discover_path, note_bad_rows, report, select};
 /// Arguments of `accomp discover`.
 #[derive(Debug, Clone, clap::Args)]
 pub struct DiscoverArgs {
-    /// The record: a log (design/architecture.md), a gMetrology .tsf or the AQG CSV.
+    /// The record: a log (docs/log-format.md), a gMetrology .tsf or the AQG CSV.
     pub log: PathBuf,
     /// Calibration table (`accomp fit -o`): the baseline becomes its prediction.
     #[arg(long)]

@@ -15,9 +15,8 @@ use std::rc::Rc;
 use accomp::acquisition::{
     board, AdsReading, AdsSequencer, InterruptDrdy, RtdSequencer, SampleAssembler, SpiSettings,
 };
-use accomp::drivers::ad7124::{Ad7124, Ad7124Config};
-use accomp::drivers::ads1262::{Ads1262, Ads1262Config, DataRate};
-use accomp::drivers::Error;
+use accomp::drivers::ad7124::{self, Ad7124, Ad7124Config};
+use accomp::drivers::ads1262::{self, Ads1262, Ads1262Config, DataRate};
 use accomp::model::StaticCoefficients;
 use accomp::pipeline::{process_prepared, Frame, Status};
 use accomp::prepared::PreparedCalibration;
@@ -283,7 +282,10 @@ fn a_wrong_spi_mode_or_clock_is_refused_and_every_frame_says_so() {
         let now = b.now();
         b.rtd_seq.boot(now)
     };
-    assert_eq!(boot_result.err(), Some(Error::Spi(BusRefusal::WrongMode)));
+    assert_eq!(
+        boot_result.err(),
+        Some(ad7124::Error::Spi(BusRefusal::WrongMode))
+    );
     assert!(b.rtd.borrow().refusals > 0);
     // The right mode, but faster than the AD7124's 100 ns SCLK pulse widths allow.
     let fast = SpiSettings {
@@ -294,14 +296,14 @@ fn a_wrong_spi_mode_or_clock_is_refused_and_every_frame_says_so() {
     let now = c.now();
     assert_eq!(
         c.rtd_seq.boot(now).err(),
-        Some(Error::Spi(BusRefusal::ClockTooFast))
+        Some(ad7124::Error::Spi(BusRefusal::ClockTooFast))
     );
     // The ADS1262 in mode 3.
     let mut d = Bench::with_buses(old_with(MODE_3), board::AD7124_BUS);
     let now = d.now();
     assert_eq!(
         d.ads_seq.boot(now).err(),
-        Some(Error::Spi(BusRefusal::WrongMode))
+        Some(ads1262::Error::Spi(BusRefusal::WrongMode))
     );
 
     // Running anyway with the AD7124 on the wrong bus: the ADS1262 half streams, every frame

@@ -1,6 +1,6 @@
 //! Stability-test logs: the CSV the board streams, the CLI records and every analysis reads.
 //!
-//! # Format (design/architecture.md, "Log format")
+//! # Format (docs/log-format.md)
 //!
 //! ```text
 //! # instrument: JN-06 A12124

@@ -18,7 +18,7 @@ pub use accomp_log::{unit_per_g_for_suffix, M_S2_PER_MGAL};
 pub enum Format {
     /// Guess from the extension and the header.
     Auto,
-    /// Our stability-test log (design/architecture.md).
+    /// Our stability-test log (docs/log-format.md).
     Log,
     /// gMetrology relative gravimeter, whitespace columns, Beijing time.
     GmetrologyTsf,
