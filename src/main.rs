@@ -39,6 +39,7 @@ mod app {
         encode_frame, DeviceMessage, FrameDecoder, FrameError, MAX_FRAME_LEN, PROTOCOL_VERSION,
     };
     use accomp::service::{BootTable, Service};
+    use accomp::timebase::Extended64;
     use heapless::Vec;
     use rtic_monotonics::fugit::ExtU64 as _;
     use rtic_monotonics::Timebase as _;
@@ -294,6 +295,9 @@ mod app {
             for _ in 0..QUEUE_DROPS.swap(0, Ordering::Relaxed) {
                 service.count_dropped();
             }
+            if board::clock_failed() {
+                service.clock_fell_back();
+            }
             let losses = service.losses_mut();
             losses.uart_rx_overrun = board::UART_OVERRUNS.load(Ordering::Relaxed);
             losses.uart_framing_noise = board::UART_LINE_ERRORS.load(Ordering::Relaxed);
@@ -326,12 +330,12 @@ mod app {
             if let Some(msg) = reply {
                 send(cx.local.tx, &msg);
             }
-            // Erase ahead the slot the next upload will write, after the answer is out and
-            // only when no request is waiting. On the STM32F405 this stalls the CPU for the
-            // sector erase (single bank, RM0090 §3.5; docs/storage.md): it happens right after
-            // a change of table or at boot, never during an upload.
+            // Erase ahead the slot the next upload will write, after the answer is out, only
+            // when no request is waiting and never while streaming (the service refuses then).
+            // On the STM32F405 this stalls the CPU for the sector erase (single bank, RM0090
+            // §3.5; docs/storage.md); a spare that reads blank is not erased.
             if service.erase_pending() && inbound.is_empty() {
-                match service.erase_ahead() {
+                match service.erase_ahead(&now_us) {
                     Ok(true) => defmt::info!("spare calibration slot erased ahead"),
                     Ok(false) => {}
                     Err(e) => defmt::warn!("erase ahead failed: code {}", e.code),
@@ -340,9 +344,21 @@ mod app {
         }
     }
 
-    /// Firmware time in µs, at the resolution of the board's tick (64-bit ticks never wrap).
+    /// The board's hardware time base extended to 64 bits.
+    static TIME_BASE: cortex_m::interrupt::Mutex<core::cell::RefCell<Extended64>> =
+        cortex_m::interrupt::Mutex::new(core::cell::RefCell::new(Extended64::new()));
+
+    /// Firmware time in µs: the board's hardware time base (front-end: TIM2 at 1 MHz, which
+    /// counts on through a flash-erase stall), or the SysTick monotonic where there is none.
     fn now_us() -> u64 {
-        Mono::now().duration_since_epoch().as_micros()
+        match board::time_base_count() {
+            // A few instructions with interrupts masked: the count and the extension agree.
+            Some(_) => cortex_m::interrupt::free(|cs| {
+                let count = board::time_base_count().unwrap_or(0);
+                TIME_BASE.borrow(cs).borrow_mut().extend(count)
+            }),
+            None => Mono::now().duration_since_epoch().as_micros(),
+        }
     }
 
     fn send(tx: &mut board::UartTx, msg: &DeviceMessage) {

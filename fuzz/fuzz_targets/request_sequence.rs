@@ -524,7 +524,7 @@ fn run(u: &mut Unstructured) -> AResult<()> {
             }
             13 => {
                 what = "EraseAhead";
-                let _ = h.dev().erase_ahead();
+                let _ = h.dev().erase_ahead(&|| 0);
             }
             14 => {
                 what = "Reboot";
@@ -549,7 +549,7 @@ fn run(u: &mut Unstructured) -> AResult<()> {
                 flash.quarters = quarters;
                 flash.cut = false;
                 h.dev = Some(Service::new(Board::Qemu, flash, LAYOUT));
-                let _ = h.dev().erase_ahead();
+                let _ = h.dev().erase_ahead(&|| 0);
                 let after = match kind {
                     0 => before,
                     1 => {

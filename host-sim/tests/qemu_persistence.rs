@@ -291,9 +291,9 @@ fn power_cut_at_every_step_of_an_upload_commit_and_erase_ahead_leaves_old_or_new
         check(&format!("killed after request {stop_after}"));
     }
 
-    // 2. Power cut inside every flash operation the upload causes (the boot's erase ahead,
-    //    the image program, the commit marker, the erase ahead after the commit), with none
-    //    and half of the operation reaching the cells.
+    // 2. Power cut inside every flash operation the upload causes (the image program, the
+    //    commit marker, the erase ahead after the commit; the boot's erase ahead finds the
+    //    spare blank), with none and half of the operation reaching the cells.
     let mut cut_points = 0;
     let mut saw_new_after_cut = false;
     for op in 0.. {
@@ -328,7 +328,8 @@ fn power_cut_at_every_step_of_an_upload_commit_and_erase_ahead_leaves_old_or_new
         assert!(op < 20, "the upload never completes");
     }
     eprintln!("system-level power cuts: {cut_points} cut points + 4 request-level kills");
-    // At least: boot erase ahead, image, marker, erase ahead after the commit (× 2 tears).
-    assert!(cut_points >= 8, "only {cut_points} cut points");
+    // At least: image, marker, erase ahead after the commit (× 2 tears). The spare at boot
+    // (C, never written) reads blank, so the boot's erase ahead erases nothing.
+    assert!(cut_points >= 6, "only {cut_points} cut points");
     assert!(saw_new_after_cut, "no cut fell after the commit marker");
 }

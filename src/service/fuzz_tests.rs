@@ -327,7 +327,7 @@ impl Harness {
                 Ok(())
             }
             Op::EraseAhead => {
-                prop_assert!(self.dev.erase_ahead().is_ok());
+                prop_assert!(self.dev.erase_ahead(&|| 0).is_ok());
                 Ok(())
             }
             Op::Reboot => {
