@@ -370,7 +370,7 @@ fn parameters_out_of_range_are_refused_with_the_name_and_the_range() {
     // ±1e308 in a log: the statistics overflow; refused by column, no `inf` printed.
     let big = dir.path("big.csv");
     let mut text = String::from("time_s,output_v\n");
-    for i in 0..100 {
+    for i in 0..200 {
         text += &format!(
             "{},{}\n",
             i * 60,
@@ -383,6 +383,25 @@ fn parameters_out_of_range_are_refused_with_the_name_and_the_range() {
     assert!(!stdout(&o).contains("inf"), "{}", stdout(&o));
     assert!(
         stderr(&o).contains("\"output_v\"") && stderr(&o).contains("overflow"),
+        "{}",
+        stderr(&o)
+    );
+    let o = accomp(&["discover", big.to_str().unwrap()]);
+    assert!(!o.status.success(), "discover printed {}", stdout(&o));
+    assert!(
+        stderr(&o).contains("values up to 1e308 overflow the fit"),
+        "{}",
+        stderr(&o)
+    );
+    let plots = dir.path("p");
+    let o = accomp(&[
+        "plot",
+        big.to_str().unwrap(),
+        "--out-dir",
+        plots.to_str().unwrap(),
+    ]);
+    assert!(
+        stderr(&o).contains("is not finite (values so large"),
         "{}",
         stderr(&o)
     );
@@ -414,7 +433,7 @@ fn a_constant_log_has_std_0_and_no_blank_allan_plot() {
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(
         stderr(&o).contains(
-            "skipped the Allan deviation plot: the Allan deviation of `output_v` is 0 at every τ"
+            "skipped the Allan deviation plot: the Allan deviation of `output_v` is 0 (a constant column) at every τ"
         ),
         "{}",
         stderr(&o)
