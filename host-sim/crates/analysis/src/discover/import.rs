@@ -578,6 +578,19 @@ pub fn dataset_from_log(log: &Log, opts: &DatasetOptions) -> Result<Dataset, Imp
             keep.len()
         )));
     }
+    // The fit squares deviations: kept values whose squares overflow (±1e308 throughout, so
+    // none is absurd against the others) would print an infinite residual as a result.
+    if let Some(big) = keep
+        .iter()
+        .map(|&i| y_raw[i].abs())
+        .max_by(f64::total_cmp)
+        .filter(|m| (m * m).is_infinite())
+    {
+        return Err(ImportError::Shape(format!(
+            "output column {out_name}: values up to {big:e} overflow the fit (their squares are \
+             infinite): not a measurement"
+        )));
+    }
     let mut dts: Vec<f64> = keep.windows(2).map(|w| t[w[1]] - t[w[0]]).collect();
     dts.sort_by(f64::total_cmp);
     let median_dt = dts[dts.len() / 2];
