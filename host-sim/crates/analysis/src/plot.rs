@@ -126,6 +126,12 @@ pub enum PlotError {
         /// The log's columns, comma-separated.
         available: String,
     },
+    /// Every Allan deviation is exactly 0 (constant columns): a log-log plot would be blank.
+    #[error(
+        "the Allan deviation of {0} is 0 at every τ (a constant column): nothing to draw on \
+         log axes"
+    )]
+    ZeroDeviation(String),
     /// A column has no finite reading at all.
     #[error("column `{0}` has no finite reading to plot")]
     EmptyColumn(String),
@@ -217,7 +223,7 @@ pub fn plot_log(log: &Log, opts: &PlotOptions) -> Result<PlotOutcome, PlotError>
         for kind in [Kind::Temperature, output_kind, Kind::Tilt, Kind::Adev] {
             match build(log, opts, kind) {
                 Ok(f) => figures.push((kind, f)),
-                Err(e @ PlotError::MissingColumn { .. }) => {
+                Err(e @ (PlotError::MissingColumn { .. } | PlotError::ZeroDeviation(_))) => {
                     out.skipped.push(format!("{}: {e}", kind.names().1));
                 }
                 Err(e) => return Err(e),
@@ -586,6 +592,13 @@ fn adev_figure(log: &Log, opts: &PlotOptions) -> Result<Figure, PlotError> {
             color,
             points,
         });
+    }
+    if curves.iter().all(|c| c.points.is_empty()) {
+        let names: Vec<String> = std::iter::once(&raw)
+            .chain(&comp)
+            .map(|s| format!("`{}`", s.name))
+            .collect();
+        return Err(PlotError::ZeroDeviation(names.join(", ")));
     }
     units.dedup();
     let unit = units.join(" / ");

@@ -49,6 +49,13 @@ pub enum StabilityError {
     /// `scale_factor_v_per_g` is present but not a positive number.
     #[error("metadata scale_factor_v_per_g = {0} is not positive")]
     BadScaleFactor(f64),
+    /// A column's values are so large that its statistics overflow (±1e308): no result is
+    /// printed as ±inf.
+    #[error(
+        "column {0:?}: its values (up to {1:e}) overflow the statistics (mean, standard \
+         deviation, drift): not a measurement, refused"
+    )]
+    Overflow(String, f64),
     /// `--taus all` on a record too long for an O(N^2) computation.
     #[error("--taus all on {0} samples would take hours (O(N^2)); use --taus octave")]
     TooLongForAllTaus(usize),
@@ -215,15 +222,21 @@ fn masked_sums<const J: usize>(
 /// Mean and sample standard deviation (divisor n - 1) of the finite values; `None` below 2.
 pub fn mean_std(y: &[f64]) -> Option<(f64, f64, usize)> {
     let fin = |k: usize| y[k].is_finite();
-    let (n, [s]) = masked_sums(y.len(), fin, |k| [y[k]]);
+    // Sums of the deviations from the first value: a constant column sums to exactly 0 (its
+    // mean and standard deviation exact, std 0 rather than the 6e-14 of a rounded mean).
+    let y0 = y.iter().copied().find(|v| v.is_finite())?;
+    let (n, [s]) = masked_sums(y.len(), fin, |k| [y[k] - y0]);
     if n < 2 {
         return None;
     }
-    let mean = s / n as f64;
+    let shift = s / n as f64;
     // Second pass on deviations: the one-pass formula loses everything for a 1 g output whose
     // scatter is 1e-6 g.
-    let (_, [ss]) = masked_sums(y.len(), fin, |k| [(y[k] - mean) * (y[k] - mean)]);
-    Some((mean, (ss / (n - 1) as f64).sqrt(), n))
+    let (_, [ss]) = masked_sums(y.len(), fin, |k| {
+        let d = (y[k] - y0) - shift;
+        [d * d]
+    });
+    Some((y0 + shift, (ss / (n - 1) as f64).sqrt(), n))
 }
 
 /// Linear regression of `y` on `t` over pairs where both are finite; `None` below 3 pairs or for
@@ -380,6 +393,20 @@ pub fn analyse(log: &Log, opts: &Options) -> Result<Report, StabilityError> {
             &scaled
         };
         let ms = mean_std(y);
+        let regression = regression(t, y);
+        let overflows = ms.is_some_and(|m| !(m.0.is_finite() && m.1.is_finite()))
+            || regression.as_ref().is_some_and(|r| {
+                ![r.intercept, r.slope_per_s, r.slope_se, r.residual_std]
+                    .iter()
+                    .all(|v| v.is_finite())
+            });
+        if overflows {
+            let biggest = y
+                .iter()
+                .filter(|v| v.is_finite())
+                .fold(0.0f64, |m, v| m.max(v.abs()));
+            return Err(StabilityError::Overflow(name.clone(), biggest));
+        }
         let mut rep = ColumnReport {
             name: name.clone(),
             unit,
@@ -387,7 +414,7 @@ pub fn analyse(log: &Log, opts: &Options) -> Result<Report, StabilityError> {
             gaps: y.iter().filter(|v| v.is_nan()).count(),
             mean: ms.map(|m| m.0),
             std: ms.map(|m| m.1),
-            regression: regression(t, y),
+            regression,
             adev: Vec::new(),
             mdev: Vec::new(),
             allan_note: None,

@@ -153,6 +153,9 @@ pub struct Sample {
     pub truth_head_angle_deg: f64,
     /// True station pressure, hPa.
     pub truth_pressure_hpa: f64,
+    /// Resistance of the RTD as wired (offset, self-heating and reading noise included), ohms:
+    /// what the virtual board's AD7124 model measures.
+    pub truth_rtd_ohms: f64,
 }
 
 /// The whole station.
@@ -495,6 +498,7 @@ impl Simulator {
             truth_output_v: e.output.0,
             truth_head_angle_deg: head.to_degrees(),
             truth_pressure_hpa: pressure.truth_hpa,
+            truth_rtd_ohms: reading.resistance.0,
         })
     }
 }

@@ -16,7 +16,7 @@ pub use accomp_log::{unit_per_g_for_suffix, M_S2_PER_MGAL};
 pub enum Format {
     /// Guess from the extension and the header.
     Auto,
-    /// Our stability-test log (design/architecture.md).
+    /// Our stability-test log (docs/log-format.md).
     Log,
     /// gMetrology relative gravimeter, whitespace columns, Beijing time.
     GmetrologyTsf,
@@ -64,9 +64,10 @@ pub const BEIJING_UTC_OFFSET_H: i64 = 8;
 pub use crate::log::time::{civil_unix_seconds, format_utc, parse_utc};
 
 fn read_text(path: &Path) -> Result<String, ImportError> {
-    std::fs::read_to_string(path).map_err(|source| ImportError::Io {
+    let (_, max_bytes) = crate::log::reader::limits();
+    crate::log::reader::read_text_limited(path, max_bytes).map_err(|e| ImportError::Io {
         path: path.display().to_string(),
-        source,
+        source: e.into_io(),
     })
 }
 
@@ -78,6 +79,7 @@ pub fn gmetrology_from_str(text: &str) -> Result<(Log, Vec<BadRow>), ImportError
     let mut unix = Vec::new();
     let mut g = Vec::new();
     let mut p = Vec::new();
+    let mut backwards = 0usize;
     for (i, line) in text.lines().enumerate() {
         let line_no = i + 1;
         let trimmed = line.trim();
@@ -123,6 +125,7 @@ pub fn gmetrology_from_str(text: &str) -> Result<(Log, Vec<BadRow>), ImportError
         // Beijing time is UTC+8: UTC = local − 8 h.
         let u = local - (BEIJING_UTC_OFFSET_H * 3600) as f64;
         if unix.last().is_some_and(|&last: &f64| u <= last) {
+            backwards += 1;
             bad.push(BadRow {
                 line: line_no,
                 reason: "time not increasing".into(),
@@ -134,6 +137,16 @@ pub fn gmetrology_from_str(text: &str) -> Result<(Log, Vec<BadRow>), ImportError
         unix.push(u);
         g.push(if ok(gv) { gv } else { f64::NAN });
         p.push(if ok(pv) && pv > 0.0 { pv } else { f64::NAN });
+    }
+    // A file in reverse order keeps its first row and refuses every other one as "not
+    // increasing": said for what it is.
+    if backwards > unix.len() {
+        return Err(ImportError::Shape(format!(
+            "time runs backwards: {backwards} rows are not later than the row before and only \
+             {} are; the file looks reversed (newest first): sort it by time, oldest first \
+             (e.g. `tac`)",
+            unix.len()
+        )));
     }
     let Some(&t0) = unix.first() else {
         return Err(ImportError::Shape("no readable rows".into()));
@@ -227,16 +240,25 @@ fn first_nonblank_line(path: &Path) -> Result<String, ImportError> {
     };
     let mut r = std::io::BufReader::new(std::fs::File::open(path).map_err(io)?);
     let mut buf = Vec::new();
-    loop {
+    let limit = crate::log::reader::MAX_LINE_BYTES;
+    for _ in 0..limit {
         buf.clear();
-        if r.read_until(b'\n', &mut buf).map_err(io)? == 0 {
+        let n = std::io::Read::take(&mut r, limit as u64 + 1)
+            .read_until(b'\n', &mut buf)
+            .map_err(io)?;
+        if n == 0 {
             return Ok(String::new());
+        }
+        if n > limit {
+            // Not a text file of lines: the reader of the guessed format says why.
+            return Ok(String::from_utf8_lossy(&buf[..256]).into_owned());
         }
         let line = String::from_utf8_lossy(&buf);
         if !line.trim().is_empty() {
             return Ok(line.into_owned());
         }
     }
+    Ok(String::new())
 }
 
 /// Reads our log format (the columns `keep` accepts, all without it). The log reader refuses a
