@@ -10,33 +10,28 @@ use std::fs::File;
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
-/// Why an output cannot be written; every message names the path and says nothing was computed
-/// when the check came first.
+/// Why an output cannot be written: each names the path, and says whether work was skipped.
 #[derive(Debug, thiserror::Error)]
 pub enum OutputError {
-    /// The path is of the wrong kind or its folder is missing.
-    #[error("output {}: {what} (nothing computed)", path.display())]
-    Unusable {
-        /// The output.
-        path: PathBuf,
-        /// What is wrong with it.
-        what: String,
-    },
-    /// The system refused the probe, the creation or the write.
-    #[error("output {}: {what}: {source}", path.display())]
+    /// The output is refused before any computing (wrong kind of path, missing folder).
+    #[error("{0} (nothing computed)")]
+    Refused(String),
+    /// The file system refused the output; the context names the path and what was done.
+    #[error("{context}: {reason}")]
     Io {
-        /// The output.
-        path: PathBuf,
-        /// What was being done.
-        what: String,
-        /// The system's reason.
-        source: std::io::Error,
+        /// What was being done, naming the path.
+        context: String,
+        /// The operating system's reason.
+        reason: std::io::Error,
     },
 }
 
-fn io(path: &Path, what: impl Into<String>) -> impl FnOnce(std::io::Error) -> OutputError {
-    let (path, what) = (path.to_path_buf(), what.into());
-    move |source| OutputError::Io { path, what, source }
+/// Attaches the path-naming context to an I/O error.
+fn io<T>(r: std::io::Result<T>, context: impl FnOnce() -> String) -> Result<T, OutputError> {
+    r.map_err(|reason| OutputError::Io {
+        context: context(),
+        reason,
+    })
 }
 
 /// The folder a file path lands in ("." for a bare name).
@@ -61,63 +56,76 @@ fn probe(dir: &Path) -> std::io::Result<()> {
 /// Checks that `path` can be written as a file: not a directory, its folder exists and takes
 /// a file. Creates nothing that stays.
 pub fn check_file(path: &Path) -> Result<(), OutputError> {
-    let unusable = |what: String| OutputError::Unusable {
-        path: path.to_path_buf(),
-        what,
-    };
     if path.is_dir() {
-        return Err(unusable("is a directory, a file is expected".into()));
+        return Err(OutputError::Refused(format!(
+            "output {}: is a directory, a file is expected",
+            path.display()
+        )));
     }
     let dir = parent_of(path);
     if !dir.is_dir() {
-        return Err(unusable(format!(
-            "its folder {} does not exist",
+        return Err(OutputError::Refused(format!(
+            "output {}: its folder {} does not exist",
+            path.display(),
             dir.display()
         )));
     }
     if path.exists() {
         // Opened for writing without truncating: the existing file stays as it is.
-        std::fs::OpenOptions::new()
-            .write(true)
-            .open(path)
-            .map_err(io(path, "cannot be written (nothing computed)"))?;
+        io(std::fs::OpenOptions::new().write(true).open(path), || {
+            format!(
+                "output {}: cannot be written (nothing computed)",
+                path.display()
+            )
+        })?;
     }
-    probe(&dir).map_err(io(
-        path,
+    io(probe(&dir), || {
         format!(
-            "its folder {} cannot be written (nothing computed)",
+            "output {}: its folder {} cannot be written (nothing computed)",
+            path.display(),
             dir.display()
-        ),
-    ))
+        )
+    })
 }
 
 /// Checks that `dir` can take the files of an output folder: created if missing, a directory,
 /// writable.
 pub fn check_dir(dir: &Path) -> Result<(), OutputError> {
     if dir.exists() && !dir.is_dir() {
-        return Err(OutputError::Unusable {
-            path: dir.to_path_buf(),
-            what: "is a file, a directory is expected".into(),
-        });
+        return Err(OutputError::Refused(format!(
+            "output folder {}: is a file, a directory is expected",
+            dir.display()
+        )));
     }
-    std::fs::create_dir_all(dir).map_err(io(dir, "folder cannot be created (nothing computed)"))?;
-    probe(dir).map_err(io(dir, "folder cannot be written (nothing computed)"))
+    io(std::fs::create_dir_all(dir), || {
+        format!(
+            "output folder {}: cannot be created (nothing computed)",
+            dir.display()
+        )
+    })?;
+    io(probe(dir), || {
+        format!(
+            "output folder {}: cannot be written (nothing computed)",
+            dir.display()
+        )
+    })
 }
 
 /// Writes `bytes` to `path` and syncs it: every failure, a short write on a full disk
 /// included, is an error naming the path.
 pub fn write_file(path: &Path, bytes: &[u8]) -> Result<(), OutputError> {
-    let mut f = File::create(path).map_err(io(path, "cannot create"))?;
-    f.write_all(bytes)
-        .and_then(|()| f.sync_all())
-        .map_err(io(path, format!("writing {} bytes", bytes.len())))
+    let mut f = io(File::create(path), || {
+        format!("cannot create {}", path.display())
+    })?;
+    io(f.write_all(bytes).and_then(|()| f.sync_all()), || {
+        format!("writing {} ({} bytes)", path.display(), bytes.len())
+    })
 }
 
 /// Flushes a buffered output file and syncs it to the disk, the error naming the path.
 pub fn finish(w: std::io::BufWriter<File>, path: &Path) -> Result<(), OutputError> {
-    let f = w
-        .into_inner()
-        .map_err(|e| e.into_error())
-        .map_err(io(path, "writing"))?;
-    f.sync_all().map_err(io(path, "writing"))
+    let f = io(w.into_inner().map_err(|e| e.into_error()), || {
+        format!("writing {}", path.display())
+    })?;
+    io(f.sync_all(), || format!("writing {}", path.display()))
 }
