@@ -7,6 +7,7 @@
 //! - [`eiv`]: errors in variables: each regressor channel's reading noise, fitted and smoothed.
 //! - [`effects`]: the catalogue of named effects as design-matrix extensions.
 //! - [`hysteresis`]: play / Preisach operators of the thermal hysteresis.
+//! - [`plausibility`]: a flexible effect must stand above the noise and beat the simpler cause.
 //! - [`shape`]: whether an accepted effect's shape describes the data (poor-fit check).
 //! - [`select`]: greedy selection with BIC (effective sample size) and blocked cross-validation.
 //! - [`report`]: text, JSON and the Markdown report with figures.
@@ -20,6 +21,7 @@ pub mod eiv;
 pub mod hysteresis;
 pub mod import;
 pub mod noise;
+pub mod plausibility;
 pub mod report;
 pub mod residual;
 pub mod select;

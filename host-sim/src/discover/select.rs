@@ -166,6 +166,9 @@ pub struct Scored {
     pub at_edge: bool,
     /// `thermal_hysteresis`: the Preisach distribution of play widths its column is made of.
     pub preisach: Option<Preisach>,
+    /// The noise model re-fitted with the candidate in the model (set by the re-scoring): the
+    /// floor its contribution must stand above (`plausibility`).
+    pub noise_with: Option<NoiseModel>,
 }
 
 /// The current model in the whitened domain, ready to score extensions quickly.
@@ -669,6 +672,7 @@ fn score_all(
             penalty,
             at_edge,
             preisach,
+            noise_with: None,
         });
     }
     out.sort_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic));
@@ -729,6 +733,7 @@ fn step_redecided(
         delta_bic: f64::NAN,
         at_edge,
         preisach: None,
+        noise_with: None,
     })
 }
 
@@ -830,6 +835,7 @@ pub fn select(
                 let d = c1.neg2_loglik() - base_ll;
                 Scored {
                     delta_bic: d + s.penalty,
+                    noise_with: Some(c1.noise.model.clone()),
                     ..s
                 }
             });
@@ -904,6 +910,14 @@ pub fn select(
                          prediction z {:.4} → {:.4}, raw {:.4e} → {:.4e})",
                         s.delta_bic, before.prediction_z, after.prediction_z, before.raw, after.raw
                     ),
+                );
+                continue;
+            }
+            if let Some(why) = simpler_wins(&cur, &cols, target, cfg, s, &scored, after) {
+                refuse(
+                    &mut refused,
+                    s.effect.name(),
+                    format!("ΔBIC {:.1}, but {why}", s.delta_bic),
                 );
                 continue;
             }
@@ -1420,8 +1434,49 @@ fn implausible(
                 )
             })
         }
+        ref e if super::plausibility::is_flexible(e) => {
+            let k = s.cols.len();
+            let contribution: Vec<f64> = (0..target.len())
+                .map(|i| (0..k).map(|j| fit.beta[k0 + j] * s.cols[j][i]).sum())
+                .collect();
+            let noise = s.noise_with.as_ref().unwrap_or(&cur.noise.model);
+            super::plausibility::below_floor(ds, &contribution, noise)
+        }
         _ => None,
     }
+}
+
+/// Why a flexible candidate loses to a simpler physical explanation out of sample, if it
+/// does: each of `plausibility::simpler_than` at its best parameter this round (from
+/// `scored`) is cross-validated in the candidate's place; one that predicts the held-out
+/// blocks at least as well (normalised prediction error) is the explanation the record
+/// supports.
+fn simpler_wins(
+    cur: &Current,
+    cols: &[Vec<f64>],
+    target: &[f64],
+    cfg: &Config,
+    s: &Scored,
+    scored: &[Scored],
+    after: CvScore,
+) -> Option<String> {
+    super::plausibility::simpler_than(&s.effect)
+        .into_iter()
+        .filter_map(|e| scored.iter().find(|c| c.effect == e))
+        .find_map(|alt| {
+            let mut trial = cols.to_vec();
+            trial.extend(alt.cols.iter().cloned());
+            let cv = cross_validate(cur.ds, &trial, target, &cur.noise.model, cfg);
+            (cv.prediction_z <= after.prediction_z).then(|| {
+                format!(
+                    "the simpler {} predicts the held-out blocks as well (prediction z {:.4} \
+                     against its {:.4}): its extra freedom is not supported",
+                    alt.effect.name(),
+                    cv.prediction_z,
+                    after.prediction_z
+                )
+            })
+        })
 }
 
 /// A tiltmeter gain error beyond ±100 % is not a gain error.
