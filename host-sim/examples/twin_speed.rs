@@ -5,7 +5,7 @@
 use std::time::Instant;
 
 use accomp_host::discover::import::{dataset_from_log, load, DatasetOptions, Format};
-use accomp_host::sim::twin::Twin;
+use accomp_host::twin::Twin;
 
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().collect();

@@ -1,0 +1,931 @@
+//! Loading a record for discovery: our log format, the gMetrology `.tsf` and the AQG CSV, and the
+//! reduction of any of them to a [`Dataset`] (output in its own unit, auxiliary channels, gaps as
+//! segment breaks, optional binning).
+//!
+//! Nothing is interpolated: a row with a NaN in the output or in a used auxiliary channel is
+//! dropped and counted, and a spacing larger than 2.5 × the median spacing starts a new segment
+//! (filters, differences and whitening restart there).
+
+use crate::log::{Log, LogError};
+use crate::sim::time::{posix_seconds, utc_date};
+use accomp::tide::UtcTime;
+use std::path::Path;
+
+pub use accomp_log::{unit_per_g_for_suffix, M_S2_PER_MGAL};
+
+/// Record formats `accomp discover` reads.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Format {
+    /// Guess from the extension and the header.
+    Auto,
+    /// Our stability-test log (design/architecture.md).
+    Log,
+    /// gMetrology relative gravimeter, whitespace columns, Beijing time.
+    GmetrologyTsf,
+    /// AQG quantum gravimeter CSV converted from MiniSEED (time_s from 2020-07-31T12:15:00.015Z).
+    AqgCsv,
+}
+
+/// Why a record could not be loaded.
+#[derive(Debug, thiserror::Error)]
+pub enum ImportError {
+    /// Reading the file failed.
+    #[error("cannot read {path}: {source}")]
+    Io {
+        /// File.
+        path: String,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// The log reader refused the file.
+    #[error(transparent)]
+    Log(#[from] LogError),
+    /// No usable output column or too few rows.
+    #[error("{0}")]
+    Shape(String),
+}
+
+/// A row the importer refused, with its 1-based line number.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BadRow {
+    /// 1-based line in the file.
+    pub line: usize,
+    /// Why.
+    pub reason: String,
+}
+
+/// Site of the gMetrology record (from the repository's own scripts).
+pub const GMETROLOGY_SITE: (f64, f64, f64) = (33.98, 116.79, 0.0);
+/// Site of the AQG record (station XML), latitude, longitude, height in metres.
+pub const AQG_SITE: (f64, f64, f64) = (37.76589, 15.016805, 2920.0);
+/// Epoch of the AQG `time_s` column.
+pub const AQG_START_UTC: &str = "2020-07-31T12:15:00.015Z";
+/// Beijing time − UTC, hours.
+pub const BEIJING_UTC_OFFSET_H: i64 = 8;
+
+/// Parses `YYYY-MM-DDTHH:MM:SS[.fff][Z]` (or with a space) to Unix seconds.
+pub fn parse_utc(text: &str) -> Option<f64> {
+    let s = text.trim().trim_end_matches('Z');
+    let (date, time) = s.split_once(['T', ' '])?;
+    let mut d = date.split('-');
+    let year: i32 = d.next()?.parse().ok()?;
+    let month: u8 = d.next()?.parse().ok()?;
+    let day: u8 = d.next()?.parse().ok()?;
+    let mut t = time.split(':');
+    let hour: u8 = t.next()?.parse().ok()?;
+    let minute: u8 = t.next()?.parse().ok()?;
+    let second: f64 = t.next().unwrap_or("0").parse().ok()?;
+    civil_unix_seconds(year, month, day, hour, minute, second)
+}
+
+/// Unix seconds of a checked calendar instant: whole seconds from jiff's calendar
+/// (`sim::time::posix_seconds`, exact integer arithmetic — the Julian-date route of
+/// `UtcTime::unix_seconds` loses ~10 µs to the f64 day count, which would jitter `time_s`), the
+/// fraction added after. `None` for a day or time that does not exist, or outside what the tide
+/// model takes (`accomp::tide::UtcTime`: years 1600–2400; a leap second's 60.x s is accepted
+/// there and counted POSIX-style, as the next minute's first second).
+pub fn civil_unix_seconds(
+    year: i32,
+    month: u8,
+    day: u8,
+    hour: u8,
+    minute: u8,
+    second: f64,
+) -> Option<f64> {
+    UtcTime::new(year, month, day, hour, minute, second).ok()?;
+    let whole = posix_seconds(
+        i64::from(year),
+        i64::from(month),
+        i64::from(day),
+        i64::from(hour),
+        i64::from(minute),
+        0,
+    )?;
+    Some(whole as f64 + second)
+}
+
+/// Formats Unix seconds as `YYYY-MM-DDTHH:MM:SS.sssZ` (the date from jiff, proleptic
+/// Gregorian).
+pub fn format_utc(unix_s: f64) -> String {
+    let days = (unix_s / 86_400.0).floor();
+    let sod = unix_s - days * 86_400.0;
+    let Some(date) = utc_date(days as i64 * 86_400) else {
+        return format!("{unix_s} s since 1970 (outside the calendar's years −9999..=9999)");
+    };
+    let (year, month, day) = (date.year(), date.month(), date.day());
+    let h = (sod / 3600.0).floor();
+    let m = ((sod - h * 3600.0) / 60.0).floor();
+    let s = sod - h * 3600.0 - m * 60.0;
+    format!("{year:04}-{month:02}-{day:02}T{h:02}:{m:02}:{s:06.3}Z")
+}
+
+fn read_text(path: &Path) -> Result<String, ImportError> {
+    std::fs::read_to_string(path).map_err(|source| ImportError::Io {
+        path: path.display().to_string(),
+        source,
+    })
+}
+
+/// Reads a gMetrology `.tsf` text: `year month day hour minute second gravity_mGal pressure_hPa`
+/// in Beijing time. Returns a log in our format (time_s from the first good row, start_utc in
+/// UTC, site metadata, `input_g: 1`) and the refused rows.
+pub fn gmetrology_from_str(text: &str) -> Result<(Log, Vec<BadRow>), ImportError> {
+    let mut bad = Vec::new();
+    let mut unix = Vec::new();
+    let mut g = Vec::new();
+    let mut p = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        let line_no = i + 1;
+        let trimmed = line.trim();
+        if trimmed.is_empty() || trimmed.starts_with(['#', '[']) {
+            continue;
+        }
+        let f: Vec<&str> = trimmed.split_whitespace().collect();
+        if f.len() != 8 {
+            bad.push(BadRow {
+                line: line_no,
+                reason: format!("{} fields, expected 8", f.len()),
+            });
+            continue;
+        }
+        let ints: Option<Vec<i64>> = f[..5].iter().map(|v| v.parse().ok()).collect();
+        let sec: Option<f64> = f[5].parse().ok();
+        let (gv, pv) = (f[6].parse::<f64>().ok(), f[7].parse::<f64>().ok());
+        let (Some(ints), Some(sec), Some(gv), Some(pv)) = (ints, sec, gv, pv) else {
+            bad.push(BadRow {
+                line: line_no,
+                reason: "unparsable number".into(),
+            });
+            continue;
+        };
+        // `try_from`, not `as`: a month of 257 must not wrap to 1.
+        let field = |k: usize| u8::try_from(ints[k]).ok();
+        let Some(local) = (|| {
+            civil_unix_seconds(
+                i32::try_from(ints[0]).ok()?,
+                field(1)?,
+                field(2)?,
+                field(3)?,
+                field(4)?,
+                sec,
+            )
+        })() else {
+            bad.push(BadRow {
+                line: line_no,
+                reason: "invalid date/time".into(),
+            });
+            continue;
+        };
+        // Beijing time is UTC+8: UTC = local − 8 h.
+        let u = local - (BEIJING_UTC_OFFSET_H * 3600) as f64;
+        if unix.last().is_some_and(|&last: &f64| u <= last) {
+            bad.push(BadRow {
+                line: line_no,
+                reason: "time not increasing".into(),
+            });
+            continue;
+        }
+        // 9999-style fill values are gaps, not readings.
+        let ok = |v: f64| v.is_finite() && v.abs() < 9.0e4;
+        unix.push(u);
+        g.push(if ok(gv) { gv } else { f64::NAN });
+        p.push(if ok(pv) && pv > 0.0 { pv } else { f64::NAN });
+    }
+    let Some(&t0) = unix.first() else {
+        return Err(ImportError::Shape("no readable rows".into()));
+    };
+    let mut log = Log::with_time(unix.iter().map(|u| u - t0).collect())?;
+    log.set_meta(
+        "instrument",
+        "gMetrology relative spring gravimeter (George-Gou/gMetrology, MIT)",
+    )?;
+    log.set_meta("start_utc", &format_utc(t0))?;
+    log.set_meta("latitude_deg", &GMETROLOGY_SITE.0.to_string())?;
+    log.set_meta("longitude_deg", &GMETROLOGY_SITE.1.to_string())?;
+    log.set_meta("height_m", &GMETROLOGY_SITE.2.to_string())?;
+    log.set_meta("input_g", "1")?;
+    log.push_column("gravity_mgal", g)?;
+    log.push_column("pressure_hpa", p)?;
+    Ok((log, bad))
+}
+
+/// Adds the AQG record's metadata (epoch, site, 1 g) to its CSV read as a log.
+pub fn aqg_from_log(mut log: Log) -> Result<Log, ImportError> {
+    if log.meta("start_utc").is_none() {
+        log.set_meta(
+            "instrument",
+            "Exail/Muquans AQG quantum gravimeter (NEWTON-g/AQG2MSEED)",
+        )?;
+        log.set_meta("start_utc", AQG_START_UTC)?;
+        log.set_meta("latitude_deg", &AQG_SITE.0.to_string())?;
+        log.set_meta("longitude_deg", &AQG_SITE.1.to_string())?;
+        log.set_meta("height_m", &AQG_SITE.2.to_string())?;
+        log.set_meta("input_g", "1")?;
+    }
+    Ok(log)
+}
+
+/// Loads a record in any supported format as a log in our format plus refused rows.
+pub fn load(path: &Path, format: Format) -> Result<(Log, Vec<BadRow>), ImportError> {
+    load_impl(path, format, None)
+}
+
+/// [`load`] for [`dataset_from_log`]: of a log in our format (or the AQG CSV) only the
+/// columns a dataset can be made of are stored — time, output candidates, channels, and the
+/// `requested` output (`--output`) — while every field is still checked. A simulated 41-day
+/// 1 Hz log holds 14 truth columns the discovery never reads (0.4 GB as numbers).
+pub fn load_for_dataset(
+    path: &Path,
+    format: Format,
+    requested: Option<&str>,
+) -> Result<(Log, Vec<BadRow>), ImportError> {
+    let keep = |name: &str| requested == Some(name) || usable_column(name);
+    load_impl(path, format, Some(&keep))
+}
+
+fn load_impl(
+    path: &Path,
+    format: Format,
+    keep: Option<&(dyn Fn(&str) -> bool + Sync)>,
+) -> Result<(Log, Vec<BadRow>), ImportError> {
+    let format = match format {
+        Format::Auto => {
+            let name = path.to_string_lossy().to_ascii_lowercase();
+            if name.ends_with(".tsf") {
+                Format::GmetrologyTsf
+            } else {
+                let first = first_nonblank_line(path)?;
+                if first.starts_with("time_s,gravity_nm_s2,tilt_1_urad") {
+                    Format::AqgCsv
+                } else {
+                    Format::Log
+                }
+            }
+        }
+        f => f,
+    };
+    match format {
+        Format::GmetrologyTsf => gmetrology_from_str(&read_text(path)?),
+        Format::AqgCsv => {
+            read_log_with_bad_rows(path, keep).and_then(|(l, b)| Ok((aqg_from_log(l)?, b)))
+        }
+        _ => read_log_with_bad_rows(path, keep),
+    }
+}
+
+/// The first line of a file that is not blank (the format guess reads no further: a 41-day
+/// 1 Hz log is 0.8 GB).
+fn first_nonblank_line(path: &Path) -> Result<String, ImportError> {
+    use std::io::BufRead;
+    let io = |source| ImportError::Io {
+        path: path.display().to_string(),
+        source,
+    };
+    let mut r = std::io::BufReader::new(std::fs::File::open(path).map_err(io)?);
+    let mut buf = Vec::new();
+    loop {
+        buf.clear();
+        if r.read_until(b'\n', &mut buf).map_err(io)? == 0 {
+            return Ok(String::new());
+        }
+        let line = String::from_utf8_lossy(&buf);
+        if !line.trim().is_empty() {
+            return Ok(line.into_owned());
+        }
+    }
+}
+
+/// Reads our log format (the columns `keep` accepts, all without it). The log reader refuses a
+/// file with bad rows as a whole (naming the line); this is reported as an error, never
+/// skipped silently.
+fn read_log_with_bad_rows(
+    path: &Path,
+    keep: Option<&(dyn Fn(&str) -> bool + Sync)>,
+) -> Result<(Log, Vec<BadRow>), ImportError> {
+    let log = match keep {
+        Some(keep) => Log::read_path_selected(path, keep)?,
+        None => Log::read_path(path)?,
+    };
+    Ok((log, Vec::new()))
+}
+
+/// A column a dataset may be made of: an output candidate or a channel (not a truth column, a
+/// raw code or a resistance; see [`classify`]). Text columns are never used.
+fn usable_column(name: &str) -> bool {
+    !crate::log::is_text_column_name(name) && (is_output_name(name) || classify(name).is_some())
+}
+
+/// What a channel is to the discovery.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ChannelKind {
+    /// The accelerometer temperature (RTD); the baseline's temperature.
+    Temperature,
+    /// A tilt, stored in radians.
+    Tilt,
+    /// Pressure, stored in Pa.
+    Pressure,
+    /// The applied input acceleration, g.
+    Input,
+    /// Any other auxiliary channel (another temperature, humidity, supply …), own unit.
+    Other,
+}
+
+/// An auxiliary channel (all finite after row selection).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Channel {
+    /// Column name in the log.
+    pub name: String,
+    /// Role.
+    pub kind: ChannelKind,
+    /// Values (Pa for pressure, rad for tilt, own unit otherwise).
+    pub values: Vec<f64>,
+}
+
+/// The record as the discovery sees it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Dataset {
+    /// Seconds since `start_utc` (or since the log's zero).
+    pub t_s: Vec<f64>,
+    /// Output, in the log's output unit.
+    pub y: Vec<f64>,
+    /// True at the first sample of each contiguous segment.
+    pub segment_start: Vec<bool>,
+    /// Auxiliary channels.
+    pub channels: Vec<Channel>,
+    /// Output column name.
+    pub output_name: String,
+    /// Output unit (column suffix).
+    pub output_unit: String,
+    /// Output units per g, if known (unit suffix, `scale_factor_v_per_g`, or the calibration).
+    pub unit_per_g: Option<f64>,
+    /// Nominal input acceleration of the test, g (metadata `input_g` or the mean input channel).
+    pub input_g: Option<f64>,
+    /// Unix seconds of `time_s = 0`.
+    pub start_unix_s: Option<f64>,
+    /// Latitude, longitude (degrees), height (m).
+    pub site: Option<(f64, f64, f64)>,
+    /// Nominal sample spacing after binning, seconds.
+    pub dt_s: f64,
+    /// Samples averaged into each point (bins of unequal counts have unequal white noise, see
+    /// `noise::white_scale_from_counts`); empty when not known (every point alike).
+    pub samples_per_point: Vec<f64>,
+    /// Rows read, rows dropped for NaN, bins used: what happened on the way.
+    pub notes: Vec<String>,
+    /// What the user must not miss about the input (empty channels, absurd values, gaps that
+    /// coarsen the bins, too few points): printed first, and in the JSON `warnings`.
+    pub warnings: Vec<String>,
+}
+
+fn suffix_of(name: &str) -> String {
+    for s in ["nm_s2", "m_s2"] {
+        if name.ends_with(&format!("_{s}")) {
+            return s.into();
+        }
+    }
+    name.rsplit_once('_')
+        .map(|(_, s)| s.to_ascii_lowercase())
+        .unwrap_or_default()
+}
+
+/// Picks the output column: `requested`, else the first whose name starts with `output`,
+/// `gravity` or `a_i`.
+pub fn output_column(log: &Log, requested: Option<&str>) -> Option<String> {
+    if let Some(r) = requested {
+        return log.column(r).map(|_| r.to_owned());
+    }
+    log.column_names()
+        .iter()
+        .find(|n| is_output_name(n) && log.column(n).is_some())
+        .cloned()
+}
+
+/// A name [`output_column`] picks by default: `output*`, `gravity*`, `a_i*`.
+fn is_output_name(name: &str) -> bool {
+    let l = name.to_ascii_lowercase();
+    l.starts_with("output") || l.starts_with("gravity") || l.starts_with("a_i")
+}
+
+fn classify(name: &str) -> Option<(ChannelKind, f64)> {
+    let l = name.to_ascii_lowercase();
+    // Truth columns of simulated logs, raw ADC codes and resistances duplicate other channels
+    // or are not observables: never regressors.
+    if l.contains("true")
+        || l.contains("truth")
+        || l.ends_with("_code")
+        || l.ends_with("_ohm")
+        || l.ends_with("_ohms")
+        || l.starts_with("output")
+        || l.starts_with("a_i")
+        || l.starts_with("gravity")
+    {
+        return None;
+    }
+    if l == "input_g" {
+        return Some((ChannelKind::Input, 1.0));
+    }
+    if l.starts_with("tilt") {
+        let f = match suffix_of(&l).as_str() {
+            "arcsec" => accomp::units::RAD_PER_ARCSEC,
+            "mas" => accomp::units::RAD_PER_ARCSEC * 1.0e-3,
+            "urad" => 1.0e-6,
+            "mrad" => 1.0e-3,
+            "rad" => 1.0,
+            _ => return Some((ChannelKind::Other, 1.0)),
+        };
+        return Some((ChannelKind::Tilt, f));
+    }
+    match suffix_of(&l).as_str() {
+        "hpa" | "mbar" => Some((ChannelKind::Pressure, 100.0)),
+        "pa" => Some((ChannelKind::Pressure, 1.0)),
+        _ => Some((ChannelKind::Other, 1.0)),
+    }
+}
+
+/// An `input_g` channel with a larger standard deviation than this (g) is a changing input.
+pub const CHANGING_INPUT_STD_G: f64 = 1.0e-3;
+
+/// Options of the reduction to a dataset.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DatasetOptions {
+    /// Output column (default: see [`output_column`]).
+    pub output: Option<String>,
+    /// Bin to at most this many points (block means, never across a gap).
+    pub max_points: usize,
+    /// Output units per g from a calibration (K1), used when the log does not say it.
+    pub unit_per_g_from_calibration: Option<f64>,
+}
+
+/// `--max-points` below this is refused: the selection's blocked cross-validation cuts the
+/// record into 100 blocks and the noise model's flicker needs several points per decade.
+pub const MIN_MAX_POINTS: usize = 1_000;
+/// `--max-points` above this is refused: the fit keeps ≈ [`BYTES_PER_POINT`] per point
+/// (design columns, their whitened copies, the Kalman gains of the noise model and of each
+/// cross-validation fold), so 2 M points is ≈ 3 GB.
+pub const MAX_MAX_POINTS: usize = 2_000_000;
+/// Working memory of the fit per point, bytes (measured order of magnitude, see above).
+pub const BYTES_PER_POINT: usize = 1_500;
+/// Fewer points than this after binning are refused: 100 cross-validation blocks of at least
+/// one point, and a baseline of up to ~10 columns.
+pub const MIN_POINTS: usize = 100;
+/// A value further than this many times the central 98 % range of its column from the
+/// column's median is not a measurement (1e300, a stuck converter's full scale); its row is
+/// dropped with a warning.
+pub const ABSURD_SPREAD: f64 = 1.0e4;
+
+/// The memory the fit will use for `points` points, bytes (stated in the notes).
+pub fn memory_estimate_bytes(points: usize, rows: usize, columns: usize) -> usize {
+    points
+        .saturating_mul(BYTES_PER_POINT)
+        .saturating_add(rows.saturating_mul(columns).saturating_mul(8))
+}
+
+/// Rows of `col` that are not measurements: non-finite, or further than [`ABSURD_SPREAD`] times
+/// the central 98 % range (at least 1e-9 of the median's magnitude) from the median.
+fn absurd_rows(col: &[f64]) -> Vec<usize> {
+    let mut v: Vec<f64> = col.iter().copied().filter(|x| x.is_finite()).collect();
+    if v.is_empty() {
+        return Vec::new();
+    }
+    // Three order statistics: selections, not a sort (a 41-day 1 Hz column is 3.5 M values).
+    let last = v.len() - 1;
+    let mut q = |p: f64| {
+        *v.select_nth_unstable_by(((last as f64) * p).round() as usize, f64::total_cmp)
+            .1
+    };
+    let med = q(0.5);
+    let spread = (q(0.99) - q(0.01))
+        .max(1e-9 * med.abs())
+        .max(f64::MIN_POSITIVE);
+    col.iter()
+        .enumerate()
+        .filter(|(_, x)| {
+            x.is_infinite() || (x.is_finite() && (*x - med).abs() > ABSURD_SPREAD * spread)
+        })
+        .map(|(i, _)| i)
+        .collect()
+}
+
+impl Default for DatasetOptions {
+    fn default() -> Self {
+        Self {
+            output: None,
+            max_points: 50_000,
+            unit_per_g_from_calibration: None,
+        }
+    }
+}
+
+/// Reduces a log to a dataset: picks the output and channels, drops rows with gaps (counted),
+/// bins to at most `max_points`, marks segments.
+pub fn dataset_from_log(log: &Log, opts: &DatasetOptions) -> Result<Dataset, ImportError> {
+    if !(MIN_MAX_POINTS..=MAX_MAX_POINTS).contains(&opts.max_points) {
+        return Err(ImportError::Shape(format!(
+            "--max-points {} is outside {MIN_MAX_POINTS}..={MAX_MAX_POINTS} (the fit keeps \
+             ≈ {BYTES_PER_POINT} bytes per point: {} MB at {}; fewer than {MIN_MAX_POINTS} \
+             cannot hold the cross-validation's blocks and the noise model)",
+            opts.max_points,
+            memory_estimate_bytes(opts.max_points, 0, 0) / 1_000_000,
+            opts.max_points
+        )));
+    }
+    let mut warnings = Vec::new();
+    let out_name = output_column(log, opts.output.as_deref())
+        .ok_or_else(|| ImportError::Shape("no output column (output*, gravity*, a_i*)".into()))?;
+    let y_raw = log
+        .column(&out_name)
+        .ok_or_else(|| ImportError::Shape(format!("no column {out_name}")))?;
+    let unit = suffix_of(&out_name);
+    let meta = |k: &str| log.meta(k).and_then(|v| v.trim().parse::<f64>().ok());
+    let unit_per_g = unit_per_g_for_suffix(&unit)
+        .or_else(|| {
+            (unit == "v")
+                .then(|| meta("scale_factor_v_per_g"))
+                .flatten()
+        })
+        .or(opts.unit_per_g_from_calibration);
+    // Temperature: `temperature_c`, else the first `*_c` channel.
+    let names: Vec<String> = log.column_names().to_vec();
+    let temp_name = names
+        .iter()
+        .find(|n| n.as_str() == "temperature_c")
+        .or_else(|| {
+            names
+                .iter()
+                .find(|n| n.ends_with("_c") && classify(n).is_some())
+        })
+        .cloned();
+    let mut chans: Vec<(String, ChannelKind, f64, &[f64])> = Vec::new();
+    for n in &names {
+        if n == "time_s" || *n == out_name {
+            continue;
+        }
+        let Some(col) = log.column(n) else { continue };
+        let Some((mut kind, f)) = classify(n) else {
+            continue;
+        };
+        if Some(n) == temp_name.as_ref() {
+            kind = ChannelKind::Temperature;
+        }
+        let finite = col.iter().filter(|v| v.is_finite()).count();
+        // A channel mostly empty would cost most rows; it is left out and said so.
+        if finite * 10 < col.len() * 9 {
+            warnings.push(if finite == 0 {
+                format!(
+                    "channel {n} is empty (all {} values NaN): left out of the model",
+                    col.len()
+                )
+            } else {
+                format!(
+                    "channel {n} has only {finite} finite values of {}: left out of the model",
+                    col.len()
+                )
+            });
+            continue;
+        }
+        chans.push((n.clone(), kind, f, col));
+    }
+    let t = log.time_s();
+    // Values that are not measurements (±inf, 1e300) are dropped with a warning: one of them
+    // makes every sum of squares infinite.
+    let mut absurd = vec![false; t.len()];
+    for (name, col) in std::iter::once((&out_name, y_raw)).chain(chans.iter().map(|c| (&c.0, c.3)))
+    {
+        let rows = absurd_rows(col);
+        if let Some(&first) = rows.first() {
+            warnings.push(format!(
+                "{} value(s) of {name} are not measurements (non-finite or absurdly far from \
+                 the rest, e.g. {:e} at data row {}): their rows are dropped",
+                rows.len(),
+                col[first],
+                first + 1
+            ));
+        }
+        for i in rows {
+            absurd[i] = true;
+        }
+    }
+    let keep: Vec<usize> = (0..t.len())
+        .filter(|&i| !absurd[i] && y_raw[i].is_finite() && chans.iter().all(|c| c.3[i].is_finite()))
+        .collect();
+    let mut notes = vec![format!(
+        "{} rows read, {} dropped for a gap (NaN) in the output or a channel",
+        t.len(),
+        t.len() - keep.len()
+    )];
+    if keep.len() < MIN_POINTS {
+        return Err(ImportError::Shape(format!(
+            "only {} usable rows: the models need at least {MIN_POINTS}",
+            keep.len()
+        )));
+    }
+    let mut dts: Vec<f64> = keep.windows(2).map(|w| t[w[1]] - t[w[0]]).collect();
+    dts.sort_by(f64::total_cmp);
+    let median_dt = dts[dts.len() / 2];
+    // The bin width comes from the time the record covers, not its span: a long gap (a year
+    // between two sessions) would otherwise coarsen every bin of the data there is.
+    let gap_limit = 2.5 * median_dt;
+    let covered: f64 = dts.iter().map(|d| d.min(gap_limit)).sum();
+    let longest_gap = dts.last().copied().unwrap_or(0.0);
+    if longest_gap > covered.max(gap_limit) {
+        warnings.push(format!(
+            "a gap of {:.3e} s ({:.1} days) is longer than all the data together ({:.1} days): \
+             the two sides are fitted as one record with separate segments; a drift or a slow \
+             effect across the gap is extrapolated over it",
+            longest_gap,
+            longest_gap / 86_400.0,
+            covered / 86_400.0
+        ));
+    }
+    let bin = if keep.len() > opts.max_points {
+        (covered / opts.max_points as f64).max(median_dt)
+    } else {
+        0.0
+    };
+    // Block means in bins of `bin` seconds (a bin never spans a gap: it simply has fewer
+    // samples, and an empty bin is a break).
+    let mut ts = Vec::new();
+    let mut ys = Vec::new();
+    let mut cs: Vec<Vec<f64>> = vec![Vec::new(); chans.len()];
+    let mut counts = Vec::new();
+    let t0 = t[keep[0]];
+    let mut cur: Option<i64> = None;
+    // A changing input (a dividing-head programme) also closes a bin: a block mean across a
+    // head move would be an input value the head never held, and the baseline's one level per
+    // input value would need a level for every mixed bin.
+    let input_col = chans
+        .iter()
+        .find(|c| c.1 == ChannelKind::Input)
+        .map(|c| c.3);
+    let mut cur_input = f64::NAN;
+    for &i in &keep {
+        let b = if bin > 0.0 {
+            ((t[i] - t0) / bin).floor() as i64
+        } else {
+            i as i64
+        };
+        let moved = input_col.is_some_and(|c| c[i] != cur_input);
+        if cur != Some(b) || moved {
+            cur = Some(b);
+            cur_input = input_col.map_or(f64::NAN, |c| c[i]);
+            ts.push(0.0);
+            ys.push(0.0);
+            for c in cs.iter_mut() {
+                c.push(0.0);
+            }
+            counts.push(0.0);
+        }
+        let k = ts.len() - 1;
+        ts[k] += t[i];
+        ys[k] += y_raw[i];
+        for (c, ch) in cs.iter_mut().zip(&chans) {
+            c[k] += ch.3[i] * ch.2;
+        }
+        counts[k] += 1.0;
+    }
+    for k in 0..ts.len() {
+        ts[k] /= counts[k];
+        ys[k] /= counts[k];
+        for c in cs.iter_mut() {
+            c[k] /= counts[k];
+        }
+    }
+    let dt = if bin > 0.0 { bin } else { median_dt };
+    if ts.len() < MIN_POINTS {
+        return Err(ImportError::Shape(format!(
+            "only {} points after binning: the models need at least {MIN_POINTS}",
+            ts.len()
+        )));
+    }
+    let out_std = crate::numerics::stats::std(&ys);
+    let out_mean = ys.iter().sum::<f64>() / ys.len() as f64;
+    if out_std.is_nan() || out_std <= 1e-12 * out_mean.abs() {
+        return Err(ImportError::Shape(format!(
+            "the output {out_name} is constant ({out_mean:e}, standard deviation {out_std:e}): \
+             there is nothing to discover"
+        )));
+    }
+    let segment_start: Vec<bool> = (0..ts.len())
+        .map(|k| k == 0 || ts[k] - ts[k - 1] > 2.5 * dt)
+        .collect();
+    let n_seg = segment_start.iter().filter(|&&s| s).count();
+    notes.push(format!(
+        "{} points used (bin {:.3} s{}), {} contiguous segment(s)",
+        ts.len(),
+        dt,
+        if bin > 0.0 {
+            ", block means"
+        } else {
+            ", unbinned"
+        },
+        n_seg
+    ));
+    notes.push(format!(
+        "memory estimate {} MB ({} points × {BYTES_PER_POINT} B for the fit + {} rows × {} \
+         columns read)",
+        memory_estimate_bytes(ts.len(), t.len(), names.len()) / 1_000_000 + 1,
+        ts.len(),
+        t.len(),
+        names.len()
+    ));
+    let channels: Vec<Channel> = chans
+        .iter()
+        .zip(cs)
+        .map(|(c, v)| Channel {
+            name: c.0.clone(),
+            kind: c.1,
+            values: v,
+        })
+        .collect();
+    let input_g = meta("input_g").or_else(|| {
+        channels
+            .iter()
+            .find(|c| c.kind == ChannelKind::Input)
+            .map(|c| c.values.iter().sum::<f64>() / c.values.len() as f64)
+    });
+    let site = match (meta("latitude_deg"), meta("longitude_deg")) {
+        (Some(la), Some(lo)) => Some((la, lo, meta("height_m").unwrap_or(0.0))),
+        _ => None,
+    };
+    Ok(Dataset {
+        t_s: ts,
+        y: ys,
+        segment_start,
+        channels,
+        output_name: out_name,
+        output_unit: unit,
+        unit_per_g,
+        input_g,
+        start_unix_s: log.meta("start_utc").and_then(parse_utc),
+        site,
+        dt_s: dt,
+        samples_per_point: counts,
+        notes,
+        warnings,
+    })
+}
+
+#[cfg(test)]
+impl Dataset {
+    /// A record in g starting one segment at its first point, with no channels, date or site:
+    /// the base the unit tests build on (`Dataset { channels, ..Dataset::test_g(..) }`).
+    pub(crate) fn test_g(t_s: Vec<f64>, y: Vec<f64>, dt_s: f64) -> Self {
+        let segment_start = (0..t_s.len()).map(|i| i == 0).collect();
+        Dataset {
+            t_s,
+            y,
+            segment_start,
+            channels: Vec::new(),
+            output_name: "output_g".into(),
+            output_unit: "g".into(),
+            unit_per_g: Some(1.0),
+            input_g: Some(1.0),
+            start_unix_s: None,
+            site: None,
+            dt_s,
+            samples_per_point: Vec::new(),
+            notes: Vec::new(),
+            warnings: Vec::new(),
+        }
+    }
+}
+
+impl Dataset {
+    /// The first channel of a kind.
+    pub fn channel(&self, kind: ChannelKind) -> Option<&Channel> {
+        self.channels.iter().find(|c| c.kind == kind)
+    }
+    /// Number of points.
+    pub fn len(&self) -> usize {
+        self.y.len()
+    }
+    /// No points.
+    pub fn is_empty(&self) -> bool {
+        self.y.is_empty()
+    }
+    /// Duration covered, seconds.
+    pub fn span_s(&self) -> f64 {
+        match (self.t_s.first(), self.t_s.last()) {
+            (Some(a), Some(b)) => b - a,
+            _ => 0.0,
+        }
+    }
+    /// Whether this is a "1 g" record (|input| > 0.5 g); tilt enters as cos, tides as gravity.
+    pub fn is_one_g(&self) -> bool {
+        self.input_g.is_some_and(|g| g.abs() > 0.5)
+    }
+    /// The per-row input (g) when the record has an `input_g` channel that changes (a
+    /// dividing-head programme; more than 1 mg standard deviation), else `None` (a static test:
+    /// the scalar [`Dataset::input_g`] describes it).
+    pub fn changing_input(&self) -> Option<&[f64]> {
+        self.channel(ChannelKind::Input)
+            .filter(|c| crate::numerics::stats::std(&c.values) > CHANGING_INPUT_STD_G)
+            .map(|c| c.values.as_slice())
+    }
+    /// The nominal input at row `i`, g: the input channel when it changes, else the scalar.
+    pub fn input_at(&self, i: usize) -> Option<f64> {
+        match self.changing_input() {
+            Some(v) => v.get(i).copied(),
+            None => self.input_g,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn beijing_time_is_moved_to_utc_and_bad_rows_keep_their_line_numbers() {
+        let text = "2021 06 08 08 00 00  5882.3353 1002.2656\n\
+                    2021 06 08 08 01 00  5882.3373\n\
+                    2021 06 08 08 02 00  5882.3393 1002.2000\n\
+                    2021 06 08 08 02 00  5882.3393 1002.2000\n";
+        let (log, bad) = gmetrology_from_str(text).unwrap();
+        assert_eq!(log.meta("start_utc"), Some("2021-06-08T00:00:00.000Z"));
+        assert_eq!(log.time_s(), &[0.0, 120.0]);
+        assert_eq!(bad.iter().map(|b| b.line).collect::<Vec<_>>(), vec![2, 4]);
+    }
+
+    #[test]
+    fn dates_that_do_not_exist_are_bad_rows_not_wrapped_or_rolled_over() {
+        // Month 257 would wrap to 1 through an `as u8`; 2021-02-29 and 24:00 do not exist.
+        let text = "2021 06 08 08 00 00  5882.3353 1002.2656
+                    2021 257 08 08 01 00  5882.3373 1002.2656
+                    2021 02 29 08 01 00  5882.3373 1002.2656
+                    2021 06 08 24 00 00  5882.3373 1002.2656
+                    2021 06 08 08 02 00  5882.3393 1002.2000
+";
+        let (log, bad) = gmetrology_from_str(text).unwrap();
+        assert_eq!(log.time_s(), &[0.0, 120.0]);
+        assert_eq!(
+            bad.iter().map(|b| b.line).collect::<Vec<_>>(),
+            vec![2, 3, 4]
+        );
+        assert!(bad.iter().all(|b| b.reason == "invalid date/time"));
+        // A leap year's 29 February exists.
+        assert_eq!(
+            civil_unix_seconds(2024, 2, 29, 23, 59, 30.5),
+            Some(1_709_251_170.5)
+        );
+    }
+
+    #[test]
+    fn an_input_g_column_is_the_input_channel_and_bins_never_straddle_a_head_move() {
+        // 2000 rows at 1 s, the head at +1 g for 701 s, then 0 g.
+        let mut log = Log::with_time((0..2000).map(f64::from).collect()).unwrap();
+        log.set_meta("input_g", "1").unwrap();
+        log.push_column(
+            "output_v",
+            (0..2000).map(|i| 0.5 + 1e-3 * f64::from(i % 7)).collect(),
+        )
+        .unwrap();
+        let a: Vec<f64> = (0..2000).map(|i| if i < 701 { 1.0 } else { 0.0 }).collect();
+        log.push_column("input_g", a).unwrap();
+        let opts = DatasetOptions {
+            max_points: 1000,
+            ..DatasetOptions::default()
+        };
+        let ds = dataset_from_log(&log, &opts).unwrap();
+        let input = ds.changing_input().unwrap();
+        assert!(input.iter().all(|&v| v == 1.0 || v == 0.0), "{input:?}");
+        // Bins of 1999 s / 1000 = 1.999 s: 1001 by time (the last holds t = 1999 s), and the
+        // one over 699.65–701.65 s split at the move (t = 700 at 1 g, t = 701 at 0 g).
+        assert_eq!(ds.len(), 1002);
+        assert_eq!(ds.input_at(350), Some(1.0));
+        assert_eq!(ds.input_at(351), Some(0.0));
+    }
+
+    #[test]
+    fn utc_round_trips_through_text() {
+        let u = parse_utc("2020-07-31T12:15:00.015Z").unwrap();
+        assert_eq!(format_utc(u), "2020-07-31T12:15:00.015Z");
+        // 2020-07-31 is day 18474 after 1970-01-01.
+        assert!((u - (18_474.0 * 86_400.0 + 12.0 * 3600.0 + 900.015)).abs() < 1e-6);
+    }
+
+    #[test]
+    fn a_gap_splits_segments_and_nan_rows_are_dropped_not_filled() {
+        let mut log = Log::with_time(vec![0.0, 1.0, 2.0, 3.0, 10.0, 11.0, 12.0]).unwrap();
+        let mut y: Vec<f64> = (0..7).map(f64::from).collect();
+        y[2] = f64::NAN;
+        log.push_column("output_g", y).unwrap();
+        let mut ds_rows = vec![20.0; 7];
+        ds_rows[0] = 21.0;
+        log.push_column("temperature_c", ds_rows).unwrap();
+        let ds = dataset_from_log(&log, &DatasetOptions::default());
+        // Fewer than MIN_POINTS rows is refused outright.
+        assert!(ds.is_err());
+        let t: Vec<f64> = (0..200)
+            .map(|i| if i < 100 { i as f64 } else { i as f64 + 50.0 })
+            .collect();
+        let mut log = Log::with_time(t).unwrap();
+        let mut y: Vec<f64> = (0..200).map(|i| f64::from(i % 5)).collect();
+        y[5] = f64::NAN;
+        log.push_column("output_g", y).unwrap();
+        let ds = dataset_from_log(&log, &DatasetOptions::default()).unwrap();
+        assert_eq!(ds.len(), 199);
+        assert_eq!(ds.segment_start.iter().filter(|&&s| s).count(), 2);
+        assert!(ds.segment_start[99]);
+        assert_eq!(ds.unit_per_g, Some(1.0));
+    }
+}

@@ -1,0 +1,83 @@
+//! Library entry points of `accomp discover <record> --simulate` (the command itself is
+//! `accomp_host::cli::discover`): the comparison on a loaded record, the extended scenario and the
+//! report's simulation section.
+
+use super::{output, Simulation};
+use crate::discover::{import, report, select};
+use std::fmt::Write as _;
+use std::path::Path;
+
+/// Runs the comparison on a loaded record (library entry point of the CLI and the tests).
+pub fn simulate_dataset(
+    ds: &import::Dataset,
+    scenario: Option<&Path>,
+    ensemble: usize,
+    cfg: &select::Config,
+) -> anyhow::Result<Simulation> {
+    let base = match scenario {
+        Some(p) => Some(
+            crate::sim::scenario::load(&p.to_string_lossy())
+                .map_err(|e| anyhow::anyhow!("--scenario {}: {e}", p.display()))?,
+        ),
+        None => None,
+    };
+    let label = match scenario {
+        Some(p) => p.display().to_string(),
+        None => {
+            "derived from the record (docs/simulator.md, \"Twin of a measured record\")".to_owned()
+        }
+    };
+    super::simulate(
+        ds,
+        |noise| crate::twin::Twin::new(ds, base.clone(), noise).map_err(|e| e.to_string()),
+        label,
+        ensemble,
+        cfg,
+    )
+    .map_err(anyhow::Error::msg)
+}
+
+/// Writes the extended scenario, if asked.
+pub fn write_scenario(s: &mut Simulation, path: Option<&Path>) -> anyhow::Result<()> {
+    let Some(path) = path else {
+        return Ok(());
+    };
+    let Some(toml) = &s.extended_toml else {
+        anyhow::bail!(
+            "--write-scenario {}: this twin has no scenario to write ({})",
+            path.display(),
+            s.warnings.join("; ")
+        );
+    };
+    std::fs::write(path, toml)?;
+    s.extended_path = Some(path.to_path_buf());
+    Ok(())
+}
+
+/// Writes the discovery's report plus the simulation's section and figures.
+pub fn write_report(s: &Simulation, dir: &Path, format: crate::plot::Format) -> anyhow::Result<()> {
+    report::write_report(&s.cause, dir, format)?;
+    let unit = s.cause.dataset.output_unit.clone();
+    let mut md = String::new();
+    let _ = writeln!(
+        md,
+        "\n# Simulation in the loop\n\n```text\n{}```\n",
+        output::text(s, &unit)
+    );
+    for (stem, caption, fig) in output::figures(s, &unit) {
+        let name = format!("{stem}.{}", format.ext());
+        match crate::plot::draw::render(&fig, &dir.join(&name), format) {
+            Ok(()) => {
+                let _ = writeln!(md, "### {caption}\n\n![{caption}]({name})\n");
+            }
+            Err(e) => {
+                let _ = writeln!(md, "### {caption}\n\nnot drawn: {e}\n");
+            }
+        }
+    }
+    let path = dir.join("report.md");
+    let mut all = std::fs::read_to_string(&path).unwrap_or_default();
+    all.push_str(&md);
+    std::fs::write(path, all)?;
+    Ok(())
+}

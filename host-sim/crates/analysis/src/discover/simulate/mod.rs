@@ -1,0 +1,348 @@
+//! `accomp discover --simulate`: the measured record against its simulated twin — what the
+//! simulation gets wrong, the named cause, the extended simulator and the measured gain
+//! (issue #14; method and the real-record figures in docs/discovery.md, "Simulation in the
+//! loop").
+//!
+//! 1. The twin's deterministic run is the predicted record; the residual is measured −
+//!    predicted (offset and linear drift removed: calibration constants, not predictions).
+//! 2. The catalogue search (`discover`) runs on that residual — the cause; its final noise model
+//!    is the twin's noise.
+//! 3. [`ensemble`]: N seeded members; each member − the deterministic part is the simulator's
+//!    own residual; [`spectra`]: ADEV, Welch PSD in bands, coherence with each measured channel.
+//! 4. [`mismatch`]: where the measured residual leaves the members' 5–95 % envelopes, and the
+//!    sentences; [`cause`]: which mismatch each accepted effect explains.
+//! 5. The twin extended by the accepted effects (joint-fit parameters), the ensemble rerun, the
+//!    same comparison; [`gain`]: forward-chaining residual std and the outside fractions,
+//!    before and after.
+
+pub mod cause;
+pub mod ensemble;
+mod entry;
+pub mod gain;
+pub mod mismatch;
+pub mod output;
+pub mod spectra;
+pub mod twin;
+
+pub use entry::{simulate_dataset, write_report, write_scenario};
+
+use super::import::Dataset;
+use super::noise::NoiseModel;
+use super::{select, Discovery};
+use ensemble::Yardstick;
+use mismatch::Comparison;
+
+/// Likelihood evaluations of the twin's noise fit (warm start).
+const NOISE_EVALS: usize = 40;
+
+/// Default ensemble size.
+pub const DEFAULT_ENSEMBLE: usize = 20;
+
+/// Effects a twin could not express: (effect name, why).
+pub type Refused = Vec<(String, String)>;
+
+/// What the comparison needs of a twin of the record (`twin::Twin` has it).
+pub trait TwinModel: Sync + Sized {
+    /// One effect the twin can be extended by (a scenario `[[effects]]` entry).
+    type Effect: Clone;
+    /// The output at the record's time stamps: `None` the deterministic part, `Some(seed)` one
+    /// ensemble member with the simulator's noise.
+    fn run(&self, seed: Option<u64>) -> Result<Vec<f64>, String>;
+    /// The accepted effects of a discovery as the twin's effects (name, effect), with the
+    /// effects it cannot express (name, why).
+    fn effects_from(&self, d: &Discovery) -> (Vec<(String, Self::Effect)>, Refused);
+    /// The twin extended by effects.
+    fn extended(&self, effects: &[Self::Effect]) -> Self;
+    /// What came from the record and what from defaults.
+    fn provenance(&self) -> Vec<String>;
+    /// The scenario as TOML (`accomp simulate` runs it), if the twin has one.
+    fn scenario_toml(&self) -> Option<String>;
+    /// Whether this is the station simulator (false: a stand-in, announced).
+    fn is_simulator(&self) -> bool;
+}
+
+/// Scores of one comparison.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Scores {
+    /// Forward-chaining out-of-sample residual std (linear amplitudes refitted on each
+    /// training part), output unit.
+    pub residual_std_out_of_sample: f64,
+    /// The same with the extension's amplitudes held at their whole-record values.
+    pub residual_std_fixed_amplitudes: f64,
+}
+
+/// Everything `--simulate` produced.
+#[derive(Debug, Clone)]
+pub struct Simulation {
+    /// Where the base scenario came from.
+    pub scenario: String,
+    /// Provenance lines of the twin.
+    pub provenance: Vec<String>,
+    /// Ensemble size.
+    pub ensemble: usize,
+    /// The comparison with the base twin.
+    pub before: Comparison,
+    /// With the extended twin.
+    pub after: Comparison,
+    /// Scores before.
+    pub before_scores: Scores,
+    /// After.
+    pub after_scores: Scores,
+    /// For each accepted effect, the `before` mismatches it explains.
+    pub explained_by: Vec<(String, Vec<usize>)>,
+    /// Effects the extended scenario could not express (name, why).
+    pub refused: Vec<(String, String)>,
+    /// The extended scenario's TOML, if the twin has a scenario.
+    pub extended_toml: Option<String>,
+    /// Where it was written.
+    pub extended_path: Option<std::path::PathBuf>,
+    /// The catalogue search on measured − twin.
+    pub cause: Discovery,
+    /// Band frequencies (Hz) of the PSD and coherence.
+    pub frequencies_hz: Vec<f64>,
+    /// Channel names of the coherence.
+    pub channels: Vec<String>,
+    /// The measured residual before (detrended), output unit, at the record's stamps.
+    pub residual_before: Vec<f64>,
+    /// After.
+    pub residual_after: Vec<f64>,
+    /// Things the user must know (refused effects, a failed noise fit …).
+    pub warnings: Vec<String>,
+    /// Whether the twin is the station simulator.
+    pub simulator: bool,
+    /// Wall time of each stage (name, s): for docs/benchmarks.md.
+    pub timing_s: Vec<(&'static str, f64)>,
+}
+
+/// Runs the comparison with twins made by `build` (noise model → twin).
+pub fn simulate<T, F>(
+    ds: &Dataset,
+    build: F,
+    scenario: String,
+    ensemble: usize,
+    cfg: &select::Config,
+) -> Result<Simulation, String>
+where
+    T: TwinModel,
+    F: Fn(Option<&NoiseModel>) -> Result<T, String>,
+{
+    let ensemble = ensemble.max(2);
+    let mut warnings = Vec::new();
+    let mut timing_s = Vec::new();
+    let mut clock = std::time::Instant::now();
+    let mut lap = |name: &'static str| {
+        timing_s.push((name, clock.elapsed().as_secs_f64()));
+        clock = std::time::Instant::now();
+    };
+    // 1. The prediction and the residual's catalogue search (the cause).
+    let quiet = build(None)?;
+    if !quiet.is_simulator() {
+        warnings.push("the twin is not the station simulator (a test stand-in)".to_owned());
+    }
+    let det = quiet.run(None)?;
+    check_len(&det, ds)?;
+    let mut resid_ds = ds.clone();
+    for (y, p) in resid_ds.y.iter_mut().zip(&det) {
+        *y -= p;
+    }
+    lap("twin");
+    let spin = stage_spinner("catalogue search on the measured − twin residual");
+    let cause = super::discover(resid_ds, None, cfg);
+    spin.finish_and_clear();
+    let cause = cause?;
+    lap("catalogue search");
+    let spin = stage_spinner("extension and the twin's noise model");
+    // 2. The extension: the accepted effects as the twin's effects; each one's contribution is
+    //    what it adds to the twin's prediction (the simulator's own rendering of it).
+    let (effects, refused) = quiet.effects_from(&cause);
+    let ext_quiet = quiet.extended(&effects.iter().map(|e| e.1.clone()).collect::<Vec<_>>());
+    let det_ext = ext_quiet.run(None)?;
+    check_len(&det_ext, ds)?;
+    let mut contrib = Vec::new();
+    for (name, e) in &effects {
+        let p = quiet.extended(std::slice::from_ref(e)).run(None)?;
+        check_len(&p, ds)?;
+        contrib.push((name.clone(), sub(&p, &det)));
+    }
+    // 3. The simulator's noise: the likelihood noise model (the discovery's: white + flicker +
+    //    random walk, Kalman innovations, warm-started from the catalogue search's final fit)
+    //    of what the extended twin cannot predict. Where the discovery's tidal analysis
+    //    separates the instrument's drift (a relative gravimeter: cubic B-spline, everything
+    //    slower than ≈ 0.25 cpd), the fit sees the residual without that drift: otherwise the
+    //    three-term family spreads the drift's power into mid-band flicker and random walk
+    //    (gMetrology: ×3–10 too much power at 0.4–20 cycles/day). The comparison itself keeps
+    //    the drift: the simulation does not predict it, and says so at long τ.
+    let yard = Yardstick::new(ds);
+    let r_before = yard.detrend(&sub(&ds.y, &det));
+    let r_after = yard.detrend(&sub(&ds.y, &det_ext));
+    let idx: Vec<usize> = (0..ds.len()).collect();
+    let (noise_input, noise_source) = match &cause.tidal {
+        Ok(t) => match without_drift(ds, &r_after) {
+            Ok(r) => (
+                r,
+                format!(
+                    "noise model: likelihood fit (white + flicker + random walk) to the extended \
+                     twin's residual without the tidal analysis' drift ({}); the drift stays in \
+                     the comparison",
+                    t.drift
+                ),
+            ),
+            Err(why) => {
+                warnings.push(format!(
+                    "the tidal analysis' drift could not be removed before the noise fit ({why}): \
+                     the noise model also describes the drift"
+                ));
+                (
+                    r_after.clone(),
+                    "noise model: likelihood fit to the extended twin's residual (drift included)"
+                        .to_owned(),
+                )
+            }
+        },
+        Err(_) => (
+            r_after.clone(),
+            "noise model: likelihood fit (white + flicker + random walk) to the extended twin's \
+             residual"
+                .to_owned(),
+        ),
+    };
+    let nf = NoiseModel::fit_ml(
+        &ds.t_s,
+        &idx,
+        &noise_input,
+        ds.dt_s,
+        ds.span_s(),
+        &[&cause.selection.final_noise.model],
+        NOISE_EVALS,
+    );
+    if let Some(why) = &nf.failure {
+        warnings.push(format!(
+            "the noise model of the extended twin's residual could not be fitted ({why}): the \
+             catalogue search's final noise model is the twin's noise instead"
+        ));
+    }
+    let noise = if nf.failure.is_none() {
+        nf.model
+    } else {
+        cause.selection.final_noise.model.clone()
+    };
+    spin.finish_and_clear();
+    lap("extension and noise fit");
+    // 4. Ensembles and comparisons, before and after.
+    let twin = build(Some(&noise))?;
+    let ext = twin.extended(&effects.iter().map(|e| e.1.clone()).collect::<Vec<_>>());
+    let mut provenance = ext.provenance();
+    provenance.push(noise_source);
+    let channels: Vec<String> = yard.channels.iter().map(|c| c.0.clone()).collect();
+    let freqs = yard
+        .welch
+        .as_ref()
+        .map(|w| w.frequencies())
+        .unwrap_or_default();
+    let members = ensemble::run(&twin, &det, ensemble, &yard, "base")?;
+    let before = mismatch::compare(yard.views(&r_before), &members, &freqs, &channels);
+    let explained_by = cause::explained_by(&yard, &before, &r_before, &contrib);
+    let members_ext = ensemble::run(&ext, &det_ext, ensemble, &yard, "extended")?;
+    let after = mismatch::compare(yard.views(&r_after), &members_ext, &freqs, &channels);
+    lap("ensembles and comparisons");
+    // 5. Gain: forward chaining; the extension's contributions refitted on each training part.
+    let base_std = gain::forward_std(ds, &det, &[], &noise);
+    let before_scores = Scores {
+        residual_std_out_of_sample: base_std,
+        residual_std_fixed_amplitudes: base_std,
+    };
+    let contrib_cols: Vec<Vec<f64>> = contrib.iter().map(|c| c.1.clone()).collect();
+    let after_scores = Scores {
+        residual_std_out_of_sample: gain::forward_std(ds, &det_ext, &contrib_cols, &noise),
+        residual_std_fixed_amplitudes: gain::forward_std(ds, &det_ext, &[], &noise),
+    };
+    lap("forward chaining");
+    if !refused.is_empty() {
+        warnings.push(format!(
+            "{} accepted effect(s) could not be written into the scenario: {}",
+            refused.len(),
+            refused
+                .iter()
+                .map(|(n, w)| format!("{n} ({w})"))
+                .collect::<Vec<_>>()
+                .join("; ")
+        ));
+    }
+    Ok(Simulation {
+        scenario,
+        provenance,
+        ensemble,
+        before,
+        after,
+        before_scores,
+        after_scores,
+        explained_by,
+        refused,
+        extended_toml: ext.scenario_toml(),
+        extended_path: None,
+        cause,
+        frequencies_hz: freqs,
+        channels,
+        residual_before: r_before,
+        residual_after: r_after,
+        warnings,
+        simulator: quiet.is_simulator(),
+        timing_s,
+    })
+}
+
+/// A spinner with the elapsed time on stderr for a stage without countable steps (drawn only
+/// on a terminal, like the ensemble's bars).
+fn stage_spinner(what: &str) -> indicatif::ProgressBar {
+    let p = indicatif::ProgressBar::new_spinner();
+    p.set_style(
+        indicatif::ProgressStyle::with_template("{spinner} {msg} ({elapsed})")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_spinner()),
+    );
+    p.set_message(what.to_owned());
+    p.enable_steady_tick(std::time::Duration::from_millis(200));
+    p
+}
+
+/// `r` minus its least-squares fit by the tidal analysis' drift columns (cubic B-splines with
+/// knots every `tidal::DRIFT_KNOT_S`, per contiguous segment).
+fn without_drift(ds: &Dataset, r: &[f64]) -> Result<Vec<f64>, String> {
+    let cols = super::tidal::spline_drift(&ds.t_s, &ds.segment_start, super::tidal::DRIFT_KNOT_S);
+    if cols.is_empty() {
+        return Err("no drift columns".into());
+    }
+    let rows: Vec<Vec<f64>> = (0..r.len())
+        .map(|i| cols.iter().map(|c| c[i]).collect())
+        .collect();
+    let ls = crate::numerics::linalg::least_squares(&rows, r).map_err(|e| e.to_string())?;
+    Ok((0..r.len())
+        .map(|i| {
+            r[i] - cols
+                .iter()
+                .zip(&ls.coeffs)
+                .map(|(c, b)| c[i] * b)
+                .sum::<f64>()
+        })
+        .collect())
+}
+
+fn sub(a: &[f64], b: &[f64]) -> Vec<f64> {
+    a.iter().zip(b).map(|(x, y)| x - y).collect()
+}
+
+fn check_len(p: &[f64], ds: &Dataset) -> Result<(), String> {
+    if p.len() != ds.len() {
+        return Err(format!(
+            "the twin returned {} values for a record of {} points",
+            p.len(),
+            ds.len()
+        ));
+    }
+    if let Some(i) = p.iter().position(|v| !v.is_finite()) {
+        return Err(format!(
+            "the twin's prediction is not finite at point {i} (t = {} s)",
+            ds.t_s[i]
+        ));
+    }
+    Ok(())
+}

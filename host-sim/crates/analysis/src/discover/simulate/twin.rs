@@ -1,0 +1,90 @@
+//! The station simulator's twin (`twin::Twin`) as the comparison's [`TwinModel`].
+//!
+//! The accepted effects become scenario entries through `scenario_effects_from_discovery`
+//! (joint-fit parameters; `tidal_gravity` as wave-group corrections with the delay in their
+//! phases when the wave-group analysis ran). One addition here: a pressure admittance fitted by
+//! the wave-group analysis (jointly with the tide) that the greedy selection did not accept is
+//! added when it is significant (|value| > [`ADMITTANCE_SIGMAS`] σ), named
+//! `pressure_admittance (tidal analysis)` — the catalogue search alone leaves the barometric
+//! signal in the residual when the tide's errors dominate its likelihood.
+
+use super::{Refused, TwinModel};
+use crate::discover::Discovery;
+use crate::sim::effects::ScenarioEffect;
+use crate::twin::{scenario_effects_from_discovery, Twin};
+
+/// Significance a wave-group analysis admittance needs to be added.
+pub const ADMITTANCE_SIGMAS: f64 = 3.0;
+
+/// Pascals per hectopascal.
+const PA_PER_HPA: f64 = 100.0;
+
+impl TwinModel for Twin {
+    type Effect = ScenarioEffect;
+
+    fn run(&self, seed: Option<u64>) -> Result<Vec<f64>, String> {
+        Twin::run(self, seed).map_err(|e| e.to_string())
+    }
+
+    fn effects_from(&self, d: &Discovery) -> (Vec<(String, ScenarioEffect)>, Refused) {
+        let (mut effects, refused) = scenario_effects_from_discovery(d);
+        let mut names: Vec<String> = effects.iter().map(|e| e.name().to_owned()).collect();
+        if !names.iter().any(|n| n == "pressure_admittance") {
+            if let Ok(Some(a)) = d.tidal.as_ref().map(|t| t.pressure_admittance.as_ref()) {
+                let p = &a.per_hpa;
+                if p.value.is_finite()
+                    && p.sigma.is_finite()
+                    && p.value.abs() > ADMITTANCE_SIGMAS * p.sigma
+                {
+                    effects.push(ScenarioEffect::PressureAdmittance {
+                        coefficient: p.value / PA_PER_HPA,
+                    });
+                    names.push("pressure_admittance (tidal analysis)".to_owned());
+                }
+            }
+        }
+        // Repeated kinds (steps, lines) get #2, #3 … in order.
+        let mut seen: Vec<String> = Vec::new();
+        let named = names
+            .into_iter()
+            .zip(effects)
+            .map(|(n, e)| {
+                let k = seen.iter().filter(|s| **s == n).count();
+                seen.push(n.clone());
+                let name = if k > 0 { format!("{n}#{}", k + 1) } else { n };
+                (name, e)
+            })
+            .collect();
+        (named, refused)
+    }
+
+    fn extended(&self, effects: &[ScenarioEffect]) -> Self {
+        Twin::extended(self, effects)
+    }
+
+    fn provenance(&self) -> Vec<String> {
+        let mut v = Twin::provenance(self).to_vec();
+        let w = self.weather_drivers();
+        v.push(if w.is_empty() {
+            "ensemble members: the instrument noise only (no simulated driver enters the output; \
+             measured channels are the record's in every member)"
+                .to_owned()
+        } else {
+            format!(
+                "ensemble members: the instrument noise and their own weather of the simulated \
+                 driver(s) {} (the station re-run with the member's seed); measured channels are \
+                 the record's in every member",
+                w.join(", ")
+            )
+        });
+        v
+    }
+
+    fn scenario_toml(&self) -> Option<String> {
+        Some(self.scenario().to_toml())
+    }
+
+    fn is_simulator(&self) -> bool {
+        true
+    }
+}

@@ -1,0 +1,949 @@
+//! The discovery catalogue's effects as simulator physics: the scenario's optional `[[effects]]`
+//! array. Each entry is tagged by its catalogue name (`discover::effects::Effect::name`) and
+//! carries the catalogue's parameters in the units `accomp discover` reports them, so that an
+//! effect found on a record can be written back into a scenario and simulated as is.
+//!
+//! Where each enters the signal chain (docs/simulator.md, "Effects"):
+//! - every effect but `channel_noise` is an **additive term in the output unit** (volts for the
+//!   accelerometer — added to E before the ADC —, the record's gravity unit for the gravimeter),
+//!   evaluated from the station's true state (mount temperature, input, foundation tilt, station
+//!   pressure, room) — the physics, not the noisy readings;
+//! - `tidal_gravity` adds a correction to the model tide: `amplitude_factor` × the model's tide
+//!   delayed by `delay_s`, plus per wave group (`groups`) a factor and a phase against the model's
+//!   elastic-Earth group tide (the discovery's tidal analysis reports both);
+//! - `channel_noise` adds white reading noise to a measured channel (temperature, tilt, pressure)
+//!   and nothing to the output.
+//!
+//! The effects draw from their own random stream (`channel_noise` only), so a scenario without
+//! effects is simulated exactly as before.
+
+use serde::{Deserialize, Serialize};
+
+use accomp::tide::cte1973::CTE1973;
+use accomp::tide::harmonic::{sin_cos, DoodsonArguments};
+use accomp::tide::{Station, MAS_PER_RAD, NM_S2_PER_M_S2, STANDARD_GRAVITY_M_S2};
+
+use super::noise::{gauss, SimRng};
+
+/// Channels whose reading `channel_noise` can disturb (log column names).
+pub const NOISY_CHANNELS: [&str; 3] = ["temperature_c", "tilt_arcsec", "pressure_hpa"];
+
+/// Ambient channels the station simulator itself provides to `ambient_coupling` (the room and
+/// the board temperature, as deviations from the room's mean, °C).
+pub const SIMULATED_AMBIENT: [&str; 2] = ["room_c", "board_c"];
+
+/// A wave group's correction of the model tide: `factor`·(group tide advanced by `phase_deg`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TideGroupTerm {
+    /// Group name as the tidal analysis reports it (`O1`, `M2`, merged groups joined with `+`,
+    /// e.g. `P1K1+J1`); the band is the union of the groups' bands (`tide::GROUPS`).
+    pub name: String,
+    /// Amplitude factor against the model's elastic-Earth group tide (0: no correction).
+    pub factor: f64,
+    /// Phase, degrees, positive = leads the model.
+    pub phase_deg: f64,
+}
+
+/// One catalogue effect with its parameters (units as `accomp discover` reports them; "unit" is
+/// the output unit of the instrument: V for the accelerometer, the gravity unit for the
+/// gravimeter).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum ScenarioEffect {
+    /// `coefficient`·(L_τ[T] − T): the proof mass lags the mount temperature (unit/°C, s).
+    ThermalLag {
+        /// Lag time constant, s.
+        tau_s: f64,
+        /// Output per °C of lag error, unit/°C.
+        coefficient: f64,
+    },
+    /// `half_width`·(T − p_r[T])/r: a play operator of half-width r on the mount temperature.
+    ThermalHysteresis {
+        /// Bias half-difference between the heating and cooling branches, unit.
+        half_width: f64,
+        /// Play half-width r, °C.
+        play_half_width_c: f64,
+    },
+    /// `coefficient`·(L_τ[a²] − a²): torquer self-heating after an input change (unit/g²).
+    SelfHeating {
+        /// Coil time constant, s.
+        tau_s: f64,
+        /// Output per g² of lag error, unit.
+        coefficient: f64,
+    },
+    /// `amplitude`·exp(−t/τ) after power-on (t from the start of the run).
+    Warmup {
+        /// Time constant, s.
+        tau_s: f64,
+        /// Amplitude at t = 0, unit.
+        amplitude: f64,
+    },
+    /// `amplitude`·ln(1 + t/τ): logarithmic aging.
+    AgingDrift {
+        /// Time scale, s.
+        tau_s: f64,
+        /// Amplitude, unit.
+        amplitude: f64,
+    },
+    /// `size`·H(t − time_s): a bias jump.
+    Step {
+        /// When, seconds from the start of the run.
+        time_s: f64,
+        /// Jump, unit (`amplitude` is accepted as another name).
+        #[serde(alias = "amplitude")]
+        size: f64,
+    },
+    /// A correction of the tide gravity: `amplitude_factor`·tide(t − delay_s) (the model tide
+    /// projected on the input axis, in the output unit), plus the wave-group terms.
+    TidalGravity {
+        /// Extra factor on the model's tide (0: none; the discovery's `amplitude_factor` of the
+        /// residual).
+        amplitude_factor: f64,
+        /// Delay of the `amplitude_factor` term, s (0 by default).
+        #[serde(default)]
+        delay_s: f64,
+        /// Wave-group corrections (none by default).
+        #[serde(default, skip_serializing_if = "Vec::is_empty")]
+        groups: Vec<TideGroupTerm>,
+    },
+    /// `amplitude_factor`·(tide tilt along `azimuth_deg`) at the output's unit per g (0 g tests).
+    TidalTilt {
+        /// Factor on the model's tide tilt.
+        amplitude_factor: f64,
+        /// Azimuth of the sensitive direction, degrees from north towards east.
+        azimuth_deg: f64,
+    },
+    /// `amplitude`·sin(2π·t_utc/1 d + phase_rad): diurnal building tilt seen by a 0 g test.
+    BuildingTilt {
+        /// Amplitude, unit.
+        amplitude: f64,
+        /// Phase, rad (against UTC midnight).
+        phase_rad: f64,
+    },
+    /// `gain`·(eq. (5) tilt term of the true foundation tilt), in the output unit.
+    TiltCoupling {
+        /// Gain error of the tilt term (dimensionless).
+        gain: f64,
+    },
+    /// `coefficient`·L_lag[c]: an auxiliary channel (deviation from its mean) through a lag.
+    AmbientCoupling {
+        /// Channel: `room_c` or `board_c` in the simulator; a twin also takes the record's
+        /// auxiliary channels by their column name.
+        channel: String,
+        /// Output per channel unit.
+        coefficient: f64,
+        /// Lag time constant, s (0: none).
+        lag_s: f64,
+    },
+    /// `coefficient`·(p − p̄): barometric admittance, unit per Pa.
+    PressureAdmittance {
+        /// Output per Pa.
+        coefficient: f64,
+    },
+    /// `amplitude`·sin(2π·t/period_s + phase_rad), t from the start of the run.
+    Periodic {
+        /// Period, s.
+        period_s: f64,
+        /// Amplitude, unit.
+        amplitude: f64,
+        /// Phase, rad.
+        phase_rad: f64,
+    },
+    /// White reading noise on a measured channel (`temperature_c` °C, `tilt_arcsec` in rad,
+    /// `pressure_hpa` in Pa: the units the discovery stores them in).
+    ChannelNoise {
+        /// Log column.
+        channel: String,
+        /// Standard deviation per reading (°C, rad or Pa).
+        noise: f64,
+    },
+}
+
+impl ScenarioEffect {
+    /// The catalogue name.
+    pub fn name(&self) -> &'static str {
+        match self {
+            ScenarioEffect::ThermalLag { .. } => "thermal_lag",
+            ScenarioEffect::ThermalHysteresis { .. } => "thermal_hysteresis",
+            ScenarioEffect::SelfHeating { .. } => "self_heating",
+            ScenarioEffect::Warmup { .. } => "warmup",
+            ScenarioEffect::AgingDrift { .. } => "aging_drift",
+            ScenarioEffect::Step { .. } => "step",
+            ScenarioEffect::TidalGravity { .. } => "tidal_gravity",
+            ScenarioEffect::TidalTilt { .. } => "tidal_tilt",
+            ScenarioEffect::BuildingTilt { .. } => "building_tilt",
+            ScenarioEffect::TiltCoupling { .. } => "tilt_coupling",
+            ScenarioEffect::AmbientCoupling { .. } => "ambient_coupling",
+            ScenarioEffect::PressureAdmittance { .. } => "pressure_admittance",
+            ScenarioEffect::Periodic { .. } => "periodic",
+            ScenarioEffect::ChannelNoise { .. } => "channel_noise",
+        }
+    }
+
+    /// Checks the ranges; the message names the entry (`effects[i] (kind)`) and the field.
+    pub fn validate(&self, index: usize) -> Result<(), String> {
+        let at = |field: &str, why: &str| {
+            Err(format!("effects[{index}] ({}): {field} {why}", self.name()))
+        };
+        let finite = |v: f64| v.is_finite();
+        let positive = |v: f64| v.is_finite() && v > 0.0;
+        match self {
+            ScenarioEffect::ThermalLag { tau_s, coefficient }
+            | ScenarioEffect::SelfHeating { tau_s, coefficient } => {
+                if !positive(*tau_s) {
+                    return at("tau_s", "must be > 0");
+                }
+                if !finite(*coefficient) {
+                    return at("coefficient", "must be finite");
+                }
+            }
+            ScenarioEffect::ThermalHysteresis {
+                half_width,
+                play_half_width_c,
+            } => {
+                if !positive(*play_half_width_c) {
+                    return at("play_half_width_c", "must be > 0");
+                }
+                if !finite(*half_width) {
+                    return at("half_width", "must be finite");
+                }
+            }
+            ScenarioEffect::Warmup { tau_s, amplitude }
+            | ScenarioEffect::AgingDrift { tau_s, amplitude } => {
+                if !positive(*tau_s) {
+                    return at("tau_s", "must be > 0");
+                }
+                if !finite(*amplitude) {
+                    return at("amplitude", "must be finite");
+                }
+            }
+            ScenarioEffect::Step { time_s, size } => {
+                if !finite(*time_s) {
+                    return at("time_s", "must be finite");
+                }
+                if !finite(*size) {
+                    return at("size", "must be finite");
+                }
+            }
+            ScenarioEffect::TidalGravity {
+                amplitude_factor,
+                delay_s,
+                groups,
+            } => {
+                if !finite(*amplitude_factor) {
+                    return at("amplitude_factor", "must be finite");
+                }
+                // A delay beyond a quarter of the shortest tidal period (M3, 8 h) is a phase
+                // error of more than 90°: not a delay.
+                if !(finite(*delay_s) && delay_s.abs() <= 2.0 * 3600.0) {
+                    return at("delay_s", "must be within ±7200 s");
+                }
+                for g in groups {
+                    if group_band(&g.name).is_none() {
+                        return at(
+                            "groups",
+                            &format!(
+                                "has an unknown group {:?} (known: {})",
+                                g.name,
+                                group_names().join(", ")
+                            ),
+                        );
+                    }
+                    if !(finite(g.factor) && finite(g.phase_deg)) {
+                        return at(
+                            "groups",
+                            &format!("{}: factor and phase must be finite", g.name),
+                        );
+                    }
+                }
+            }
+            ScenarioEffect::TidalTilt {
+                amplitude_factor,
+                azimuth_deg,
+            } => {
+                if !(finite(*amplitude_factor) && finite(*azimuth_deg)) {
+                    return at("amplitude_factor and azimuth_deg", "must be finite");
+                }
+            }
+            ScenarioEffect::BuildingTilt {
+                amplitude,
+                phase_rad,
+            } => {
+                if !(finite(*amplitude) && finite(*phase_rad)) {
+                    return at("amplitude and phase_rad", "must be finite");
+                }
+            }
+            ScenarioEffect::TiltCoupling { gain } => {
+                if !finite(*gain) {
+                    return at("gain", "must be finite");
+                }
+            }
+            ScenarioEffect::AmbientCoupling {
+                channel,
+                coefficient,
+                lag_s,
+            } => {
+                if channel.trim().is_empty() {
+                    return at("channel", "must name a channel");
+                }
+                if !finite(*coefficient) {
+                    return at("coefficient", "must be finite");
+                }
+                if !(finite(*lag_s) && *lag_s >= 0.0) {
+                    return at("lag_s", "must be ≥ 0");
+                }
+            }
+            ScenarioEffect::PressureAdmittance { coefficient } => {
+                if !finite(*coefficient) {
+                    return at("coefficient", "must be finite");
+                }
+            }
+            ScenarioEffect::Periodic {
+                period_s,
+                amplitude,
+                phase_rad,
+            } => {
+                if !positive(*period_s) {
+                    return at("period_s", "must be > 0");
+                }
+                if !(finite(*amplitude) && finite(*phase_rad)) {
+                    return at("amplitude and phase_rad", "must be finite");
+                }
+            }
+            ScenarioEffect::ChannelNoise { channel, noise } => {
+                if !NOISY_CHANNELS.contains(&channel.as_str()) {
+                    return at(
+                        "channel",
+                        &format!(
+                            "{channel:?} is not a measured channel ({})",
+                            NOISY_CHANNELS.join(", ")
+                        ),
+                    );
+                }
+                if !(finite(*noise) && *noise >= 0.0) {
+                    return at("noise", "must be ≥ 0");
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+fn group_names() -> Vec<&'static str> {
+    crate::tide::GROUPS.iter().map(|g| g.name).collect()
+}
+
+/// The frequency band (cpd) of a group name; merged names (`A+B`) take the union.
+pub fn group_band(name: &str) -> Option<(f64, f64)> {
+    let mut band: Option<(f64, f64)> = None;
+    for part in name.split('+') {
+        let g = crate::tide::GROUPS.iter().find(|g| g.name == part.trim())?;
+        band = Some(match band {
+            None => (g.from_cpd, g.to_cpd),
+            Some((a, b)) => (a.min(g.from_cpd), b.max(g.to_cpd)),
+        });
+    }
+    band
+}
+
+/// What the effects need to know about the run.
+#[derive(Debug, Clone)]
+pub struct ChainSetup {
+    /// Unix seconds of t = 0.
+    pub start_unix_s: f64,
+    /// Site (latitude, longitude degrees, height m) for the tide corrections.
+    pub site: (f64, f64, f64),
+    /// First and last time the chain will be asked for, seconds from t = 0.
+    pub span_s: (f64, f64),
+    /// Output units per g (V/g: K1 at the set point; the gravity unit's per g).
+    pub unit_per_g: f64,
+    /// Nominal input of the test, g (its sign projects the tide on the input axis).
+    pub input_g: f64,
+    /// Names of the ambient channels the caller passes in [`Drive::ambient`], in order.
+    pub ambient: Vec<String>,
+}
+
+/// The station's state at one instant, as the effects see it.
+#[derive(Debug, Clone, Copy)]
+pub struct Drive<'a> {
+    /// Seconds from t = 0.
+    pub t_s: f64,
+    /// Temperature the thermal effects follow (the mount's, °C).
+    pub temperature_c: f64,
+    /// Nominal input acceleration, g.
+    pub input_g: f64,
+    /// Foundation tilt about the spindle, rad.
+    pub tilt_rad: f64,
+    /// Station pressure minus its mean, Pa.
+    pub pressure_dev_pa: f64,
+    /// Ambient channels (deviations from their means), in [`ChainSetup::ambient`] order.
+    pub ambient: &'a [f64],
+}
+
+/// One effect's running state.
+#[derive(Debug, Clone)]
+enum State {
+    /// Last filter output and time (first-order lag with the actual spacing).
+    Lag {
+        x: Option<(f64, f64)>,
+    },
+    /// Play operator output.
+    Play {
+        p: Option<f64>,
+    },
+    /// Index of the ambient channel and its lag state.
+    Ambient {
+        index: usize,
+        x: Option<(f64, f64)>,
+    },
+    None,
+}
+
+/// The effects of a scenario, evaluated sample by sample.
+#[derive(Debug, Clone)]
+pub struct EffectChain {
+    effects: Vec<ScenarioEffect>,
+    states: Vec<State>,
+    setup: ChainSetup,
+    tide: Option<TideNodes>,
+    groups: Option<Nodes>,
+}
+
+/// Why the chain cannot be built.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum EffectError {
+    /// An ambient coupling names a channel nobody provides.
+    #[error(
+        "effects[{index}] (ambient_coupling): channel {channel:?} is not available (have: {have})"
+    )]
+    Channel {
+        /// Entry.
+        index: usize,
+        /// Channel named.
+        channel: String,
+        /// Channels available.
+        have: String,
+    },
+    /// The site is not on the Earth.
+    #[error("effects: the tide corrections need a valid site: {0}")]
+    Site(String),
+}
+
+fn lag_step(x: &mut Option<(f64, f64)>, t: f64, u: f64, tau: f64) -> f64 {
+    let y = match *x {
+        Some((t0, y0)) if tau > 0.0 => {
+            let a = (-(t - t0).max(0.0) / tau).exp();
+            a * y0 + (1.0 - a) * u
+        }
+        _ => u,
+    };
+    *x = Some((t, y));
+    y
+}
+
+impl EffectChain {
+    /// The chain of `effects` (validated by the scenario) for a run described by `setup`.
+    pub fn new(effects: &[ScenarioEffect], setup: ChainSetup) -> Result<Self, EffectError> {
+        let mut states = Vec::with_capacity(effects.len());
+        let mut needs_tide = false;
+        let mut group_terms: Vec<&TideGroupTerm> = Vec::new();
+        for (index, e) in effects.iter().enumerate() {
+            states.push(match e {
+                ScenarioEffect::ThermalLag { .. } | ScenarioEffect::SelfHeating { .. } => {
+                    State::Lag { x: None }
+                }
+                ScenarioEffect::ThermalHysteresis { .. } => State::Play { p: None },
+                ScenarioEffect::AmbientCoupling { channel, .. } => {
+                    let i = setup
+                        .ambient
+                        .iter()
+                        .position(|c| c == channel)
+                        .ok_or_else(|| EffectError::Channel {
+                            index,
+                            channel: channel.clone(),
+                            have: setup.ambient.join(", "),
+                        })?;
+                    State::Ambient { index: i, x: None }
+                }
+                ScenarioEffect::TidalGravity {
+                    amplitude_factor,
+                    groups,
+                    ..
+                } => {
+                    needs_tide |= *amplitude_factor != 0.0;
+                    group_terms.extend(groups.iter());
+                    State::None
+                }
+                ScenarioEffect::TidalTilt { .. } => {
+                    needs_tide = true;
+                    State::None
+                }
+                _ => State::None,
+            });
+        }
+        let station = || {
+            let (lat, lon, h) = setup.site;
+            Station::new(lat, lon, h).map_err(|e| EffectError::Site(format!("{e:?}")))
+        };
+        let tide = if needs_tide {
+            Some(TideNodes::new(station()?, &setup))
+        } else {
+            None
+        };
+        let groups = if group_terms.is_empty() {
+            None
+        } else {
+            Some(group_nodes(&station()?, &setup, &group_terms))
+        };
+        Ok(EffectChain {
+            effects: effects.to_vec(),
+            states,
+            setup,
+            tide,
+            groups,
+        })
+    }
+
+    /// Whether the chain adds anything to the output.
+    pub fn is_empty(&self) -> bool {
+        self.effects.is_empty()
+    }
+
+    /// The additive output term at one instant (output unit). Instants must come in increasing
+    /// order (the lags and the play operator carry state).
+    pub fn output_term(&mut self, d: &Drive) -> f64 {
+        let u = self.setup.unit_per_g;
+        let sign = if self.setup.input_g < 0.0 { -1.0 } else { 1.0 };
+        let t = d.t_s;
+        let mut sum = 0.0;
+        for (e, st) in self.effects.iter().zip(self.states.iter_mut()) {
+            sum += match (e, st) {
+                (ScenarioEffect::ThermalLag { tau_s, coefficient }, State::Lag { x }) => {
+                    coefficient * (lag_step(x, t, d.temperature_c, *tau_s) - d.temperature_c)
+                }
+                (ScenarioEffect::SelfHeating { tau_s, coefficient }, State::Lag { x }) => {
+                    let a2 = d.input_g * d.input_g;
+                    coefficient * (lag_step(x, t, a2, *tau_s) - a2)
+                }
+                (
+                    ScenarioEffect::ThermalHysteresis {
+                        half_width,
+                        play_half_width_c,
+                    },
+                    State::Play { p },
+                ) => {
+                    let r = *play_half_width_c;
+                    let tc = d.temperature_c;
+                    let q = p.unwrap_or(tc).max(tc - r).min(tc + r);
+                    *p = Some(q);
+                    half_width * (tc - q) / r
+                }
+                (ScenarioEffect::Warmup { tau_s, amplitude }, _) => amplitude * (-t / tau_s).exp(),
+                (ScenarioEffect::AgingDrift { tau_s, amplitude }, _) => {
+                    amplitude * (1.0 + t.max(0.0) / tau_s).ln()
+                }
+                (ScenarioEffect::Step { time_s, size }, _) if t >= *time_s => *size,
+                (ScenarioEffect::Step { .. }, _) => 0.0,
+                (
+                    ScenarioEffect::TidalGravity {
+                        amplitude_factor,
+                        delay_s,
+                        ..
+                    },
+                    _,
+                ) => match &mut self.tide {
+                    Some(tn) if *amplitude_factor != 0.0 => {
+                        amplitude_factor * tn.at(t - delay_s).0 * u * sign
+                    }
+                    _ => 0.0,
+                },
+                (
+                    ScenarioEffect::TidalTilt {
+                        amplitude_factor,
+                        azimuth_deg,
+                    },
+                    _,
+                ) => match &mut self.tide {
+                    Some(tn) => {
+                        let (_, n, e) = tn.at(t);
+                        let (s, c) = azimuth_deg.to_radians().sin_cos();
+                        amplitude_factor * (c * n + s * e) * u
+                    }
+                    None => 0.0,
+                },
+                (
+                    ScenarioEffect::BuildingTilt {
+                        amplitude,
+                        phase_rad,
+                    },
+                    _,
+                ) => {
+                    let w = std::f64::consts::TAU / 86_400.0;
+                    amplitude * (w * (self.setup.start_unix_s + t) + phase_rad).sin()
+                }
+                (ScenarioEffect::TiltCoupling { gain }, _) => {
+                    // Eq. (5): sin(θ + φ) − sin θ at the nominal input a = sin θ (θ in ±90°).
+                    let a = d.input_g.clamp(-1.0, 1.0);
+                    let cos_head = (1.0 - a * a).max(0.0).sqrt();
+                    let (s, c) = d.tilt_rad.sin_cos();
+                    gain * u * (a * (c - 1.0) + cos_head * s)
+                }
+                (
+                    ScenarioEffect::AmbientCoupling {
+                        coefficient, lag_s, ..
+                    },
+                    State::Ambient { index, x },
+                ) => {
+                    let v = d.ambient.get(*index).copied().unwrap_or(0.0);
+                    coefficient * lag_step(x, t, v, *lag_s)
+                }
+                (ScenarioEffect::PressureAdmittance { coefficient }, _) => {
+                    coefficient * d.pressure_dev_pa
+                }
+                (
+                    ScenarioEffect::Periodic {
+                        period_s,
+                        amplitude,
+                        phase_rad,
+                    },
+                    _,
+                ) => amplitude * (std::f64::consts::TAU * t / period_s + phase_rad).sin(),
+                _ => 0.0,
+            };
+        }
+        if let Some(g) = &self.groups {
+            // The group terms are in nm/s² of gravity along the vertical.
+            sum += g.at(t) * u / (STANDARD_GRAVITY_M_S2 * NM_S2_PER_M_S2) * sign;
+        }
+        sum
+    }
+
+    /// Reading noise of the `channel_noise` entries for one sample: (temperature °C, tilt rad,
+    /// pressure Pa) to add to the readings.
+    pub fn reading_noise(&self, rng: &mut SimRng) -> (f64, f64, f64) {
+        let mut n = (0.0, 0.0, 0.0);
+        for e in &self.effects {
+            if let ScenarioEffect::ChannelNoise { channel, noise } = e {
+                let x = noise * gauss(rng);
+                match channel.as_str() {
+                    "temperature_c" => n.0 += x,
+                    "tilt_arcsec" => n.1 += x,
+                    _ => n.2 += x,
+                }
+            }
+        }
+        n
+    }
+
+    /// Whether any entry is `channel_noise`.
+    pub fn has_reading_noise(&self) -> bool {
+        self.effects
+            .iter()
+            .any(|e| matches!(e, ScenarioEffect::ChannelNoise { .. }))
+    }
+}
+
+/// Tide gravity (g) and tilt north/east (rad) from the ephemeris model every 60 s, linear in
+/// between (as `discover::effects::tide_series` does, so the simulated term has the catalogue's
+/// shape up to the interpolation, < 1e-5 of the range).
+#[derive(Debug, Clone)]
+struct TideNodes {
+    station: Station,
+    start_unix_s: f64,
+    k: i64,
+    a: (f64, f64, f64),
+    b: (f64, f64, f64),
+}
+
+const TIDE_NODE_S: f64 = 60.0;
+
+impl TideNodes {
+    fn new(station: Station, setup: &ChainSetup) -> Self {
+        TideNodes {
+            station,
+            start_unix_s: setup.start_unix_s,
+            k: i64::MIN,
+            a: (0.0, 0.0, 0.0),
+            b: (0.0, 0.0, 0.0),
+        }
+    }
+
+    fn node(&self, k: i64) -> (f64, f64, f64) {
+        let s = self
+            .station
+            .tide_at_unix_seconds(self.start_unix_s + k as f64 * TIDE_NODE_S);
+        (
+            s.gravity_gs().0,
+            s.tilt_north_mas / MAS_PER_RAD,
+            s.tilt_east_mas / MAS_PER_RAD,
+        )
+    }
+
+    fn at(&mut self, t: f64) -> (f64, f64, f64) {
+        let x = t / TIDE_NODE_S;
+        let k = x.floor() as i64;
+        if k != self.k {
+            self.a = if k == self.k.wrapping_add(1) {
+                self.b
+            } else {
+                self.node(k)
+            };
+            self.b = self.node(k + 1);
+            self.k = k;
+        }
+        let f = x - k as f64;
+        (
+            self.a.0 + f * (self.b.0 - self.a.0),
+            self.a.1 + f * (self.b.1 - self.a.1),
+            self.a.2 + f * (self.b.2 - self.a.2),
+        )
+    }
+}
+
+/// Node spacing of the wave-group corrections, s; with 4-point Lagrange interpolation the error
+/// is ~(ωh)⁴/40 ≈ 5e-7 of an M3 wave at 300 s.
+const GROUP_NODE_S: f64 = 300.0;
+
+/// A precomputed series on a regular grid, interpolated by 4-point Lagrange.
+#[derive(Debug, Clone)]
+struct Nodes {
+    t0: f64,
+    v: Vec<f64>,
+}
+
+impl Nodes {
+    fn at(&self, t: f64) -> f64 {
+        let n = self.v.len();
+        if n < 4 {
+            return self.v.first().copied().unwrap_or(0.0);
+        }
+        let p = (t - self.t0) / GROUP_NODE_S;
+        let k = (p.floor() as isize - 1).clamp(0, n as isize - 4) as usize;
+        let u = p - k as f64;
+        let l0 = -(u - 1.0) * (u - 2.0) * (u - 3.0) / 6.0;
+        let l1 = u * (u - 2.0) * (u - 3.0) / 2.0;
+        let l2 = -u * (u - 1.0) * (u - 3.0) / 2.0;
+        let l3 = u * (u - 1.0) * (u - 2.0) / 6.0;
+        self.v[k] * l0 + self.v[k + 1] * l1 + self.v[k + 2] * l2 + self.v[k + 3] * l3
+    }
+}
+
+/// Σ over the terms of factor·(elastic group tide advanced by phase), nm/s², on the nodes.
+fn group_nodes(st: &Station, setup: &ChainSetup, terms: &[&TideGroupTerm]) -> Nodes {
+    // Per term: the catalogue waves in its band with their rigid gravity and the model's δ.
+    let per_term: Vec<(f64, f64, Vec<_>)> = terms
+        .iter()
+        .map(|g| {
+            let (lo, hi) = group_band(&g.name).unwrap_or((0.0, 0.0));
+            let (s, c) = g.phase_deg.to_radians().sin_cos();
+            let waves: Vec<_> = CTE1973
+                .iter()
+                .filter(|w| (lo..hi).contains(&w.frequency_cpd()))
+                .map(|w| (*w, st.wave_gravity(w), st.gravimetric_factor(w)))
+                .collect();
+            (g.factor * c, g.factor * s, waves)
+        })
+        .collect();
+    let t0 = setup.span_s.0 - 2.0 * GROUP_NODE_S;
+    let t1 = setup.span_s.1 + 2.0 * GROUP_NODE_S;
+    let n = ((t1 - t0) / GROUP_NODE_S).ceil().max(0.0) as usize + 1;
+    let v = (0..n)
+        .map(|k| {
+            let args = DoodsonArguments::at_unix_seconds(
+                setup.start_unix_s + t0 + k as f64 * GROUP_NODE_S,
+            );
+            let mut sum = 0.0;
+            for (fc, fs, waves) in &per_term {
+                let (mut cs, mut sn) = (0.0, 0.0);
+                for (w, wg, delta) in waves {
+                    let (s, c) = sin_cos(w.argument_rad(&args) + wg.phase_rad);
+                    cs += delta * wg.amplitude_nm_s2 * c;
+                    sn += delta * wg.amplitude_nm_s2 * s;
+                }
+                // cos(x + φ) = cos x·cos φ − sin x·sin φ.
+                sum += fc * cs - fs * sn;
+            }
+            sum
+        })
+        .collect();
+    Nodes { t0, v }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn setup() -> ChainSetup {
+        ChainSetup {
+            start_unix_s: 1.6e9,
+            site: (34.0, 116.8, 50.0),
+            span_s: (0.0, 86_400.0),
+            unit_per_g: 1.0,
+            input_g: 1.0,
+            ambient: vec!["room_c".into()],
+        }
+    }
+
+    fn drive(t_s: f64, temperature_c: f64) -> Drive<'static> {
+        Drive {
+            t_s,
+            temperature_c,
+            input_g: 1.0,
+            tilt_rad: 0.0,
+            pressure_dev_pa: 0.0,
+            ambient: &[0.0],
+        }
+    }
+
+    #[test]
+    fn every_kind_parses_from_its_catalogue_name_and_validates() {
+        let text = r#"
+            [[effects]]
+            kind = "step"
+            time_s = 100.0
+            amplitude = 2.0
+            [[effects]]
+            kind = "tidal_gravity"
+            amplitude_factor = 0.1
+            groups = [{ name = "M2", factor = 0.01, phase_deg = 2.0 }]
+            [[effects]]
+            kind = "channel_noise"
+            channel = "temperature_c"
+            noise = 0.003
+        "#;
+        #[derive(Deserialize)]
+        struct W {
+            effects: Vec<ScenarioEffect>,
+        }
+        let w: W = toml::from_str(text).unwrap();
+        assert_eq!(
+            w.effects[0],
+            ScenarioEffect::Step {
+                time_s: 100.0,
+                size: 2.0
+            }
+        );
+        assert_eq!(w.effects[1].name(), "tidal_gravity");
+        for (i, e) in w.effects.iter().enumerate() {
+            e.validate(i).unwrap();
+        }
+    }
+
+    #[test]
+    fn validation_names_the_entry_and_the_field() {
+        let e = ScenarioEffect::Warmup {
+            tau_s: -1.0,
+            amplitude: 1.0,
+        };
+        let m = e.validate(3).unwrap_err();
+        assert!(m.contains("effects[3] (warmup): tau_s"), "{m}");
+        let e = ScenarioEffect::TidalGravity {
+            amplitude_factor: 0.0,
+            delay_s: 0.0,
+            groups: vec![TideGroupTerm {
+                name: "X9".into(),
+                factor: 1.0,
+                phase_deg: 0.0,
+            }],
+        };
+        assert!(e.validate(0).unwrap_err().contains("X9"));
+        let e = ScenarioEffect::ChannelNoise {
+            channel: "output_v".into(),
+            noise: 1.0,
+        };
+        assert!(e.validate(0).unwrap_err().contains("output_v"));
+        assert_eq!(group_band("P1K1+J1"), Some((0.986, 1.5)));
+    }
+
+    #[test]
+    fn lag_hysteresis_and_step_follow_their_definitions() {
+        let mut c = EffectChain::new(
+            &[
+                ScenarioEffect::ThermalLag {
+                    tau_s: 100.0,
+                    coefficient: 2.0,
+                },
+                ScenarioEffect::ThermalHysteresis {
+                    half_width: 1.0,
+                    play_half_width_c: 0.5,
+                },
+            ],
+            setup(),
+        )
+        .unwrap();
+        // Temperature steps by 1 °C at t = 10 s: after one τ the lag error is −e^{−1}·2, and
+        // the play has moved to T − r (heating branch, +1).
+        assert_eq!(c.output_term(&drive(0.0, 0.0)), 0.0);
+        let y1 = c.output_term(&drive(10.0, 1.0));
+        assert!((y1 - (2.0 * ((1.0 - (-0.1f64).exp()) - 1.0) + 1.0)).abs() < 1e-12);
+        let y = c.output_term(&drive(110.0, 1.0));
+        let lag = 2.0 * ((1.0 - (-1.1f64).exp()) - 1.0);
+        assert!((y - (lag + 1.0)).abs() < 1e-12, "{y}");
+        let mut s = EffectChain::new(
+            &[ScenarioEffect::Step {
+                time_s: 50.0,
+                size: 3.0,
+            }],
+            setup(),
+        )
+        .unwrap();
+        assert_eq!(s.output_term(&drive(49.9, 0.0)), 0.0);
+        assert_eq!(s.output_term(&drive(50.0, 0.0)), 3.0);
+    }
+
+    #[test]
+    fn an_unknown_ambient_channel_is_refused_by_name() {
+        let e = [ScenarioEffect::AmbientCoupling {
+            channel: "humidity".into(),
+            coefficient: 1.0,
+            lag_s: 0.0,
+        }];
+        let err = EffectChain::new(&e, setup()).unwrap_err();
+        assert!(err.to_string().contains("humidity"), "{err}");
+    }
+
+    #[test]
+    fn a_group_term_at_factor_one_is_the_models_group_tide() {
+        // M2 alone at factor 1 against the model's full tide: the semidiurnal band dominates
+        // at mid latitude, so the two correlate strongly and the M2 term is ~half the range.
+        let mut c = EffectChain::new(
+            &[ScenarioEffect::TidalGravity {
+                amplitude_factor: 0.0,
+                delay_s: 0.0,
+                groups: vec![TideGroupTerm {
+                    name: "M2".into(),
+                    factor: 1.0,
+                    phase_deg: 0.0,
+                }],
+            }],
+            setup(),
+        )
+        .unwrap();
+        let mut full = EffectChain::new(
+            &[ScenarioEffect::TidalGravity {
+                amplitude_factor: 1.0,
+                delay_s: 0.0,
+                groups: vec![],
+            }],
+            setup(),
+        )
+        .unwrap();
+        let (mut a, mut b) = (Vec::new(), Vec::new());
+        for i in 0..288 {
+            let t = 300.0 * f64::from(i);
+            a.push(c.output_term(&drive(t, 0.0)));
+            b.push(full.output_term(&drive(t, 0.0)));
+        }
+        let ptp = |v: &[f64]| {
+            v.iter().cloned().fold(f64::MIN, f64::max) - v.iter().cloned().fold(f64::MAX, f64::min)
+        };
+        // In g: the full tide spans ~1–3e-7 g, M2 alone a good part of it.
+        assert!((0.5e-7..4e-7).contains(&ptp(&b)), "{}", ptp(&b));
+        assert!(
+            ptp(&a) > 0.2 * ptp(&b) && ptp(&a) < 1.2 * ptp(&b),
+            "{}",
+            ptp(&a)
+        );
+    }
+}
