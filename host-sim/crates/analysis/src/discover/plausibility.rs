@@ -72,7 +72,7 @@ pub fn noise_floor(ds: &Dataset, contribution: &[f64], noise: &NoiseModel) -> Op
 /// The noise model's Allan variance at `tau_s` from its state-space levels (white of variance
 /// `white_var` per point of spacing `dt_s`, the flicker components, the random walk), so that a
 /// model without fitted Allan coefficients (the white fallback) has its floor too.
-fn model_avar(noise: &NoiseModel, dt_s: f64, tau_s: f64) -> f64 {
+pub fn model_avar(noise: &NoiseModel, dt_s: f64, tau_s: f64) -> f64 {
     let f: f64 = noise
         .flicker
         .iter()
