@@ -177,3 +177,63 @@ fn no_hysteresis_is_named_on_null_logs_with_gaps_spikes_a_quake_or_a_random_walk
     eprintln!("ABSORBERS: hysteresis named on {hysteresis} of {logs} null logs; {extras} effects accepted in all");
     assert_eq!(hysteresis, 0, "hysteresis named on null logs");
 }
+
+/// Logs of the lag-or-loop test (≈ 2 s each in the dev profile).
+const ONE_RATE_LOGS: usize = 3;
+
+#[test]
+fn a_lag_on_a_programme_of_one_rate_is_reported_as_ambiguous_with_a_loop() {
+    // A ±0.5 °C triangle of ONE rate (8 h period): after each reversal a first-order lag's
+    // error relaxes exponentially in the temperature moved, which is exactly a Preisach
+    // distribution of play widths — no fit can tell them apart, so whichever is named must be
+    // reported as "ambiguous: A or B" with the other's parameters and what would separate them.
+    // The lag: 20–40 min on the true temperature, 5–10 µg/°C (2–6 µg of offset on the ramps).
+    let mut rng = synth::rng(0x0A3B_1601);
+    let mut said = 0;
+    let mut named = 0;
+    for i in 0..ONE_RATE_LOGS {
+        let mut r = synth::rng(rng.random::<u64>());
+        let st = synth::station(
+            ROWS,
+            DT_S,
+            synth::Thermal::Cycling {
+                amplitude_c: 0.5,
+                period_s: 8.0 * 3600.0,
+            },
+            &mut r,
+        );
+        let noise = synth::draw_noise(&mut r);
+        let tau = r.random_range(1200.0..2400.0);
+        let k = hidden::sign(&mut r) * r.random_range(5.0e-6..10.0e-6);
+        let lag = synth::low_pass(&st.temp_true_c, DT_S, tau);
+        let extra: Vec<f64> = lag
+            .iter()
+            .zip(&st.temp_true_c)
+            .map(|(l, t)| k * (l - t))
+            .collect();
+        let y = synth::output_g(&st, &noise, &extra, &mut r);
+        let (_, d) = hidden::discover_blind(&synth::log_of(&st, y));
+        let thermal = d
+            .selection
+            .accepted
+            .iter()
+            .find(|a| matches!(a.effect.name(), "thermal_lag" | "thermal_hysteresis"));
+        let amb = thermal.and_then(|a| a.ambiguous_with.as_ref());
+        eprintln!(
+            "one-rate lag {i}: τ {tau:.0} s, {:.1} µg/°C → {:?}; ambiguous with {:?}",
+            k * 1e6,
+            hidden::accepted_with_params(&d),
+            amb.map(|a| (&a.other, a.other_delta_bic, a.overlap))
+        );
+        named += usize::from(thermal.is_some());
+        if let Some(a) = amb {
+            said += 1;
+            let j = accomp_host::discover::report::json(&d);
+            assert!(j.to_string().contains("ambiguous_with"), "JSON");
+            assert!(accomp_host::discover::report::text(&d).contains("ambiguous: "));
+            assert!(!a.other_parameters.is_empty() && !a.separates.is_empty());
+        }
+    }
+    eprintln!("ONE-RATE LAG: thermal cause named {named}/{ONE_RATE_LOGS}, ambiguity said {said}");
+    assert_eq!(named, ONE_RATE_LOGS);
+}

@@ -97,12 +97,124 @@ pub fn below_floor(ds: &Dataset, contribution: &[f64], noise: &NoiseModel) -> Op
     })
 }
 
+/// Two candidates of one round whose ΔBIC differ by less than this explain the data equally
+/// (the lag-or-loop margin of `hysteresis`).
+pub const AMBIGUOUS_DBIC: f64 = super::hysteresis::LAG_OR_LOOP_DBIC;
+
+/// ... when their fitted shapes (projections of the whitened residual on each, off the current
+/// model) overlap by at least this (cosine): they explain the same part of the residual.
+pub const AMBIGUOUS_OVERLAP: f64 = 0.8;
+
+/// An accepted effect that another cause explains equally: reported as "ambiguous: A or B".
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct Ambiguity {
+    /// The other cause.
+    pub other: String,
+    /// Its ΔBIC in the round the effect was accepted in.
+    pub other_delta_bic: f64,
+    /// Its parameters fitted in the effect's place.
+    pub other_parameters: Vec<(String, super::effects::Param)>,
+    /// Cosine between the two fitted shapes (whitened, off the current model).
+    pub overlap: f64,
+    /// What measurement would separate them.
+    pub separates: String,
+}
+
+/// The fitted shape of `cols` (whitened and off the current model) in the whitened residual
+/// `r_w`: the residual's projection on their span (Gram–Schmidt).
+pub fn fitted_shape(cols: &[Vec<f64>], r_w: &[f64]) -> Vec<f64> {
+    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+    let mut q: Vec<Vec<f64>> = Vec::new();
+    for c in cols {
+        let mut v = c.clone();
+        for b in &q {
+            let k = dot(&v, b);
+            v.iter_mut().zip(b).for_each(|(x, y)| *x -= k * y);
+        }
+        let nv = dot(&v, &v).sqrt();
+        if nv > 0.0 && nv.is_finite() {
+            q.push(v.into_iter().map(|x| x / nv).collect());
+        }
+    }
+    let mut p = vec![0.0; r_w.len()];
+    for b in &q {
+        let k = dot(r_w, b);
+        p.iter_mut().zip(b).for_each(|(x, y)| *x += k * y);
+    }
+    p
+}
+
+/// Cosine between two fitted shapes (0 when either is zero).
+pub fn overlap(a: &[f64], b: &[f64]) -> f64 {
+    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+    let d = (dot(a, a) * dot(b, b)).sqrt();
+    if d > 0.0 {
+        dot(a, b) / d
+    } else {
+        0.0
+    }
+}
+
+/// What measurement would tell two causes apart.
+pub fn separating_measurement(a: &Effect, b: &Effect) -> String {
+    use Effect::*;
+    let pair = |x: &Effect, y: &Effect| {
+        (std::mem::discriminant(a) == std::mem::discriminant(x)
+            && std::mem::discriminant(b) == std::mem::discriminant(y))
+            || (std::mem::discriminant(a) == std::mem::discriminant(y)
+                && std::mem::discriminant(b) == std::mem::discriminant(x))
+    };
+    if pair(&ThermalLag, &ThermalHysteresis) {
+        "temperature ramps of different rates (a lag's offset scales with the rate, a loop's \
+         does not) or a hold after a ramp (a lag settles, a loop stays on its branch)"
+            .into()
+    } else if pair(&Warmup, &AgingDrift) {
+        "a longer record (an exponential settles, a logarithm keeps growing)".into()
+    } else if pair(&TiltCoupling, &BuildingTilt) || pair(&TiltCoupling, &TidalTilt) {
+        "a tilt excursion off the solar day (a deliberate tilt of the pier or the mount)".into()
+    } else if pair(&Step { duration_s: 0.0 }, &Warmup)
+        || pair(&Step { duration_s: 0.0 }, &AgingDrift)
+    {
+        "a record that continues past the change (a step holds its level, a drift goes on)".into()
+    } else {
+        format!(
+            "a record in which the {} and {} columns differ more than here",
+            a.name(),
+            b.name()
+        )
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
     fn white(var: f64) -> NoiseModel {
         NoiseModel::white(var)
+    }
+
+    #[test]
+    fn two_columns_fitting_the_same_leftover_overlap_and_an_orthogonal_one_does_not() {
+        let n = 400;
+        let r: Vec<f64> = (0..n).map(|i| (i as f64 * 0.05).sin()).collect();
+        let a = vec![r.clone()];
+        // Nearly the same shape (a small phase shift): overlap near 1.
+        let b = vec![(0..n)
+            .map(|i| (i as f64 * 0.05 + 0.1).sin())
+            .collect::<Vec<_>>()];
+        // An orthogonal one (a cosine over whole cycles would be; a constant here) explains little.
+        let c = vec![vec![1.0; n]];
+        let (pa, pb, pc) = (
+            fitted_shape(&a, &r),
+            fitted_shape(&b, &r),
+            fitted_shape(&c, &r),
+        );
+        assert!(overlap(&pa, &pb) > 0.99, "{}", overlap(&pa, &pb));
+        assert!(overlap(&pa, &pc) > 0.0 && overlap(&pa, &pc) < AMBIGUOUS_OVERLAP);
+        assert!(
+            separating_measurement(&Effect::ThermalHysteresis, &Effect::ThermalLag)
+                .contains("different rates")
+        );
     }
 
     #[test]

@@ -128,6 +128,8 @@ pub struct Accepted {
     pub cv_before: CvScore,
     /// After.
     pub cv_after: CvScore,
+    /// Another cause of the same round that explains the data equally (`plausibility`).
+    pub ambiguous_with: Option<super::plausibility::Ambiguity>,
     /// Forward-chaining scores before/after (fit on the first part, predict the rest).
     pub forward_before: CvScore,
     /// After.
@@ -186,6 +188,18 @@ impl Current<'_> {
     /// −2 ln L of the current model under its noise model (constant dropped).
     pub(super) fn neg2_loglik(&self) -> f64 {
         self.rss + self.rows.kalman.as_ref().map_or(0.0, |w| w.log_det())
+    }
+
+    /// Raw columns whitened and projected off the current model.
+    fn projected(&self, extra: &[Vec<f64>]) -> Vec<Vec<f64>> {
+        extra
+            .iter()
+            .map(|c| {
+                let mut w = self.rows.whiten(c, self.phi);
+                super::baseline::orthogonalize(&self.basis.q, &mut w);
+                w
+            })
+            .collect()
     }
 
     /// Whitened RSS with extra raw columns (projected on the current basis first).
@@ -979,6 +993,7 @@ pub fn select(
                     o.delta_bic,
                 ));
             }
+            let ambiguous_with = ambiguity(&cur, &cols, target, &s, &rescored, &scored);
             if let Some(p) = &s.preisach {
                 ctx_own.hysteresis = Some(p.clone());
             }
@@ -1022,6 +1037,7 @@ pub fn select(
                 std_after,
                 cv_before: before,
                 cv_after: after,
+                ambiguous_with,
                 forward_before: fwd_before,
                 forward_after: fwd_after,
             });
@@ -1457,6 +1473,55 @@ fn implausible(
         }
         _ => None,
     }
+}
+
+/// Another candidate of the round that explains the data as well as the accepted `s`: a
+/// different cause whose ΔBIC is within `plausibility::AMBIGUOUS_DBIC` of it (and passes the
+/// margin) and whose fitted shape overlaps its own by at least `AMBIGUOUS_OVERLAP`, with its
+/// parameters fitted in `s`'s place and what would separate the two.
+fn ambiguity(
+    cur: &Current,
+    cols: &[Vec<f64>],
+    target: &[f64],
+    s: &Scored,
+    rescored: &[Scored],
+    scored: &[Scored],
+) -> Option<super::plausibility::Ambiguity> {
+    use super::plausibility as pl;
+    if !s.delta_bic.is_finite() || matches!(s.effect, Effect::Step { .. }) {
+        return None;
+    }
+    let mine = pl::fitted_shape(&cur.projected(&s.cols), &cur.r_w);
+    rescored
+        .iter()
+        .chain(scored.iter().skip(RESCORE))
+        .filter(|c| c.effect.name() != s.effect.name() && c.delta_bic < 0.0)
+        .filter(|c| (c.delta_bic - s.delta_bic).abs() < pl::AMBIGUOUS_DBIC)
+        .find_map(|c| {
+            let o = pl::overlap(&mine, &pl::fitted_shape(&cur.projected(&c.cols), &cur.r_w));
+            (o.abs() >= pl::AMBIGUOUS_OVERLAP).then(|| {
+                let mut trial = cols.to_vec();
+                trial.extend(c.cols.iter().cloned());
+                let fit = gls(&trial, target, 0.0, &cur.rows);
+                let k0 = cols.len();
+                pl::Ambiguity {
+                    other: c.effect.name().to_owned(),
+                    other_delta_bic: c.delta_bic,
+                    other_parameters: effects::parameters(
+                        &c.effect,
+                        cur.ds,
+                        Param {
+                            value: c.theta,
+                            sigma: f64::NAN,
+                        },
+                        &fit.beta[k0..],
+                        &fit.se[k0..],
+                    ),
+                    overlap: o,
+                    separates: pl::separating_measurement(&s.effect, &c.effect),
+                }
+            })
+        })
 }
 
 /// A round's candidate and its validation scores (CV before/after, forward before/after).
