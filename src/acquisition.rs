@@ -26,8 +26,7 @@ use embedded_hal::spi::{Mode, Phase, Polarity, SpiDevice};
 
 use crate::drivers::ad7124::{self, Ad7124};
 use crate::drivers::ads1262::{self, registers::POWER_RESET, Ads1262, Channel, DataRate};
-use crate::drivers::Error;
-use crate::pipeline::{ChannelFlags, RawSample};
+use crate::pipeline::{ChannelFlags, LossFlags, RawSample};
 
 /// The SPI mode and clock a bus actually runs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -129,35 +128,61 @@ pub mod board {
     const _: () = assert!(ADS1262_SPI.accepts(&ADS1262_BUS) && AD7124_SPI.accepts(&AD7124_BUS));
 }
 
-/// The pipeline's channel flag for a driver error: every error names at least one bit.
-pub fn flags_for<S, P>(e: &Error<S, P>) -> ChannelFlags {
-    let bits = match e {
-        // The bytes arrived but cannot be trusted (or the bus itself failed).
-        Error::Checksum { .. } | Error::CrcMismatch { .. } | Error::Spi(_) => {
-            ChannelFlags::CHECKSUM
-        }
-        Error::AdcError(f) => {
-            let mut b = 0;
-            if f.reference_missing() {
-                b |= ChannelFlags::OPEN_CIRCUIT;
+/// A converter error as the pipeline's channel flags: every error names at least one bit.
+pub trait ChannelFault {
+    /// The flags this error gives the channel it happened on.
+    fn channel_flags(&self) -> ChannelFlags;
+}
+
+impl<S, P> ChannelFault for ads1262::Error<S, P> {
+    fn channel_flags(&self) -> ChannelFlags {
+        use ads1262::Error as E;
+        ChannelFlags(match self {
+            // The bytes arrived but cannot be trusted (or the bus itself failed).
+            E::Checksum { .. } | E::CrcMismatch { .. } | E::Spi(_) => ChannelFlags::CHECKSUM,
+            E::UnexpectedReset => ChannelFlags::RESET,
+            E::NotResponding { .. } => ChannelFlags::NOT_RESPONDING,
+            // No fresh, valid conversion: timeout, stale data, or a chip that does not take its
+            // configuration.
+            E::DrdyTimeout
+            | E::StaleData
+            | E::Pin(_)
+            | E::InvalidConfig
+            | E::DeviceId { .. }
+            | E::ReadBack { .. } => ChannelFlags::DRDY_TIMEOUT,
+        })
+    }
+}
+
+impl<S, P> ChannelFault for ad7124::Error<S, P> {
+    fn channel_flags(&self) -> ChannelFlags {
+        use ad7124::Error as E;
+        ChannelFlags(match self {
+            E::CrcMismatch { .. } | E::Spi(_) => ChannelFlags::CHECKSUM,
+            E::AdcError(f) => {
+                let mut b = 0;
+                if f.reference_missing() {
+                    b |= ChannelFlags::OPEN_CIRCUIT;
+                }
+                if f.saturated() || f.input_out_of_range() || f.conversion() || b == 0 {
+                    b |= ChannelFlags::SATURATION;
+                }
+                b
             }
-            if f.saturated() || f.input_out_of_range() || f.conversion() || b == 0 {
-                b |= ChannelFlags::SATURATION;
-            }
-            b
-        }
-        Error::UnexpectedReset => ChannelFlags::RESET,
-        Error::NotResponding { .. } => ChannelFlags::NOT_RESPONDING,
-        // No fresh, valid conversion: timeout, stale data, or a chip that does not take its
-        // configuration.
-        Error::DrdyTimeout
-        | Error::StaleData
-        | Error::Pin(_)
-        | Error::InvalidConfig
-        | Error::DeviceId { .. }
-        | Error::ReadBack { .. } => ChannelFlags::DRDY_TIMEOUT,
-    };
-    ChannelFlags(bits)
+            E::UnexpectedReset => ChannelFlags::RESET,
+            E::NotResponding { .. } => ChannelFlags::NOT_RESPONDING,
+            E::DrdyTimeout
+            | E::Pin(_)
+            | E::InvalidConfig
+            | E::DeviceId { .. }
+            | E::ReadBack { .. } => ChannelFlags::DRDY_TIMEOUT,
+        })
+    }
+}
+
+/// The pipeline's channel flags for a driver error of either converter.
+pub fn flags_for<E: ChannelFault>(e: &E) -> ChannelFlags {
+    e.channel_flags()
 }
 
 /// The drivers' data-ready input when the firmware does not poll a pin (the ADS1262's DRDY is
@@ -192,6 +217,12 @@ pub struct AdsReading {
     pub tilt_flags: ChannelFlags,
     /// Firmware time of the accelerometer DRDY edge (or of the timeout), µs.
     pub time_us: u64,
+    /// Sequence number: one per reading slot of the pair clock. Readings the core could not
+    /// take in time (a stall longer than a pair period) leave a gap here.
+    pub seq: u32,
+    /// Why readings are missing before this one ([`LossFlags::STALL`] from the sequencer; the
+    /// firmware adds the losses it sees later).
+    pub lost: LossFlags,
 }
 
 /// Counters for Info and the logs.
@@ -237,6 +268,11 @@ pub struct AdsSequencer<SPI, DRDY, D> {
     diagnosis: u8,
     pending_rate: Option<DataRate>,
     counters: SequencerCounters,
+    /// Sequence number of the next reading.
+    next_seq: u32,
+    /// DRDY time of the previous pair's accelerometer half, while the pair clock is steady
+    /// (None after a (re)start or a change of rate).
+    last_pair_us: Option<u64>,
 }
 
 impl<SPI, DRDY, D> AdsSequencer<SPI, DRDY, D>
@@ -263,6 +299,8 @@ where
                 reinits: 0,
                 errors: 0,
             },
+            next_seq: 0,
+            last_pair_us: None,
         }
     }
 
@@ -326,6 +364,34 @@ where
         self.converting = Some(Channel::Accelerometer);
         self.accel = None;
         self.last_progress_us = now_us;
+        self.last_pair_us = None;
+    }
+
+    /// Gives `reading` the next sequence number. A pair that comes more than half a pair
+    /// period late (the core did not serve DRDY: a flash erase, interrupts off) skips the
+    /// numbers of the pairs that would have come meanwhile and says STALL.
+    fn numbered(&mut self, mut reading: AdsReading, pair: bool) -> AdsReading {
+        if pair {
+            if let Some(prev) = self.last_pair_us {
+                // 32-bit arithmetic (one UDIV in the DRDY handler): pair periods are below
+                // 2³² µs, and a stall of more than 71 minutes saturates to u32::MAX numbers.
+                let period = u32::try_from(self.pair_period_us())
+                    .unwrap_or(u32::MAX)
+                    .max(1);
+                let dt = u32::try_from(reading.time_us.saturating_sub(prev)).unwrap_or(u32::MAX);
+                let missed = (dt.saturating_add(period / 2) / period).saturating_sub(1);
+                if missed > 0 {
+                    self.next_seq = self.next_seq.wrapping_add(missed);
+                    reading.lost = LossFlags(reading.lost.0 | LossFlags::STALL);
+                }
+            }
+            self.last_pair_us = Some(reading.time_us);
+        } else {
+            self.last_pair_us = None;
+        }
+        reading.seq = self.next_seq;
+        self.next_seq = self.next_seq.wrapping_add(1);
+        reading
     }
 
     /// DRDY fell at `now_us`: read what it announced, switch the mux, and return the pair when
@@ -347,7 +413,10 @@ where
             Err(e) => {
                 self.counters.errors = self.counters.errors.wrapping_add(1);
                 let flags = flags_for(&e);
-                if matches!(e, Error::UnexpectedReset | Error::NotResponding { .. }) {
+                if matches!(
+                    e,
+                    ads1262::Error::UnexpectedReset | ads1262::Error::NotResponding { .. }
+                ) {
                     // The configuration is gone or nobody answers: the pair in progress is lost;
                     // say why in a reading and re-initialise in steps from the tick.
                     self.diagnosis = flags.0;
@@ -371,13 +440,16 @@ where
                     now_us,
                 ));
                 self.switch_to(Channel::Accelerometer);
-                Some(AdsReading {
+                let reading = AdsReading {
                     accel,
                     accel_flags,
                     tilt: code,
                     tilt_flags: flags,
                     time_us,
-                })
+                    seq: 0,
+                    lost: LossFlags(0),
+                };
+                Some(self.numbered(reading, true))
             }
             None => {
                 // A conversion of an input we cannot name: start the pair again.
@@ -450,14 +522,17 @@ where
         Some(self.fault_reading(now_us, self.timeout_flags()))
     }
 
-    fn fault_reading(&self, now_us: u64, flags: ChannelFlags) -> AdsReading {
-        AdsReading {
+    fn fault_reading(&mut self, now_us: u64, flags: ChannelFlags) -> AdsReading {
+        let reading = AdsReading {
             accel: 0,
             accel_flags: flags,
             tilt: 0,
             tilt_flags: flags,
             time_us: now_us,
-        }
+            seq: 0,
+            lost: LossFlags(0),
+        };
+        self.numbered(reading, false)
     }
 
     /// Why did DRDY stop? POWER.RESET = 1 means the chip reset (brown-out: START1 was lost with
@@ -489,6 +564,8 @@ where
 
     fn switch_to(&mut self, channel: Channel) {
         if let Some(rate) = self.pending_rate.take() {
+            // The pair clock changes: the next pair starts it afresh.
+            self.last_pair_us = None;
             if self.ads.set_data_rate(rate).is_err() {
                 self.counters.errors = self.counters.errors.wrapping_add(1);
             }
@@ -689,19 +766,23 @@ where
                 self.diagnosis = 0;
                 Some(self.reading(now_us, code.0, 0))
             }
-            Err(Error::AdcError(f))
+            Err(ad7124::Error::AdcError(f))
                 if !(f.spi() || f.spi_crc() || f.register_map_crc() || f.supply()) =>
             {
                 // An analog condition of the measurement (open RTD, saturation): the part works
                 // and keeps converting; the reading carries the flag.
                 self.last_result_us = now_us;
-                Some(self.reading(now_us, 0, flags_for::<(), ()>(&Error::AdcError(f)).0))
+                Some(self.reading(
+                    now_us,
+                    0,
+                    flags_for(&ad7124::Error::<(), ()>::AdcError(f)).0,
+                ))
             }
             Err(e) => Some(self.transport_error(now_us, &e)),
         }
     }
 
-    fn transport_error<S, P>(&mut self, now_us: u64, e: &Error<S, P>) -> RtdReading {
+    fn transport_error<S, P>(&mut self, now_us: u64, e: &ad7124::Error<S, P>) -> RtdReading {
         self.counters.errors = self.counters.errors.wrapping_add(1);
         let flags = flags_for(e).0;
         if flags & ChannelFlags::NOT_RESPONDING != 0 {
@@ -815,37 +896,59 @@ mod tests {
 
     #[test]
     fn every_driver_error_names_a_flag() {
-        type E = Error<(), ()>;
-        let all: [E; 12] = [
-            Error::Spi(()),
-            Error::Pin(()),
-            Error::DrdyTimeout,
-            Error::Checksum {
+        use ads1262::Error as A;
+        let ads: [A<(), ()>; 11] = [
+            A::Spi(()),
+            A::Pin(()),
+            A::DrdyTimeout,
+            A::Checksum {
                 expected: 0,
                 received: 1,
             },
-            Error::CrcMismatch {
+            A::CrcMismatch {
                 expected: 0,
                 received: 1,
             },
-            Error::InvalidConfig,
-            Error::DeviceId { found: 3 },
-            Error::NotResponding { found: 0xFF },
-            Error::ReadBack {
+            A::InvalidConfig,
+            A::DeviceId { found: 3 },
+            A::NotResponding { found: 0xFF },
+            A::ReadBack {
                 register: 1,
                 written: 1,
                 read: 0,
             },
-            Error::StaleData,
-            Error::UnexpectedReset,
-            Error::AdcError(ad7124::ErrorFlags(0)),
+            A::StaleData,
+            A::UnexpectedReset,
         ];
-        for e in all {
+        for e in ads {
+            assert_ne!(flags_for(&e).0, 0, "{e:?}");
+        }
+        use ad7124::Error as R;
+        let rtd: [R<(), ()>; 10] = [
+            R::Spi(()),
+            R::Pin(()),
+            R::DrdyTimeout,
+            R::CrcMismatch {
+                expected: 0,
+                received: 1,
+            },
+            R::InvalidConfig,
+            R::DeviceId { found: 3 },
+            R::NotResponding { found: 0xFF },
+            R::ReadBack {
+                register: 1,
+                written: 1,
+                read: 0,
+            },
+            R::UnexpectedReset,
+            R::AdcError(ad7124::ErrorFlags(0)),
+        ];
+        for e in rtd {
             assert_ne!(flags_for(&e).0, 0, "{e:?}");
         }
         let open = ad7124::ErrorFlags(1 << 11);
         assert_eq!(
-            flags_for::<(), ()>(&Error::AdcError(open)).0,
+            flags_for(&R::<(), ()>::AdcError(open)).0,
             ChannelFlags::OPEN_CIRCUIT
         );
     }
@@ -859,6 +962,8 @@ mod tests {
             tilt: 6,
             tilt_flags: ChannelFlags::default(),
             time_us: 5_000_000,
+            seq: 0,
+            lost: LossFlags(0),
         };
         assert!(a.assemble(&pair).rtd_flags.has(ChannelFlags::DRDY_TIMEOUT));
         a.rtd(RtdReading {

@@ -16,14 +16,15 @@
 //! 1.5 g ≈ 2 V. The maths only sees the gain, 1 either way, so no result depended on the
 //! contradiction; `tests::the_drivers_board_settings_are_the_front_end_constants` now pins it.
 
-use crate::adc::{Ad7124Code, AdcError, AdcScale, Ads1262Code, Coding};
+use crate::adc::{Ad7124Code, AdcError, AdcScale, Ads1262Code};
+use crate::drivers::{ad7124, ads1262};
 use crate::table::CalibrationTable;
 use crate::units::{Celsius, Ohms, RtdOhms, TiltArcsec, Volts};
 
 /// ADS1262 reference: the internal 2.5 V reference.
 pub const ADS1262_VREF: Volts = Volts(2.5);
 /// ADS1262 result width (ADC1, 32-bit two's complement).
-pub const ADS1262_BITS: u8 = 32;
+pub const ADS1262_BITS: u8 = ads1262::CODE_BITS;
 /// Full-scale magnitude of the ADS1262 code, 2^31: ±Vref/gain ↔ ±2^31.
 pub const ADS1262_HALF_SCALE: f64 = 2_147_483_648.0;
 /// ADS1262 PGA gain of the accelerometer channel (PGA enabled; see the module text).
@@ -32,7 +33,7 @@ pub const ACCEL_PGA_GAIN: f64 = 1.0;
 pub const TILT_PGA_GAIN: f64 = 1.0;
 
 /// AD7124-4 result width (24-bit, unipolar on the RTD channel).
-pub const AD7124_BITS: u8 = 24;
+pub const AD7124_BITS: u8 = ad7124::CODE_BITS;
 /// Full scale of the unipolar AD7124 code, 2^24: R_ref/gain ↔ 2^24.
 pub const AD7124_FULL_SCALE: f64 = 16_777_216.0;
 /// Largest AD7124 code (all ones): reads as saturated (an open RTD).
@@ -60,31 +61,13 @@ pub fn ads1262_scale_with_vref(
     gain_correction: f64,
     offset: Volts,
 ) -> AdcScale {
-    AdcScale {
-        bits: ADS1262_BITS,
-        coding: Coding::TwosComplement,
-        pga_gain,
-        vref,
-        gain_correction,
-        offset,
-    }
+    ads1262::code_scale(pga_gain, vref, gain_correction, offset)
 }
 
 /// How AD7124 codes read: 24 bits, unipolar or offset binary (bipolar), the PGA gain, the
 /// reference voltage (for volt readings) and the gain correction.
 pub fn ad7124_scale(bipolar: bool, pga_gain: f64, vref: Volts, gain_correction: f64) -> AdcScale {
-    AdcScale {
-        bits: AD7124_BITS,
-        coding: if bipolar {
-            Coding::OffsetBinary
-        } else {
-            Coding::Unipolar
-        },
-        pga_gain,
-        vref,
-        gain_correction,
-        offset: Volts(0.0),
-    }
+    ad7124::code_scale(bipolar, pga_gain, vref, gain_correction)
 }
 
 /// How the AD7124's ratiometric RTD codes read: unipolar, the PGA gain and the gain correction.

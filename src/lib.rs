@@ -24,4 +24,5 @@ pub mod service;
 pub mod storage;
 pub mod table;
 pub mod tide;
+pub mod timebase;
 pub mod units;

@@ -34,10 +34,12 @@ mod app {
 
     use accomp::acquisition::{AdsReading, RtdReading, SampleAssembler};
     use accomp::drivers::ads1262::DataRate;
+    use accomp::pipeline::LossFlags;
     use accomp::protocol::{
         encode_frame, DeviceMessage, FrameDecoder, FrameError, MAX_FRAME_LEN, PROTOCOL_VERSION,
     };
     use accomp::service::{BootTable, Service};
+    use accomp::timebase::Extended64;
     use heapless::Vec;
     use rtic_monotonics::fugit::ExtU64 as _;
     use rtic_monotonics::Timebase as _;
@@ -73,6 +75,9 @@ mod app {
 
     /// Frames lost because the inbound queue was full (added to the service's counter).
     static QUEUE_DROPS: AtomicU32 = AtomicU32::new(0);
+    /// Readings lost because the inbound queue was full: their seq numbers are the gap, the
+    /// next reading says QUEUE_FULL, Info counts them.
+    static READINGS_DROPPED: AtomicU32 = AtomicU32::new(0);
     /// Readings produced by the ADS1262 sequencer (DRDY or timeout): acquisition progress.
     static ACQ_PROGRESS: AtomicU32 = AtomicU32::new(0);
     /// Items the worker has processed: worker progress.
@@ -111,6 +116,9 @@ mod app {
         // Boot restores the newest valid calibration slot (none: samples flag NO_CALIBRATION).
         let mut service = Service::new(board::BOARD, parts.flash, board::SLOT_LAYOUT);
         service.set_boot_report(parts.boot);
+        let (watchdog_resets, brownout_resets) = board::count_resets(parts.boot);
+        service.losses_mut().watchdog_resets = watchdog_resets;
+        service.losses_mut().brownout_resets = brownout_resets;
         defmt::info!(
             "reset cause {=u8:#x}, clock fallback {}",
             parts.boot.reset_cause,
@@ -180,8 +188,15 @@ mod app {
         board::acknowledge_drdy(cx.local.drdy_pin);
         ACQ_PROGRESS.fetch_add(1, Ordering::Relaxed);
         if let Some(reading) = cx.shared.ads.lock(|ads| ads.on_drdy(now)) {
-            // A full queue loses this reading; the frame's seq gap shows it on the host.
-            let _ = cx.local.drdy_to_worker.try_send(Inbound::Ads(reading));
+            // A full queue loses this reading: counted, and flagged on the next one.
+            if cx
+                .local
+                .drdy_to_worker
+                .try_send(Inbound::Ads(reading))
+                .is_err()
+            {
+                READINGS_DROPPED.fetch_add(1, Ordering::Relaxed);
+            }
         }
     }
 
@@ -201,10 +216,14 @@ mod app {
             });
             if let Some(reading) = reading {
                 ACQ_PROGRESS.fetch_add(1, Ordering::Relaxed);
-                let _ = cx
+                if cx
                     .local
                     .supervisor_to_worker
-                    .try_send(Inbound::Ads(reading));
+                    .try_send(Inbound::Ads(reading))
+                    .is_err()
+                {
+                    READINGS_DROPPED.fetch_add(1, Ordering::Relaxed);
+                }
             }
         }
     }
@@ -276,16 +295,27 @@ mod app {
             for _ in 0..QUEUE_DROPS.swap(0, Ordering::Relaxed) {
                 service.count_dropped();
             }
+            if board::clock_failed() {
+                service.clock_fell_back();
+            }
+            let losses = service.losses_mut();
+            losses.uart_rx_overrun = board::UART_OVERRUNS.load(Ordering::Relaxed);
+            losses.uart_framing_noise = board::UART_LINE_ERRORS.load(Ordering::Relaxed);
             let reply = match item {
                 Inbound::Frame(frame) => {
                     service.handle_frame(frame.as_deref().map_err(|e| *e), &now_us)
                 }
                 Inbound::Ads(reading) => {
+                    let mut lost = reading.lost;
+                    let dropped = READINGS_DROPPED.swap(0, Ordering::Relaxed);
+                    if dropped > 0 {
+                        lost.0 |= LossFlags::QUEUE_FULL;
+                        let losses = service.losses_mut();
+                        losses.queue_full = losses.queue_full.wrapping_add(dropped);
+                    }
                     let raw = cx.local.assembler.assemble(&reading);
                     // Timestamped at the DRDY edge, not now.
-                    service
-                        .streaming()
-                        .then(|| service.sample(0, &raw, reading.time_us))
+                    service.acquired(reading.seq, lost, &raw, reading.time_us)
                 }
                 Inbound::Rtd(reading) => {
                     cx.local.assembler.rtd(reading);
@@ -300,12 +330,12 @@ mod app {
             if let Some(msg) = reply {
                 send(cx.local.tx, &msg);
             }
-            // Erase ahead the slot the next upload will write, after the answer is out and
-            // only when no request is waiting. On the STM32F405 this stalls the CPU for the
-            // sector erase (single bank, RM0090 §3.5; docs/storage.md): it happens right after
-            // a change of table or at boot, never during an upload.
+            // Erase ahead the slot the next upload will write, after the answer is out, only
+            // when no request is waiting and never while streaming (the service refuses then).
+            // On the STM32F405 this stalls the CPU for the sector erase (single bank, RM0090
+            // §3.5; docs/storage.md); a spare that reads blank is not erased.
             if service.erase_pending() && inbound.is_empty() {
-                match service.erase_ahead() {
+                match service.erase_ahead(&now_us) {
                     Ok(true) => defmt::info!("spare calibration slot erased ahead"),
                     Ok(false) => {}
                     Err(e) => defmt::warn!("erase ahead failed: code {}", e.code),
@@ -314,9 +344,21 @@ mod app {
         }
     }
 
-    /// Firmware time in µs, at the resolution of the board's tick (64-bit ticks never wrap).
+    /// The board's hardware time base extended to 64 bits.
+    static TIME_BASE: cortex_m::interrupt::Mutex<core::cell::RefCell<Extended64>> =
+        cortex_m::interrupt::Mutex::new(core::cell::RefCell::new(Extended64::new()));
+
+    /// Firmware time in µs: the board's hardware time base (front-end: TIM2 at 1 MHz, which
+    /// counts on through a flash-erase stall), or the SysTick monotonic where there is none.
     fn now_us() -> u64 {
-        Mono::now().duration_since_epoch().as_micros()
+        match board::time_base_count() {
+            // A few instructions with interrupts masked: the count and the extension agree.
+            Some(_) => cortex_m::interrupt::free(|cs| {
+                let count = board::time_base_count().unwrap_or(0);
+                TIME_BASE.borrow(cs).borrow_mut().extend(count)
+            }),
+            None => Mono::now().duration_since_epoch().as_micros(),
+        }
     }
 
     fn send(tx: &mut board::UartTx, msg: &DeviceMessage) {

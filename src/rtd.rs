@@ -102,11 +102,17 @@ impl CallendarVanDusen {
         if r.0 < r_min {
             return Err(RtdError::Short);
         }
-        let q = r.0 / self.r0 - 1.0;
+        Ok(Celsius(self.temperature_of_ratio(r.0 / self.r0 - 1.0)?))
+    }
+
+    /// T for q = R/R0 − 1, without the checks of [`Self::temperature`] (validated constants, R
+    /// inside the fault thresholds): for a caller that made them once (the firmware's prepared
+    /// table, which checks R by code thresholds).
+    pub(crate) fn temperature_of_ratio(&self, q: f64) -> Result<f64, RtdError> {
         // Root of B·T² + A·T − q = 0 that tends to q/A as B → 0, written without cancellation.
         let quadratic = 2.0 * q / (self.a + libm::sqrt(self.a * self.a + 4.0 * self.b * q));
         if q >= 0.0 {
-            return Ok(Celsius(quadratic));
+            return Ok(quadratic);
         }
         // Below 0 °C the C term (at most 0.1 °C at −200 °C) makes it a quartic: Newton from the
         // quadratic root converges in 2–3 steps; 20 are allowed before declaring failure.
@@ -117,7 +123,7 @@ impl CallendarVanDusen {
             let step = f / df;
             t -= step;
             if libm::fabs(step) < 1e-10 {
-                return Ok(Celsius(t));
+                return Ok(t);
             }
         }
         Err(RtdError::NoConvergence)

@@ -15,17 +15,16 @@
 //! (load of another table, activate of the previous one, rollback) makes the table active
 //! before it the rollback table; rollback and activate swap back; all of it survives a reboot.
 
-use crate::drivers::stm32f4_flash::{FlashError, FlashRegisters, Stm32f4Flash};
-use crate::pipeline::{self, RawSample};
+use crate::pipeline::{self, LossFlags, RawSample};
 use crate::prepared::PreparedCalibration;
 use crate::protocol::{
     decode_message, peek_request_id, upload_body_crc32, Board, BootReport, DeviceInfo,
-    DeviceMessage, ErrorCode, ErrorReply, FrameError, HostFrame, Request, Response, CHUNK_LEN,
-    MAX_BENCH_COUNT, MAX_RATE_HZ, PROTOCOL_VERSION, SET_RATES_SPS,
+    DeviceMessage, ErrorCode, ErrorReply, FlashErrorReply, FrameError, HostFrame, LossCounters,
+    Request, Response, CHUNK_LEN, MAX_BENCH_COUNT, MAX_RATE_HZ, PROTOCOL_VERSION, SET_RATES_SPS,
 };
 use crate::storage::{CalibrationStore, SlotLayout, StorageError, ValidSlots};
 use crate::table::{CalibrationTable, ENCODED_LEN};
-use embedded_storage::nor_flash::{NorFlash, NorFlashError, NorFlashErrorKind};
+use embedded_storage::nor_flash::NorFlash;
 
 /// Default acquisition rate in samples per second.
 pub const DEFAULT_RATE_HZ: u32 = 10;
@@ -68,8 +67,12 @@ pub struct Service<F> {
     /// The active table prepared for the per-sample path; rebuilt whenever `active` changes.
     prepared: Option<PreparedCalibration>,
     upload: Upload,
+    /// Sequence number the next reading is expected to carry.
     seq: u32,
     frames_dropped: u32,
+    losses: LossCounters,
+    /// Losses noticed here (a frame that could not be sent) to report on the next frame.
+    pending_lost: LossFlags,
     streaming: bool,
     rate_hz: u32,
     /// None when the store could not be opened at boot (layout does not fit the flash).
@@ -80,38 +83,20 @@ pub struct Service<F> {
     erase_pending: bool,
 }
 
-/// A calibration flash whose driver errors have protocol codes. The default maps a driver
-/// error to FlashFailed with its `NorFlashErrorKind` (0 not aligned, 1 out of bounds, 2 other);
-/// the STM32 flash names each FLASH_SR error flag (63–68).
+/// A calibration flash: any embedded-storage NOR flash whose error has a protocol code
+/// ([`FlashErrorReply`]: each driver says how its errors read on the wire, the service names
+/// no driver).
 pub trait CalibrationFlash: NorFlash {
     /// The reply for a driver error.
-    fn error_reply(e: &Self::Error) -> ErrorReply {
-        ErrorCode::FlashFailed.reply(match e.kind() {
-            NorFlashErrorKind::NotAligned => 0,
-            NorFlashErrorKind::OutOfBounds => 1,
-            _ => 2,
-        })
-    }
+    fn error_reply(e: &Self::Error) -> ErrorReply;
 }
 
-impl<const N: usize, const ERASE: usize, const WRITE: usize> CalibrationFlash
-    for crate::storage::RamFlash<N, ERASE, WRITE>
+impl<F: NorFlash> CalibrationFlash for F
+where
+    F::Error: FlashErrorReply,
 {
-}
-
-impl<R: FlashRegisters> CalibrationFlash for Stm32f4Flash<R> {
-    fn error_reply(e: &FlashError) -> ErrorReply {
-        let code = match e {
-            FlashError::NotAligned => return ErrorCode::FlashFailed.reply(0),
-            FlashError::OutOfBounds => return ErrorCode::FlashFailed.reply(1),
-            FlashError::ProgramSequence => ErrorCode::FlashProgramSequence,
-            FlashError::ProgramParallelism => ErrorCode::FlashProgramParallelism,
-            FlashError::ProgramAlignment => ErrorCode::FlashProgramAlignment,
-            FlashError::WriteProtected => ErrorCode::FlashWriteProtected,
-            FlashError::Operation => ErrorCode::FlashOperation,
-            FlashError::Locked => ErrorCode::FlashLocked,
-        };
-        code.reply(0)
+    fn error_reply(e: &Self::Error) -> ErrorReply {
+        e.reply()
     }
 }
 
@@ -148,6 +133,8 @@ impl<F: CalibrationFlash> Service<F> {
             },
             seq: 0,
             frames_dropped: 0,
+            losses: LossCounters::default(),
+            pending_lost: LossFlags(0),
             streaming: false,
             rate_hz: DEFAULT_RATE_HZ,
             store: None,
@@ -188,6 +175,11 @@ impl<F: CalibrationFlash> Service<F> {
         self.boot_report = report;
     }
 
+    /// The crystal failed while running (Clock Security System): Info's `clock_fallback`.
+    pub fn clock_fell_back(&mut self) {
+        self.boot_report.clock_fallback = true;
+    }
+
     /// What the store gave at boot.
     pub fn boot_table(&self) -> BootTable {
         self.boot
@@ -226,11 +218,51 @@ impl<F: CalibrationFlash> Service<F> {
             .and_then(|t| PreparedCalibration::new(t).ok());
     }
 
-    /// Runs one acquired or injected sample through the pipeline with the active table.
+    /// Runs one injected sample through the pipeline with the active table; it takes the
+    /// next sequence number.
     pub fn sample(&mut self, id: u32, raw: &RawSample, now_us: u64) -> DeviceMessage {
-        let frame = pipeline::process_prepared(self.seq, now_us, raw, self.prepared.as_ref());
-        self.seq = self.seq.wrapping_add(1);
+        let seq = self.seq;
+        self.seq = seq.wrapping_add(1);
+        let mut frame = pipeline::process_prepared(seq, now_us, raw, self.prepared.as_ref());
+        frame.lost = core::mem::take(&mut self.pending_lost);
         DeviceMessage::Sample { id, frame }
+    }
+
+    /// An acquired reading with sequence number `seq`, missing readings before it explained by
+    /// `lost`. Every number skipped since the last reading is counted as lost (and flagged on
+    /// this frame); the frame is returned while streaming.
+    pub fn acquired(
+        &mut self,
+        seq: u32,
+        lost: LossFlags,
+        raw: &RawSample,
+        time_us: u64,
+    ) -> Option<DeviceMessage> {
+        let gap = seq.wrapping_sub(self.seq);
+        self.seq = seq.wrapping_add(1);
+        self.losses.conversions_lost = self.losses.conversions_lost.wrapping_add(gap);
+        let lost = LossFlags(lost.0 | core::mem::take(&mut self.pending_lost).0);
+        if !self.streaming {
+            // Nothing is sent while not streaming: losses before the stream starts are
+            // counted, but flag no frame of it.
+            return None;
+        }
+        let mut frame = pipeline::process_prepared(seq, time_us, raw, self.prepared.as_ref());
+        frame.lost = lost;
+        Some(DeviceMessage::Sample { id: 0, frame })
+    }
+
+    /// A frame that could not be sent (the transmitter was full): counted, and flagged on the
+    /// next frame.
+    pub fn frame_not_sent(&mut self) {
+        self.losses.tx_frames_dropped = self.losses.tx_frames_dropped.wrapping_add(1);
+        self.pending_lost.0 |= LossFlags::TX_DROPPED;
+    }
+
+    /// The loss counters, for the board's own counts (UART errors, queue, erase stalls,
+    /// resets) to be added.
+    pub fn losses_mut(&mut self) -> &mut LossCounters {
+        &mut self.losses
     }
 
     /// Handles what the frame decoder produced. Frames with broken framing are counted and
@@ -276,9 +308,29 @@ impl<F: CalibrationFlash> Service<F> {
                 return self.sample(id, raw, now_us);
             }
         }
-        match self.respond(frame.request, now_us) {
+        let erases = self.erase_count();
+        let result = self.respond(frame.request, now_us);
+        self.count_erase_stalls(erases, now_us, clock);
+        match result {
             Ok(body) => DeviceMessage::Response { id, body },
             Err(error) => DeviceMessage::Error { id, error },
+        }
+    }
+
+    fn erase_count(&self) -> u32 {
+        self.store.as_ref().map_or(0, CalibrationStore::erase_count)
+    }
+
+    /// Counts the sector erases run since `erases_before` as stalls, with the time they took
+    /// (the operation's whole duration: the erase dominates it by three orders of magnitude).
+    fn count_erase_stalls(&mut self, erases_before: u32, since_us: u64, clock: &dyn Fn() -> u64) {
+        let n = self.erase_count().wrapping_sub(erases_before);
+        if n > 0 {
+            let l = &mut self.losses;
+            l.erase_stalls = l.erase_stalls.wrapping_add(n);
+            l.erase_stall_us = l
+                .erase_stall_us
+                .wrapping_add(clock().saturating_sub(since_us));
         }
     }
 
@@ -424,19 +476,28 @@ impl<F: CalibrationFlash> Service<F> {
     /// the rollback table, so this loses nothing and is power-fail safe (docs/storage.md).
     /// Returns Ok(true) when an erase ran. A failure is reported for logging only: the next
     /// commit erases the slot itself.
-    pub fn erase_ahead(&mut self) -> Result<bool, ErrorReply> {
-        if !self.erase_pending {
+    ///
+    /// Never while streaming: on a single-bank MCU an erase stalls the acquisition for seconds
+    /// (docs/storage.md). It stays pending until the stream stops; a commit during a stream
+    /// erases itself, and that stall is counted and shows as a STALL gap in `seq`. A spare that
+    /// already reads blank is not erased (no stall at all).
+    pub fn erase_ahead(&mut self, clock: &dyn Fn() -> u64) -> Result<bool, ErrorReply> {
+        if !self.erase_pending || self.streaming {
             return Ok(false);
         }
         self.erase_pending = false;
+        let erases = self.erase_count();
+        let since = clock();
         let Some(store) = self.store.as_mut() else {
             return Ok(false);
         };
         if store.spare_erased().map_err(storage_reply::<F>)? {
             return Ok(false);
         }
-        store.prepare_commit().map_err(storage_reply::<F>)?;
-        Ok(true)
+        let result = store.prepare_commit().map_err(storage_reply::<F>);
+        self.count_erase_stalls(erases, since, clock);
+        result?;
+        Ok(self.erase_count() != erases)
     }
 
     fn commit(&mut self, upload_id: u32) -> Result<Response, ErrorReply> {
@@ -517,9 +578,10 @@ impl<F: CalibrationFlash> Service<F> {
             protocol: PROTOCOL_VERSION,
             active_table: self.active.as_ref().map(CalibrationTable::id),
             previous_table: self.previous.as_ref().map(CalibrationTable::id),
-            uptime_ms: now_us / 1000,
+            uptime_us: now_us,
             frames_dropped: self.frames_dropped,
             samples: self.seq,
+            losses: self.losses,
             streaming: self.streaming,
             rate_hz: self.rate_hz,
             boot: self.boot_report,
@@ -944,8 +1006,6 @@ mod tests {
         fail_writes: bool,
     }
 
-    impl CalibrationFlash for Probe {}
-
     impl embedded_storage::nor_flash::ErrorType for Probe {
         type Error = crate::storage::RamFlashError;
     }
@@ -1165,31 +1225,32 @@ mod tests {
         let (a, b, c) = (paper_table(), second_table(), third_table());
         let mut s = probe_service();
         let counter = probe_counter(&mut s);
-        // After boot: the spare (A on empty flash) is erased ahead, once.
+        // After boot on empty flash the spare (A) reads blank: nothing to erase.
         assert!(s.erase_pending());
-        assert_eq!(s.erase_ahead(), Ok(true));
-        assert_eq!(s.erase_ahead(), Ok(false), "nothing pending any more");
-        assert_eq!(counter.get(), 1);
+        assert_eq!(s.erase_ahead(&|| 0), Ok(false));
+        assert!(!s.erase_pending(), "nothing pending any more");
+        assert_eq!(counter.get(), 0);
         // Begin, chunks and a refused upload erase nothing.
         let mut nan = paper_table();
         nan.rtd.cvd.r0 = f64::NAN;
         assert!(error_code(&upload(&mut s, &nan.encode())).is_some());
         assert!(!s.erase_pending());
-        for (n, t) in [a, b, c, a].iter().enumerate() {
+        // a → A, b → B, c → C: blank slots; after c the spare is A, holding a: erased ahead.
+        // Then a → A (erased ahead: the commit erases nothing), spare B (b) erased ahead.
+        for (t, erased_ahead) in [(a, false), (b, false), (c, true), (a, true)] {
+            let before = counter.get();
             upload(&mut s, &t.encode());
-            assert_eq!(
-                counter.get(),
-                1 + n as u32,
-                "commit {n} erased: it was not erased ahead"
-            );
+            assert_eq!(counter.get(), before, "a commit erased: not erased ahead");
             assert!(s.erase_pending());
-            assert_eq!(s.erase_ahead(), Ok(true));
-            assert_eq!(counter.get(), 2 + n as u32);
+            assert_eq!(s.erase_ahead(&|| 0), Ok(erased_ahead));
+            assert_eq!(counter.get(), before + u32::from(erased_ahead));
         }
-        // A rollback writes into the erased spare too, then erases the next one.
+        assert_eq!(counter.get(), 2);
+        // A rollback writes into the erased spare (B) too, then erases the next one (C).
         req(&mut s, Request::Rollback);
-        assert_eq!(counter.get(), 5);
-        assert_eq!(s.erase_ahead(), Ok(true));
+        assert_eq!(counter.get(), 2);
+        assert_eq!(s.erase_ahead(&|| 0), Ok(true));
+        assert_eq!(counter.get(), 3);
         let i = info(&mut s);
         assert_eq!(
             (i.active_table, i.previous_table),
@@ -1202,6 +1263,68 @@ mod tests {
             (Some(c.id()), Some(a.id()))
         );
         let _ = b;
+    }
+
+    #[test]
+    fn no_erase_runs_while_streaming_and_a_commit_that_must_erase_counts_the_stall() {
+        let (a, b, c, d) = (paper_table(), second_table(), third_table(), paper_table());
+        let mut s = probe_service();
+        let counter = probe_counter(&mut s);
+        for t in [a, b, c] {
+            upload(&mut s, &t.encode());
+        }
+        // The spare (A) holds a: an erase is pending, but not while streaming.
+        req(&mut s, Request::StreamStart);
+        assert!(s.erase_pending());
+        assert_eq!(s.erase_ahead(&|| 0), Ok(false));
+        assert!(s.erase_pending(), "still pending for when the stream stops");
+        assert_eq!(counter.get(), 0);
+        // A commit during the stream must erase its slot itself: the stall is counted, with
+        // the time the operation took on the device's clock.
+        let mut d = d;
+        d.date.day = 9;
+        let t = core::cell::Cell::new(1_000u64);
+        let clock = || {
+            t.set(t.get() + 1_500_000);
+            t.get()
+        };
+        let bytes = d.encode();
+        let uid = 77;
+        let begin = Request::UploadBegin {
+            upload_id: uid,
+            total_len: ENCODED_LEN as u32,
+            body_crc32: upload_body_crc32(&bytes),
+        };
+        s.handle(
+            HostFrame {
+                id: 1,
+                request: begin,
+            },
+            &clock,
+        );
+        for (k, chunk) in bytes.chunks(CHUNK_LEN).enumerate() {
+            let request = Request::UploadChunk {
+                upload_id: uid,
+                offset: (k * CHUNK_LEN) as u32,
+                data: heapless::Vec::from_slice(chunk).unwrap(),
+            };
+            s.handle(HostFrame { id: 2, request }, &clock);
+        }
+        let commit = Request::UploadCommit { upload_id: uid };
+        s.handle(
+            HostFrame {
+                id: 3,
+                request: commit,
+            },
+            &clock,
+        );
+        assert_eq!(counter.get(), 1);
+        let l = info(&mut s).losses;
+        assert_eq!((l.erase_stalls, l.erase_stall_us), (1, 1_500_000));
+        // Stream stopped: the pending erase runs (spare B holds b).
+        req(&mut s, Request::StreamStop);
+        assert_eq!(s.erase_ahead(&|| 0), Ok(true));
+        assert_eq!(counter.get(), 2);
     }
 
     #[test]

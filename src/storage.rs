@@ -45,7 +45,10 @@ pub const COMMIT_MARKER: u32 = 0xC33C_5AA5;
 /// CRC-32/ISO-HDLC: a CRC over a block that ends with a correct CRC of the same polynomial has
 /// a value independent of the block's contents (the residue property), so the same polynomial
 /// would add no check on the table bytes.
-pub const SLOT_CRC: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISCSI);
+// Bitwise (no 1 KiB table in flash): it runs only at boot and at a commit, over a slot header
+// and a table (< 512 bytes, ≈ 30 k instructions).
+pub const SLOT_CRC: crc::Crc<u32, crc::NoTable> =
+    crc::Crc::<u32, crc::NoTable>::new(&crc::CRC_32_ISCSI);
 /// Largest WRITE_SIZE/READ_SIZE alignment supported (sizes the stack buffers).
 pub const MAX_ALIGN: usize = 64;
 /// Bytes of header plus table before padding.
@@ -252,6 +255,9 @@ pub struct CalibrationStore<F> {
     /// ([`CalibrationStore::prepare_commit`]). Kept in RAM only, so an erase cut short by a
     /// power loss is never trusted.
     erased: Option<Slot>,
+    /// Sector erases run since boot (each one stalls a single-bank MCU: the service counts the
+    /// stall time around the operations that erased).
+    erases: u32,
 }
 
 impl<F: NorFlash> CalibrationStore<F> {
@@ -266,6 +272,7 @@ impl<F: NorFlash> CalibrationStore<F> {
             geometry,
             active: None,
             erased: None,
+            erases: 0,
         };
         store.boot()?;
         Ok(store)
@@ -404,12 +411,42 @@ impl<F: NorFlash> CalibrationStore<F> {
         // Cleared before the erase and set only after it completes: a failed or interrupted
         // erase must be redone by the commit.
         self.erased = None;
-        let base = self.layout.offset(target);
-        self.flash
-            .erase(base, base + self.layout.slot_len)
-            .map_err(StorageError::Flash)?;
+        self.erase_unless_blank(target)?;
         self.erased = Some(target);
         Ok(target)
+    }
+
+    /// Sector erases run since boot.
+    pub fn erase_count(&self) -> u32 {
+        self.erases
+    }
+
+    /// Erases `slot` unless everything a commit programs there (image and marker) already
+    /// reads erased: an erase stalls the whole MCU for up to seconds, a blank check costs a
+    /// read of a few hundred bytes. Cells outside that area are never programmed or read, so
+    /// whatever an interrupted erase left there does not matter.
+    fn erase_unless_blank(&mut self, slot: Slot) -> Result<(), StorageError<F::Error>> {
+        let base = self.layout.offset(slot);
+        let len = self.geometry.image_len + self.geometry.marker_len;
+        let mut chunk = [0u8; 64];
+        let mut at = 0usize;
+        let mut blank = true;
+        while blank && at < len {
+            let n = chunk.len().min(len - at);
+            let part = chunk.get_mut(..n).unwrap_or(&mut []);
+            self.flash
+                .read(base + at as u32, part)
+                .map_err(StorageError::Flash)?;
+            blank = part.iter().all(|b| *b == 0xFF);
+            at += n;
+        }
+        if blank {
+            return Ok(());
+        }
+        self.erases = self.erases.wrapping_add(1);
+        self.flash
+            .erase(base, base + self.layout.slot_len)
+            .map_err(StorageError::Flash)
     }
 
     /// Whether the next commit's target is known erased (an erase completed in this power
@@ -584,9 +621,7 @@ impl<F: NorFlash> CalibrationStore<F> {
         // Skip the erase only after a completed erase in this power cycle; the read-back below
         // would catch any bit that is not erased anyway (programming can only clear bits).
         if self.erased.take() != Some(slot) {
-            self.flash
-                .erase(base, base + self.layout.slot_len)
-                .map_err(StorageError::Flash)?;
+            self.erase_unless_blank(slot)?;
         }
         self.flash.write(base, image).map_err(StorageError::Flash)?;
 

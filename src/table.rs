@@ -36,7 +36,9 @@ pub const PAYLOAD_LEN: usize = SERIAL_LEN
 pub const ENCODED_LEN: usize = HEADER_LEN + PAYLOAD_LEN + 4;
 
 /// CRC-32/ISO-HDLC (the zlib/Ethernet CRC), so that any tool can check a table file.
-pub const CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
+// Bitwise (no 1 KiB table in flash): it runs only on uploads, commits and at boot.
+pub const CRC32: crc::Crc<u32, crc::NoTable> =
+    crc::Crc::<u32, crc::NoTable>::new(&crc::CRC_32_ISO_HDLC);
 
 /// Which coefficient a polynomial belongs to (for error messages and the format's order).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -4,8 +4,8 @@
 //! wrong one: foreign upload ids, wrong offsets and checksums, random chunk bytes, unknown ids),
 //! plus reboots, erase-ahead and **power cuts inside a flash operation**.
 //!
-//! Checked against a small model of what the user expects
-//! (docs/protocol.md, docs/storage.md):
+//! Checked against the protocol's reference model of what the user expects
+//! (`accomp::protocol::model::TableHistory`, from docs/protocol.md and docs/storage.md):
 //! - every request is answered with its own id; Ping with Pong;
 //! - Info's (active, previous) follow the model: a commit makes the new table active and the
 //!   old one previous (re-uploading the active table changes nothing), Rollback and
@@ -14,17 +14,19 @@
 //! - a power cut during a commit, rollback, activate or erase-ahead leaves, at the next boot,
 //!   the state before or the state after the operation — never anything else.
 //!
-//! The stateful proptest in `src/service/fuzz_tests.rs` checks each answer in more detail with
-//! a fuller model (100,000 sequences in every `cargo xtask test`); this target adds coverage
-//! guidance, arbitrary lengths and power cuts at every flash operation.
+//! The stateful proptest in `src/service/fuzz_tests.rs` checks each answer in more detail against
+//! the whole `ProtocolModel` (100,000 sequences in every `cargo xtask test`); this target adds
+//! coverage guidance, arbitrary lengths and power cuts at every flash operation.
 #![no_main]
 
 use accomp::pipeline::{ChannelFlags, RawSample};
+use accomp::protocol::model::TableHistory;
 use accomp::protocol::{
     upload_body_crc32, Board, DeviceMessage, HostFrame, Request, Response, CHUNK_LEN,
 };
 use accomp::reference::paper_order2_table;
-use accomp::service::{CalibrationFlash, Service};
+use accomp::protocol::FlashErrorReply;
+use accomp::service::Service;
 use accomp::storage::{RamFlash, RamFlashError, SlotLayout};
 use accomp::table::{CalibrationDate, CalibrationTable, ENCODED_LEN};
 use embedded_storage::nor_flash::{
@@ -64,7 +66,7 @@ impl NorFlashError for CutError {
 }
 
 /// Its errors answer as FlashFailed (kind 2, "other").
-impl CalibrationFlash for CutFlash {}
+impl FlashErrorReply for CutError {}
 
 impl ErrorType for CutFlash {
     type Error = CutError;
@@ -157,13 +159,13 @@ fn id_of(bytes: &[u8; ENCODED_LEN]) -> u32 {
     upload_body_crc32(bytes)
 }
 
-/// (active, previous) as the user expects them.
+/// (active, previous) table ids, as Info reports them.
 type State = (Option<u32>, Option<u32>);
 
 struct Harness {
     dev: Option<Service<CutFlash>>,
     next_id: u32,
-    model: State,
+    model: TableHistory,
     tables: [[u8; ENCODED_LEN]; TABLES],
 }
 
@@ -215,7 +217,7 @@ impl Harness {
 
     fn check(&mut self, what: &str) {
         let s = self.state();
-        assert_eq!(s, self.model, "after {what}: (active, previous)");
+        assert_eq!(s, self.model.ids(), "after {what}: (active, previous)");
         assert!(
             s.0.is_some() || s.1.is_none(),
             "a previous table without an active one"
@@ -309,17 +311,18 @@ impl Harness {
         self.call(Request::UploadCommit { upload_id: uid })
     }
 
-    /// Model of a successful commit of table `id`.
-    fn committed(&self, id: u32) -> State {
-        if self.model.0 == Some(id) {
-            self.model
-        } else {
-            (Some(id), self.model.0)
-        }
+    /// Model of a successful commit of `bytes`.
+    fn committed(&self, bytes: &[u8; ENCODED_LEN]) -> TableHistory {
+        let mut m = self.model;
+        m.load(bytes);
+        m
     }
 
-    fn swapped(&self) -> State {
-        (self.model.1, self.model.0)
+    /// Model of a rollback (unchanged when there is nothing to roll back to).
+    fn swapped(&self) -> TableHistory {
+        let mut m = self.model;
+        let _ = m.rollback();
+        m
     }
 }
 
@@ -341,7 +344,7 @@ fn run(u: &mut Unstructured) -> AResult<()> {
             LAYOUT,
         )),
         next_id: 0,
-        model: (None, None),
+        model: TableHistory::default(),
         tables,
     };
     // Upload in progress: its id, source table, bytes sent so far (all from that table).
@@ -374,7 +377,7 @@ fn run(u: &mut Unstructured) -> AResult<()> {
                 let bytes = h.tables[src];
                 let a = h.load(uid, &bytes);
                 assert!(is_ok(&a), "commit of a valid table refused: {a:?}");
-                h.model = h.committed(id_of(&bytes));
+                h.model = h.committed(&bytes);
                 upload = None;
             }
             3 => {
@@ -446,11 +449,12 @@ fn run(u: &mut Unstructured) -> AResult<()> {
                     ..
                 } = a
                 {
-                    assert!(
-                        h.tables.iter().any(|t| id_of(t) == table_id),
-                        "committed an unknown table {table_id:#x}"
-                    );
-                    h.model = h.committed(table_id);
+                    let bytes = *h
+                        .tables
+                        .iter()
+                        .find(|t| id_of(t) == table_id)
+                        .unwrap_or_else(|| panic!("committed an unknown table {table_id:#x}"));
+                    h.model = h.committed(&bytes);
                 }
                 if matches!(upload, Some((cur, _, _)) if cur == uid) {
                     upload = None;
@@ -459,10 +463,9 @@ fn run(u: &mut Unstructured) -> AResult<()> {
             8 => {
                 what = "Rollback";
                 let a = h.call(Request::Rollback);
-                assert_eq!(is_ok(&a), h.model.1.is_some(), "Rollback: {a:?}");
-                if is_ok(&a) {
-                    h.model = h.swapped();
-                }
+                let mut m = h.model;
+                assert_eq!(is_ok(&a), m.rollback().is_ok(), "Rollback: {a:?}");
+                h.model = m;
             }
             9 => {
                 what = "Activate";
@@ -472,23 +475,21 @@ fn run(u: &mut Unstructured) -> AResult<()> {
                     u.arbitrary()?
                 };
                 let a = h.call(Request::Activate { table_id: id });
-                let known = h.model.0 == Some(id) || h.model.1 == Some(id);
+                let mut m = h.model;
                 assert_eq!(
                     is_ok(&a),
-                    known,
+                    m.activate(id).is_ok(),
                     "Activate({id:#x}) with {:?}: {a:?}",
-                    h.model
+                    h.model.ids()
                 );
-                if is_ok(&a) && h.model.1 == Some(id) {
-                    h.model = h.swapped();
-                }
+                h.model = m;
             }
             10 => {
                 what = "ReadTable";
                 let offset = u.int_in_range(0..=2 * ENCODED_LEN as u32)?;
                 let a = h.call(Request::ReadTable { offset });
                 // offset = length: an empty chunk, the end of the table.
-                let readable = h.model.0.is_some() && (offset as usize) <= ENCODED_LEN;
+                let readable = h.model.active.is_some() && (offset as usize) <= ENCODED_LEN;
                 assert_eq!(is_ok(&a), readable, "ReadTable({offset}): {a:?}");
             }
             11 => {
@@ -523,7 +524,7 @@ fn run(u: &mut Unstructured) -> AResult<()> {
             }
             13 => {
                 what = "EraseAhead";
-                let _ = h.dev().erase_ahead();
+                let _ = h.dev().erase_ahead(&|| 0);
             }
             14 => {
                 what = "Reboot";
@@ -548,39 +549,37 @@ fn run(u: &mut Unstructured) -> AResult<()> {
                 flash.quarters = quarters;
                 flash.cut = false;
                 h.dev = Some(Service::new(Board::Qemu, flash, LAYOUT));
-                let _ = h.dev().erase_ahead();
+                let _ = h.dev().erase_ahead(&|| 0);
                 let after = match kind {
                     0 => before,
                     1 => {
                         let bytes = h.tables[u.choose_index(TABLES)?];
                         let _ = h.load_unchecked(1, &bytes);
-                        h.committed(id_of(&bytes))
+                        h.committed(&bytes)
                     }
                     _ => {
                         let r = if kind == 2 {
                             Request::Rollback
                         } else {
                             Request::Activate {
-                                table_id: before.1.unwrap_or(0),
+                                table_id: before.ids().1.unwrap_or(0),
                             }
                         };
                         let _ = h.call(r);
-                        if before.1.is_some() {
-                            h.swapped()
-                        } else {
-                            before
-                        }
+                        h.swapped()
                     }
                 };
                 // Power back on (the switch is reset by the reboot): old or new, nothing else.
                 h.reboot();
                 let got = h.state();
                 assert!(
-                    got == before || got == after,
+                    got == before.ids() || got == after.ids(),
                     "power cut (kind {kind}, flash op {k}, {quarters}/4 written): \
-                     before {before:?}, expected that or {after:?}, booted with {got:?}"
+                     before {:?}, expected that or {:?}, booted with {got:?}",
+                    before.ids(),
+                    after.ids()
                 );
-                h.model = got;
+                h.model = if got == after.ids() { after } else { before };
                 upload = None;
             }
         }

@@ -18,5 +18,6 @@ pub use accomp_analysis::{allan, discover, fit, plot, stability, tumble, tumble_
 pub use accomp_device as device;
 pub use accomp_log as log;
 pub use accomp_log::calibration_file;
+pub use accomp_log::outputs;
 pub use accomp_numerics as numerics;
 pub use accomp_sim as sim;

@@ -42,6 +42,13 @@ enum Command {
     /// The paper's two experiments through the firmware in QEMU: fit, upload, stream raw codes,
     /// record, report stability before/after compensation next to the paper and the floor.
     Demo(cli::demo::DemoArgs),
+    /// One request to the board: info, ping, rollback, activate, set-rate.
+    Device(cli::device::DeviceArgs),
+    /// Record the board's sample stream into a log, through unplugging and resets.
+    Record(cli::record::RecordArgs),
+    /// The virtual front-end board (firmware core on chip models, station physics) on a
+    /// pseudo-terminal.
+    BoardSim(cli::board_sim::BoardSimArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -58,5 +65,8 @@ fn main() -> anyhow::Result<()> {
         Command::Plot(args) => cli::plot::run(&args),
         Command::Stability(args) => Ok(cli::stability::run(&args)?),
         Command::Demo(args) => cli::demo::run(&args),
+        Command::Device(args) => cli::device::run(&args),
+        Command::Record(args) => cli::record::run(&args),
+        Command::BoardSim(args) => cli::board_sim::run(&args),
     }
 }

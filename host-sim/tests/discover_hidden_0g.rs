@@ -4,7 +4,7 @@
 //! SNR of 5 to 10 (tests/common/hidden.rs), adds it where the physics puts it, and the discovery
 //! runs on the log without being told anything. Null logs (flicker and random walk on, barometer
 //! present) must accept nothing. Rates are printed and asserted; they are quoted in
-//! docs/discovery.md ("0 g effects").
+//! docs/discovery.md ("Hidden-effect tests").
 //!
 //! The preset's tiltmeter *measures* the foundation tilt (building thermal tilt, creep, tide) and
 //! the baseline subtracts eq. (5) with it, so a tilt the tiltmeter sees is no hidden effect. The

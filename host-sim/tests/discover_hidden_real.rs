@@ -342,7 +342,7 @@ fn effects_injected_into_the_real_gravimeter_residual_are_found_by_snr() {
     // uninjected windows (the real residual is not pure noise: the first window holds the
     // instrument's settling). Met since the out-of-sample score is the held-out prediction
     // error (select.rs): measured 5/6 at 9–14 and 10/12 at SNR ≥ 6, 2/12 uninjected windows
-    // (docs/discovery.md, "Real residual"); before, the raw held-out residual refused real
+    // (docs/discovery.md, "Non-circular tests"); before, the raw held-out residual refused real
     // steps and lines of ΔBIC −190…−520 (3/6).
     assert!(
         curve[3] >= 5,

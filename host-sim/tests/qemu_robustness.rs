@@ -209,7 +209,7 @@ fn garbage_on_the_line_mid_stream_costs_at_most_the_frame_it_hits() {
         // a loaded machine it measures the host's scheduling as much as the decoder (a bound of
         // a few sample periods failed at load 9 with 93–121 ms). What proves that the decoder
         // resynchronises on its own is above: every sample after the first is answered, with
-        // the right values. Timing belongs in docs/benchmarks.md (GUIDE: no timed assertions).
+        // the right values. Timing belongs in docs/benchmarks.md (no timed assertions in tests).
         let gap_ms = (first.time_us - last_before_us) as f64 / 1e3;
         resume_ms.push((len, garbage_wire_ms, gap_ms, first_at.as_secs_f64() * 1e3));
     }

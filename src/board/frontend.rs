@@ -7,6 +7,8 @@
 //! The acquisition sequencing itself is the core's [`accomp::acquisition`] (tested on the host
 //! against chip models); this file only builds the buses, pins and clocks it runs on.
 
+use core::sync::atomic::{AtomicBool, Ordering};
+
 use cortex_m_rt::{exception, ExceptionFrame};
 use defmt_rtt as _;
 use embedded_hal::delay::DelayNs;
@@ -109,10 +111,15 @@ fn start_crystal(rcc: &pac::RCC) -> bool {
 
 /// Clocks (crystal or HSI fallback), USART1 115200 8N1, SPI1 (ADS1262, mode 1) and SPI2
 /// (AD7124, mode 3) at the frequencies of [`accomp::acquisition::board`], the two sequencers
-/// (they initialise their converters from their first tick), DRDY falling edge on PC4, and the
-/// watchdog started last.
+/// (they initialise their converters from their first tick), DRDY falling edge on PC4, TIM2 as
+/// the time base; the watchdog is started first, before the clocks.
 pub fn init(mut dp: pac::Peripherals) -> Parts {
     let reset_cause = take_reset_cause(&dp.RCC);
+    // The watchdog first: it runs on the LSI, independent of the clock setup below, so a hang
+    // there (a PLL that never locks) resets the MCU instead of hanging it.
+    let mut watchdog = IndependentWatchdog::new(dp.IWDG);
+    watchdog.stop_on_debug(&dp.DBGMCU, true);
+    watchdog.start(WATCHDOG_MS.millis());
     let crystal = start_crystal(&dp.RCC);
     let config = if crystal {
         Config::hse(8.MHz())
@@ -122,7 +129,11 @@ pub fn init(mut dp: pac::Peripherals) -> Parts {
     let mut rcc = dp
         .RCC
         .freeze(config.sysclk(168.MHz()).pclk1(42.MHz()).pclk2(84.MHz()));
-    if !crystal {
+    if crystal {
+        // Clock Security System: should the crystal stop, the hardware switches SYSCLK to the
+        // HSI and raises the NMI ([`NonMaskableInt`] relocks the PLL on the HSI).
+        rcc.cr().modify(|_, w| w.csson().set_bit());
+    } else {
         defmt::error!(
             "HSE did not start in {} ms: running from HSI",
             HSE_TIMEOUT_MS
@@ -182,9 +193,7 @@ pub fn init(mut dp: pac::Peripherals) -> Parts {
     drdy.trigger_on_edge(&mut dp.EXTI, Edge::Falling);
     drdy.enable_interrupt(&mut dp.EXTI);
 
-    let mut watchdog = IndependentWatchdog::new(dp.IWDG);
-    watchdog.stop_on_debug(&dp.DBGMCU, true);
-    watchdog.start(WATCHDOG_MS.millis());
+    start_time_base(&rcc, &dp.TIM2);
 
     Parts {
         rx,
@@ -198,6 +207,73 @@ pub fn init(mut dp: pac::Peripherals) -> Parts {
             reset_cause,
             clock_fallback: !crystal,
         },
+    }
+}
+
+/// TIM2's kernel clock: APB1 (42 MHz) × 2, since the APB1 prescaler is not 1 (RM0090 §6.2,
+/// "the timer clock frequencies are twice the APB frequency").
+const TIM2_CLOCK_HZ: u32 = 2 * bus::APB1_HZ;
+
+/// TIM2 as the time base: 32-bit up-counter at 1 MHz, free running over its whole range
+/// (RM0090 §18: PSC divides by PSC + 1, loaded at the update event UG forces).
+fn start_time_base(rcc: &pac::RCC, tim2: &pac::TIM2) {
+    // Through the HAL's Rcc (it derefs to the RCC registers): APB1ENR.TIM2EN.
+    rcc.apb1enr().modify(|_, w| w.tim2en().set_bit());
+    tim2.psc()
+        .write(|w| w.psc().set((TIM2_CLOCK_HZ / 1_000_000 - 1) as u16));
+    tim2.arr().write(|w| w.arr().set(u32::MAX));
+    tim2.egr().write(|w| w.ug().set_bit());
+    tim2.cr1().modify(|_, w| w.cen().set_bit());
+}
+
+/// The time base's count in µs (wraps every 71.6 min; `accomp::timebase` extends it).
+pub fn time_base_count() -> Option<u32> {
+    // SAFETY: a read of the counter register of a timer this module configured and nothing
+    // else writes; reading CNT has no side effect.
+    Some(unsafe { (*pac::TIM2::ptr()).cnt().read().bits() })
+}
+
+/// The Clock Security System saw the crystal fail (the NMI ran).
+static CLOCK_FAILED: AtomicBool = AtomicBool::new(false);
+
+/// True once the crystal failed while running: the core runs from the HSI (±1 %).
+pub fn clock_failed() -> bool {
+    CLOCK_FAILED.load(Ordering::Relaxed)
+}
+
+/// Polls allowed for PLLRDY and for the clock switch in the NMI: at 16 MHz on the HSI the PLL
+/// locks in ≈ 100 µs (datasheet t_LOCK ≤ 200 µs), far below 10 000 polls.
+const CLOCK_POLLS: u32 = 10_000;
+
+/// CSS: the crystal failed (RM0090 §6.2.7). The hardware has switched SYSCLK to the HSI and
+/// turned the PLL off; the NMI repeats until CSSC is written. Relock the PLL on the HSI at the
+/// same 168 MHz (16 MHz / M 16 × N 336 / P 2; Q 7 → 48 MHz), so the UART, SPI and TIM2 keep
+/// their rates, every wait bounded, and record the event for Info.
+// SAFETY (cortex-m-rt asks NMI handlers to be `unsafe fn`: an NMI can preempt critical
+// sections): it touches only the RCC registers and an atomic flag, nothing a critical section
+// of the application guards.
+#[exception]
+unsafe fn NonMaskableInt() {
+    // SAFETY: the NMI owns the RCC while it runs; the application never touches these
+    // registers after `init`.
+    let rcc = unsafe { &*pac::RCC::ptr() };
+    rcc.cir().modify(|_, w| w.cssc().set_bit());
+    CLOCK_FAILED.store(true, Ordering::Relaxed);
+    // SAFETY: PLLCFGR field values within their ranges (RM0090 §6.3.2): M 16, N 336, P /2,
+    // source HSI, Q 7.
+    rcc.pllcfgr()
+        .write(|w| unsafe { w.bits(16 | (336 << 6) | (7 << 24)) });
+    rcc.cr().modify(|_, w| w.pllon().set_bit());
+    let mut polls = 0;
+    while rcc.cr().read().pllrdy().bit_is_clear() && polls < CLOCK_POLLS {
+        polls += 1;
+    }
+    if rcc.cr().read().pllrdy().bit_is_set() {
+        rcc.cfgr().modify(|_, w| w.sw().pll());
+        let mut polls = 0;
+        while !rcc.cfgr().read().sws().is_pll() && polls < CLOCK_POLLS {
+            polls += 1;
+        }
     }
 }
 

@@ -51,6 +51,14 @@ impl FlashRegisters for PacFlash {
         // access into a program operation (RM0090 §3.5.4), it is never a plain RAM store.
         unsafe { core::ptr::write_volatile(at as *mut u8, byte) };
     }
+    fn acr(&mut self) -> u32 {
+        self.flash.acr().read().bits()
+    }
+    fn set_acr(&mut self, value: u32) {
+        // SAFETY: the driver writes back what it read with only the cache bits changed (the
+        // latency and prefetch fields stay as clock setup left them).
+        self.flash.acr().write(|w| unsafe { w.bits(value) });
+    }
     fn read(&mut self, offset: u32, bytes: &mut [u8]) {
         let start = offset as usize;
         if start + bytes.len() > FLASH_BYTES {

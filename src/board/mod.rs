@@ -6,6 +6,8 @@
 //! and the logger/panic plumbing (a panic never ends in a HardFault loop).
 //! The shared UART helpers are here because both boards use the HAL's USART1.
 
+use core::sync::atomic::{AtomicU32, Ordering};
+
 use stm32f4xx_hal::prelude::*;
 
 #[cfg(feature = "board-frontend")]
@@ -84,16 +86,62 @@ pub(crate) fn log_panic(info: &core::panic::PanicInfo) {
     }
 }
 
-/// Next received byte, or None when the receive register is empty. Line errors (overrun,
-/// framing, noise) lose bytes; the frame CRC catches that, so they are skipped here.
+/// UART receiver overruns (SR.ORE) since boot.
+pub static UART_OVERRUNS: AtomicU32 = AtomicU32::new(0);
+/// UART bytes received with a framing or noise error (SR.FE / SR.NF) since boot.
+pub static UART_LINE_ERRORS: AtomicU32 = AtomicU32::new(0);
+
+/// Next received byte, or None when the receive register is empty. A line error (overrun,
+/// framing, noise) loses bytes: it is counted by kind (Info's loss counters) and the frame CRC
+/// refuses the damaged frame.
 pub fn read_byte(rx: &mut UartRx) -> Option<u8> {
+    use stm32f4xx_hal::serial::Error as E;
     loop {
         match rx.read() {
             Ok(b) => return Some(b),
             Err(stm32f4xx_hal::nb::Error::WouldBlock) => return None,
-            Err(stm32f4xx_hal::nb::Error::Other(_)) => continue,
+            Err(stm32f4xx_hal::nb::Error::Other(E::Overrun)) => {
+                UART_OVERRUNS.fetch_add(1, Ordering::Relaxed);
+            }
+            Err(stm32f4xx_hal::nb::Error::Other(_)) => {
+                UART_LINE_ERRORS.fetch_add(1, Ordering::Relaxed);
+            }
         }
     }
+}
+
+/// Reset counts kept in RAM that survives a reset but not a power cycle: magic, then
+/// (watchdog, brown-out). Written once per boot, before interrupts run.
+#[link_section = ".uninit.accomp_resets"]
+static mut KEPT_RESETS: core::mem::MaybeUninit<[u32; 2]> = core::mem::MaybeUninit::uninit();
+const KEPT_MAGIC: u32 = 0xACC0_4E5E;
+
+/// The (watchdog, brown-out) reset counts since power-on, including this boot (RCC_CSR flags
+/// in `boot`), and keeps them for the next boot.
+pub fn count_resets(boot: accomp::protocol::BootReport) -> (u16, u16) {
+    // SAFETY: called once from `init`, before any task runs: nothing else touches the static.
+    // Its bytes may be garbage after a power-on; the magic word decides whether they count.
+    let cell = unsafe { &mut *core::ptr::addr_of_mut!(KEPT_RESETS) };
+    let words = cell.as_mut_ptr().cast::<u32>();
+    // SAFETY: both words lie inside the static; volatile so the read of memory the program
+    // never wrote in this boot is not assumed away.
+    let (magic, counts) = unsafe {
+        (
+            core::ptr::read_volatile(words),
+            core::ptr::read_volatile(words.add(1)),
+        )
+    };
+    let kept = (magic == KEPT_MAGIC).then_some(((counts >> 16) as u16, counts as u16));
+    let (watchdog, brownout) = boot.counted_resets(kept);
+    // SAFETY: as above.
+    unsafe {
+        core::ptr::write_volatile(words, KEPT_MAGIC);
+        core::ptr::write_volatile(
+            words.add(1),
+            u32::from(watchdog) << 16 | u32::from(brownout),
+        );
+    }
+    (watchdog, brownout)
 }
 
 /// Sends bytes, blocking on the transmit register (115200 Bd: ~87 µs per byte).

@@ -22,7 +22,18 @@ use semihosting::io::{Read as _, Seek as _, SeekFrom, Write as _};
 /// Board reported in READY and Info.
 pub const BOARD: Board = Board::Qemu;
 
-/// QEMU clocks SysTick at 168 MHz whatever RCC says (qemu-notes.md), so that is the figure the
+/// QEMU models no crystal and no Clock Security System.
+pub fn clock_failed() -> bool {
+    false
+}
+
+/// No hardware time base under QEMU (its STM32 timer model is not verified): the firmware's
+/// time is the SysTick monotonic, which nothing stalls there.
+pub fn time_base_count() -> Option<u32> {
+    None
+}
+
+/// QEMU clocks SysTick at 168 MHz whatever RCC says (docs/architecture.md), so that is the figure the
 /// monotonic needs to count milliseconds.
 pub const SYSTICK_HZ: u32 = 168_000_000;
 
@@ -165,9 +176,6 @@ fn read_cut_at() -> Option<(u32, u32)> {
     let quarters = words.next().and_then(|w| w.parse().ok()).unwrap_or(2);
     Some((op, quarters))
 }
-
-/// RamFlash errors reported as FlashFailed with their kind.
-impl accomp::service::CalibrationFlash for PersistentFlash {}
 
 impl ErrorType for PersistentFlash {
     type Error = RamFlashError;

@@ -7,8 +7,11 @@
 //!
 //! Both take an [`embedded_hal::spi::SpiDevice`] (so the bus can be shared and chip select is
 //! the bus manager's business), an [`embedded_hal::digital::InputPin`] for data-ready and an
-//! [`embedded_hal::delay::DelayNs`] for the reset waits. Nothing allocates and nothing panics: every
-//! failure comes back as an [`Error`], and every conversion comes back as the core's code
+//! [`embedded_hal::delay::DelayNs`] for the reset waits. Each knows only its chip: its registers,
+//! its coding, and its own error type ([`ads1262::Error`], [`ad7124::Error`]) generic over the
+//! bus and pin errors; where a chip sits and how the board uses it is the board's business
+//! ([`crate::frontend`], [`crate::acquisition`]). Nothing allocates and nothing panics: every
+//! failure comes back as the chip's error, and every conversion comes back as the core's code
 //! newtypes ([`crate::adc::Ads1262Code`], [`crate::adc::Ad7124Code`]) so the maths layer never
 //! sees a bare integer.
 
@@ -58,104 +61,30 @@ pub(crate) mod test_support {
     }
 }
 
-/// Everything a driver call can fail with.
-///
-/// `SpiE` is the bus error of the [`embedded_hal::spi::SpiDevice`], `PinE` the error of the
-/// data-ready [`embedded_hal::digital::InputPin`]. The other variants say what the chip did wrong,
-/// so the firmware can report a precise status flag instead of a number it cannot trust.
+/// Why a wait for data-ready ended without it; each driver turns this into its own error.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Error<SpiE, PinE> {
-    /// The SPI transfer itself failed.
-    Spi(SpiE),
-    /// Reading the data-ready pin failed.
+pub(crate) enum WaitError<PinE> {
+    /// Reading the pin failed.
     Pin(PinE),
-    /// Data-ready did not assert within the configured number of polls.
-    DrdyTimeout,
-    /// ADS1262 checksum mode: the received checksum byte differs from the sum of the data
-    /// bytes + 0x9B.
-    Checksum {
-        /// Checksum computed from the received data bytes.
-        expected: u8,
-        /// Checksum byte the converter sent.
-        received: u8,
-    },
-    /// CRC-8 (x^8 + x^2 + x + 1) over the received bytes differs from the received CRC byte.
-    CrcMismatch {
-        /// CRC computed from the received bytes.
-        expected: u8,
-        /// CRC byte the converter sent.
-        received: u8,
-    },
-    /// A configuration value does not fit its register field or contradicts another setting.
-    InvalidConfig,
-    /// The ID register names another device.
-    DeviceId {
-        /// The ID register content read.
-        found: u8,
-    },
-    /// The ID register reads as an idle bus (all zeros or all ones): no device answered.
-    NotResponding {
-        /// The byte read where the ID was expected.
-        found: u8,
-    },
-    /// A register read back after writing holds another value than written.
-    ReadBack {
-        /// Register address.
-        register: u8,
-        /// Value written.
-        written: u32,
-        /// Value read back.
-        read: u32,
-    },
-    /// ADS1262: the status byte says no new conversion since the last read (stale data).
-    StaleData,
-    /// The converter reports it has been reset since it was configured (brown-out or glitch on
-    /// the reset line): its configuration is lost and must be re-initialised.
-    UnexpectedReset,
-    /// AD7124: the ERROR register reports the listed conditions (see [`ad7124::ErrorFlags`]).
-    AdcError(ad7124::ErrorFlags),
-}
-
-impl<SpiE, PinE> Error<SpiE, PinE> {
-    /// The variant's name, for firmware logs: defmt prints it without pulling in `core::fmt`
-    /// (whose Debug machinery would cost the front-end build ~3.5 KiB of flash).
-    pub const fn name(&self) -> &'static str {
-        match self {
-            Error::Spi(_) => "Spi",
-            Error::Pin(_) => "Pin",
-            Error::DrdyTimeout => "DrdyTimeout",
-            Error::Checksum { .. } => "Checksum",
-            Error::CrcMismatch { .. } => "CrcMismatch",
-            Error::InvalidConfig => "InvalidConfig",
-            Error::DeviceId { .. } => "DeviceId",
-            Error::NotResponding { .. } => "NotResponding",
-            Error::ReadBack { .. } => "ReadBack",
-            Error::StaleData => "StaleData",
-            Error::UnexpectedReset => "UnexpectedReset",
-            Error::AdcError(_) => "AdcError",
-        }
-    }
+    /// Data-ready did not assert within the polls allowed.
+    Timeout,
 }
 
 /// Polls an active-low data-ready pin at most `limit` times, `interval_us` apart: both converters
 /// pull their DRDY output low when a conversion result is ready.
-pub(crate) fn wait_low<
-    SpiE,
-    P: embedded_hal::digital::InputPin,
-    D: embedded_hal::delay::DelayNs,
->(
+pub(crate) fn wait_low<P: embedded_hal::digital::InputPin, D: embedded_hal::delay::DelayNs>(
     pin: &mut P,
     delay: &mut D,
     limit: u32,
     interval_us: u32,
-) -> Result<(), Error<SpiE, P::Error>> {
+) -> Result<(), WaitError<P::Error>> {
     for _ in 0..limit {
-        if pin.is_low().map_err(Error::Pin)? {
+        if pin.is_low().map_err(WaitError::Pin)? {
             return Ok(());
         }
         delay.delay_us(interval_us);
     }
-    Err(Error::DrdyTimeout)
+    Err(WaitError::Timeout)
 }
 
 /// CRC-8 with polynomial x^8 + x^2 + x + 1 (0x07), initial value 0, no reflection, no final XOR

@@ -52,12 +52,26 @@ pub mod cr {
     pub const SNB_MASK: u32 = 0xF << SNB_SHIFT;
     /// Program size, bits 9:8 (00 = x8, 01 = x16, 10 = x32, 11 = x64).
     pub const PSIZE_MASK: u32 = 0b11 << 8;
+    /// PSIZE = 10: x32 parallelism.
+    pub const PSIZE_X32: u32 = 0b10 << 8;
     /// Start an erase.
     pub const STRT: u32 = 1 << 16;
     /// Error interrupt enable (OPERR is only set when this is on).
     pub const ERRIE: u32 = 1 << 25;
     /// FLASH_CR locked (set by software, cleared by the KEYR sequence).
     pub const LOCK: u32 = 1 << 31;
+}
+
+/// FLASH_ACR bits (RM0090 §3.9.1).
+pub mod acr {
+    /// Instruction cache enable.
+    pub const ICEN: u32 = 1 << 9;
+    /// Data cache enable.
+    pub const DCEN: u32 = 1 << 10;
+    /// Instruction cache reset (only while ICEN = 0).
+    pub const ICRST: u32 = 1 << 11;
+    /// Data cache reset (only while DCEN = 0).
+    pub const DCRST: u32 = 1 << 12;
 }
 
 /// FLASH_KEYR unlock sequence (RM0090 §3.5.1). A wrong key locks FLASH_CR until reset.
@@ -98,6 +112,10 @@ pub trait FlashRegisters {
     fn write_byte(&mut self, offset: u32, byte: u8);
     /// Reads the flash memory from `offset`.
     fn read(&mut self, offset: u32, bytes: &mut [u8]);
+    /// Reads FLASH_ACR.
+    fn acr(&mut self) -> u32;
+    /// Writes FLASH_ACR.
+    fn set_acr(&mut self, value: u32);
 }
 
 /// What an erase or program can fail with: each FLASH_SR error flag named (RM0090 §3.8.4), plus
@@ -120,6 +138,25 @@ pub enum FlashError {
     WriteProtected,
     /// OPERR: operation error.
     Operation,
+}
+
+/// Each FLASH_SR flag has its own protocol code (63–68), so the host names what the controller
+/// refused; the refusals made before the controller is touched are FlashFailed 0/1.
+impl crate::protocol::FlashErrorReply for FlashError {
+    fn reply(&self) -> crate::protocol::ErrorReply {
+        use crate::protocol::ErrorCode as C;
+        let code = match self {
+            FlashError::NotAligned => return C::FlashFailed.reply(0),
+            FlashError::OutOfBounds => return C::FlashFailed.reply(1),
+            FlashError::ProgramSequence => C::FlashProgramSequence,
+            FlashError::ProgramParallelism => C::FlashProgramParallelism,
+            FlashError::ProgramAlignment => C::FlashProgramAlignment,
+            FlashError::WriteProtected => C::FlashWriteProtected,
+            FlashError::Operation => C::FlashOperation,
+            FlashError::Locked => C::FlashLocked,
+        };
+        code.reply(0)
+    }
 }
 
 impl FlashError {
@@ -226,11 +263,26 @@ impl<R: FlashRegisters> Stm32f4Flash<R> {
     fn erase_sector(&mut self, sector: u8) -> Result<(), FlashError> {
         self.begin()?;
         let base = self.regs.cr() & !(cr::PG | cr::MER | cr::SNB_MASK | cr::PSIZE_MASK);
-        // SER and SNB first, then STRT (RM0090 §3.5.3 steps 2–3).
-        let set = base | cr::SER | (u32::from(sector) << cr::SNB_SHIFT);
+        // SER and SNB first, then STRT (RM0090 §3.5.3 steps 2–3). PSIZE x32: the erase takes
+        // half the time of x8 (datasheet "Flash memory programming": t_ERASE128KB 1 s typ.,
+        // 2 s max at x32 against 2 s / 4 s at x8) and the whole MCU stalls for it; x32 needs
+        // VDD 2.7–3.6 V, which the board's 3.3 V rail is.
+        let set = base | cr::SER | cr::PSIZE_X32 | (u32::from(sector) << cr::SNB_SHIFT);
         self.regs.set_cr(set);
         self.regs.set_cr(set | cr::STRT);
         self.end()
+    }
+
+    /// After an erase the ART accelerator's caches may hold lines of the erased sector: RM0090
+    /// §3.5.2 asks to flush them — disable, reset, re-enable (a reset only acts while the
+    /// cache is disabled).
+    fn reset_caches(&mut self) {
+        let on = self.regs.acr();
+        let off = on & !(acr::ICEN | acr::DCEN);
+        self.regs.set_acr(off);
+        self.regs.set_acr(off | acr::ICRST | acr::DCRST);
+        self.regs.set_acr(off);
+        self.regs.set_acr(on);
     }
 
     fn program(&mut self, offset: u32, bytes: &[u8]) -> Result<(), FlashError> {
@@ -280,12 +332,14 @@ impl<R: FlashRegisters> NorFlash for Stm32f4Flash<R> {
     fn erase(&mut self, from: u32, to: u32) -> Result<(), FlashError> {
         check_erase(self, from, to).map_err(refused)?;
         let mut at = from;
-        while at < to {
+        let mut result = Ok(());
+        while at < to && result.is_ok() {
             let (sector, size) = sector_of(at);
-            self.erase_sector(sector)?;
+            result = self.erase_sector(sector);
             at += size;
         }
-        Ok(())
+        self.reset_caches();
+        result
     }
 
     fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), FlashError> {

@@ -4,7 +4,7 @@
 
 use super::*;
 use crate::drivers::stm32f4_flash::model::FlashModel;
-use crate::drivers::stm32f4_flash::sr;
+use crate::drivers::stm32f4_flash::{sr, FlashRegisters, Stm32f4Flash};
 use crate::table::tests::paper_table;
 
 type BoardFlash = Stm32f4Flash<FlashModel>;
@@ -86,7 +86,7 @@ fn each_flash_error_of_a_commit_has_its_code_and_the_retry_commits() {
             upload(&mut s, &t1.encode(), 1),
             DeviceMessage::Response { .. }
         ));
-        let _ = s.erase_ahead();
+        let _ = s.erase_ahead(&|| 0);
         model(&mut s).fail_next = Some(flag);
         let r = upload(&mut s, &t2.encode(), 2);
         assert_eq!(

@@ -3,13 +3,14 @@
 //! tables, read-back at any offset, activate/rollback by right and wrong ids, samples, bench,
 //! garbage bodies, erase-ahead and reboots — are driven through `Service` and every answer and
 //! the state reported by Info are checked against a reference model of the protocol written
-//! from docs/protocol.md.
+//! from docs/protocol.md ([`crate::protocol::model`]).
 //!
 //! [`SEQUENCES`] sequences per `cargo test` run (split over two tests so both CI cores work);
 //! the count and the runtime are in docs/benchmarks.md.
 
 use super::*;
 use crate::pipeline::Status;
+use crate::protocol::model::{Expect, ProtocolModel};
 use crate::storage::RamFlash;
 use crate::table::tests::paper_table;
 use crate::table::CRC32;
@@ -115,185 +116,13 @@ fn sources() -> [[u8; ENCODED_LEN]; SOURCES] {
     out
 }
 
-#[derive(Debug, Clone)]
-struct Upload {
-    uid: u32,
-    total: usize,
-    crc: u32,
-    bytes: Vec<u8>,
-}
-
-/// The protocol as docs/protocol.md states it.
-#[derive(Debug, Clone, Default)]
-struct Model {
-    active: Option<[u8; ENCODED_LEN]>,
-    previous: Option<[u8; ENCODED_LEN]>,
-    upload: Option<Upload>,
-    streaming: bool,
-    rate: Option<u32>,
-    samples: u32,
-    dropped: u32,
-}
-
 fn id_of(bytes: &[u8; ENCODED_LEN]) -> u32 {
     crate::table::table_id(bytes)
 }
 
-/// What the model expects for a request: the exact answer body, or an error code and detail.
-#[derive(Debug, PartialEq)]
-enum Expect {
-    Body(Response),
-    Err(ErrorCode, u32),
-    /// A sample, with or without NO_CALIBRATION, at this sequence number.
-    Sample {
-        seq: u32,
-        calibrated: bool,
-    },
-    /// Checked separately (Info, SetRate, Bench).
-    Special,
-}
-
-impl Model {
-    fn request(&mut self, r: &Request) -> Expect {
-        use ErrorCode as C;
-        match r {
-            Request::Ping => Expect::Body(Response::Pong),
-            Request::Info | Request::SetRate { .. } => Expect::Special,
-            Request::UploadBegin {
-                upload_id,
-                total_len,
-                body_crc32,
-            } => {
-                self.upload = None;
-                if *total_len as usize > ENCODED_LEN {
-                    return Expect::Err(C::UploadTooLong, ENCODED_LEN as u32);
-                }
-                self.upload = Some(Upload {
-                    uid: *upload_id,
-                    total: *total_len as usize,
-                    crc: *body_crc32,
-                    bytes: Vec::new(),
-                });
-                Expect::Body(Response::Ok)
-            }
-            Request::UploadChunk {
-                upload_id,
-                offset,
-                data,
-            } => {
-                let Some(u) = self.upload.as_mut() else {
-                    return Expect::Err(C::NoUpload, 0);
-                };
-                if *upload_id != u.uid {
-                    return Expect::Err(C::UploadIdMismatch, u.uid);
-                }
-                if *offset as usize != u.bytes.len() {
-                    return Expect::Err(C::ChunkOutOfOrder, u.bytes.len() as u32);
-                }
-                if u.bytes.len() + data.len() > u.total {
-                    return Expect::Err(C::UploadTooLong, u.total as u32);
-                }
-                u.bytes.extend_from_slice(data);
-                Expect::Body(Response::Ok)
-            }
-            Request::UploadCommit { upload_id } => {
-                let Some(u) = self.upload.as_ref() else {
-                    return Expect::Err(C::NoUpload, 0);
-                };
-                if *upload_id != u.uid {
-                    return Expect::Err(C::UploadIdMismatch, u.uid);
-                }
-                let u = self.upload.take().unwrap_or_else(|| unreachable!());
-                if u.bytes.len() != u.total {
-                    return Expect::Err(C::UploadIncomplete, u.bytes.len() as u32);
-                }
-                let body = CRC32.checksum(&u.bytes[..u.bytes.len().saturating_sub(4)]);
-                if body != u.crc {
-                    return Expect::Err(C::UploadCrcMismatch, body);
-                }
-                if let Err(e) = CalibrationTable::decode(&u.bytes) {
-                    let e = ErrorReply::from(e);
-                    return Expect::Err(
-                        ErrorCode::from_u16(e.code).unwrap_or(C::Malformed),
-                        e.detail,
-                    );
-                }
-                let mut t = [0u8; ENCODED_LEN];
-                t.copy_from_slice(&u.bytes);
-                if self.active != Some(t) {
-                    self.previous = self.active.replace(t);
-                }
-                Expect::Body(Response::Committed {
-                    table_id: id_of(&t),
-                })
-            }
-            Request::ReadTable { offset } => {
-                let Some(a) = self.active else {
-                    return Expect::Err(C::NoTable, 0);
-                };
-                let start = *offset as usize;
-                if start > ENCODED_LEN {
-                    return Expect::Err(C::OffsetOutOfRange, ENCODED_LEN as u32);
-                }
-                let end = (start + CHUNK_LEN).min(ENCODED_LEN);
-                Expect::Body(Response::TableChunk {
-                    offset: *offset,
-                    total_len: ENCODED_LEN as u32,
-                    data: heapless::Vec::from_slice(&a[start..end]).unwrap_or_default(),
-                })
-            }
-            Request::Activate { table_id } => {
-                if self.active.map(|a| id_of(&a)) == Some(*table_id) {
-                    Expect::Body(Response::Ok)
-                } else if self.previous.map(|p| id_of(&p)) == Some(*table_id) {
-                    core::mem::swap(&mut self.active, &mut self.previous);
-                    Expect::Body(Response::Ok)
-                } else {
-                    Expect::Err(C::TableNotFound, 0)
-                }
-            }
-            Request::Rollback => {
-                if self.previous.is_none() {
-                    return Expect::Err(C::NoPreviousTable, 0);
-                }
-                core::mem::swap(&mut self.active, &mut self.previous);
-                Expect::Body(Response::Ok)
-            }
-            Request::StreamStart | Request::StreamStop => {
-                self.streaming = matches!(r, Request::StreamStart);
-                Expect::Body(Response::Ok)
-            }
-            Request::InjectSample { .. } => {
-                let seq = self.samples;
-                self.samples = self.samples.wrapping_add(1);
-                Expect::Sample {
-                    seq,
-                    calibrated: self.active.is_some(),
-                }
-            }
-            Request::Bench { count, .. } => {
-                if *count == 0 || *count > MAX_BENCH_COUNT {
-                    Expect::Err(C::InvalidCount, MAX_BENCH_COUNT)
-                } else {
-                    Expect::Special
-                }
-            }
-        }
-    }
-
-    fn reboot(&mut self) {
-        // Tables come back from flash; everything else starts over.
-        *self = Model {
-            active: self.active,
-            previous: self.previous,
-            ..Model::default()
-        };
-    }
-}
-
 struct Harness {
     dev: Service<Flash>,
-    model: Model,
+    model: ProtocolModel,
     src: [[u8; ENCODED_LEN]; SOURCES],
     raw: RawSample,
 }
@@ -347,12 +176,11 @@ impl Harness {
                     },
                 ) => {
                     let m = &self.model;
-                    prop_assert_eq!(i.active_table, m.active.map(|a| id_of(&a)));
-                    prop_assert_eq!(i.previous_table, m.previous.map(|p| id_of(&p)));
+                    prop_assert_eq!((i.active_table, i.previous_table), m.tables.ids());
                     prop_assert_eq!(i.streaming, m.streaming);
                     prop_assert_eq!(i.samples, m.samples);
-                    prop_assert_eq!(i.frames_dropped, m.dropped);
-                    if let Some(rate) = m.rate {
+                    prop_assert_eq!(i.frames_dropped, m.frames_dropped);
+                    if let Some(rate) = m.rate_hz {
                         prop_assert_eq!(i.rate_hz, rate);
                     }
                 }
@@ -363,7 +191,7 @@ impl Harness {
                     },
                 ) => {
                     prop_assert!(*hz > 0);
-                    self.model.rate = Some(*hz);
+                    self.model.rate_hz = Some(*hz);
                 }
                 (Request::SetRate { .. }, DeviceMessage::Error { error, .. }) => {
                     prop_assert_eq!(error.code, ErrorCode::InvalidRate as u16);
@@ -416,7 +244,7 @@ impl Harness {
                 offset,
                 n,
             } => {
-                let expected = self.model.upload.as_ref().map_or(0, |u| u.bytes.len());
+                let expected = self.model.expected_offset();
                 let offset = if *at_expected {
                     expected
                 } else {
@@ -495,11 +323,11 @@ impl Harness {
             Op::Dropped => {
                 let msg = self.dev.handle_frame(Err(FrameError::Cobs), &|| 5);
                 prop_assert!(msg.is_none());
-                self.model.dropped = self.model.dropped.wrapping_add(1);
+                self.model.frame_dropped();
                 Ok(())
             }
             Op::EraseAhead => {
-                prop_assert!(self.dev.erase_ahead().is_ok());
+                prop_assert!(self.dev.erase_ahead(&|| 0).is_ok());
                 Ok(())
             }
             Op::Reboot => {
@@ -547,7 +375,7 @@ fn fuzz(seed_name: &str, cases: u32) {
             ran.set(ran.get() + 1);
             let mut h = Harness {
                 dev: Service::new(Board::Qemu, Flash::new(), LAYOUT),
-                model: Model::default(),
+                model: ProtocolModel::default(),
                 src,
                 raw,
             };
@@ -591,7 +419,7 @@ fn the_garbage_generator_can_reach_a_valid_request() {
     assert!(!body.is_empty());
     let mut h = Harness {
         dev: Service::new(Board::Qemu, Flash::new(), LAYOUT),
-        model: Model::default(),
+        model: ProtocolModel::default(),
         src: sources(),
         raw: RawSample::from_codes(0, 0, 0),
     };

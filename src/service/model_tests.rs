@@ -1,16 +1,10 @@
 //! Every sequence of load / activate / rollback over four tables, up to [`DEPTH`] operations,
-//! checked against a reference model of what the user expects (issue #15.1), on the live
-//! device and after a reboot at every step.
-//!
-//! The model is written from the user's point of view, not from the service's code:
-//! - loading the table that is active changes nothing (the rollback table stays);
-//! - loading another table makes it active and the table active before it the rollback table;
-//! - rollback (or activating the rollback table by id) swaps the two; activating the active
-//!   table changes nothing; any other id is TableNotFound; rollback without a rollback table
-//!   is NoPreviousTable;
-//! - a reboot (power off/on) changes nothing of this.
+//! checked against the protocol's reference model of what the user expects
+//! ([`crate::protocol::model::TableHistory`]), on the live device, after erase-ahead and after a
+//! reboot at every step.
 
 use super::*;
+use crate::protocol::model::TableHistory;
 use crate::storage::RamFlash;
 use crate::table::tests::paper_table;
 use crate::table::CRC32;
@@ -29,41 +23,18 @@ enum Op {
     Rollback,
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-struct Model {
-    active: Option<usize>,
-    previous: Option<usize>,
-}
+/// What the device answered (the model's error codes, or Ok).
+type Expect = Result<(), ErrorCode>;
 
-/// What the user expects the device to answer.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Expect {
-    Ok,
-    Error(ErrorCode),
-}
-
-impl Model {
-    fn apply(&mut self, op: Op) -> Expect {
-        match op {
-            Op::Load(t) => {
-                if self.active != Some(t) {
-                    self.previous = self.active;
-                    self.active = Some(t);
-                }
-                Expect::Ok
-            }
-            Op::Activate(t) if self.active == Some(t) => Expect::Ok,
-            Op::Activate(t) if self.previous == Some(t) => {
-                core::mem::swap(&mut self.active, &mut self.previous);
-                Expect::Ok
-            }
-            Op::Activate(_) => Expect::Error(ErrorCode::TableNotFound),
-            Op::Rollback if self.previous.is_some() => {
-                core::mem::swap(&mut self.active, &mut self.previous);
-                Expect::Ok
-            }
-            Op::Rollback => Expect::Error(ErrorCode::NoPreviousTable),
+/// The model's answer to `op` ([`crate::protocol::model::TableHistory`]).
+fn apply(m: &mut TableHistory, op: Op, encoded: &[[u8; ENCODED_LEN]; TABLES]) -> Expect {
+    match op {
+        Op::Load(t) => {
+            m.load(&encoded[t]);
+            Ok(())
         }
+        Op::Activate(t) => m.activate(crate::table::table_id(&encoded[t])),
+        Op::Rollback => m.rollback(),
     }
 }
 
@@ -81,9 +52,9 @@ fn call(s: &mut Service<Flash>, request: Request) -> DeviceMessage {
 
 fn answer(m: &DeviceMessage) -> Expect {
     match m {
-        DeviceMessage::Response { .. } => Expect::Ok,
+        DeviceMessage::Response { .. } => Ok(()),
         DeviceMessage::Error { error, .. } => {
-            Expect::Error(ErrorCode::from_u16(error.code).unwrap_or(ErrorCode::Malformed))
+            Err(ErrorCode::from_u16(error.code).unwrap_or(ErrorCode::Malformed))
         }
         other => panic!("unexpected {other:?}"),
     }
@@ -104,14 +75,14 @@ fn run(
                 total_len: ENCODED_LEN as u32,
                 body_crc32: CRC32.checksum(&bytes[..ENCODED_LEN - 4]),
             };
-            assert_eq!(answer(&call(s, begin)), Expect::Ok);
+            assert_eq!(answer(&call(s, begin)), Ok(()));
             for (i, c) in bytes.chunks(CHUNK_LEN).enumerate() {
                 let chunk = Request::UploadChunk {
                     upload_id,
                     offset: (i * CHUNK_LEN) as u32,
                     data: heapless::Vec::from_slice(c).unwrap_or_default(),
                 };
-                assert_eq!(answer(&call(s, chunk)), Expect::Ok);
+                assert_eq!(answer(&call(s, chunk)), Ok(()));
             }
             answer(&call(s, Request::UploadCommit { upload_id }))
         }
@@ -120,7 +91,8 @@ fn run(
     }
 }
 
-fn observed(s: &mut Service<Flash>, ids: &[u32]) -> Model {
+/// (active, previous) table ids as Info reports them.
+fn observed(s: &mut Service<Flash>) -> (Option<u32>, Option<u32>) {
     let DeviceMessage::Response {
         body: Response::Info(i),
         ..
@@ -128,11 +100,7 @@ fn observed(s: &mut Service<Flash>, ids: &[u32]) -> Model {
     else {
         panic!("Info failed");
     };
-    let which = |id: Option<u32>| id.map(|id| ids.iter().position(|x| *x == id).unwrap_or(99));
-    Model {
-        active: which(i.active_table),
-        previous: which(i.previous_table),
-    }
+    (i.active_table, i.previous_table)
 }
 
 struct Walk {
@@ -143,7 +111,7 @@ struct Walk {
 }
 
 impl Walk {
-    fn visit(&mut self, s: &Service<Flash>, model: Model, path: &mut std::vec::Vec<Op>) {
+    fn visit(&mut self, s: &Service<Flash>, model: TableHistory, path: &mut std::vec::Vec<Op>) {
         if path.len() == DEPTH {
             return;
         }
@@ -151,23 +119,23 @@ impl Walk {
             let mut dev = s.clone();
             let mut m = model;
             path.push(op);
-            let expected = m.apply(op);
+            let expected = apply(&mut m, op, &self.encoded);
             let got = run(&mut dev, op, &self.encoded, &self.ids);
             assert_eq!(got, expected, "answer after {path:?}");
-            assert_eq!(observed(&mut dev, &self.ids), m, "state after {path:?}");
+            assert_eq!(observed(&mut dev), m.ids(), "state after {path:?}");
             // The firmware erases ahead after every change; it must not change the state.
-            let _ = dev.erase_ahead();
+            let _ = dev.erase_ahead(&|| 0);
             assert_eq!(
-                observed(&mut dev, &self.ids),
-                m,
+                observed(&mut dev),
+                m.ids(),
                 "state after erase-ahead, {path:?}"
             );
             // Power off and on: the same state comes back from flash.
             let flash = dev.clone().into_flash().expect("store open");
             let mut rebooted = Service::new(Board::Qemu, flash, LAYOUT);
             assert_eq!(
-                observed(&mut rebooted, &self.ids),
-                m,
+                observed(&mut rebooted),
+                m.ids(),
                 "state after reboot, {path:?}"
             );
             self.nodes += 1;
@@ -192,7 +160,7 @@ fn every_load_activate_rollback_sequence_of_four_tables_matches_what_the_user_ex
         nodes: 0,
     };
     let start = Service::new(Board::Qemu, Flash::new(), LAYOUT);
-    walk.visit(&start, Model::default(), &mut std::vec::Vec::new());
+    walk.visit(&start, TableHistory::default(), &mut std::vec::Vec::new());
     // 9 + 9² + … + 9⁵ sequences, each checked live, after erase-ahead and after a reboot.
     assert_eq!(
         walk.nodes,

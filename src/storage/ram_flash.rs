@@ -153,6 +153,9 @@ impl<const N: usize, const ERASE: usize, const WRITE: usize> NorFlash
     }
 }
 
+/// FlashFailed with the error's kind.
+impl crate::protocol::FlashErrorReply for RamFlashError {}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -314,6 +314,8 @@ fn flash_with<const E: usize, const W: usize, const R: usize>(
 /// Commits table 3 into slot C of the small layout, which must erase C first, and checks that a
 /// reboot finds table 3 active.
 fn commit_3_erases_slot_c(mut s: CalibrationStore<SimFlash<256, 1, 1>>) {
+    // C held something once (a blank slot is not erased at all).
+    s.flash.bytes[1024 + 100] = 0x5A;
     s.flash.log.clear();
     s.commit(&table(3)).unwrap();
     assert!(s.flash.log.contains(&Access::Erase(1024, 1536)));
@@ -499,10 +501,30 @@ fn prepared_commit_does_not_erase_again() {
 }
 
 #[test]
+fn a_blank_spare_is_not_erased_and_one_with_a_single_programmed_bit_is() {
+    let flash = flash_with::<256, 1, 1>(1536, SMALL_LAYOUT, &[table(1)]); // A active
+    let mut s = store(flash, SMALL_LAYOUT);
+    s.flash.log.clear();
+    assert_eq!(s.prepare_commit(), Ok(Slot::B));
+    assert!(!s.flash.log.iter().any(|a| matches!(a, Access::Erase(..))));
+    assert_eq!(s.erase_count(), 0);
+    s.commit(&table(2)).unwrap();
+    assert!(!s.flash.log.iter().any(|a| matches!(a, Access::Erase(..))));
+    // The last byte of C's marker area with one bit programmed: erased before C is written.
+    let marker_end = 1024 + doc_marker_offset(4) + 3;
+    s.flash.bytes[marker_end] = 0xFE;
+    s.flash.log.clear();
+    assert_eq!(s.prepare_commit(), Ok(Slot::C));
+    assert!(s.flash.log.contains(&Access::Erase(1024, 1536)));
+    assert_eq!(s.erase_count(), 1);
+}
+
+#[test]
 fn an_erase_that_failed_is_redone_by_the_next_commit() {
     let flash = flash_with::<256, 1, 1>(1536, SMALL_LAYOUT, &[table(1), table(2)]);
     // The erase fails in its second block (a transient driver error: same store, no reboot).
     let mut s = store(flash, SMALL_LAYOUT);
+    s.flash.bytes[1024 + 100] = 0x5A; // the spare C is not blank
     s.flash.budget = Some(1);
     assert_eq!(
         s.prepare_commit(),
@@ -690,6 +712,7 @@ fn commits_rotate_through_the_three_slots_with_increasing_sequence_in_the_docume
 fn commit_erases_the_inactive_slot_and_programs_the_marker_last_after_read_back() {
     let flash = flash_with::<256, 1, 1>(1536, SMALL_LAYOUT, &[table(1)]); // A active
     let mut s = store(flash, SMALL_LAYOUT);
+    s.flash.bytes[512 + 443] = 0x00; // B held an image once
     s.flash.log.clear();
     s.commit(&table(2)).unwrap();
     let changes: Vec<Access> = s

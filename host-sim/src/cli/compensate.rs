@@ -24,10 +24,13 @@ pub struct CompensateArgs {
     /// target/thumbv7em-none-eabihf/release/accomp-fw).
     #[arg(long)]
     pub firmware: Option<PathBuf>,
+    #[command(flatten)]
+    pub state: super::load::BoardStateArgs,
 }
 
 /// Runs `accomp compensate` (streams its output: docs/protocol.md).
 pub fn run(args: &CompensateArgs) -> anyhow::Result<()> {
+    args.state.apply();
     compensate::run_to_file(
         &args.target,
         args.firmware.as_deref(),

@@ -10,7 +10,7 @@ use crate::discover::{discover_path, note_bad_rows, report, select};
 /// Arguments of `accomp discover`.
 #[derive(Debug, Clone, clap::Args)]
 pub struct DiscoverArgs {
-    /// The record: a log (design/architecture.md), a gMetrology .tsf or the AQG CSV.
+    /// The record: a log (docs/log-format.md), a gMetrology .tsf or the AQG CSV.
     pub log: PathBuf,
     /// Calibration table (`accomp fit -o`): the baseline becomes its prediction.
     #[arg(long)]
@@ -41,21 +41,33 @@ pub struct DiscoverArgs {
     #[arg(long, requires = "simulate")]
     pub scenario: Option<PathBuf>,
     /// Ensemble size of the twin (seeds 1..=N).
-    #[arg(long, default_value_t = simulate::DEFAULT_ENSEMBLE, requires = "simulate")]
+    #[arg(long, default_value_t = simulate::DEFAULT_ENSEMBLE, requires = "simulate",
+          value_parser = simulate::parse_ensemble)]
     pub ensemble: usize,
     /// Write the extended scenario (TOML that `accomp simulate` runs) here.
     #[arg(long, requires = "simulate")]
     pub write_scenario: Option<PathBuf>,
+    /// Read a log above the reader's limits (20 million data lines, 4 GiB).
+    #[arg(long)]
+    pub allow_large: bool,
 }
 
 /// `accomp discover`.
 pub fn run(args: &DiscoverArgs) -> anyhow::Result<()> {
+    crate::log::reader::set_allow_large(args.allow_large);
+    // Outputs proved writable before minutes of work, not after.
+    if let Some(p) = &args.write_scenario {
+        crate::outputs::check_file(p)?;
+    }
+    if let Some(d) = &args.report {
+        crate::outputs::check_dir(d)?;
+    }
     if args.simulate {
         return run_simulate(args);
     }
     let table = match &args.calibration {
         Some(p) => {
-            let bytes = std::fs::read(p)?;
+            let bytes = crate::calibration_file::read_table_bytes(p)?;
             Some(
                 accomp::table::CalibrationTable::decode(&bytes)
                     .map_err(|e| anyhow::anyhow!("{}: {e}", p.display()))?,

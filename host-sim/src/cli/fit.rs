@@ -6,8 +6,8 @@ use std::path::{Path, PathBuf};
 use accomp::units::Celsius;
 
 use crate::fit::{
-    calibration_table, fit_table, parse_coefficient_table, parse_date, parse_printed_models,
-    render_text, today_utc, FitError, PAPER_MODELS_FILE,
+    calibration_table, fit_table, parse_coefficient_table, parse_date, parse_orientation,
+    parse_printed_models, render_text, today_utc, with_orientation, FitError, PAPER_MODELS_FILE,
 };
 
 /// Arguments of `accomp fit`.
@@ -37,17 +37,26 @@ pub struct FitArgs {
     /// Calibration date stored in the table, YYYY-MM-DD (default: today, UTC).
     #[arg(long)]
     pub date: Option<String>,
+    /// Test orientation stored in the table: 1g (input axis vertical), 0g (input axis
+    /// horizontal, gravity on the pendulum axis) or a_i,a_p,a_o in g.
+    #[arg(long, default_value = "1g")]
+    pub orientation: String,
 }
 
 fn read(path: &Path) -> Result<String, FitError> {
-    std::fs::read_to_string(path).map_err(|error| FitError::Io {
-        path: path.to_owned(),
-        error,
-    })
+    crate::log::reader::read_text_limited(path, crate::log::reader::MAX_SMALL_TEXT_BYTES).map_err(
+        |e| FitError::Io {
+            path: path.to_owned(),
+            error: e.into_io(),
+        },
+    )
 }
 
 /// `accomp fit`.
 pub fn run(args: &FitArgs) -> anyhow::Result<()> {
+    if let Some(p) = &args.output {
+        crate::outputs::check_file(p)?;
+    }
     let at = Celsius(args.at);
     let table = parse_coefficient_table(&read(&args.input)?).map_err(|error| FitError::Csv {
         path: args.input.clone(),
@@ -89,12 +98,16 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
             path: args.input.clone(),
             error,
         })?;
-        let cal = calibration_table(&report, scale, Celsius(args.reference), &args.serial, date)?;
-        std::fs::write(out, cal.encode())
-            .map_err(|e| anyhow::anyhow!("cannot write {}: {e}", out.display()))?;
+        let orientation = parse_orientation(&args.orientation)?;
+        let cal = with_orientation(
+            calibration_table(&report, scale, Celsius(args.reference), &args.serial, date)?,
+            orientation,
+        )?;
+        crate::outputs::write_file(out, &cal.encode())?;
         // stderr, so that `--json` output stays a single JSON document on stdout.
         eprintln!(
-            "wrote calibration table {} (id {:08x}, orders K0 {} K1 {} K2 {} δp {} δo {}, T0 {} °C)",
+            "wrote calibration table {} (id {:08x}, orders K0 {} K1 {} K2 {} δp {} δo {}, T0 {} °C, \
+             orientation a_i {} g, a_p {} g, a_o {} g)",
             out.display(),
             cal.id(),
             cal.thermal.models.bias_g.order(),
@@ -102,7 +115,10 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
             cal.thermal.models.nonlinearity_g_per_g2.order(),
             cal.thermal.models.misalignment_p_rad.order(),
             cal.thermal.models.misalignment_o_rad.order(),
-            args.reference
+            args.reference,
+            cal.orientation.nominal_input.0,
+            cal.orientation.cross.a_p.0,
+            cal.orientation.cross.a_o.0,
         );
     }
     Ok(())

@@ -19,10 +19,37 @@ pub struct LoadArgs {
     /// Firmware ELF for --target qemu.
     #[arg(long)]
     pub firmware: Option<PathBuf>,
+    #[command(flatten)]
+    pub state: BoardStateArgs,
+}
+
+/// How a command takes the QEMU board's persistent state (one command at a time).
+#[derive(clap::Args, Debug, Clone, Copy, Default)]
+pub struct BoardStateArgs {
+    /// --target qemu: refuse at once when another command is using the board state, instead
+    /// of waiting for it.
+    #[arg(long)]
+    pub no_wait: bool,
+    /// --target qemu: move a damaged board state (flash image of the wrong size) aside,
+    /// renamed with a time stamp, and start with a blank board.
+    #[arg(long)]
+    pub reset_state: bool,
+}
+
+impl BoardStateArgs {
+    /// Makes these the options of every device connection of this process.
+    pub fn apply(self) {
+        crate::device::qemu::StateOptions {
+            no_wait: self.no_wait,
+            reset_state: self.reset_state,
+        }
+        .set_for_process();
+    }
 }
 
 /// Runs `accomp load`.
 pub fn run(args: &LoadArgs) -> anyhow::Result<()> {
+    args.state.apply();
     let bytes = crate::calibration_file::read_table_bytes(&args.calibration)?;
     if !args.no_local_check {
         crate::calibration_file::decode_named(&bytes).context("table refused locally")?;
@@ -41,6 +68,23 @@ pub fn run(args: &LoadArgs) -> anyhow::Result<()> {
         .load(&bytes, |sent, _| bar.set_position(sent as u64));
     bar.finish_and_clear();
     let id = loaded?;
-    eprintln!("active table {id:#010x} (read back and verified)");
+    let state = conn.state_image();
+    // The board said so; for the QEMU board it counts once the image on disk says so too.
+    match conn.close()? {
+        None => eprintln!("active table {id:#010x} (read back and verified)"),
+        Some((active, previous)) => {
+            let path = state.map(|p| p.display().to_string()).unwrap_or_default();
+            anyhow::ensure!(
+                active == Some(id),
+                "{path}: the persisted image's active table is {}, not {id:#010x}: not loaded",
+                active.map_or("none".into(), |a| format!("{a:#010x}"))
+            );
+            let rollback = previous.map_or("none".into(), |p| format!("{p:#010x}"));
+            eprintln!(
+                "active table {id:#010x} (read back and verified, persisted in {path}; \
+                 rollback table {rollback})"
+            );
+        }
+    }
     Ok(())
 }

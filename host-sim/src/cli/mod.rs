@@ -5,12 +5,15 @@
 //! (`plot::Format`, `plot::Kind`, `discover::import::Format`) derive `clap::ValueEnum` there
 //! rather than being mirrored here.
 
+pub mod board_sim;
 pub mod compensate;
 pub mod demo;
+pub mod device;
 pub mod discover;
 pub mod fit;
 pub mod load;
 pub mod plot;
+pub mod record;
 pub mod simulate;
 pub mod simulate_tumble;
 pub mod stability;

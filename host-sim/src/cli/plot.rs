@@ -27,10 +27,15 @@ pub struct PlotArgs {
     /// output_linearized_v, output_compensated_g that the log has.
     #[arg(long = "compensated")]
     pub compensated: Vec<String>,
+    /// Read a log above the reader's limits (20 million data lines, 4 GiB).
+    #[arg(long)]
+    pub allow_large: bool,
 }
 
 /// Runs the subcommand: reads the log, writes the figures, prints their paths.
 pub fn run(args: &PlotArgs) -> anyhow::Result<()> {
+    crate::log::reader::set_allow_large(args.allow_large);
+    crate::outputs::check_dir(&args.out_dir)?;
     let log = Log::read_path(&args.log)?;
     let stem = args
         .log

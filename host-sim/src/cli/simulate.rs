@@ -96,6 +96,7 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
     let (Some(arg), Some(output)) = (&args.scenario, &args.output) else {
         anyhow::bail!("a scenario and -o OUTPUT are required");
     };
+    crate::outputs::check_file(output)?;
     let mut sc = scenario::load(arg)?;
     if let Some(dt) = args.interval {
         sc.run.interval_s = dt;
@@ -103,7 +104,12 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
     if let Some(days) = args.days {
         sc.run.duration_s = days * 86_400.0;
     }
-    sc.validate()?;
+    // An absurd size is said as such (with the estimate) even when it also puts the run's end
+    // outside the calendar the scenario checks.
+    if let Err(e) = sc.validate() {
+        check_size(&sc, args.seed, args.codes, args.allow_large)?;
+        return Err(e.into());
+    }
     check_size(&sc, args.seed, args.codes, args.allow_large)?;
     let file =
         File::create(output).with_context(|| format!("cannot create {}", output.display()))?;
@@ -112,14 +118,27 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
         ProgressStyle::with_template("simulate {bar:40} {pos}/{len} rows, {eta} left")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
+    // Off a terminal the bar is not drawn: a line a minute instead.
+    let lines = crate::numerics::parallel::ProgressLines::new(
+        format!("simulate {}", sc.name),
+        sc.samples() as usize,
+        "rows",
+    );
     let started = std::time::Instant::now();
-    let (summary, _) = simulate(
+    let (summary, file) = simulate(
         &sc,
         args.seed,
         &Options { codes: args.codes },
         file,
-        &mut |done, _| bar.set_position(done),
-    )?;
+        &mut |done, _| {
+            bar.set_position(done);
+            lines.set(done as usize);
+        },
+    )
+    .with_context(|| format!("writing {}", output.display()))?;
+    // A full disk can refuse the data only now (delayed allocation): said, never exit 0.
+    file.sync_all()
+        .with_context(|| format!("writing {}", output.display()))?;
     bar.finish_and_clear();
     eprintln!(
         "simulated {} ({} rows, {} s interval, seed {}) in {:.1} s → {}",

@@ -6,7 +6,6 @@ use std::path::PathBuf;
 use super::tumble::parse_axis;
 use crate::tumble::RotationAxis;
 use crate::tumble_sim::{self, TumbleSimConfig};
-use anyhow::Context;
 
 /// Generate a tumble log from true temperature models (the paper's printed order-2 models).
 #[derive(clap::Args, Debug)]
@@ -54,6 +53,9 @@ pub struct SimulateTumbleArgs {
 
 /// Runs `accomp simulate-tumble`.
 pub fn run(args: SimulateTumbleArgs) -> anyhow::Result<()> {
+    if let Some(p) = &args.output {
+        crate::outputs::check_file(p)?;
+    }
     let SimulateTumbleArgs {
         seed,
         output,
@@ -85,9 +87,7 @@ pub fn run(args: SimulateTumbleArgs) -> anyhow::Result<()> {
     cfg.test_column = !no_test_column;
     let (log, _) = tumble_sim::simulate_tumble(&cfg).map_err(anyhow::Error::msg)?;
     match output {
-        Some(path) => {
-            std::fs::write(&path, log).with_context(|| format!("writing {}", path.display()))?
-        }
+        Some(path) => crate::outputs::write_file(&path, log.as_bytes())?,
         None => print!("{log}"),
     }
 

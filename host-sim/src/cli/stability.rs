@@ -21,6 +21,9 @@ pub struct StabilityArgs {
     /// Averaging times: octave (m = 1, 2, 4, ...) or all (every m; short logs only).
     #[arg(long, value_enum, default_value_t = TausArg::Octave)]
     pub taus: TausArg,
+    /// Read a log above the reader's limits (20 million data lines, 4 GiB).
+    #[arg(long)]
+    pub allow_large: bool,
 }
 
 /// `--taus` values.
@@ -34,6 +37,7 @@ pub enum TausArg {
 
 /// Runs the subcommand, printing to stdout.
 pub fn run(args: &StabilityArgs) -> Result<(), StabilityError> {
+    crate::log::reader::set_allow_large(args.allow_large);
     let log = Log::read_path(&args.log)?;
     let opts = Options {
         columns: args.columns.clone(),

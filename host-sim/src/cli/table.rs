@@ -7,7 +7,6 @@ use crate::device::{Connection, Target};
 use accomp::poly::TempPoly;
 use accomp::table::{CalibrationTable, ENCODED_LEN};
 use accomp::units::{Celsius, RAD_PER_ARCMIN};
-use anyhow::Context as _;
 use anyhow::Result;
 use serde::Serialize;
 use serde_json::Value;
@@ -261,6 +260,8 @@ pub fn run(args: &TableArgs) -> Result<()> {
             let bytes = match read_table_bytes(path) {
                 Ok(b) => b,
                 Err(e) => {
+                    // With its cause: `cannot read <file>: <system error>`.
+                    let e = anyhow::Error::from(e);
                     if *json {
                         println!(
                             "{}",
@@ -312,14 +313,18 @@ pub struct TableGetArgs {
     /// Firmware ELF for --target qemu.
     #[arg(long)]
     pub firmware: Option<PathBuf>,
+    #[command(flatten)]
+    pub state: super::load::BoardStateArgs,
 }
 
 /// Runs `accomp table get`.
 pub fn run_get(args: &TableGetArgs) -> anyhow::Result<()> {
+    args.state.apply();
+    crate::outputs::check_file(&args.output)?;
     let mut conn = Connection::open(&args.target, args.firmware.as_deref())?;
     let bytes = conn.client.read_table()?;
-    std::fs::write(&args.output, &bytes)
-        .with_context(|| format!("writing {}", args.output.display()))?;
+    conn.close()?;
+    crate::outputs::write_file(&args.output, &bytes)?;
     eprintln!("{} bytes written to {}", bytes.len(), args.output.display());
     Ok(())
 }

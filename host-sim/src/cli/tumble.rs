@@ -41,6 +41,9 @@ pub struct TumbleArgs {
 
 /// Runs `accomp tumble`.
 pub fn run(args: TumbleArgs) -> anyhow::Result<()> {
+    if let Some(p) = &args.output {
+        crate::outputs::check_file(p)?;
+    }
     let TumbleArgs {
         logs,
         json,
@@ -54,7 +57,8 @@ pub fn run(args: TumbleArgs) -> anyhow::Result<()> {
     let mut parsed = Vec::new();
     for path in &logs {
         let text =
-            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+            crate::log::reader::read_text_limited(path, crate::log::reader::MAX_SMALL_TEXT_BYTES)
+                .with_context(|| format!("reading {}", path.display()))?;
         parsed.push(tumble::parse_log(&text).with_context(|| format!("{}", path.display()))?);
     }
     let opts = TumbleOptions {
@@ -71,8 +75,7 @@ pub fn run(args: TumbleArgs) -> anyhow::Result<()> {
         print!("{}", tumble::render_text(&report));
     }
     if let Some(path) = output {
-        std::fs::write(&path, tumble::table_csv(&report, with_se)?)
-            .with_context(|| format!("writing {}", path.display()))?;
+        crate::outputs::write_file(&path, tumble::table_csv(&report, with_se)?.as_bytes())?;
     }
 
     Ok(())

@@ -43,6 +43,7 @@ fn frames_with_the_same_nan_values_compare_equal_and_a_one_ulp_change_does_not()
     let f = Frame {
         seq: 1,
         time_us: 2,
+        lost: Default::default(),
         output_v: 1.0,
         temperature_c: 60.0,
         rtd_ohms: 123.0,

@@ -21,8 +21,8 @@ use embedded_hal::delay::DelayNs;
 use embedded_hal::digital::InputPin;
 use embedded_hal::spi::{Mode, SpiDevice, MODE_3};
 
-use crate::adc::{Ad7124Code, AdcScale};
-use crate::drivers::{wait_low, Error, CRC8_ATM};
+use crate::adc::{Ad7124Code, AdcScale, Coding};
+use crate::drivers::{wait_low, WaitError, CRC8_ATM};
 use crate::units::Volts;
 use registers::{adc_control, config, err, status, Reg};
 pub use registers::{AnalogInput, Excitation, FilterType, Gain, IoutPin, PowerMode, Reference};
@@ -197,7 +197,7 @@ impl Ad7124Config {
     /// offset binary, the PGA gain. `vref` is the reference voltage for volt conversions; the
     /// ratiometric RTD path ([`crate::adc::AdcScale::ratiometric_ohms`]) does not depend on it.
     pub fn scale(&self, vref: Volts) -> AdcScale {
-        crate::frontend::ad7124_scale(self.bipolar, self.gain.factor(), vref, 1.0)
+        code_scale(self.bipolar, self.gain.factor(), vref, 1.0)
     }
 
     fn validate(&self) -> bool {
@@ -280,6 +280,107 @@ impl Ad7124Config {
 pub struct DeviceInfo {
     /// SILICON_REVISION (ID[3:0]).
     pub silicon_revision: u8,
+}
+
+/// Everything a driver call can fail with.
+///
+/// `SpiE` is the bus error of the [`embedded_hal::spi::SpiDevice`], `PinE` the error of the
+/// data-ready [`embedded_hal::digital::InputPin`]. The other variants say what the chip did wrong,
+/// so the firmware can report a precise status flag instead of a number it cannot trust.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Error<SpiE, PinE> {
+    /// The SPI transfer itself failed.
+    Spi(SpiE),
+    /// Reading the data-ready pin failed.
+    Pin(PinE),
+    /// Data-ready did not assert within the configured number of polls.
+    DrdyTimeout,
+    /// CRC-8 (x^8 + x^2 + x + 1) over the received bytes differs from the received CRC byte.
+    CrcMismatch {
+        /// CRC computed from the received bytes.
+        expected: u8,
+        /// CRC byte the converter sent.
+        received: u8,
+    },
+    /// A configuration value does not fit its register field or contradicts another setting.
+    InvalidConfig,
+    /// The ID register names another device.
+    DeviceId {
+        /// The ID register content read.
+        found: u8,
+    },
+    /// The ID register reads as an idle bus (all zeros or all ones): no device answered.
+    NotResponding {
+        /// The byte read where the ID was expected.
+        found: u8,
+    },
+    /// A register read back after writing holds another value than written.
+    ReadBack {
+        /// Register address.
+        register: u8,
+        /// Value written.
+        written: u32,
+        /// Value read back.
+        read: u32,
+    },
+    /// The converter reports it has been reset since it was configured (brown-out or glitch on
+    /// the reset line): its configuration is lost and must be re-initialised.
+    UnexpectedReset,
+    /// The ERROR register reports the listed conditions (see [`ErrorFlags`]).
+    AdcError(ErrorFlags),
+}
+
+impl<SpiE, PinE> Error<SpiE, PinE> {
+    /// The variant's name, for firmware logs: defmt prints it without pulling in `core::fmt`
+    /// (whose Debug machinery would cost the front-end build ~3.5 KiB of flash).
+    pub const fn name(&self) -> &'static str {
+        match self {
+            Error::Spi(_) => "Spi",
+            Error::Pin(_) => "Pin",
+            Error::DrdyTimeout => "DrdyTimeout",
+            Error::CrcMismatch { .. } => "CrcMismatch",
+            Error::InvalidConfig => "InvalidConfig",
+            Error::DeviceId { .. } => "DeviceId",
+            Error::NotResponding { .. } => "NotResponding",
+            Error::ReadBack { .. } => "ReadBack",
+            Error::UnexpectedReset => "UnexpectedReset",
+            Error::AdcError(_) => "AdcError",
+        }
+    }
+}
+
+impl<SpiE, PinE> From<WaitError<PinE>> for Error<SpiE, PinE> {
+    fn from(e: WaitError<PinE>) -> Self {
+        match e {
+            WaitError::Pin(p) => Error::Pin(p),
+            WaitError::Timeout => Error::DrdyTimeout,
+        }
+    }
+}
+
+/// Result width (Rev. B "Data Register": 24 bits).
+pub const CODE_BITS: u8 = 24;
+
+/// How codes read: 24 bits, unipolar or offset binary (`bipolar`), full scale `vref`/`pga_gain`,
+/// then the calibration's `gain_correction` (the board decides these; the chip only its coding).
+pub const fn code_scale(
+    bipolar: bool,
+    pga_gain: f64,
+    vref: Volts,
+    gain_correction: f64,
+) -> AdcScale {
+    AdcScale {
+        bits: CODE_BITS,
+        coding: if bipolar {
+            Coding::OffsetBinary
+        } else {
+            Coding::Unipolar
+        },
+        pga_gain,
+        vref,
+        gain_correction,
+        offset: Volts(0.0),
+    }
 }
 
 /// The AD7124-4 on an SPI device, with a data-ready pin and a delay source.
@@ -414,7 +515,7 @@ where
             self.config.drdy_poll_limit,
             self.config.drdy_poll_interval_us,
         );
-        wait_low(&mut self.drdy, &mut self.delay, limit, interval_us)
+        wait_low(&mut self.drdy, &mut self.delay, limit, interval_us).map_err(Error::from)
     }
 
     /// Poll the STATUS register's RDY bit at most `drdy_poll_limit` times (shared-bus path).

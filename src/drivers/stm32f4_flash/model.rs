@@ -38,6 +38,11 @@ pub(crate) struct FlashModel {
     pub busy_for: u32,
     pub erases: u32,
     pub programmed_bytes: u32,
+    /// FLASH_ACR (reset value with the caches on, as the firmware runs).
+    pub acr: u32,
+    /// Cache resets done while the caches were disabled (RM0090 §3.5.2), and refused ones.
+    pub cache_resets: u32,
+    pub cache_resets_while_enabled: u32,
 }
 
 impl FlashModel {
@@ -54,6 +59,9 @@ impl FlashModel {
             busy_for: 3,
             erases: 0,
             programmed_bytes: 0,
+            acr: super::acr::ICEN | super::acr::DCEN,
+            cache_resets: 0,
+            cache_resets_while_enabled: 0,
         }
     }
 
@@ -87,6 +95,22 @@ impl FlashModel {
 }
 
 impl FlashRegisters for FlashModel {
+    fn acr(&mut self) -> u32 {
+        self.acr
+    }
+
+    fn set_acr(&mut self, value: u32) {
+        use super::acr;
+        if value & (acr::ICRST | acr::DCRST) != 0 {
+            if self.acr & (acr::ICEN | acr::DCEN) != 0 || value & (acr::ICEN | acr::DCEN) != 0 {
+                self.cache_resets_while_enabled += 1;
+            } else {
+                self.cache_resets += 1;
+            }
+        }
+        self.acr = value;
+    }
+
     fn sr(&mut self) -> u32 {
         if self.busy_polls > 0 {
             self.busy_polls -= 1;

@@ -51,6 +51,20 @@ fn erase_program_read_round_trip_and_the_controller_is_left_locked() {
 }
 
 #[test]
+fn every_erase_resets_the_caches_while_they_are_disabled_and_turns_them_back_on() {
+    let mut f = flash();
+    assert_eq!(f.erase(SECTOR_9, SECTOR_9 + SECTOR), Ok(()));
+    let m = f.registers();
+    assert_eq!((m.cache_resets, m.cache_resets_while_enabled), (1, 0));
+    assert_eq!(m.acr & (acr::ICEN | acr::DCEN), acr::ICEN | acr::DCEN);
+    assert_eq!(m.acr & (acr::ICRST | acr::DCRST), 0);
+    // A failed erase (write-protected sector) may have erased nothing, but resets all the same.
+    f.registers().n_wrp &= !(1 << 10);
+    assert!(f.erase(SECTOR_10, SECTOR_10 + SECTOR).is_err());
+    assert_eq!(f.registers().cache_resets, 2);
+}
+
+#[test]
 fn sectors_follow_the_f405_map() {
     assert_eq!(sector_of(0), (0, 16 * 1024));
     assert_eq!(sector_of(0xC000), (3, 16 * 1024));

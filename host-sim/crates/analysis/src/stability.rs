@@ -49,6 +49,13 @@ pub enum StabilityError {
     /// `scale_factor_v_per_g` is present but not a positive number.
     #[error("metadata scale_factor_v_per_g = {0} is not positive")]
     BadScaleFactor(f64),
+    /// A column's values are so large that its statistics overflow (±1e308): no result is
+    /// printed as ±inf.
+    #[error(
+        "column {0:?}: its values (up to {1:e}) overflow the statistics (mean, standard \
+         deviation, drift): not a measurement, refused"
+    )]
+    Overflow(String, f64),
     /// `--taus all` on a record too long for an O(N^2) computation.
     #[error("--taus all on {0} samples would take hours (O(N^2)); use --taus octave")]
     TooLongForAllTaus(usize),
@@ -215,15 +222,21 @@ fn masked_sums<const J: usize>(
 /// Mean and sample standard deviation (divisor n - 1) of the finite values; `None` below 2.
 pub fn mean_std(y: &[f64]) -> Option<(f64, f64, usize)> {
     let fin = |k: usize| y[k].is_finite();
-    let (n, [s]) = masked_sums(y.len(), fin, |k| [y[k]]);
+    // Sums of the deviations from the first value: a constant column sums to exactly 0 (its
+    // mean and standard deviation exact, std 0 rather than the 6e-14 of a rounded mean).
+    let y0 = y.iter().copied().find(|v| v.is_finite())?;
+    let (n, [s]) = masked_sums(y.len(), fin, |k| [y[k] - y0]);
     if n < 2 {
         return None;
     }
-    let mean = s / n as f64;
+    let shift = s / n as f64;
     // Second pass on deviations: the one-pass formula loses everything for a 1 g output whose
     // scatter is 1e-6 g.
-    let (_, [ss]) = masked_sums(y.len(), fin, |k| [(y[k] - mean) * (y[k] - mean)]);
-    Some((mean, (ss / (n - 1) as f64).sqrt(), n))
+    let (_, [ss]) = masked_sums(y.len(), fin, |k| {
+        let d = (y[k] - y0) - shift;
+        [d * d]
+    });
+    Some((y0 + shift, (ss / (n - 1) as f64).sqrt(), n))
 }
 
 /// Linear regression of `y` on `t` over pairs where both are finite; `None` below 3 pairs or for
@@ -325,7 +338,7 @@ pub fn default_columns(log: &Log) -> Vec<String> {
     log.column_names()
         .iter()
         .filter(|n| n.as_str() != TIME_COLUMN && n.as_str() != "input_g")
-        .filter(|n| matches!(unit_suffix(n), Some("v" | "g")))
+        .filter(|n| matches!(unit_suffix(n).as_deref(), Some("v" | "g")))
         .filter(|n| log.column(n).is_some())
         .cloned()
         .collect()
@@ -333,7 +346,7 @@ pub fn default_columns(log: &Log) -> Vec<String> {
 
 /// Unit and multiplier that bring a column to its reported unit.
 pub fn column_unit(log: &Log, name: &str) -> Result<(String, f64), StabilityError> {
-    match unit_suffix(name) {
+    match unit_suffix(name).as_deref() {
         Some("g") => Ok(("g".into(), 1.0)),
         Some("v") => match log.meta_f64(SCALE_FACTOR_KEY)? {
             Some(k1) if k1 > 0.0 => Ok(("g".into(), 1.0 / k1)),
@@ -380,6 +393,20 @@ pub fn analyse(log: &Log, opts: &Options) -> Result<Report, StabilityError> {
             &scaled
         };
         let ms = mean_std(y);
+        let regression = regression(t, y);
+        let overflows = ms.is_some_and(|m| !(m.0.is_finite() && m.1.is_finite()))
+            || regression.as_ref().is_some_and(|r| {
+                ![r.intercept, r.slope_per_s, r.slope_se, r.residual_std]
+                    .iter()
+                    .all(|v| v.is_finite())
+            });
+        if overflows {
+            let biggest = y
+                .iter()
+                .filter(|v| v.is_finite())
+                .fold(0.0f64, |m, v| m.max(v.abs()));
+            return Err(StabilityError::Overflow(name.clone(), biggest));
+        }
         let mut rep = ColumnReport {
             name: name.clone(),
             unit,
@@ -387,7 +414,7 @@ pub fn analyse(log: &Log, opts: &Options) -> Result<Report, StabilityError> {
             gaps: y.iter().filter(|v| v.is_nan()).count(),
             mean: ms.map(|m| m.0),
             std: ms.map(|m| m.1),
-            regression: regression(t, y),
+            regression,
             adev: Vec::new(),
             mdev: Vec::new(),
             allan_note: None,
@@ -740,5 +767,36 @@ mod tests {
         assert!(col["adev"][0]["adev"].is_f64() && col["adev"][0]["ci_low"].is_f64());
         assert!(col["mdev"][0]["mdev"].is_f64() && col["mdev"][0]["edf"].is_f64());
         assert!(rep.to_table().contains("OADEV"));
+    }
+
+    /// The column names on which this command and `discover` read different units before they
+    /// both asked `accomp_log::unit_suffix` (stability took `gravity_m_s2` as `s2` and `output_V`
+    /// as volts without the scale factor; discover took `m_s2` and `v`).
+    #[test]
+    fn stability_and_discover_read_the_same_unit_of_a_column() {
+        use crate::discover::import::{dataset_from_log, DatasetOptions};
+        let rows: String = (0..120)
+            .map(|i| format!("{i},{},{}\n", 1.0 + 1e-6 * f64::from(i % 3), 20.0))
+            .collect();
+        for (name, unit, per_g) in [
+            ("gravity_m_s2", "m_s2", accomp::tide::STANDARD_GRAVITY_M_S2),
+            (
+                "gravity_NM_S2",
+                "nm_s2",
+                accomp::tide::STANDARD_GRAVITY_M_S2 * 1e9,
+            ),
+            ("output_V", "g", 2.5),
+        ] {
+            let text = format!("# scale_factor_v_per_g: 2.5\ntime_s,{name},temperature_c\n{rows}");
+            let log = Log::parse_str(&text).unwrap();
+            let (stability_unit, k) = column_unit(&log, name).unwrap();
+            assert_eq!(stability_unit, unit, "{name}");
+            let ds = dataset_from_log(&log, &DatasetOptions::default()).unwrap();
+            let discover_per_g = ds.unit_per_g.unwrap();
+            assert!((discover_per_g - per_g).abs() <= 1e-12 * per_g, "{name}");
+            if unit == "g" {
+                assert!((k * discover_per_g - 1.0).abs() < 1e-15, "{name}");
+            }
+        }
     }
 }

@@ -15,9 +15,8 @@ use std::rc::Rc;
 use accomp::acquisition::{
     board, AdsReading, AdsSequencer, InterruptDrdy, RtdSequencer, SampleAssembler, SpiSettings,
 };
-use accomp::drivers::ad7124::{Ad7124, Ad7124Config};
-use accomp::drivers::ads1262::{Ads1262, Ads1262Config, DataRate};
-use accomp::drivers::Error;
+use accomp::drivers::ad7124::{self, Ad7124, Ad7124Config};
+use accomp::drivers::ads1262::{self, Ads1262, Ads1262Config, DataRate};
 use accomp::model::StaticCoefficients;
 use accomp::pipeline::{process_prepared, Frame, Status};
 use accomp::prepared::PreparedCalibration;
@@ -185,9 +184,26 @@ impl Bench {
 
     fn emit(&mut self, reading: AdsReading) {
         let raw = self.assembler.assemble(&reading);
-        let seq = self.frames.len() as u32;
-        let frame = process_prepared(seq, reading.time_us, &raw, Some(&self.prepared));
+        let mut frame = process_prepared(reading.seq, reading.time_us, &raw, Some(&self.prepared));
+        frame.lost = reading.lost;
         self.frames.push(frame);
+    }
+
+    /// The core stalls for `duration_us` (a flash erase: no instruction fetch, no handler runs)
+    /// while the converters go on converting. Then the DRDY interrupt that became pending during
+    /// the stall runs first (EXTI4 has the highest priority), then the overdue ticks.
+    fn stall(&mut self, duration_us: u64) {
+        let edges = self.ads.borrow().drdy_edges;
+        let end = self.now() + duration_us;
+        self.clock.set(end);
+        self.apply_physics();
+        if self.ads.borrow().drdy_edges != edges {
+            if let Some(r) = self.ads_seq.on_drdy(end) {
+                self.emit(r);
+            }
+        }
+        self.next_ads_tick = self.next_ads_tick.max(end);
+        self.next_rtd_tick = self.next_rtd_tick.max(end);
     }
 
     /// Event-driven run: DRDY edges of the ADS1262 model (the EXTI interrupt), the ADS1262
@@ -283,7 +299,10 @@ fn a_wrong_spi_mode_or_clock_is_refused_and_every_frame_says_so() {
         let now = b.now();
         b.rtd_seq.boot(now)
     };
-    assert_eq!(boot_result.err(), Some(Error::Spi(BusRefusal::WrongMode)));
+    assert_eq!(
+        boot_result.err(),
+        Some(ad7124::Error::Spi(BusRefusal::WrongMode))
+    );
     assert!(b.rtd.borrow().refusals > 0);
     // The right mode, but faster than the AD7124's 100 ns SCLK pulse widths allow.
     let fast = SpiSettings {
@@ -294,14 +313,14 @@ fn a_wrong_spi_mode_or_clock_is_refused_and_every_frame_says_so() {
     let now = c.now();
     assert_eq!(
         c.rtd_seq.boot(now).err(),
-        Some(Error::Spi(BusRefusal::ClockTooFast))
+        Some(ad7124::Error::Spi(BusRefusal::ClockTooFast))
     );
     // The ADS1262 in mode 3.
     let mut d = Bench::with_buses(old_with(MODE_3), board::AD7124_BUS);
     let now = d.now();
     assert_eq!(
         d.ads_seq.boot(now).err(),
-        Some(Error::Spi(BusRefusal::WrongMode))
+        Some(ads1262::Error::Spi(BusRefusal::WrongMode))
     );
 
     // Running anyway with the AD7124 on the wrong bus: the ADS1262 half streams, every frame
@@ -552,4 +571,271 @@ fn a_multi_day_stability_run_names_every_fault_and_recovers() {
     assert!(clean as f64 > 0.999 * frames.len() as f64);
     let c = b.ads_seq.counters();
     assert!(c.reinits >= 4 && c.timeouts >= 4, "{c:?}");
+}
+
+/// A 2 s stall of the core (the worst-case 128 KiB sector erase at x32, DS8626) in the middle of
+/// a stream at the default rate: every pair slot of the ADC's conversion clock is either a frame
+/// or a number skipped in `seq`, the gap sits on the first frame after the stall and says STALL,
+/// and no frame before or after says so.
+#[test]
+fn a_core_stall_longer_than_a_pair_leaves_a_seq_gap_flagged_stall_and_nothing_else_is_lost() {
+    use accomp::pipeline::LossFlags;
+    let mut b = Bench::new();
+    assert_eq!(b.boot(), (true, true));
+    b.run_until(b.now() + 20 * S);
+    let pair_us = b.ads_seq.pair_period_us();
+    let first = b.frames.len();
+    b.stall(2 * S);
+    b.run_until(b.now() + 20 * S);
+    let frames = &b.frames[first.saturating_sub(5)..];
+    let mut gaps = Vec::new();
+    for w in frames.windows(2) {
+        assert!(w[1].seq > w[0].seq, "seq runs forward");
+        let gap = w[1].seq - w[0].seq - 1;
+        assert_eq!(
+            gap > 0,
+            w[1].lost.has(LossFlags::STALL),
+            "frame {}: gap {gap}, lost {:?}",
+            w[1].seq,
+            w[1].lost
+        );
+        if gap > 0 {
+            gaps.push((gap, w[1].time_us - w[0].time_us));
+        }
+    }
+    assert_eq!(gaps.len(), 1, "one gap, at the stall: {gaps:?}");
+    let (gap, dt) = gaps[0];
+    // The slots the pair clock had between the two frames, all accounted for.
+    let slots = (dt + pair_us / 2) / pair_us;
+    assert_eq!(
+        u64::from(gap) + 1,
+        slots,
+        "gap {gap} over {dt} µs of {pair_us} µs pairs"
+    );
+    assert!(
+        gap >= 2,
+        "a 2 s stall at {pair_us} µs per pair loses at least 2 pairs"
+    );
+    // Every frame is clean: the stall cost readings, not values.
+    for f in frames {
+        check_clean_frame(&b.station, f).unwrap();
+    }
+}
+
+/// The calibration flash of the service under test, counting its sector erases: each one stalls
+/// the simulated core for the worst-case 128 KiB erase (2 s at x32, DS8626).
+struct ErasingFlash {
+    ram: accomp::storage::RamFlash<3072, 1024, 4>,
+    erases: Rc<std::cell::Cell<u32>>,
+}
+
+mod erasing_flash {
+    use super::ErasingFlash;
+    use accomp::storage::RamFlashError;
+    use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
+
+    impl ErrorType for ErasingFlash {
+        type Error = RamFlashError;
+    }
+    impl ReadNorFlash for ErasingFlash {
+        const READ_SIZE: usize = 1;
+        fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), RamFlashError> {
+            self.ram.read(offset, bytes)
+        }
+        fn capacity(&self) -> usize {
+            self.ram.capacity()
+        }
+    }
+    impl NorFlash for ErasingFlash {
+        const WRITE_SIZE: usize = 4;
+        const ERASE_SIZE: usize = 1024;
+        fn erase(&mut self, from: u32, to: u32) -> Result<(), RamFlashError> {
+            self.erases.set(self.erases.get() + 1);
+            self.ram.erase(from, to)
+        }
+        fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), RamFlashError> {
+            self.ram.write(offset, bytes)
+        }
+    }
+}
+
+/// The device side around the simulated board: the real `Service` on a flash whose erases
+/// stall the simulated core, called as the firmware's worker calls it.
+struct Device {
+    service: accomp::service::Service<ErasingFlash>,
+    erases: Rc<std::cell::Cell<u32>>,
+    next_id: u32,
+}
+
+/// Worst-case sector erase (128 KiB at x32, DS8626 "Flash memory programming").
+const ERASE_STALL_US: u64 = 2 * S;
+
+impl Device {
+    fn request(&mut self, b: &mut Bench, request: accomp::protocol::Request) {
+        use accomp::protocol::{DeviceMessage, HostFrame};
+        self.next_id += 1;
+        let before = self.erases.get();
+        let clock = b.clock.clone();
+        let erases = self.erases.clone();
+        // The device's clock during the call: an erase stalls it ERASE_STALL_US.
+        let now = move || clock.now() + u64::from(erases.get() - before) * ERASE_STALL_US;
+        let answer = self.service.handle(
+            HostFrame {
+                id: self.next_id,
+                request,
+            },
+            &now,
+        );
+        assert!(
+            matches!(answer, DeviceMessage::Response { .. }),
+            "{answer:?}"
+        );
+        self.stall_for_erases(b, before);
+        // The worker's erase ahead once the answer is out.
+        self.erase_ahead(b);
+    }
+
+    /// The worker's erase ahead; true when it erased.
+    fn erase_ahead(&mut self, b: &mut Bench) -> bool {
+        let before = self.erases.get();
+        let clock = b.clock.clone();
+        let erases = self.erases.clone();
+        let now = move || clock.now() + u64::from(erases.get() - before) * ERASE_STALL_US;
+        let erased = self.service.erase_ahead(&now) == Ok(true);
+        self.stall_for_erases(b, before);
+        erased
+    }
+
+    fn stall_for_erases(&self, b: &mut Bench, before: u32) {
+        let n = self.erases.get() - before;
+        if n > 0 {
+            b.stall(u64::from(n) * ERASE_STALL_US);
+        }
+    }
+
+    fn upload(&mut self, b: &mut Bench, table: &CalibrationTable) {
+        use accomp::protocol::{upload_body_crc32, Request, CHUNK_LEN};
+        let bytes = table.encode();
+        let upload_id = self.next_id + 1000;
+        self.request(
+            b,
+            Request::UploadBegin {
+                upload_id,
+                total_len: bytes.len() as u32,
+                body_crc32: upload_body_crc32(&bytes),
+            },
+        );
+        for (k, chunk) in bytes.chunks(CHUNK_LEN).enumerate() {
+            self.request(
+                b,
+                Request::UploadChunk {
+                    upload_id,
+                    offset: (k * CHUNK_LEN) as u32,
+                    data: heapless::Vec::from_slice(chunk).unwrap(),
+                },
+            );
+        }
+        self.request(b, Request::UploadCommit { upload_id });
+    }
+}
+
+/// Tables changed while streaming, on a board booted with an old table in the spare slot: the
+/// erase ahead runs at boot, before the stream; during the stream the first change writes into
+/// the erased spare and costs no reading, its own erase ahead waits for the stream to stop; a
+/// second change must erase and stalls the core — its lost pairs are a seq gap flagged STALL,
+/// and Info counts the stall. Every pair slot of the ADC's clock is a frame or a counted gap.
+#[test]
+fn tables_changed_while_streaming_lose_readings_only_to_counted_flagged_erase_stalls() {
+    use accomp::pipeline::LossFlags;
+    use accomp::protocol::{Board, Request};
+    let erases = Rc::new(std::cell::Cell::new(0));
+    let flash = ErasingFlash {
+        ram: accomp::storage::RamFlash::new(),
+        erases: erases.clone(),
+    };
+    let layout = accomp::storage::SlotLayout::consecutive(1024);
+    let mut b = Bench::new();
+    let mut dev = Device {
+        service: accomp::service::Service::new(Board::Frontend, flash, layout),
+        erases: erases.clone(),
+        next_id: 0,
+    };
+    let tables: Vec<CalibrationTable> = (1..=5u8)
+        .map(|d| {
+            let mut t = paper_order2_table();
+            t.date.day = d;
+            t
+        })
+        .collect();
+    // Loaded while a stream runs, so no erase ahead ran after the last one.
+    dev.request(&mut b, Request::StreamStart);
+    for t in &tables[..3] {
+        dev.upload(&mut b, t);
+    }
+    assert_eq!(erases.get(), 0, "three blank slots");
+    // Power off and on: slots A, B, C hold tables 1, 2, 3; the spare (A) holds an old table.
+    let flash = dev.service.into_flash().unwrap();
+    dev.service = accomp::service::Service::new(Board::Frontend, flash, layout);
+    assert_eq!(b.boot(), (true, true));
+    // The worker's erase ahead after boot, before any host streams.
+    assert!(dev.erase_ahead(&mut b));
+
+    dev.request(&mut b, Request::StreamStart);
+    let first = b.frames.len();
+    b.run_until(b.now() + 10 * S);
+    let erases_at_start = erases.get();
+    dev.upload(&mut b, &tables[3]); // into the erased spare: no erase
+    assert_eq!(erases.get(), erases_at_start, "the first change erased");
+    b.run_until(b.now() + 10 * S);
+    dev.request(&mut b, Request::Rollback); // the spare holds table 2: erased now
+    assert_eq!(erases.get(), erases_at_start + 1);
+    b.run_until(b.now() + 10 * S);
+
+    let frames = b.frames[first..].to_vec();
+    let pair_us = b.ads_seq.pair_period_us();
+    let mut lost = 0u64;
+    let mut stalls = 0;
+    for w in frames.windows(2) {
+        let gap = u64::from(w[1].seq - w[0].seq - 1);
+        let slots = (w[1].time_us - w[0].time_us + pair_us / 2) / pair_us;
+        assert_eq!(
+            gap + 1,
+            slots,
+            "frame {}: every pair slot accounted",
+            w[1].seq
+        );
+        assert_eq!(
+            gap > 0,
+            w[1].lost.has(LossFlags::STALL),
+            "frame {}",
+            w[1].seq
+        );
+        lost += gap;
+        stalls += usize::from(gap > 0);
+    }
+    assert_eq!(stalls, 1, "one stall: the rollback's erase");
+    assert!(lost >= ERASE_STALL_US / pair_us - 1, "{lost} pairs lost");
+    let accomp::protocol::DeviceMessage::Response {
+        body: accomp::protocol::Response::Info(info),
+        ..
+    } = dev.service.handle(
+        accomp::protocol::HostFrame {
+            id: 1,
+            request: Request::Info,
+        },
+        &|| 0,
+    )
+    else {
+        panic!("Info");
+    };
+    // Both erases stalled the core (the one at boot before the stream), both are counted.
+    assert_eq!(info.losses.erase_stalls, 2);
+    assert_eq!(info.losses.erase_stall_us, 2 * ERASE_STALL_US);
+    // The stream stops: the pending erase ahead runs now.
+    let before = erases.get();
+    dev.request(&mut b, Request::StreamStop);
+    assert_eq!(erases.get(), before + 1);
+    for f in &frames {
+        check_clean_frame(&b.station, f).unwrap();
+    }
 }

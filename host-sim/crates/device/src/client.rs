@@ -6,8 +6,9 @@ use std::time::{Duration, Instant};
 
 use accomp::pipeline::{Frame, RawSample};
 use accomp::protocol::{
-    decode_message, encode_frame, upload_body_crc32, DeviceInfo, DeviceMessage, ErrorCode,
-    ErrorReply, FrameDecoder, HostFrame, Request, Response, CHUNK_LEN, MAX_FRAME_LEN,
+    decode_message, encode_frame, peek_protocol_version, upload_body_crc32, DeviceInfo,
+    DeviceMessage, ErrorCode, ErrorReply, FrameDecoder, HostFrame, Request, Response, CHUNK_LEN,
+    MAX_FRAME_LEN, PROTOCOL_VERSION,
 };
 
 use super::transport::Transport;
@@ -36,6 +37,29 @@ pub enum ClientError {
     /// The table read back differs from the one uploaded.
     #[error("read-back differs from the upload at byte {0}")]
     ReadBackMismatch(usize),
+    /// The device speaks another protocol version: its messages cannot be read.
+    #[error(
+        "the device speaks protocol version {device}, this host speaks version {host}: \
+         update the firmware or the host tools so that both match"
+    )]
+    ProtocolMismatch {
+        /// This host's version.
+        host: u16,
+        /// The device's version (from Ready or Info).
+        device: u16,
+    },
+}
+
+/// The device's protocol version when it is not this host's.
+fn foreign_version(device: u16) -> Result<(), ClientError> {
+    if device == PROTOCOL_VERSION {
+        Ok(())
+    } else {
+        Err(ClientError::ProtocolMismatch {
+            host: PROTOCOL_VERSION,
+            device,
+        })
+    }
 }
 
 impl ClientError {
@@ -118,13 +142,28 @@ impl Client {
                 match self.decoder.push(b) {
                     Some(Ok(body)) => match decode_message::<DeviceMessage>(body) {
                         Ok(m) => {
+                            if let DeviceMessage::Ready { protocol, .. }
+                            | DeviceMessage::Response {
+                                body: Response::Info(DeviceInfo { protocol, .. }),
+                                ..
+                            } = &m
+                            {
+                                foreign_version(*protocol)?;
+                            }
                             if got.is_none() {
                                 got = Some(m);
                             } else {
                                 self.inbox.push_back(m);
                             }
                         }
-                        Err(_) => self.bad_frames += 1,
+                        Err(_) => {
+                            // Ready and Info keep the place of their version in every
+                            // version: a board of another version is named, not timed out on.
+                            if let Some(v) = peek_protocol_version(body) {
+                                foreign_version(v)?;
+                            }
+                            self.bad_frames += 1;
+                        }
                     },
                     Some(Err(_)) => self.bad_frames += 1,
                     None => {}
@@ -147,6 +186,12 @@ impl Client {
             Err(ClientError::Timeout(..)) => Err(ClientError::Timeout(timeout, "a message")),
             other => other,
         }
+    }
+
+    /// Takes the messages received while waiting for answers and not handed out yet (samples
+    /// that streamed in during a request/response exchange).
+    pub fn take_inbox(&mut self) -> Vec<DeviceMessage> {
+        self.inbox.drain(..).collect()
     }
 
     /// Waits for READY (sent once by the firmware when its receiver is live).
@@ -378,4 +423,76 @@ fn random_u32() -> u32 {
     let mut h = std::collections::hash_map::RandomState::new().build_hasher();
     h.write_u32(std::process::id());
     h.finish() as u32
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use accomp::protocol::Board;
+
+    /// A device that answers every read with the same bytes.
+    struct Replay(Vec<u8>);
+
+    impl Transport for Replay {
+        fn send(&mut self, _: &[u8]) -> io::Result<()> {
+            Ok(())
+        }
+        fn recv(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+            let n = self.0.len().min(buf.len());
+            buf[..n].copy_from_slice(&self.0[..n]);
+            self.0.drain(..n);
+            Ok(n)
+        }
+    }
+
+    fn wire<T: serde::Serialize>(msg: &T) -> Vec<u8> {
+        let mut out = [0u8; MAX_FRAME_LEN];
+        let n = encode_frame(msg, &mut out).unwrap();
+        out[..n].to_vec()
+    }
+
+    #[test]
+    fn a_board_of_another_protocol_version_is_refused_with_both_versions_named() {
+        let old_ready = DeviceMessage::Ready {
+            board: Board::Frontend,
+            protocol: PROTOCOL_VERSION - 1,
+        };
+        let mut c = Client::new(Box::new(Replay(wire(&old_ready))));
+        let e = c.wait_ready(Duration::from_millis(50)).unwrap_err();
+        assert!(
+            matches!(e, ClientError::ProtocolMismatch { host, device }
+                if host == PROTOCOL_VERSION && device == PROTOCOL_VERSION - 1),
+            "{e}"
+        );
+        let text = e.to_string();
+        assert!(
+            text.contains(&format!("version {}", PROTOCOL_VERSION - 1)),
+            "{text}"
+        );
+        assert!(
+            text.contains(&format!("version {PROTOCOL_VERSION}")),
+            "{text}"
+        );
+
+        // An Info of another version does not decode as this version's: the version is still
+        // read from its head (Response, id, Info, firmware, board, protocol, …).
+        let old_info = (
+            1u32,
+            1u32,
+            1u32,
+            "0.1.0",
+            Board::Qemu,
+            3u16,
+            7u64,
+            0u32,
+            0u32,
+        );
+        let mut c = Client::new(Box::new(Replay(wire(&old_info))));
+        c.timeout = Duration::from_millis(50);
+        let e = c.info().unwrap_err();
+        assert!(
+            matches!(e, ClientError::ProtocolMismatch { device: 3, .. }),
+            "{e}"
+        );
+    }
 }

@@ -108,6 +108,12 @@ pub fn compensate_streaming(
             let mut conn = Connection::open(target, firmware)?;
             let info = conn.client.info()?;
             if info.active_table != Some(table.id()) {
+                // The upload activates it: the board keeps it, as `load` would leave it.
+                eprintln!(
+                    "activating table {:#010x} on the device (it stays active after this run; \
+                     the previous one becomes the rollback table)",
+                    table.id()
+                );
                 conn.client
                     .load(table_bytes, |sent, total| progress("upload", sent, total))?;
             }
@@ -128,9 +134,7 @@ pub fn compensate_streaming(
                 return Err(e);
             }
             streamed?;
-            if let Some(q) = conn.qemu.take() {
-                q.shutdown();
-            }
+            conn.close()?;
         }
     }
     Ok(())
@@ -148,9 +152,11 @@ pub fn run_to_file(
 ) -> anyhow::Result<()> {
     use anyhow::Context as _;
     use std::io::Write as _;
+    accomp_log::outputs::check_file(output)?;
     let table = accomp_log::calibration_file::read_table_bytes(calibration)?;
-    let text =
-        std::fs::read_to_string(input).with_context(|| format!("reading {}", input.display()))?;
+    let (_, max_bytes) = accomp_log::reader::limits();
+    let text = accomp_log::reader::read_text_limited(input, max_bytes)
+        .with_context(|| format!("reading {}", input.display()))?;
     let file = super::samples_csv::parse(&text)?;
     let out =
         std::fs::File::create(output).with_context(|| format!("creating {}", output.display()))?;
@@ -196,10 +202,10 @@ pub fn run_to_file(
             Ok(())
         },
     );
-    out.flush()
-        .with_context(|| format!("writing {}", output.display()))?;
+    let finished = accomp_log::outputs::finish(out, output);
     bar.finish_and_clear();
     result?;
+    finished?;
     eprintln!(
         "{written} samples through {target:?} in {:.2} s ({:.0} samples/s), written to {}",
         started.elapsed().as_secs_f64(),

@@ -1,9 +1,11 @@
 //! Talking to the firmware: transports (serial port, QEMU's TCP serial), the QEMU launcher, a
 //! request/response client with a pipelined sample stream, and `compensate` end to end.
 
+pub mod board_sim;
 pub mod client;
 pub mod compensate;
 pub mod qemu;
+pub mod record;
 pub mod samples_csv;
 pub mod transport;
 
@@ -48,17 +50,20 @@ pub enum Target {
     Serial(String),
 }
 
+/// A `--target` that is none of host, qemu, serial:<port>.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("unknown target `{0}`: use host, qemu or serial:<port>")]
+pub struct UnknownTarget(pub String);
+
 impl std::str::FromStr for Target {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
+    type Err = UnknownTarget;
+    fn from_str(s: &str) -> Result<Self, UnknownTarget> {
         match s {
             "host" => Ok(Target::Host),
             "qemu" => Ok(Target::Qemu),
             _ => match s.strip_prefix("serial:") {
                 Some(port) if !port.is_empty() => Ok(Target::Serial(port.to_string())),
-                _ => Err(format!(
-                    "unknown target `{s}`: use host, qemu or serial:<port>"
-                )),
+                _ => Err(UnknownTarget(s.to_owned())),
             },
         }
     }
@@ -70,25 +75,45 @@ pub struct Connection {
     pub client: Client,
     /// The QEMU instance behind the client, if any (shut down on drop).
     pub qemu: Option<Qemu>,
+    /// The persistent board state QEMU runs on a working copy of (locked while this lives):
+    /// [`Connection::close`] persists the image the board left, and so does a drop, best effort.
+    board: Option<qemu::BoardState>,
 }
 
 impl Connection {
     /// Opens `target` (not `Host`): boots QEMU with `firmware` or opens the serial port, and
-    /// waits for the device to answer.
+    /// waits for the device to answer. The QEMU board's state is taken as
+    /// [`qemu::StateOptions::for_process`] says (by default: waits for another command using
+    /// it, refuses a damaged image).
     pub fn open(target: &Target, firmware: Option<&Path>) -> anyhow::Result<Connection> {
+        Self::open_with(target, firmware, qemu::StateOptions::for_process())
+    }
+
+    /// As [`Connection::open`], with how to take the QEMU board's persistent state.
+    pub fn open_with(
+        target: &Target,
+        firmware: Option<&Path>,
+        state: qemu::StateOptions,
+    ) -> anyhow::Result<Connection> {
         match target {
             Target::Host => anyhow::bail!("the host target has no device to connect to"),
             Target::Qemu => {
                 let elf = firmware_path(firmware);
-                // The CLI's board keeps its flash across commands, like a real board.
+                if !elf.is_file() {
+                    return Err(QemuError::NoFirmware(elf).into());
+                }
+                // The CLI's board keeps its flash across commands, like a real board: one
+                // command at a time, QEMU on a working copy, persisted when it is done.
+                let board = qemu::BoardState::open(&qemu::board_state_dir(), state)?;
                 let opts = qemu::QemuOptions {
-                    state_dir: Some(qemu::board_state_dir()),
+                    initial_flash: board.image()?,
                     ..qemu::QemuOptions::default()
                 };
                 let (qemu, client) = Qemu::launch(&elf, &opts)?;
                 Ok(Connection {
                     client,
                     qemu: Some(qemu),
+                    board: Some(board),
                 })
             }
             Target::Serial(port) => {
@@ -96,7 +121,66 @@ impl Connection {
                 let mut client = Client::new(Box::new(t));
                 // A board that is already running sent READY long ago: ask instead.
                 client.ping()?;
-                Ok(Connection { client, qemu: None })
+                Ok(Connection {
+                    client,
+                    qemu: None,
+                    board: None,
+                })
+            }
+        }
+    }
+
+    /// Ends the session: for the QEMU board, cuts its power and persists the flash image it
+    /// left (synced, renamed, read back), then releases the board. Returns the (active,
+    /// previous) table ids of the image now on disk, None for a real board (its flash is its
+    /// own).
+    pub fn close(mut self) -> anyhow::Result<Option<(Option<u32>, Option<u32>)>> {
+        self.persist()
+    }
+
+    fn persist(&mut self) -> anyhow::Result<Option<(Option<u32>, Option<u32>)>> {
+        let Some(board) = self.board.take() else {
+            if let Some(q) = self.qemu.take() {
+                q.shutdown();
+            }
+            return Ok(None);
+        };
+        let Some(q) = self.qemu.take() else {
+            anyhow::bail!(
+                "the board's QEMU was stopped before its image was saved: {} left as it was",
+                board.image_path().display()
+            );
+        };
+        let (_, image) = q.power_off();
+        let image = image.map_err(|e| {
+            anyhow::anyhow!(
+                "the board left no readable flash image ({e}): {} left as it was",
+                board.image_path().display()
+            )
+        })?;
+        let back = board.persist(&image)?;
+        let tables = qemu::image_tables(&back).ok_or_else(|| {
+            anyhow::anyhow!(
+                "{}: the persisted image does not scan as a flash image",
+                board.image_path().display()
+            )
+        })?;
+        Ok(Some(tables))
+    }
+
+    /// The persistent board state's image path (QEMU target).
+    pub fn state_image(&self) -> Option<PathBuf> {
+        self.board.as_ref().map(|b| b.image_path())
+    }
+}
+
+impl Drop for Connection {
+    /// A command that ends early still persists what the board did (a real board would keep
+    /// it); a failure is said on stderr.
+    fn drop(&mut self) {
+        if self.board.is_some() {
+            if let Err(e) = self.persist() {
+                eprintln!("warning: {e:#}");
             }
         }
     }

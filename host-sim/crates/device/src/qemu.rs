@@ -33,6 +33,9 @@ pub struct QemuOptions {
     /// QEMU's working directory, where the board keeps `accomp-flash.bin`: the board's state
     /// across runs. None: the log directory (a fresh board, forgotten with it).
     pub state_dir: Option<PathBuf>,
+    /// A flash image put in QEMU's working directory before it boots (a working copy of a
+    /// [`BoardState`]'s image); None: whatever is there (nothing: a factory-new board).
+    pub initial_flash: Option<Vec<u8>>,
 }
 
 impl Default for QemuOptions {
@@ -42,6 +45,7 @@ impl Default for QemuOptions {
             icount_shift: None,
             log_dir: None,
             state_dir: None,
+            initial_flash: None,
         }
     }
 }
@@ -57,6 +61,17 @@ pub enum QemuError {
         "cannot start qemu-system-arm ({0}); install it with: apt-get install qemu-system-arm"
     )]
     Spawn(std::io::Error),
+    /// A file or folder QEMU needs could not be made: named, with the system's reason (not
+    /// the emulator's fault: a state path under a regular file, a full or read-only disk).
+    #[error("{what} {}: {source}", path.display())]
+    Io {
+        /// What the path is for.
+        what: &'static str,
+        /// The path.
+        path: PathBuf,
+        /// The system's reason.
+        source: std::io::Error,
+    },
     /// Something failed after QEMU started.
     #[error("{0}")]
     Failed(Box<QemuFailure>),
@@ -85,6 +100,8 @@ pub struct Qemu {
     child: Child,
     /// Directory with QEMU's stderr and the firmware's semihosting output.
     pub log_dir: PathBuf,
+    /// QEMU's working directory, holding the board's flash image.
+    state_dir: PathBuf,
     /// Whether `log_dir` was created for this run (then it is removed on drop).
     temporary_log_dir: bool,
     elf: PathBuf,
@@ -189,24 +206,42 @@ impl Qemu {
             return Err(QemuError::NoFirmware(elf.to_path_buf()));
         }
         install_signal_cleanup();
+        reclaim_orphaned_dirs();
         let temporary_log_dir = opts.log_dir.is_none();
         let log_dir = match &opts.log_dir {
             Some(d) => d.clone(),
             None => std::env::temp_dir().join(format!(
-                "accomp-qemu-{}-{:016x}",
+                "{TEMP_PREFIX}{}-{:016x}",
                 std::process::id(),
                 rand_suffix()
             )),
         };
-        let io_err = |e: std::io::Error| QemuError::Spawn(e);
-        fs::create_dir_all(&log_dir).map_err(io_err)?;
+        let io_err = |what: &'static str, path: &Path| {
+            let path = path.to_path_buf();
+            move |source| QemuError::Io { what, path, source }
+        };
+        fs::create_dir_all(&log_dir)
+            .map_err(io_err("cannot create QEMU's log folder", &log_dir))?;
+        // Until a `Qemu` owns the temporary folder (and removes it when dropped), an early
+        // return removes it here.
+        let mut guard = DirGuard(temporary_log_dir.then(|| log_dir.clone()));
         let state_dir = opts.state_dir.clone().unwrap_or_else(|| log_dir.clone());
-        fs::create_dir_all(&state_dir).map_err(io_err)?;
+        fs::create_dir_all(&state_dir)
+            .map_err(io_err("cannot create the board's state folder", &state_dir))?;
+        if let Some(image) = &opts.initial_flash {
+            let path = state_dir.join(FLASH_IMAGE);
+            fs::write(&path, image)
+                .map_err(io_err("cannot write the board's flash image", &path))?;
+        }
         // Absolute: QEMU runs in the state directory.
         let elf = &fs::canonicalize(elf).unwrap_or_else(|_| elf.to_path_buf());
-        let stdout = File::create(log_dir.join("semihosting.bin")).map_err(io_err)?;
-        let stderr = File::create(log_dir.join("qemu-stderr.txt")).map_err(io_err)?;
-        let port = free_port().map_err(io_err)?;
+        let stdout_path = log_dir.join("semihosting.bin");
+        let stdout = File::create(&stdout_path)
+            .map_err(io_err("cannot create the firmware log", &stdout_path))?;
+        let stderr_path = log_dir.join("qemu-stderr.txt");
+        let stderr = File::create(&stderr_path)
+            .map_err(io_err("cannot create QEMU's stderr file", &stderr_path))?;
+        let port = free_port().map_err(QemuError::Spawn)?;
         let mut cmd = Command::new("qemu-system-arm");
         cmd.args([
             "-machine",
@@ -228,11 +263,14 @@ impl Qemu {
             .stdin(Stdio::null())
             .stdout(stdout)
             .stderr(stderr);
+        die_with_parent(&mut cmd);
         let child = cmd.spawn().map_err(QemuError::Spawn)?;
         register(child.id(), temporary_log_dir.then(|| log_dir.clone()));
+        guard.0 = None;
         let mut qemu = Qemu {
             child,
             log_dir,
+            state_dir,
             temporary_log_dir,
             elf: elf.to_path_buf(),
         };
@@ -355,6 +393,21 @@ impl Qemu {
         self.stop()
     }
 
+    /// Cuts the board's power (kills QEMU, reaps it) and returns its exit code and the flash
+    /// image it left in its working directory, read before the temporary folder goes.
+    pub fn power_off(mut self) -> (Option<i32>, std::io::Result<Vec<u8>>) {
+        let code = match self.exited() {
+            Some(s) => s.code(),
+            None => {
+                let _ = self.child.kill();
+                self.child.wait().ok().and_then(|s| s.code())
+            }
+        };
+        let image = fs::read(self.state_dir.join(FLASH_IMAGE));
+        self.stop();
+        (code, image)
+    }
+
     /// Waits up to `timeout` for QEMU to exit by itself (the firmware's semihosting exit) and
     /// returns its exit code.
     pub fn wait_exit(&mut self, timeout: Duration) -> Option<i32> {
@@ -397,6 +450,74 @@ impl Qemu {
     }
 }
 
+/// Name prefix of the temporary folders, `accomp-qemu-<pid>-<random>` in the system temp dir.
+const TEMP_PREFIX: &str = "accomp-qemu-";
+
+/// Removes a temporary folder when dropped, unless emptied first.
+struct DirGuard(Option<PathBuf>);
+
+impl Drop for DirGuard {
+    fn drop(&mut self) {
+        if let Some(d) = self.0.take() {
+            let _ = fs::remove_dir_all(d);
+        }
+    }
+}
+
+/// Whether process `pid` exists (a zombie counts as gone: it holds no files).
+fn process_alive(pid: u32) -> bool {
+    match fs::read_to_string(format!("/proc/{pid}/stat")) {
+        Err(_) => false,
+        Ok(s) => !s
+            .rsplit(')')
+            .next()
+            .is_some_and(|r| r.trim_start().starts_with('Z')),
+    }
+}
+
+/// Removes the temporary folders left by `accomp` processes that no longer exist (killed with
+/// SIGKILL, which no handler sees): their QEMU died with them ([`die_with_parent`]), the folder
+/// stays until this next launch. Folders of living processes, this one included, are left.
+fn reclaim_orphaned_dirs() {
+    let Ok(entries) = fs::read_dir(std::env::temp_dir()) else {
+        return;
+    };
+    for e in entries.flatten() {
+        let name = e.file_name();
+        let Some(rest) = name.to_str().and_then(|n| n.strip_prefix(TEMP_PREFIX)) else {
+            continue;
+        };
+        let Some(pid) = rest.split('-').next().and_then(|p| p.parse::<u32>().ok()) else {
+            continue;
+        };
+        if pid != std::process::id() && !process_alive(pid) {
+            let _ = fs::remove_dir_all(e.path());
+        }
+    }
+}
+
+/// Makes the kernel kill the child when the thread that spawned it ends (the `accomp` process
+/// killed with SIGKILL included, which leaves no chance for a handler): `PR_SET_PDEATHSIG`,
+/// set between fork and exec. If the parent died before that, the child exits at once.
+/// (The signal follows the spawning *thread*: a [`Qemu`] is used and dropped on the thread that
+/// launched it.)
+fn die_with_parent(cmd: &mut Command) {
+    use std::os::unix::process::CommandExt as _;
+    // SAFETY: getpid/prctl/getppid/_exit are async-signal-safe and touch no memory of ours.
+    let parent = unsafe { libc::getpid() };
+    unsafe {
+        cmd.pre_exec(move || {
+            if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL as libc::c_ulong) != 0 {
+                return Err(std::io::Error::last_os_error());
+            }
+            if libc::getppid() != parent {
+                libc::_exit(1);
+            }
+            Ok(())
+        });
+    }
+}
+
 /// A per-launch random number (std's randomly keyed hasher), so parallel tests do not share logs.
 fn rand_suffix() -> u64 {
     use std::hash::{BuildHasher, Hasher};
@@ -409,4 +530,302 @@ impl Drop for Qemu {
     fn drop(&mut self) {
         self.stop();
     }
+}
+
+/// Bytes of the QEMU board's flash image: three 1 KiB slots (`src/board/qemu.rs`,
+/// `RamCalibrationFlash`).
+pub const FLASH_IMAGE_LEN: usize = 3 * 1024;
+/// The lock file beside the flash image: held (flock, exclusive) by the one command using the
+/// board, and holding that command's pid for the others' message.
+pub const LOCK_FILE: &str = "accomp-board.lock";
+
+/// How a command takes the board state.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct StateOptions {
+    /// Refuse at once when another command holds the board, instead of waiting for it.
+    pub no_wait: bool,
+    /// Move a damaged flash image aside (renamed with a time stamp) and start with a blank
+    /// board, instead of refusing it.
+    pub reset_state: bool,
+}
+
+/// Why the board state cannot be used; every message names the path.
+#[derive(Debug, thiserror::Error)]
+pub enum StateError {
+    /// The folder or a file in it could not be made, written or read.
+    #[error("board state {}: {what}: {source}", path.display())]
+    Io {
+        /// What was being done.
+        what: String,
+        /// The path.
+        path: PathBuf,
+        /// The system's reason.
+        source: std::io::Error,
+    },
+    /// Another command holds the board and `--no-wait` was given.
+    #[error("board state {} in use by {holder} (--no-wait given)", dir.display())]
+    Busy {
+        /// The state folder.
+        dir: PathBuf,
+        /// "pid N", or "another process".
+        holder: String,
+    },
+    /// The flash image is not a flash image of this board.
+    #[error(
+        "board state {}: flash image is {size} bytes, expected {expected}: refused, nothing \
+         sent or overwritten (--reset-state moves it aside and starts a blank board)",
+        path.display()
+    )]
+    Damaged {
+        /// The image.
+        path: PathBuf,
+        /// Its size.
+        size: u64,
+        /// [`FLASH_IMAGE_LEN`].
+        expected: usize,
+    },
+    /// What was written is not what reads back.
+    #[error("board state {}: {what}", path.display())]
+    NotPersisted {
+        /// The image.
+        path: PathBuf,
+        /// What differs.
+        what: String,
+    },
+}
+
+/// The persistent board state, locked for this process until dropped: the flash image
+/// `accomp-flash.bin` in a folder ([`board_state_dir`]), and the lock file beside it.
+///
+/// QEMU never writes the image in place: it runs on a working copy in its temporary folder
+/// ([`QemuOptions::initial_flash`]), and [`BoardState::persist`] puts what the board left there
+/// back by writing a temporary file in the state folder, syncing it, renaming it over the image
+/// and reading it back. So a command killed at any moment leaves the old or the new image, and
+/// a folder where the image cannot be persisted is found before anything is sent.
+#[derive(Debug)]
+pub struct BoardState {
+    dir: PathBuf,
+    /// Open with an exclusive flock for as long as this lives (released by the kernel when the
+    /// process dies, however it dies; close-on-exec, so QEMU never holds it).
+    _lock: File,
+}
+
+/// The options the command line chose for this process ([`StateOptions::set_for_process`]).
+static PROCESS_STATE_OPTIONS: std::sync::OnceLock<StateOptions> = std::sync::OnceLock::new();
+
+impl StateOptions {
+    /// Sets the options every [`super::Connection::open`] of this process uses (the CLI's
+    /// `--no-wait`, `--reset-state`); the first call wins.
+    pub fn set_for_process(self) {
+        let _ = PROCESS_STATE_OPTIONS.set(self);
+    }
+
+    /// What [`StateOptions::set_for_process`] set, else the defaults (wait, refuse damage).
+    pub fn for_process() -> StateOptions {
+        PROCESS_STATE_OPTIONS.get().copied().unwrap_or_default()
+    }
+}
+
+fn state_io(what: impl Into<String>, path: &Path) -> impl FnOnce(std::io::Error) -> StateError {
+    let (what, path) = (what.into(), path.to_path_buf());
+    move |source| StateError::Io { what, path, source }
+}
+
+impl BoardState {
+    /// Creates the folder if needed, takes the lock (waiting with a message on stderr, or
+    /// refusing with `no_wait`), proves the folder writable with a synced probe file the size
+    /// of an image, and checks the image: a file of the wrong size or an unreadable one is
+    /// refused (or moved aside with `reset_state`).
+    pub fn open(dir: &Path, opts: StateOptions) -> Result<BoardState, StateError> {
+        fs::create_dir_all(dir).map_err(state_io("cannot create the folder", dir))?;
+        let lock_path = dir.join(LOCK_FILE);
+        let mut lock = fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(false)
+            .open(&lock_path)
+            .map_err(state_io("cannot open the lock file", &lock_path))?;
+        match lock.try_lock() {
+            Ok(()) => {}
+            Err(fs::TryLockError::WouldBlock) => {
+                // The holder writes its pid right after it locks: give it that moment.
+                std::thread::sleep(Duration::from_millis(20));
+                let holder = fs::read_to_string(&lock_path)
+                    .ok()
+                    .and_then(|t| t.trim().parse::<u32>().ok())
+                    .map_or_else(|| "another process".to_string(), |p| format!("pid {p}"));
+                if opts.no_wait {
+                    return Err(StateError::Busy {
+                        dir: dir.to_path_buf(),
+                        holder,
+                    });
+                }
+                eprintln!("board state {} in use by {holder}, waiting…", dir.display());
+                lock.lock()
+                    .map_err(state_io("cannot lock the lock file", &lock_path))?;
+            }
+            Err(fs::TryLockError::Error(e)) => {
+                return Err(state_io("cannot lock the lock file", &lock_path)(e))
+            }
+        }
+        {
+            use std::io::{Seek as _, Write as _};
+            let pid = std::process::id();
+            let _ = lock
+                .set_len(0)
+                .and_then(|()| lock.seek(std::io::SeekFrom::Start(0)))
+                .and_then(|_| writeln!(lock, "{pid}"));
+        }
+        let state = BoardState {
+            dir: dir.to_path_buf(),
+            _lock: lock,
+        };
+        // Left by a command killed while persisting (it held the lock, which is ours now).
+        if let Ok(entries) = fs::read_dir(dir) {
+            for e in entries.flatten() {
+                if e.file_name()
+                    .to_string_lossy()
+                    .starts_with(TEMP_IMAGE_PREFIX)
+                {
+                    let _ = fs::remove_file(e.path());
+                }
+            }
+        }
+        // A read-only, immutable or full folder fails here, before QEMU boots: as much as an
+        // image, synced.
+        let probe = dir.join(format!("{TEMP_IMAGE_PREFIX}probe-{}", std::process::id()));
+        let probed = write_synced(&probe, &[0xFF; FLASH_IMAGE_LEN]);
+        let _ = fs::remove_file(&probe);
+        probed.map_err(state_io(
+            "cannot write there (read-only, immutable or full?): nothing sent",
+            &probe,
+        ))?;
+        state.check_image(opts.reset_state)?;
+        Ok(state)
+    }
+
+    /// The state folder.
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    /// The flash image's path.
+    pub fn image_path(&self) -> PathBuf {
+        self.dir.join(FLASH_IMAGE)
+    }
+
+    fn check_image(&self, reset: bool) -> Result<(), StateError> {
+        let path = self.image_path();
+        let size = match fs::metadata(&path) {
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
+            Err(e) => return Err(state_io("cannot read the flash image", &path)(e)),
+            Ok(m) if !m.is_file() => {
+                return Err(StateError::Io {
+                    what: "the flash image is not a regular file".into(),
+                    path,
+                    source: std::io::Error::other("not a file"),
+                })
+            }
+            Ok(m) => m.len(),
+        };
+        let readable = fs::File::open(&path).map(|_| ());
+        let damaged = size != FLASH_IMAGE_LEN as u64 || readable.is_err();
+        if !damaged {
+            return Ok(());
+        }
+        if !reset {
+            return match readable {
+                Err(e) => Err(state_io("cannot read the flash image", &path)(e)),
+                Ok(()) => Err(StateError::Damaged {
+                    path,
+                    size,
+                    expected: FLASH_IMAGE_LEN,
+                }),
+            };
+        }
+        let stamp = jiff::Timestamp::now()
+            .strftime("%Y%m%dT%H%M%SZ")
+            .to_string();
+        let aside = self.dir.join(format!("{FLASH_IMAGE}.damaged-{stamp}"));
+        fs::rename(&path, &aside).map_err(state_io("cannot move the flash image aside", &path))?;
+        eprintln!(
+            "board state: damaged flash image ({size} bytes, expected {FLASH_IMAGE_LEN}) moved \
+             to {}; the board starts blank",
+            aside.display()
+        );
+        Ok(())
+    }
+
+    /// The image on disk, None when there is none yet (a factory-new board).
+    pub fn image(&self) -> Result<Option<Vec<u8>>, StateError> {
+        let path = self.image_path();
+        match fs::read(&path) {
+            Ok(b) => Ok(Some(b)),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
+            Err(e) => Err(state_io("cannot read the flash image", &path)(e)),
+        }
+    }
+
+    /// Persists `image`: a temporary file in the state folder, synced, renamed over the image,
+    /// the folder synced, then the image read back and compared. Returns what was read back.
+    pub fn persist(&self, image: &[u8]) -> Result<Vec<u8>, StateError> {
+        let path = self.image_path();
+        if image.len() != FLASH_IMAGE_LEN {
+            return Err(StateError::NotPersisted {
+                path,
+                what: format!(
+                    "the board left an image of {} bytes, expected {FLASH_IMAGE_LEN}: not written",
+                    image.len()
+                ),
+            });
+        }
+        let tmp = self
+            .dir
+            .join(format!("{TEMP_IMAGE_PREFIX}{}", std::process::id()));
+        if let Err(e) = write_synced(&tmp, image) {
+            let _ = fs::remove_file(&tmp);
+            return Err(state_io("cannot write the new flash image", &tmp)(e));
+        }
+        if let Err(e) = fs::rename(&tmp, &path) {
+            let _ = fs::remove_file(&tmp);
+            return Err(state_io(
+                "cannot rename the new flash image into place",
+                &path,
+            )(e));
+        }
+        File::open(&self.dir)
+            .and_then(|d| d.sync_all())
+            .map_err(state_io("cannot sync the folder", &self.dir))?;
+        let back = fs::read(&path).map_err(state_io("cannot read the image back", &path))?;
+        if back != image {
+            return Err(StateError::NotPersisted {
+                path,
+                what: "the image read back differs from the one written".into(),
+            });
+        }
+        Ok(back)
+    }
+}
+
+/// Name prefix of the temporary files in the state folder.
+const TEMP_IMAGE_PREFIX: &str = ".accomp-flash.tmp-";
+
+/// Writes `bytes` to a new file at `path` and syncs it to the disk.
+fn write_synced(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    use std::io::Write as _;
+    let mut f = File::create(path)?;
+    f.write_all(bytes)?;
+    f.sync_all()
+}
+
+/// The (active, previous) table ids a flash image holds, as the firmware's boot scan would
+/// find them (the core's own [`accomp::storage::CalibrationStore`] on the image's bytes).
+pub fn image_tables(image: &[u8]) -> Option<(Option<u32>, Option<u32>)> {
+    use accomp::storage::{CalibrationStore, RamFlash, SlotLayout};
+    let bytes: [u8; FLASH_IMAGE_LEN] = image.try_into().ok()?;
+    let flash = RamFlash::<FLASH_IMAGE_LEN, 1024, 4>::from_bytes(bytes);
+    let mut store = CalibrationStore::new(flash, SlotLayout::consecutive(1024)).ok()?;
+    let v = store.valid_slots().ok()?;
+    Some((v.newest.map(|s| s.table_id), v.previous.map(|s| s.table_id)))
 }

@@ -92,6 +92,12 @@ impl SerialTransport {
             path: path.to_string(),
         })
     }
+
+    /// Discards what the port has received and not yet been read (bytes from before this
+    /// program opened it).
+    pub fn clear_input(&mut self) {
+        let _ = self.port.clear(serialport::ClearBuffer::Input);
+    }
 }
 
 impl Transport for SerialTransport {

@@ -1,6 +1,6 @@
 //! Stability-test logs: the CSV the board streams, the CLI records and every analysis reads.
 //!
-//! # Format (design/architecture.md, "Log format")
+//! # Format (docs/log-format.md)
 //!
 //! ```text
 //! # instrument: JN-06 A12124
@@ -44,10 +44,78 @@ use std::path::Path;
 use accomp::tide::STANDARD_GRAVITY_M_S2;
 
 pub mod calibration_file;
+pub mod outputs;
 pub mod reader;
 pub mod time;
 pub mod writer;
 use reader::{ReadError, Records};
+
+/// The bytes of a log file, or of a directory of daily files (`*.csv` in name order, as
+/// `accomp record --rotate daily` writes them) read as one record: every file after the first
+/// must have the same header row and `start_utc` (its metadata and header are skipped, so
+/// `time_s` runs on), or the directory is refused naming the file.
+pub fn open_record(path: &Path) -> Result<Box<dyn BufRead + Send>, LogError> {
+    if !path.is_dir() {
+        reader::check_file_size(path)?;
+        let f = File::open(path)?;
+        return Ok(Box::new(BufReader::with_capacity(1 << 20, f)));
+    }
+    let mut files: Vec<std::path::PathBuf> = std::fs::read_dir(path)?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.is_file() && p.extension().is_some_and(|e| e == "csv"))
+        .collect();
+    files.sort();
+    let mut first: Option<(String, Option<String>)> = None;
+    let mut chain: Box<dyn Read + Send> = Box::new(std::io::empty());
+    for f in files {
+        reader::check_file_size(&f)?;
+        let mut r = BufReader::with_capacity(1 << 20, File::open(&f)?);
+        // The preamble: `#` lines and blank lines up to the header row.
+        let mut preamble = Vec::new();
+        let mut start = None;
+        let header = loop {
+            let mut line = String::new();
+            if r.read_line(&mut line)? == 0 {
+                break None;
+            }
+            preamble.extend_from_slice(line.as_bytes());
+            let t = line.trim();
+            if t.is_empty() {
+                continue;
+            }
+            match t.strip_prefix('#') {
+                Some(c) => {
+                    if let Some(("start_utc", v)) = c.split_once(':').map(|(k, v)| (k.trim(), v)) {
+                        start = Some(v.trim().to_owned());
+                    }
+                }
+                None => break Some(t.to_owned()),
+            }
+        };
+        let Some(header) = header else { continue };
+        match &first {
+            None => {
+                first = Some((header, start));
+                chain = Box::new(chain.chain(std::io::Cursor::new(preamble)).chain(r));
+            }
+            Some((h, s)) if *h == header && *s == start => {
+                // A cut last line of the file before must not run into this one.
+                chain = Box::new(chain.chain(&b"\n"[..]).chain(r));
+            }
+            Some(_) => {
+                return Err(LogError::Shape(format!(
+                    "{}: its header row or start_utc differs from the first file's: not the \
+                     same record",
+                    f.display()
+                )))
+            }
+        }
+    }
+    if first.is_none() {
+        return Err(LogError::MissingHeader);
+    }
+    Ok(Box::new(BufReader::with_capacity(1 << 20, chain)))
+}
 
 /// Name of the required time column (seconds since `start_utc`).
 pub const TIME_COLUMN: &str = "time_s";
@@ -61,6 +129,9 @@ pub enum LogError {
     /// The file ended before a header row.
     #[error("log has no header row")]
     MissingHeader,
+    /// The file is beyond a limit of the reader (size, rows, line length).
+    #[error("log refused: {0}")]
+    Limit(String),
     /// The header has no `time_s` column.
     #[error("log header (line {line}) has no `time_s` column")]
     MissingTime {
@@ -110,6 +181,9 @@ impl From<ReadError> for LogError {
         match e {
             ReadError::Io(e) => LogError::Io(e),
             ReadError::NoHeader => LogError::MissingHeader,
+            e @ (ReadError::TooLarge { .. } | ReadError::LineTooLong { .. }) => {
+                LogError::Limit(e.to_string())
+            }
             ReadError::BadHeader { line, reason } => LogError::BadHeader { line, reason },
             other => LogError::BadRow {
                 line: other.line().unwrap_or(0),
@@ -228,10 +302,26 @@ pub fn is_text_column_name(name: &str) -> bool {
     name == "status" || name.ends_with("_status") || name.ends_with("_flags")
 }
 
-/// The unit suffix of a column name: the part after the last `_` (`"temperature_c"` → `"c"`).
-pub fn unit_suffix(name: &str) -> Option<&str> {
-    name.rsplit_once('_')
-        .map(|(_, u)| u)
+/// Units whose own name holds an `_`: taken whole (`gravity_m_s2` is in `m_s2`, not `s2`).
+const COMPOUND_UNITS: [&str; 2] = ["nm_s2", "m_s2"];
+
+/// The gravity units a gravimeter column can be in (`gravity_<unit>`), each known to
+/// [`unit_per_g_for_suffix`].
+pub const GRAVITY_UNITS: [&str; 4] = ["mgal", "ugal", "nm_s2", "m_s2"];
+
+/// The unit of a column, from its name, in lower case: the part after the last `_`
+/// (`temperature_c` → `c`, `output_V` → `v`), or a whole compound unit (`gravity_nm_s2` →
+/// `nm_s2`). `None` when the name has no suffix. Every reader of a column's unit asks here.
+pub fn unit_suffix(name: &str) -> Option<String> {
+    let l = name.to_ascii_lowercase();
+    if let Some(u) = COMPOUND_UNITS
+        .iter()
+        .find(|u| l.strip_suffix(*u).is_some_and(|head| head.ends_with('_')))
+    {
+        return Some((*u).to_owned());
+    }
+    l.rsplit_once('_')
+        .map(|(_, u)| u.to_owned())
         .filter(|u| !u.is_empty())
 }
 
@@ -420,10 +510,10 @@ impl Log {
         }
     }
 
-    /// Reads a log from a file.
+    /// Reads a log from a file, or from a directory of daily files as one record
+    /// ([`open_record`]).
     pub fn read_path(path: impl AsRef<Path>) -> Result<Self, LogError> {
-        let f = File::open(path)?;
-        Self::read(BufReader::with_capacity(1 << 20, f))
+        Self::read(open_record(path.as_ref())?)
     }
 
     /// Parses a log held in a string.
@@ -447,8 +537,7 @@ impl Log {
         path: impl AsRef<Path>,
         keep: &(dyn Fn(&str) -> bool + Sync),
     ) -> Result<Self, LogError> {
-        let f = File::open(path)?;
-        Self::read_selected(BufReader::with_capacity(1 << 20, f), keep)
+        Self::read_selected(open_record(path.as_ref())?, keep)
     }
 
     /// [`Log::read`] keeping only some columns (see [`Log::read_path_selected`]).
@@ -1048,8 +1137,21 @@ mod tests {
 
     #[test]
     fn unit_suffix_is_the_part_after_the_last_underscore() {
-        assert_eq!(unit_suffix("temperature_c"), Some("c"));
-        assert_eq!(unit_suffix("a_i_exact_g"), Some("g"));
+        assert_eq!(unit_suffix("temperature_c").as_deref(), Some("c"));
+        assert_eq!(unit_suffix("a_i_exact_g").as_deref(), Some("g"));
         assert_eq!(unit_suffix("status"), None);
+    }
+
+    #[test]
+    fn unit_suffix_takes_compound_units_whole_and_ignores_case() {
+        assert_eq!(unit_suffix("gravity_m_s2").as_deref(), Some("m_s2"));
+        assert_eq!(unit_suffix("gravity_nm_s2").as_deref(), Some("nm_s2"));
+        assert_eq!(unit_suffix("output_V").as_deref(), Some("v"));
+        assert_eq!(unit_suffix("Tilt_ARCSEC").as_deref(), Some("arcsec"));
+        for u in GRAVITY_UNITS {
+            let name = format!("gravity_{u}");
+            assert_eq!(unit_suffix(&name).as_deref(), Some(u), "{name}");
+            assert!(unit_per_g_for_suffix(u).is_some(), "{u}");
+        }
     }
 }

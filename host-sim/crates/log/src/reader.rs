@@ -14,7 +14,9 @@
 //! - The first other non-blank line is the header: comma-separated names, none empty, none
 //!   repeated. Fields are parsed by the `csv` crate (RFC 4180 quoting), trimmed of whitespace.
 //! - Then one record per line, exactly as many fields as the header. Blank lines are skipped; a
-//!   `#` line after the header is refused ([`ReadError::CommentAfterHeader`]): a comment in the
+//!   `#` line after the header is refused ([`ReadError::CommentAfterHeader`]) unless it is an
+//!   event line, `# event: <UTC> <kind> <details>` (what `accomp record` writes in place for a
+//!   gap, a reset, a reconnection …; skipped here, the rows around it are the data): a comment in the
 //!   middle of the samples means two logs were concatenated.
 //!
 //! What a field means (number, gap, text) is the caller's business: [`Row`] hands out the
@@ -22,6 +24,9 @@
 
 use std::collections::VecDeque;
 use std::io::{BufRead, Chain, Cursor, Read};
+
+/// The start of an event line, allowed among the rows.
+pub const EVENT_PREFIX: &[u8] = b"# event:";
 
 /// The UTF-8 byte-order mark.
 const BOM: &[u8] = b"\xEF\xBB\xBF";
@@ -83,6 +88,33 @@ pub enum ReadError {
         /// 1-based line.
         line: usize,
     },
+    /// The file is UTF-16 (with or without its byte-order mark): every other byte of its text
+    /// is NUL. Read as UTF-8 it would be garbage; said as such.
+    #[error("line {line}: the file is UTF-16 text ({endian}), not UTF-8: save it as UTF-8 (or CSV UTF-8)")]
+    Utf16 {
+        /// 1-based line.
+        line: usize,
+        /// "little-endian" or "big-endian".
+        endian: &'static str,
+    },
+    /// A line longer than any record: not a log (`/dev/zero`, a binary file).
+    #[error("line {line}: longer than {limit} bytes, the limit of one line: not a log")]
+    LineTooLong {
+        /// 1-based line.
+        line: usize,
+        /// [`MAX_LINE_BYTES`].
+        limit: usize,
+    },
+    /// More lines or bytes than the reader takes.
+    #[error("{what}, above the limit of {limit}: refused (--allow-large lifts it)")]
+    TooLarge {
+        /// 1-based line where the limit was passed.
+        line: usize,
+        /// "more than N data lines", "more than N bytes".
+        what: String,
+        /// The limit, with its unit.
+        limit: String,
+    },
     /// The CSV layer refused the record (e.g. an unterminated quote).
     #[error("line {line}: {reason}")]
     Csv {
@@ -109,7 +141,24 @@ impl ReadError {
             Self::CommentAfterHeader { .. } => {
                 "comment line after the header (two files concatenated?)".into()
             }
+            Self::Utf16 { endian, .. } => {
+                format!("the file is UTF-16 text ({endian}), not UTF-8: save it as UTF-8")
+            }
+            Self::LineTooLong { limit, .. } => {
+                format!("longer than {limit} bytes, the limit of one line: not a log")
+            }
+            Self::TooLarge { what, limit, .. } => {
+                format!("{what}, above the limit of {limit}: refused (--allow-large lifts it)")
+            }
             Self::Io(_) | Self::NoHeader => self.to_string(),
+        }
+    }
+
+    /// As an I/O error (for readers whose errors carry one), the message kept.
+    pub fn into_io(self) -> std::io::Error {
+        match self {
+            Self::Io(e) => e,
+            other => std::io::Error::other(other.to_string()),
         }
     }
 
@@ -123,8 +172,141 @@ impl ReadError {
             | Self::MissingColumn { line, .. }
             | Self::FieldCount { line, .. }
             | Self::CommentAfterHeader { line }
+            | Self::LineTooLong { line, .. }
+            | Self::TooLarge { line, .. }
+            | Self::Utf16 { line, .. }
             | Self::Csv { line, .. } => Some(*line),
         }
+    }
+}
+
+/// The longest line any reader takes (a log's record is a few hundred bytes): `/dev/zero` or a
+/// binary file is refused after this much, not read until memory runs out.
+pub const MAX_LINE_BYTES: usize = 1 << 20;
+/// Data lines a file may have without `--allow-large`: what `accomp simulate` writes without it
+/// (231 days at 1 s).
+pub const MAX_ROWS: u64 = 20_000_000;
+/// Bytes a file may have without `--allow-large`: what `accomp simulate` writes without it.
+pub const MAX_FILE_BYTES: u64 = 4 << 30;
+/// Bytes of metadata and comments before the header.
+const MAX_PREAMBLE_BYTES: usize = 16 << 20;
+
+/// Whether this process reads files above [`MAX_ROWS`] / [`MAX_FILE_BYTES`] (`--allow-large`).
+static ALLOW_LARGE: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// Lifts the row and byte limits of every reader of this process (the commands'
+/// `--allow-large`); the line limit stays.
+pub fn set_allow_large(allow: bool) {
+    ALLOW_LARGE.store(allow, std::sync::atomic::Ordering::Relaxed);
+}
+
+/// The (rows, bytes) limits in force.
+pub fn limits() -> (u64, u64) {
+    if ALLOW_LARGE.load(std::sync::atomic::Ordering::Relaxed) {
+        (u64::MAX, u64::MAX)
+    } else {
+        (MAX_ROWS, MAX_FILE_BYTES)
+    }
+}
+
+fn too_many_bytes(line: usize, bytes: u64) -> ReadError {
+    ReadError::TooLarge {
+        line,
+        what: format!("more than {bytes} bytes read by line {line}"),
+        limit: format!("{} bytes", limits().1),
+    }
+}
+
+/// Refuses a file whose size alone is above the byte limit, before anything is read.
+pub fn check_file_size(path: &std::path::Path) -> Result<(), ReadError> {
+    let len = std::fs::metadata(path)?.len();
+    let (_, max) = limits();
+    if len > max {
+        return Err(ReadError::TooLarge {
+            line: 0,
+            what: format!("{}: {len} bytes", path.display()),
+            limit: format!("{max} bytes"),
+        });
+    }
+    Ok(())
+}
+
+/// Bytes of the small text files read whole (Table 1 and model CSVs, tumble logs).
+pub const MAX_SMALL_TEXT_BYTES: u64 = 64 << 20;
+
+/// Reads a whole text file of at most `max_bytes`, line by line with no line longer than
+/// [`MAX_LINE_BYTES`]: for the small files read whole (tables, tumble logs, sample files), so
+/// that `/dev/zero` or a huge file is refused with the limit named instead of filling memory.
+pub fn read_text_limited(path: &std::path::Path, max_bytes: u64) -> Result<String, ReadError> {
+    let f = std::fs::File::open(path)?;
+    let len = f.metadata()?.len();
+    if len > max_bytes {
+        return Err(ReadError::TooLarge {
+            line: 0,
+            what: format!("{}: {len} bytes", path.display()),
+            limit: format!("{max_bytes} bytes"),
+        });
+    }
+    let mut r = std::io::BufReader::with_capacity(1 << 16, f);
+    let mut all = Vec::new();
+    let mut line = 0usize;
+    loop {
+        let n = (&mut r)
+            .take(MAX_LINE_BYTES as u64 + 1)
+            .read_until(b'\n', &mut all)?;
+        if n == 0 {
+            break;
+        }
+        line += 1;
+        if line == 1 {
+            if let Some(endian) = utf16_endianness(&all) {
+                return Err(ReadError::Utf16 { line, endian });
+            }
+        }
+        if n > MAX_LINE_BYTES && all.last() != Some(&b'\n') {
+            return Err(ReadError::LineTooLong {
+                line,
+                limit: MAX_LINE_BYTES,
+            });
+        }
+        if all.len() as u64 > max_bytes {
+            return Err(ReadError::TooLarge {
+                line,
+                what: format!("more than {max_bytes} bytes by line {line}"),
+                limit: format!("{max_bytes} bytes"),
+            });
+        }
+    }
+    String::from_utf8(all).map_err(|e| {
+        let at = e.utf8_error().valid_up_to();
+        let bytes = e.as_bytes();
+        ReadError::NotUtf8 {
+            line: 1 + memchr::memchr_iter(b'\n', &bytes[..at]).count(),
+        }
+    })
+}
+
+/// Whether a line is UTF-16 text: a UTF-16 byte-order mark, or (without one) NUL in every
+/// other byte of a line of ASCII text — which no UTF-8 log has (a UTF-8 text holds no NUL).
+/// Returns the byte order.
+fn utf16_endianness(line: &[u8]) -> Option<&'static str> {
+    if line.starts_with(b"\xFF\xFE") {
+        return Some("little-endian");
+    }
+    if line.starts_with(b"\xFE\xFF") {
+        return Some("big-endian");
+    }
+    let text = line.strip_suffix(b"\n").unwrap_or(line);
+    let text = text.strip_suffix(b"\0").unwrap_or(text);
+    if text.len() < 2 || !text.contains(&0) {
+        return None;
+    }
+    let even_nul = text.iter().step_by(2).all(|&b| b == 0);
+    let odd_nul = text.iter().skip(1).step_by(2).all(|&b| b == 0);
+    match (even_nul, odd_nul) {
+        (false, true) => Some("little-endian"),
+        (true, false) => Some("big-endian"),
+        _ => None,
     }
 }
 
@@ -168,6 +350,23 @@ struct CsvSource<R: Read> {
     first_line: usize,
     /// Newlines of the csv stream before the current record.
     newlines_before: usize,
+    /// The last file line the row limit allows.
+    last_line: usize,
+}
+
+/// The last file line the row limit allows after a header on `header_line`.
+fn last_line(header_line: usize) -> usize {
+    usize::try_from(limits().0)
+        .unwrap_or(usize::MAX)
+        .saturating_add(header_line)
+}
+
+fn too_many_rows(line: usize) -> ReadError {
+    ReadError::TooLarge {
+        line,
+        what: format!("more than {} data lines (line {line})", limits().0),
+        limit: format!("{} data lines", limits().0),
+    }
 }
 
 /// Raw lines of the data section, read in large pieces.
@@ -179,11 +378,15 @@ struct Lines<R> {
     /// File line of the line starting at `pos`.
     line: usize,
     eof: bool,
+    /// Bytes of the file read so far (for the byte limit).
+    read: u64,
+    /// The last file line the row limit allows.
+    last_line: usize,
 }
 
 impl<R: Read> Lines<R> {
     /// Appends up to [`READ_BYTES`] to `buf` (after dropping the bytes before `pos`).
-    fn refill(&mut self) -> std::io::Result<()> {
+    fn refill(&mut self) -> Result<(), ReadError> {
         if self.pos > 0 {
             self.buf.drain(..self.pos);
             self.pos = 0;
@@ -196,30 +399,44 @@ impl<R: Read> Lines<R> {
                 Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
                 Err(e) => {
                     self.buf.truncate(old);
-                    return Err(e);
+                    return Err(e.into());
                 }
             }
         };
         self.buf.truncate(old + n);
         self.eof = n == 0;
+        self.read += n as u64;
+        if self.read > limits().1 {
+            return Err(too_many_bytes(self.line, self.read));
+        }
         Ok(())
     }
 
     /// The end (index of its `\n`, or the end of the file) of the line at `pos`; `None` at the
-    /// end of the file.
-    fn line_end(&mut self) -> std::io::Result<Option<usize>> {
+    /// end of the file. A line longer than [`MAX_LINE_BYTES`] is refused.
+    fn line_end(&mut self) -> Result<Option<usize>, ReadError> {
         let mut scanned = 0;
         loop {
             let from = self.pos + scanned;
             if let Some(i) = memchr::memchr(b'\n', &self.buf[from..]) {
+                if from + i - self.pos > MAX_LINE_BYTES {
+                    break;
+                }
                 return Ok(Some(from + i));
             }
             if self.eof {
                 return Ok((self.pos < self.buf.len()).then_some(self.buf.len()));
             }
             scanned = self.buf.len() - self.pos;
+            if scanned > MAX_LINE_BYTES {
+                break;
+            }
             self.refill()?;
         }
+        Err(ReadError::LineTooLong {
+            line: self.line,
+            limit: MAX_LINE_BYTES,
+        })
     }
 }
 
@@ -266,6 +483,9 @@ fn check_record(
     fields: usize,
     expected: usize,
 ) -> Result<bool, ReadError> {
+    if first.starts_with(EVENT_PREFIX) {
+        return Ok(false);
+    }
     if first.starts_with(b"#") {
         return Err(ReadError::CommentAfterHeader { line });
     }
@@ -282,9 +502,11 @@ fn check_record(
     Ok(true)
 }
 
+/// The csv crate's reader over `start` then `r`; `before`: bytes of the file before `start`.
 fn csv_reader<R: Read>(
     start: Vec<u8>,
     r: R,
+    before: u64,
 ) -> csv::Reader<NewlineOffsets<Chain<Cursor<Vec<u8>>, R>>> {
     csv::ReaderBuilder::new()
         .has_headers(false)
@@ -294,25 +516,51 @@ fn csv_reader<R: Read>(
             inner: Cursor::new(start).chain(r),
             offset: 0,
             pending: VecDeque::new(),
+            before,
+            since_newline: 0,
         })
 }
 
 /// Remembers the byte offsets of the newlines that pass through, so that a record's byte
 /// position gives its line exactly: csv's own line counter skips blank lines. Only the newlines
 /// read ahead of the current record are kept (a buffer's worth).
+/// Also where the csv crate's reading is bounded: no line (a quoted field included) longer
+/// than [`MAX_LINE_BYTES`], no more than the byte limit in all.
 struct NewlineOffsets<R> {
     inner: R,
     offset: u64,
     pending: VecDeque<u64>,
+    /// Bytes of the file before this stream.
+    before: u64,
+    /// Bytes since the last newline.
+    since_newline: usize,
 }
 
 impl<R: Read> Read for NewlineOffsets<R> {
     fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
         let n = self.inner.read(buf)?;
+        let mut last = None;
         for i in memchr::memchr_iter(b'\n', &buf[..n]) {
             self.pending.push_back(self.offset + i as u64);
+            last = Some(i);
         }
+        self.since_newline = match last {
+            Some(i) => n - i - 1,
+            None => self.since_newline + n,
+        };
         self.offset += n as u64;
+        if self.since_newline > MAX_LINE_BYTES {
+            return Err(std::io::Error::other(format!(
+                "a line longer than {MAX_LINE_BYTES} bytes, the limit of one line: not a log"
+            )));
+        }
+        let total = self.before + self.offset;
+        if total > limits().1 {
+            return Err(std::io::Error::other(format!(
+                "more than {total} bytes, above the limit of {} bytes (--allow-large lifts it)",
+                limits().1
+            )));
+        }
         Ok(n)
     }
 }
@@ -456,17 +704,40 @@ impl<R: BufRead> Records<R> {
         let mut buf = Vec::with_capacity(256);
         let mut line = 0usize;
         let mut meta: Vec<(String, String, usize)> = Vec::new();
+        let mut preamble = 0usize;
         let header_bytes = loop {
             buf.clear();
-            if r.read_until(b'\n', &mut buf)? == 0 {
+            let n = (&mut r)
+                .take(MAX_LINE_BYTES as u64 + 1)
+                .read_until(b'\n', &mut buf)?;
+            if n == 0 {
                 return Err(ReadError::NoHeader);
             }
             line += 1;
+            if n > MAX_LINE_BYTES && buf.last() != Some(&b'\n') {
+                return Err(ReadError::LineTooLong {
+                    line,
+                    limit: MAX_LINE_BYTES,
+                });
+            }
+            preamble += n;
+            if preamble > MAX_PREAMBLE_BYTES {
+                return Err(ReadError::Csv {
+                    line,
+                    reason: format!(
+                        "no header row in the first {MAX_PREAMBLE_BYTES} bytes (the limit of \
+                         metadata and comments)"
+                    ),
+                });
+            }
             let bytes = if line == 1 {
                 buf.strip_prefix(BOM).unwrap_or(&buf)
             } else {
                 &buf[..]
             };
+            if let Some(endian) = utf16_endianness(bytes) {
+                return Err(ReadError::Utf16 { line, endian });
+            }
             if bytes.iter().all(u8::is_ascii_whitespace) {
                 continue;
             }
@@ -504,11 +775,13 @@ impl<R: BufRead> Records<R> {
                     pos: 0,
                     line: header_line + 1,
                     eof: false,
+                    read: preamble as u64,
+                    last_line: last_line(header_line),
                 }),
             ),
             None => {
                 // A quoted header: the csv crate reads it and everything after.
-                let mut csv = csv_reader(header_bytes.clone(), r);
+                let mut csv = csv_reader(header_bytes.clone(), r, preamble as u64);
                 let more = csv
                     .read_byte_record(&mut record)
                     .map_err(|e| ReadError::Csv {
@@ -524,6 +797,7 @@ impl<R: BufRead> Records<R> {
                         csv,
                         first_line: header_line,
                         newlines_before: 0,
+                        last_line: last_line(header_line),
                     }),
                 )
             }
@@ -602,10 +876,12 @@ impl<R: BufRead> Records<R> {
     fn switch_to_csv(&mut self) {
         if let Source::Lines(l) = std::mem::replace(&mut self.source, Source::Switching) {
             let rest = l.buf[l.pos..].to_vec();
+            let before = l.read - rest.len() as u64;
             self.source = Source::Csv(CsvSource {
-                csv: csv_reader(rest, l.r),
+                csv: csv_reader(rest, l.r, before),
                 first_line: l.line,
                 newlines_before: 0,
+                last_line: l.last_line,
             });
         }
     }
@@ -640,6 +916,9 @@ impl<R: BufRead> Records<R> {
         };
         l.line += memchr::memchr_iter(b'\n', bytes).count();
         l.pos += take;
+        if l.line > l.last_line.saturating_add(1) {
+            return Err(too_many_rows(l.line - 1));
+        }
         Ok(Taken::Block(block))
     }
 
@@ -722,6 +1001,9 @@ impl<R: BufRead> Records<R> {
                     }
                     l.pos = (end + 1).min(l.buf.len());
                     l.line += 1;
+                    if line > l.last_line {
+                        return Err(too_many_rows(line));
+                    }
                     if split == Some(false) {
                         continue;
                     }
@@ -751,6 +1033,9 @@ impl<R: BufRead> Records<R> {
                     // one before.
                     let end = c.csv.position().byte();
                     let line = c.line_at(end.saturating_sub(1));
+                    if line > c.last_line {
+                        return Err(too_many_rows(line));
+                    }
                     let first = self.record.get(0).unwrap_or(b"");
                     if check_record(line, first, self.record.len(), expected)? {
                         break Some((0, 0, line));
@@ -851,6 +1136,12 @@ mod tests {
         ));
         let comment = rows("time_s,v\n0,1\n# second log\n1,2\n").unwrap_err();
         assert!(matches!(comment, ReadError::CommentAfterHeader { line: 3 }));
+        // An event line of a record is no comment: skipped, the rows around it kept.
+        let events = rows("time_s,v\n0,1\n# event: 2026-01-01T00:00:00Z seq_gap lost=2, x\n1,2\n");
+        assert_eq!(
+            events.unwrap().iter().map(|r| r.0).collect::<Vec<_>>(),
+            vec![2, 4]
+        );
         assert!(matches!(
             Records::from_text("# only: meta\n\n"),
             Err(ReadError::NoHeader)

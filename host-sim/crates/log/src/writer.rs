@@ -1,4 +1,4 @@
-//! Streaming writer of the log format (design/architecture.md; read back by [`crate::Log`]):
+//! Streaming writer of the log format (docs/log-format.md; read back by [`crate::Log`]):
 //! `# key: value` metadata lines, one header row, one row per sample.
 //!
 //! `log::Log` holds a whole log in memory, which for 41 days at 1 Hz and ~18 columns would be

@@ -27,6 +27,79 @@ pub fn par_map<T: Sync, U: Send>(items: &[T], f: impl Fn(&T) -> U + Sync) -> Vec
     })
 }
 
+/// Progress of a long parallel run as plain lines on stderr when stderr is not a terminal
+/// (where the progress bars are not drawn): one line at most every [`ProgressLines::every`]
+/// (a minute; `ACCOMP_PROGRESS_EVERY_S` sets another), and nothing on a terminal.
+pub struct ProgressLines {
+    what: String,
+    unit: &'static str,
+    total: usize,
+    done: std::sync::atomic::AtomicUsize,
+    started: std::time::Instant,
+    last: std::sync::Mutex<std::time::Instant>,
+    every: Option<std::time::Duration>,
+}
+
+impl ProgressLines {
+    /// Counts `total` steps of `what`, in `unit`.
+    pub fn new(what: String, total: usize, unit: &'static str) -> Self {
+        use std::io::IsTerminal as _;
+        let every = (!std::io::stderr().is_terminal()).then(Self::every);
+        let now = std::time::Instant::now();
+        ProgressLines {
+            what,
+            unit,
+            total,
+            done: std::sync::atomic::AtomicUsize::new(0),
+            started: now,
+            last: std::sync::Mutex::new(now),
+            every,
+        }
+    }
+
+    /// The interval between lines.
+    pub fn every() -> std::time::Duration {
+        let s = std::env::var("ACCOMP_PROGRESS_EVERY_S")
+            .ok()
+            .and_then(|v| v.parse::<f64>().ok())
+            .filter(|s| s.is_finite() && *s >= 0.0)
+            .unwrap_or(60.0);
+        std::time::Duration::from_secs_f64(s)
+    }
+
+    /// One step done; prints a line when the interval has passed.
+    pub fn inc(&self) {
+        self.done.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        self.maybe_print();
+    }
+
+    /// `done` steps done; prints a line when the interval has passed.
+    pub fn set(&self, done: usize) {
+        self.done.store(done, std::sync::atomic::Ordering::Relaxed);
+        self.maybe_print();
+    }
+
+    fn maybe_print(&self) {
+        let Some(every) = self.every else {
+            return;
+        };
+        let Ok(mut last) = self.last.lock() else {
+            return;
+        };
+        if last.elapsed() >= every {
+            let done = self.done.load(std::sync::atomic::Ordering::Relaxed);
+            *last = std::time::Instant::now();
+            eprintln!(
+                "{}: {done}/{} {} ({:.0} s)",
+                self.what,
+                self.total,
+                self.unit,
+                self.started.elapsed().as_secs_f64()
+            );
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

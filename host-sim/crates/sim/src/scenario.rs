@@ -82,6 +82,12 @@ pub enum ScenarioError {
     /// A value is out of its physical range.
     #[error("scenario: {0}")]
     Invalid(String),
+    /// An `[[effects]]` entry is out of its range.
+    #[error("scenario: {0}")]
+    Effect(#[from] crate::effects::InvalidEffect),
+    /// The `[instrument]` gravimeter is out of its range.
+    #[error("scenario: {0}")]
+    Instrument(#[from] crate::gravimeter::InvalidInstrument),
     /// Neither a file nor a preset of that name.
     #[error("no scenario file or preset named {0:?} (presets: {presets})", presets = PRESETS.join(", "))]
     Unknown(String),
@@ -147,9 +153,8 @@ impl Scenario {
         if !(r.duration_s.is_finite() && r.duration_s >= r.interval_s) {
             return bad("run.duration_s must be at least one interval");
         }
-        if super::time::Utc::parse(&r.start_utc).is_err() {
-            return bad("run.start_utc must be YYYY-MM-DDTHH:MM:SSZ");
-        }
+        check_start(&r.start_utc, r.duration_s).map_err(ScenarioError::Invalid)?;
+        self.check_field_ranges().map_err(ScenarioError::Invalid)?;
         if !(-90.0..=90.0).contains(&self.site.latitude_deg) {
             return bad("site.latitude_deg must be within ±90");
         }
@@ -208,10 +213,195 @@ impl Scenario {
             return bad("barometer peak hours must be finite");
         }
         if let Some(InstrumentParams::Gravimeter(g)) = &self.instrument {
-            g.validate().map_err(ScenarioError::Invalid)?;
+            g.validate()?;
         }
         for (i, e) in self.effects.iter().enumerate() {
-            e.validate(i).map_err(ScenarioError::Invalid)?;
+            e.validate(i)?;
+        }
+        Ok(())
+    }
+}
+
+/// Years a run may start and end in: where the tide and sun ephemerides are used (their
+/// series are fitted to the 20th and 21st centuries), with margin.
+pub const RUN_YEARS: std::ops::RangeInclusive<i64> = 1900..=2199;
+
+/// `run.start_utc`: the format, a day and time that exist, and a start and end within
+/// [`RUN_YEARS`], each failure said as such.
+fn check_start(start: &str, duration_s: f64) -> Result<(), String> {
+    let year = start
+        .trim()
+        .split('-')
+        .next()
+        .and_then(|y| y.parse::<i64>().ok());
+    let Some(year) = year else {
+        return Err(format!(
+            "run.start_utc = {start:?}: not of the form YYYY-MM-DDTHH:MM:SSZ"
+        ));
+    };
+    if !RUN_YEARS.contains(&year) {
+        return Err(format!(
+            "run.start_utc = {start:?}: year {year} outside {}..={} (the range of the tide and \
+             sun ephemerides)",
+            RUN_YEARS.start(),
+            RUN_YEARS.end()
+        ));
+    }
+    let t = super::time::Utc::parse(start).map_err(|_| {
+        format!(
+            "run.start_utc = {start:?}: not of the form YYYY-MM-DDTHH:MM:SSZ, or a day or time \
+             that does not exist"
+        )
+    })?;
+    // 2200-01-01T00:00:00Z in seconds since 1970.
+    const END_UNIX_S: f64 = 7_258_118_400.0;
+    if duration_s.is_finite() && t.0 + duration_s > END_UNIX_S {
+        return Err(format!(
+            "run.start_utc + run.duration_s ends after {}-12-31: outside the range of the tide \
+             and sun ephemerides",
+            RUN_YEARS.end()
+        ));
+    }
+    Ok(())
+}
+
+/// The physical range of each numeric field of the station's tables, by dotted path (array
+/// indices left out). A value outside is refused with the field's name and the range, so that
+/// `room.mean_c = 1e30` is not a 16,000 °C room and an empty output column. `run.*` is checked
+/// by the size limits of `simulate`; `[instrument]` and `[[effects]]` by their own validation.
+const FIELD_RANGES: &[(&str, f64, f64)] = &[
+    ("site.latitude_deg", -90.0, 90.0),
+    ("site.longitude_deg", -180.0, 360.0),
+    ("site.height_m", -500.0, 11_000.0),
+    ("room.mean_c", -50.0, 60.0),
+    ("room.diurnal_amplitude_c", 0.0, 30.0),
+    ("room.diurnal_peak_solar_h", 0.0, 24.0),
+    ("room.weather_std_c", 0.0, 20.0),
+    ("room.weather_tau_h", 0.0, 8_760.0),
+    ("room.door_rate_per_day", 0.0, 1_440.0),
+    ("room.door_step_c", -20.0, 20.0),
+    ("room.door_decay_min", 0.0, 1_440.0),
+    ("thermostat.setpoint_c", -50.0, 150.0),
+    ("thermostat.controller_std_c", 0.0, 10.0),
+    ("thermostat.controller_tau_s", 0.0, 86_400.0),
+    ("thermostat.setpoint_walk_c_per_sqrt_day", 0.0, 10.0),
+    ("thermostat.room_coupling", 0.0, 1.0),
+    ("thermostat.room_lowpass_h", 0.0, 8_760.0),
+    ("thermostat.proof_mass_lag_s", 0.0, 86_400.0),
+    ("accelerometer.noise_g.white_adev_1s", 0.0, 1e3),
+    ("accelerometer.noise_g.flicker_floor", 0.0, 1e3),
+    ("accelerometer.noise_g.random_walk_per_sqrt_s", 0.0, 1e3),
+    ("accelerometer.orientation.cross_sign", -1.0, 1.0),
+    (
+        "accelerometer.orientation.indexing_std_arcsec",
+        0.0,
+        3_600.0,
+    ),
+    (
+        "accelerometer.orientation.positions.angle_deg",
+        -360.0,
+        360.0,
+    ),
+    ("accelerometer.orientation.positions.dwell_s", 0.0, 1e8),
+    ("rtd.r0_ohm", 1.0, 10_000.0),
+    ("rtd.cvd_a", 0.0, 0.01),
+    ("rtd.cvd_b", -1e-5, 1e-5),
+    ("rtd.cvd_c", -1e-10, 1e-10),
+    ("rtd.accuracy_c", 0.0, 10.0),
+    ("rtd.excitation_ua", 0.0, 10_000.0),
+    ("rtd.self_heating_c_per_mw", 0.0, 10.0),
+    ("rtd.noise_uv_rms", 0.0, 1_000.0),
+    ("foundation.initial_arcsec", -3_600.0, 3_600.0),
+    ("foundation.building_arcsec_per_c", -100.0, 100.0),
+    ("foundation.building_lag_h", 0.0, 8_760.0),
+    ("foundation.creep_arcsec_per_sqrt_day", 0.0, 100.0),
+    ("tide.tilt_azimuth_deg", -360.0, 360.0),
+    ("tide.step_s", 0.0, 86_400.0),
+    ("tiltmeter.noise_arcsec", 0.0, 100.0),
+    ("tiltmeter.resolution_arcsec", 0.0, 100.0),
+    ("tiltmeter.scale_arcsec_per_v", -1e6, 1e6),
+    ("adc.board_lowpass_min", 0.0, 1_440.0),
+    ("adc.ads1262.vref_v", 0.1, 5.5),
+    ("adc.ads1262.vref_tempco_ppm_per_c", -1_000.0, 1_000.0),
+    ("adc.ads1262.vref_calibrated_at_c", -50.0, 150.0),
+    ("adc.ads1262.accel_pga_gain", 1.0, 32.0),
+    ("adc.ads1262.tilt_pga_gain", 1.0, 32.0),
+    ("adc.ads1262.noise_uv_rms", 0.0, 1_000.0),
+    ("adc.ads1262.gain_error_ppm", -1e5, 1e5),
+    ("adc.ads1262.offset_uv", -1e6, 1e6),
+    ("adc.ad7124.pga_gain", 1.0, 128.0),
+    ("adc.ad7124.reference_resistor_ohm", 1.0, 1e6),
+    ("adc.ad7124.reference_resistor_error_ppm", -1e5, 1e5),
+    ("adc.ad7124.gain_error_ppm", -1e5, 1e5),
+    ("barometer.sea_level_hpa", 800.0, 1_100.0),
+    ("barometer.s2_amplitude_hpa", 0.0, 10.0),
+    ("barometer.s2_peak_solar_h", 0.0, 24.0),
+    ("barometer.s1_amplitude_hpa", 0.0, 10.0),
+    ("barometer.s1_peak_solar_h", 0.0, 24.0),
+    ("barometer.weather_std_hpa", 0.0, 50.0),
+    ("barometer.weather_tau_h", 0.0, 8_760.0),
+    ("barometer.noise_hpa", 0.0, 10.0),
+    ("barometer.resolution_hpa", 0.0, 10.0),
+];
+
+/// Every numeric leaf of a TOML value with its dotted path (array indices as `[i]`).
+fn numeric_fields(v: &toml::Value, path: &str, out: &mut Vec<(String, f64)>) {
+    match v {
+        toml::Value::Float(f) => out.push((path.to_owned(), *f)),
+        toml::Value::Integer(i) => out.push((path.to_owned(), *i as f64)),
+        toml::Value::Table(t) => {
+            for (k, x) in t {
+                let p = if path.is_empty() {
+                    k.clone()
+                } else {
+                    format!("{path}.{k}")
+                };
+                numeric_fields(x, &p, out);
+            }
+        }
+        toml::Value::Array(a) => {
+            for (i, x) in a.iter().enumerate() {
+                numeric_fields(x, &format!("{path}[{i}]"), out);
+            }
+        }
+        _ => {}
+    }
+}
+
+impl Scenario {
+    /// Every numeric field finite (NaN and infinities refused by name), and each station field
+    /// within its [`FIELD_RANGES`] range.
+    fn check_field_ranges(&self) -> Result<(), String> {
+        let Ok(v) = toml::Value::try_from(self) else {
+            return Ok(());
+        };
+        let mut fields = Vec::new();
+        numeric_fields(&v, "", &mut fields);
+        for (path, x) in fields {
+            if !x.is_finite() {
+                return Err(format!("{path} = {x}: must be a finite number"));
+            }
+            let key: String = {
+                // `positions[2].angle_deg` → `positions.angle_deg`
+                let mut k = String::with_capacity(path.len());
+                let mut skip = false;
+                for c in path.chars() {
+                    match c {
+                        '[' => skip = true,
+                        ']' => skip = false,
+                        _ if !skip => k.push(c),
+                        _ => {}
+                    }
+                }
+                k
+            };
+            if let Some((_, lo, hi)) = FIELD_RANGES.iter().find(|(f, ..)| *f == key) {
+                if !(*lo..=*hi).contains(&x) {
+                    return Err(format!(
+                        "{path} = {x}: outside its physical range {lo} ..= {hi}"
+                    ));
+                }
+            }
         }
         Ok(())
     }
@@ -461,6 +651,41 @@ mod tests {
     use super::*;
 
     #[test]
+    fn every_ranged_field_exists_and_the_presets_are_within_their_ranges() {
+        let s = Scenario::preset("paper-1g").unwrap();
+        let mut fields = Vec::new();
+        numeric_fields(&toml::Value::try_from(&s).unwrap(), "", &mut fields);
+        let names: Vec<String> = fields.iter().map(|(p, _)| p.replace("[0]", "")).collect();
+        for (f, lo, hi) in FIELD_RANGES {
+            assert!(
+                names.iter().any(|n| n == f),
+                "{f} is no field of a scenario"
+            );
+            assert!(lo < hi, "{f}");
+        }
+        for name in PRESETS {
+            Scenario::preset(name).unwrap().validate().unwrap();
+        }
+    }
+
+    #[test]
+    fn out_of_range_nan_and_infinite_fields_are_refused_by_name_with_the_range() {
+        let text = Scenario::preset("paper-1g").unwrap().to_toml();
+        for (from, to, said) in [
+            ("mean_c = 20.0", "mean_c = 1e30", "room.mean_c = 1000000000000000000000000000000: outside its physical range -50 ..= 60"),
+            ("sea_level_hpa = 1013.25", "sea_level_hpa = nan", "barometer.sea_level_hpa = NaN: must be a finite number"),
+            ("door_step_c = 0.8", "door_step_c = -inf", "room.door_step_c = -inf: must be a finite number"),
+            ("angle_deg = 90.0", "angle_deg = inf", "accelerometer.orientation.positions[0].angle_deg = inf"),
+            ("start_utc = \"2016-03-01T00:00:00Z\"", "start_utc = \"9999-12-31T00:00:00Z\"", "year 9999 outside 1900..=2199"),
+            ("start_utc = \"2016-03-01T00:00:00Z\"", "start_utc = \"2016-02-30T00:00:00Z\"", "does not exist"),
+        ] {
+            assert!(text.contains(from), "{from}");
+            let e = Scenario::from_toml(&text.replace(from, to)).unwrap_err().to_string();
+            assert!(e.contains(said), "{to}: {e}");
+        }
+    }
+
+    #[test]
     fn presets_round_trip_through_toml() {
         for name in PRESETS {
             let s = Scenario::preset(name).unwrap();
@@ -544,7 +769,8 @@ mod tests {
         assert_eq!(ok.gravimeter().map(|g| g.column()), Some("gravity_ugal"));
         assert!(matches!(
             Scenario::from_toml(&grav("volt")),
-            Err(ScenarioError::Invalid(m)) if m.contains("instrument.unit") && m.contains("volt")
+            Err(ScenarioError::Instrument(e)) if e.field == "unit"
+                && e.to_string().contains("instrument.unit") && e.to_string().contains("volt")
         ));
         let unknown = format!("{text}\n[[effects]]\nkind = \"gremlins\"\nsize = 1.0\n");
         assert!(matches!(
@@ -554,7 +780,8 @@ mod tests {
         let bad = format!("{text}\n[[effects]]\nkind = \"periodic\"\nperiod_s = 0.0\namplitude = 1.0\nphase_rad = 0.0\n");
         assert!(matches!(
             Scenario::from_toml(&bad),
-            Err(ScenarioError::Invalid(m)) if m.contains("effects[0] (periodic): period_s")
+            Err(ScenarioError::Effect(e)) if e.index == 0 && e.field == "period_s"
+                && e.to_string().contains("effects[0] (periodic): period_s")
         ));
     }
 

@@ -7,8 +7,6 @@
 //! (filters, differences and whitening restart there).
 
 use crate::log::{Log, LogError};
-use crate::sim::time::{posix_seconds, utc_date};
-use accomp::tide::UtcTime;
 use std::path::Path;
 
 pub use accomp_log::{unit_per_g_for_suffix, M_S2_PER_MGAL};
@@ -18,7 +16,7 @@ pub use accomp_log::{unit_per_g_for_suffix, M_S2_PER_MGAL};
 pub enum Format {
     /// Guess from the extension and the header.
     Auto,
-    /// Our stability-test log (design/architecture.md).
+    /// Our stability-test log (docs/log-format.md).
     Log,
     /// gMetrology relative gravimeter, whitespace columns, Beijing time.
     GmetrologyTsf,
@@ -63,66 +61,13 @@ pub const AQG_START_UTC: &str = "2020-07-31T12:15:00.015Z";
 /// Beijing time − UTC, hours.
 pub const BEIJING_UTC_OFFSET_H: i64 = 8;
 
-/// Parses `YYYY-MM-DDTHH:MM:SS[.fff][Z]` (or with a space) to Unix seconds.
-pub fn parse_utc(text: &str) -> Option<f64> {
-    let s = text.trim().trim_end_matches('Z');
-    let (date, time) = s.split_once(['T', ' '])?;
-    let mut d = date.split('-');
-    let year: i32 = d.next()?.parse().ok()?;
-    let month: u8 = d.next()?.parse().ok()?;
-    let day: u8 = d.next()?.parse().ok()?;
-    let mut t = time.split(':');
-    let hour: u8 = t.next()?.parse().ok()?;
-    let minute: u8 = t.next()?.parse().ok()?;
-    let second: f64 = t.next().unwrap_or("0").parse().ok()?;
-    civil_unix_seconds(year, month, day, hour, minute, second)
-}
-
-/// Unix seconds of a checked calendar instant: whole seconds from jiff's calendar
-/// (`sim::time::posix_seconds`, exact integer arithmetic — the Julian-date route of
-/// `UtcTime::unix_seconds` loses ~10 µs to the f64 day count, which would jitter `time_s`), the
-/// fraction added after. `None` for a day or time that does not exist, or outside what the tide
-/// model takes (`accomp::tide::UtcTime`: years 1600–2400; a leap second's 60.x s is accepted
-/// there and counted POSIX-style, as the next minute's first second).
-pub fn civil_unix_seconds(
-    year: i32,
-    month: u8,
-    day: u8,
-    hour: u8,
-    minute: u8,
-    second: f64,
-) -> Option<f64> {
-    UtcTime::new(year, month, day, hour, minute, second).ok()?;
-    let whole = posix_seconds(
-        i64::from(year),
-        i64::from(month),
-        i64::from(day),
-        i64::from(hour),
-        i64::from(minute),
-        0,
-    )?;
-    Some(whole as f64 + second)
-}
-
-/// Formats Unix seconds as `YYYY-MM-DDTHH:MM:SS.sssZ` (the date from jiff, proleptic
-/// Gregorian).
-pub fn format_utc(unix_s: f64) -> String {
-    let days = (unix_s / 86_400.0).floor();
-    let sod = unix_s - days * 86_400.0;
-    let Some(date) = utc_date(days as i64 * 86_400) else {
-        return format!("{unix_s} s since 1970 (outside the calendar's years −9999..=9999)");
-    };
-    let (year, month, day) = (date.year(), date.month(), date.day());
-    let h = (sod / 3600.0).floor();
-    let m = ((sod - h * 3600.0) / 60.0).floor();
-    let s = sod - h * 3600.0 - m * 60.0;
-    format!("{year:04}-{month:02}-{day:02}T{h:02}:{m:02}:{s:06.3}Z")
-}
+pub use crate::log::time::{civil_unix_seconds, format_utc, parse_utc};
 
 fn read_text(path: &Path) -> Result<String, ImportError> {
-    std::fs::read_to_string(path).map_err(|source| ImportError::Io {
+    let (_, max_bytes) = crate::log::reader::limits();
+    crate::log::reader::read_text_limited(path, max_bytes).map_err(|e| ImportError::Io {
         path: path.display().to_string(),
-        source,
+        source: e.into_io(),
     })
 }
 
@@ -134,6 +79,7 @@ pub fn gmetrology_from_str(text: &str) -> Result<(Log, Vec<BadRow>), ImportError
     let mut unix = Vec::new();
     let mut g = Vec::new();
     let mut p = Vec::new();
+    let mut backwards = 0usize;
     for (i, line) in text.lines().enumerate() {
         let line_no = i + 1;
         let trimmed = line.trim();
@@ -179,6 +125,7 @@ pub fn gmetrology_from_str(text: &str) -> Result<(Log, Vec<BadRow>), ImportError
         // Beijing time is UTC+8: UTC = local − 8 h.
         let u = local - (BEIJING_UTC_OFFSET_H * 3600) as f64;
         if unix.last().is_some_and(|&last: &f64| u <= last) {
+            backwards += 1;
             bad.push(BadRow {
                 line: line_no,
                 reason: "time not increasing".into(),
@@ -190,6 +137,16 @@ pub fn gmetrology_from_str(text: &str) -> Result<(Log, Vec<BadRow>), ImportError
         unix.push(u);
         g.push(if ok(gv) { gv } else { f64::NAN });
         p.push(if ok(pv) && pv > 0.0 { pv } else { f64::NAN });
+    }
+    // A file in reverse order keeps its first row and refuses every other one as "not
+    // increasing": said for what it is.
+    if backwards > unix.len() {
+        return Err(ImportError::Shape(format!(
+            "time runs backwards: {backwards} rows are not later than the row before and only \
+             {} are; the file looks reversed (newest first): sort it by time, oldest first \
+             (e.g. `tac`)",
+            unix.len()
+        )));
     }
     let Some(&t0) = unix.first() else {
         return Err(ImportError::Shape("no readable rows".into()));
@@ -283,16 +240,25 @@ fn first_nonblank_line(path: &Path) -> Result<String, ImportError> {
     };
     let mut r = std::io::BufReader::new(std::fs::File::open(path).map_err(io)?);
     let mut buf = Vec::new();
-    loop {
+    let limit = crate::log::reader::MAX_LINE_BYTES;
+    for _ in 0..limit {
         buf.clear();
-        if r.read_until(b'\n', &mut buf).map_err(io)? == 0 {
+        let n = std::io::Read::take(&mut r, limit as u64 + 1)
+            .read_until(b'\n', &mut buf)
+            .map_err(io)?;
+        if n == 0 {
             return Ok(String::new());
+        }
+        if n > limit {
+            // Not a text file of lines: the reader of the guessed format says why.
+            return Ok(String::from_utf8_lossy(&buf[..256]).into_owned());
         }
         let line = String::from_utf8_lossy(&buf);
         if !line.trim().is_empty() {
             return Ok(line.into_owned());
         }
     }
+    Ok(String::new())
 }
 
 /// Reads our log format (the columns `keep` accepts, all without it). The log reader refuses a
@@ -376,15 +342,9 @@ pub struct Dataset {
     pub warnings: Vec<String>,
 }
 
+/// A column's unit (lower case, "" without a suffix), as `accomp_log` reads it.
 fn suffix_of(name: &str) -> String {
-    for s in ["nm_s2", "m_s2"] {
-        if name.ends_with(&format!("_{s}")) {
-            return s.into();
-        }
-    }
-    name.rsplit_once('_')
-        .map(|(_, s)| s.to_ascii_lowercase())
-        .unwrap_or_default()
+    accomp_log::unit_suffix(name).unwrap_or_default()
 }
 
 /// Picks the output column: `requested`, else the first whose name starts with `output`,
@@ -616,6 +576,19 @@ pub fn dataset_from_log(log: &Log, opts: &DatasetOptions) -> Result<Dataset, Imp
         return Err(ImportError::Shape(format!(
             "only {} usable rows: the models need at least {MIN_POINTS}",
             keep.len()
+        )));
+    }
+    // The fit squares deviations: kept values whose squares overflow (±1e308 throughout, so
+    // none is absurd against the others) would print an infinite residual as a result.
+    if let Some(big) = keep
+        .iter()
+        .map(|&i| y_raw[i].abs())
+        .max_by(f64::total_cmp)
+        .filter(|m| (m * m).is_infinite())
+    {
+        return Err(ImportError::Shape(format!(
+            "output column {out_name}: values up to {big:e} overflow the fit (their squares are \
+             infinite): not a measurement"
         )));
     }
     let mut dts: Vec<f64> = keep.windows(2).map(|w| t[w[1]] - t[w[0]]).collect();

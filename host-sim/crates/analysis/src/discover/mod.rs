@@ -74,7 +74,7 @@ pub struct Discovery {
     /// Shape checks of the accepted effects (a poor fit is said, see `shape`).
     pub shape_checks: Vec<shape::ShapeCheck>,
     /// Wave-group tidal analysis of a gravity record, or why it was not run.
-    pub tidal: Result<tidal::TidalAnalysis, String>,
+    pub tidal: Result<tidal::TidalAnalysis, tidal::NotRun>,
 }
 
 /// The shared series of the candidates.
@@ -107,7 +107,7 @@ pub fn discover(
     ds: Dataset,
     table: Option<&accomp::table::CalibrationTable>,
     cfg: &select::Config,
-) -> Result<Discovery, String> {
+) -> Result<Discovery, baseline::BaselineError> {
     let measured_channels = ds.channels.clone();
     // Errors in variables: each channel's reading noise and smoother are fitted and reported;
     // see FIT_ON_SMOOTHED_CHANNELS for whether the effects are fitted on the smoothed states.
@@ -197,7 +197,7 @@ pub fn discover_path(
     }
     let mut ds = import::dataset_from_log(&log, &opts)?;
     note_bad_rows(&mut ds, &bad);
-    let d = discover(ds, table, cfg).map_err(anyhow::Error::msg)?;
+    let d = discover(ds, table, cfg)?;
     Ok((d, bad))
 }
 
@@ -227,7 +227,7 @@ fn tidal_analysis(
     base_cols: &[Vec<f64>],
     ctx: &effects::Context,
     accepted: &[select::Accepted],
-) -> Result<tidal::TidalAnalysis, String> {
+) -> Result<tidal::TidalAnalysis, tidal::NotRun> {
     if let Some(why) = tidal::not_applicable(ds) {
         return Err(why);
     }

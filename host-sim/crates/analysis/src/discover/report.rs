@@ -577,7 +577,7 @@ pub fn write_report(d: &Discovery, dir: &Path, format: Format) -> anyhow::Result
             }
         }
     }
-    std::fs::write(dir.join("report.md"), md)?;
+    crate::log::outputs::write_file(&dir.join("report.md"), md.as_bytes())?;
     Ok(())
 }
 

@@ -2,6 +2,9 @@
 //! know), and the calibration date.
 
 use super::*;
+use accomp::model::CrossAxis;
+use accomp::table::Orientation;
+use accomp::units::Gs;
 
 /// Why a calibration table cannot be built from the fits.
 #[derive(Debug, Error)]
@@ -28,6 +31,39 @@ pub enum BuildError {
     /// `--date` is not YYYY-MM-DD.
     #[error("--date `{0}` is not a date of the form YYYY-MM-DD")]
     Date(String),
+    /// `--orientation` is neither a named test nor three finite components.
+    #[error("--orientation `{0}`: use 1g, 0g or a_i,a_p,a_o in g (e.g. 0,1,0)")]
+    Orientation(String),
+}
+
+/// The test orientation stored in the table: `1g` (input axis vertical: a_i = 1 g), `0g` (input
+/// axis horizontal, the dividing head's spindle along the output axis so gravity lies on the
+/// pendulum axis: a_i = 0, a_p = 1 g, as in the `paper-0g` scenario) or the three components
+/// `a_i,a_p,a_o` in g.
+pub fn parse_orientation(text: &str) -> Result<Orientation, BuildError> {
+    let err = || BuildError::Orientation(text.to_owned());
+    let (a_i, a_p, a_o) = match text.trim() {
+        "1g" => (1.0, 0.0, 0.0),
+        "0g" => (0.0, 1.0, 0.0),
+        other => {
+            let v: Vec<f64> = other
+                .split(',')
+                .map(|x| x.trim().parse::<f64>())
+                .collect::<Result<_, _>>()
+                .map_err(|_| err())?;
+            match v.as_slice() {
+                [i, p, o] if v.iter().all(|x| x.is_finite()) => (*i, *p, *o),
+                _ => return Err(err()),
+            }
+        }
+    };
+    Ok(Orientation {
+        cross: CrossAxis {
+            a_p: Gs(a_p),
+            a_o: Gs(a_o),
+        },
+        nominal_input: Gs(a_i),
+    })
 }
 
 /// Defaults of the non-thermal table fields, which the fit cannot know. They describe the
@@ -109,6 +145,16 @@ fn calibration_date(date: jiff::civil::Date) -> Option<CalibrationDate> {
     })
 }
 
+/// `table` for the test `orientation` (validated again).
+pub fn with_orientation(
+    mut table: CalibrationTable,
+    orientation: Orientation,
+) -> Result<CalibrationTable, BuildError> {
+    table.orientation = orientation;
+    table.validate().map_err(BuildError::Table)?;
+    Ok(table)
+}
+
 /// Today's UTC date from the system clock.
 pub fn today_utc() -> CalibrationDate {
     let today = jiff::Timestamp::now()
@@ -119,4 +165,42 @@ pub fn today_utc() -> CalibrationDate {
         month: 1,
         day: 1,
     })
+}
+
+#[cfg(test)]
+mod orientation_tests {
+    use super::*;
+
+    #[test]
+    fn named_orientations_and_components_parse_and_nonsense_is_refused() {
+        let o = parse_orientation("0g").unwrap();
+        assert_eq!(
+            (o.nominal_input.0, o.cross.a_p.0, o.cross.a_o.0),
+            (0.0, 1.0, 0.0)
+        );
+        let o = parse_orientation("1g").unwrap();
+        assert_eq!(
+            (o.nominal_input.0, o.cross.a_p.0, o.cross.a_o.0),
+            (1.0, 0.0, 0.0)
+        );
+        let o = parse_orientation("0.5, 0.866, 0").unwrap();
+        assert_eq!(
+            (o.nominal_input.0, o.cross.a_p.0, o.cross.a_o.0),
+            (0.5, 0.866, 0.0)
+        );
+        // Written into the table and read back from its encoding.
+        let t = with_orientation(
+            accomp::reference::paper_order2_table(),
+            parse_orientation("0g").unwrap(),
+        )
+        .unwrap();
+        let back = CalibrationTable::decode(&t.encode()).unwrap();
+        assert_eq!(back.orientation, parse_orientation("0g").unwrap());
+        for bad in ["2g", "1,2", "1,nan,0", ""] {
+            assert!(matches!(
+                parse_orientation(bad),
+                Err(BuildError::Orientation(_))
+            ));
+        }
+    }
 }

@@ -104,6 +104,13 @@ pub fn run<T: TwinModel>(
         .unwrap_or(1)
         .clamp(1, n.max(1));
     let next = std::sync::atomic::AtomicUsize::new(0);
+    // The bar is drawn on a terminal only: elsewhere (a log file, CI) a line at most every
+    // PROGRESS_EVERY says where a long run is.
+    let log = crate::numerics::parallel::ProgressLines::new(
+        format!("twin ensemble ({label})"),
+        n,
+        "members",
+    );
     let mut out: Vec<Option<Result<Views, String>>> = vec![None; n];
     std::thread::scope(|s| {
         let handles: Vec<_> = (0..threads)
@@ -120,6 +127,7 @@ pub fn run<T: TwinModel>(
                             yard.views(&yard.detrend(&r))
                         });
                         bar.inc(1);
+                        log.inc();
                         mine.push((k, v));
                     }
                     mine

@@ -49,7 +49,7 @@ pub fn write_scenario(s: &mut Simulation, path: Option<&Path>) -> anyhow::Result
             s.warnings.join("; ")
         );
     };
-    std::fs::write(path, toml)?;
+    crate::log::outputs::write_file(path, toml.as_bytes())?;
     s.extended_path = Some(path.to_path_buf());
     Ok(())
 }
@@ -78,6 +78,6 @@ pub fn write_report(s: &Simulation, dir: &Path, format: crate::plot::Format) -> 
     let path = dir.join("report.md");
     let mut all = std::fs::read_to_string(&path).unwrap_or_default();
     all.push_str(&md);
-    std::fs::write(path, all)?;
+    crate::log::outputs::write_file(&path, all.as_bytes())?;
     Ok(())
 }

@@ -1,0 +1,138 @@
+//! `accomp record`: record the board's sample stream into a log (the recorder is
+//! [`crate::device::record`]).
+
+use std::io::{IsTerminal as _, Write as _};
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+
+use anyhow::Context as _;
+
+use crate::device::record::{self, Link, Options, Progress};
+use crate::device::Target;
+
+/// Record the board's samples into a log (flushed to disk every second).
+#[derive(clap::Args, Debug)]
+pub struct RecordArgs {
+    /// serial:<port>
+    #[arg(long)]
+    pub target: Target,
+    /// Output file (.csv), or directory with --rotate daily.
+    #[arg(short = 'o', long = "output")]
+    pub output: PathBuf,
+    /// Stop after this many samples written.
+    #[arg(long, conflicts_with = "duration")]
+    pub samples: Option<u64>,
+    /// Stop after this much board time: 6w, 3d, 12h, 30m, 90s.
+    #[arg(long, value_parser = record::parse_duration)]
+    pub duration: Option<f64>,
+    /// Continue an existing record (the header must name the same board and table).
+    #[arg(long)]
+    pub append: bool,
+    /// Write over an existing record, or append to one of another board or table.
+    #[arg(long)]
+    pub force: bool,
+    /// `daily`: one file per UTC day in the output directory.
+    #[arg(long, value_enum)]
+    pub rotate: Option<Rotate>,
+    /// Where the test runs (written into the header).
+    #[arg(long)]
+    pub site: Option<String>,
+    /// A note for the header.
+    #[arg(long)]
+    pub note: Option<String>,
+    /// Set the ADS1262 data rate first (samples/s; frames come at rate / 8).
+    #[arg(long)]
+    pub rate: Option<u32>,
+    /// Full-screen live view (not built: the status line is shown instead).
+    #[arg(long)]
+    pub tui: bool,
+}
+
+/// `--rotate` values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Rotate {
+    /// One file per UTC day.
+    Daily,
+}
+
+fn pc_clock() -> f64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0.0, |d| d.as_secs_f64())
+}
+
+fn status_text(p: &Progress) -> String {
+    format!(
+        "{} samples, {:.0} s recorded, {} lost, {} events, device dropped {}, link {}, drift \
+         {:.2} ppm{}",
+        p.samples,
+        p.record_s,
+        p.lost,
+        p.events,
+        p.frames_dropped,
+        match p.link {
+            Link::Up => "up",
+            Link::Down => "DOWN (reopening)",
+        },
+        p.drift_ppm,
+        p.to_go
+            .as_ref()
+            .map_or_else(String::new, |t| format!(", {t}"))
+    )
+}
+
+/// Runs `accomp record`.
+pub fn run(args: &RecordArgs) -> anyhow::Result<()> {
+    let Target::Serial(port) = &args.target else {
+        anyhow::bail!("record needs --target serial:<port> (a board or `accomp board-sim`)");
+    };
+    if args.tui {
+        eprintln!("record: --tui is not available in this version; showing the status line");
+    }
+    let opts = Options {
+        port: port.clone(),
+        output: args.output.clone(),
+        samples: args.samples,
+        duration_s: args.duration,
+        append: args.append,
+        force: args.force,
+        daily: args.rotate == Some(Rotate::Daily),
+        site: args.site.clone(),
+        note: args.note.clone(),
+        rate_hz: args.rate,
+    };
+    let stop = Arc::new(AtomicBool::new(false));
+    {
+        let stop = stop.clone();
+        ctrlc::set_handler(move || stop.store(true, Ordering::Relaxed))
+            .context("cannot install the Ctrl-C handler")?;
+    }
+    let tty = std::io::stderr().is_terminal();
+    let mut last_line = Instant::now();
+    let mut show = |p: &Progress| {
+        if tty {
+            eprint!("\r\x1b[2K{}", status_text(p));
+            let _ = std::io::stderr().flush();
+        } else if last_line.elapsed() >= Duration::from_secs(60) {
+            last_line = Instant::now();
+            eprintln!("record: {}", status_text(p));
+        }
+    };
+    let summary = record::record(&opts, &pc_clock, &stop, &mut show)?;
+    if tty {
+        eprintln!();
+    }
+    eprintln!(
+        "record: {} samples written to {} ({}), {} lost, {} events, {} reconnects, {} resets",
+        summary.samples,
+        summary.path.display(),
+        summary.reason,
+        summary.lost,
+        summary.events,
+        summary.reconnects,
+        summary.resets
+    );
+    Ok(())
+}

@@ -1,0 +1,556 @@
+//! The QEMU board's persistent state under careless or unlucky use: one command at a time
+//! (concurrent `load`s and a `table get` racing them lose no table), "verified" only once the
+//! image on disk holds the table, a damaged image refused and never overwritten, a folder that
+//! cannot take the image refused by name before anything is sent, and no emulator or temporary
+//! folder left behind by an `accomp` killed with SIGKILL.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+use accomp::table::CalibrationTable;
+use accomp_host::device::qemu::{image_tables, QemuOptions, FLASH_IMAGE, STATE_ENV};
+use accomp_host::device::{firmware_path, paper_table, Qemu};
+
+#[path = "common/cli.rs"]
+mod cli;
+#[path = "common/scratch.rs"]
+mod scratch;
+use cli::stderr;
+use scratch::Scratch;
+
+fn elf() -> PathBuf {
+    let elf = firmware_path(None);
+    assert!(
+        elf.exists(),
+        "firmware ELF missing at {} (cargo xtask firmware)",
+        elf.display()
+    );
+    elf
+}
+
+/// A table told apart by its date (its id is its CRC).
+fn table(n: u32) -> CalibrationTable {
+    let mut t = paper_table();
+    t.date.year = 2000 + (n / 300) as u16;
+    t.date.month = 1 + ((n / 28) % 12) as u8;
+    t.date.day = 1 + (n % 28) as u8;
+    t
+}
+
+fn accomp_cmd(state: &Path, args: &[&str]) -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_accomp"));
+    c.args(args)
+        .env(STATE_ENV, state)
+        .env("ACCOMP_FIRMWARE_ELF", elf())
+        .stdin(Stdio::null());
+    c
+}
+
+fn accomp(state: &Path, args: &[&str]) -> Output {
+    accomp_cmd(state, args).output().expect("accomp runs")
+}
+
+fn write_table(dir: &Path, n: u32) -> (PathBuf, u32) {
+    let t = table(n);
+    let p = dir.join(format!("t{n}.acal"));
+    std::fs::write(&p, t.encode()).unwrap();
+    (p, t.id())
+}
+
+/// (active, previous) as the firmware finds them when it boots on a copy of the state.
+fn tables_after_boot(state: &Path) -> (Option<u32>, Option<u32>) {
+    let copy = Scratch::new("board-state-boot");
+    std::fs::copy(state.join(FLASH_IMAGE), copy.join(FLASH_IMAGE)).expect("image");
+    let opts = QemuOptions {
+        state_dir: Some(copy.to_path_buf()),
+        ..QemuOptions::default()
+    };
+    let (q, mut c) = Qemu::launch(&elf(), &opts).unwrap_or_else(|e| panic!("QEMU: {e}"));
+    let i = c.info().expect("info");
+    q.shutdown();
+    (i.active_table, i.previous_table)
+}
+
+fn on_disk(state: &Path) -> (Option<u32>, Option<u32>) {
+    let image = std::fs::read(state.join(FLASH_IMAGE)).expect("image");
+    image_tables(&image).expect("the image scans")
+}
+
+fn hex(id: u32) -> String {
+    format!("{id:#010x}")
+}
+
+#[test]
+fn concurrent_loads_and_a_racing_table_get_lose_no_table_in_30_rounds() {
+    let state = Scratch::new("board-state-race");
+    let work = Scratch::new("board-state-race-files");
+    let (first, first_id) = write_table(&work, 0);
+    assert!(accomp(
+        &state,
+        &["load", "--target", "qemu", first.to_str().unwrap()]
+    )
+    .status
+    .success());
+    let mut active = first_id;
+    let mut waited = 0;
+    for round in 0..30u32 {
+        let (a, a_id) = write_table(&work, 1 + 2 * round);
+        let (b, b_id) = write_table(&work, 2 + 2 * round);
+        let got = work.join(format!("got{round}.acal"));
+        let spawn = |args: &[&str]| {
+            accomp_cmd(&state, args)
+                .stdout(Stdio::piped())
+                .stderr(Stdio::piped())
+                .spawn()
+                .expect("spawn")
+        };
+        let la = spawn(&["load", "--target", "qemu", a.to_str().unwrap()]);
+        let get = spawn(&[
+            "table",
+            "get",
+            "--target",
+            "qemu",
+            "-o",
+            got.to_str().unwrap(),
+        ]);
+        let lb = spawn(&["load", "--target", "qemu", b.to_str().unwrap()]);
+        let (oa, og, ob) = (
+            la.wait_with_output().unwrap(),
+            get.wait_with_output().unwrap(),
+            lb.wait_with_output().unwrap(),
+        );
+        for (what, o) in [("load a", &oa), ("table get", &og), ("load b", &ob)] {
+            assert!(
+                o.status.success(),
+                "round {round}: {what} failed: {}",
+                stderr(o)
+            );
+            waited += stderr(o).contains("in use by pid") as usize;
+        }
+        // Each load says which table it left as the rollback: the one before it.
+        let (ea, eb) = (stderr(&oa), stderr(&ob));
+        let (later, earlier, earlier_id, later_id) =
+            if eb.contains(&format!("rollback table {}", hex(a_id))) {
+                (eb, ea, a_id, b_id)
+            } else {
+                (ea, eb, b_id, a_id)
+            };
+        assert!(
+            later.contains(&format!(
+                "active table {} (read back and verified",
+                hex(later_id)
+            )) && later.contains(&format!("rollback table {}", hex(earlier_id))),
+            "round {round}: later load says {later}"
+        );
+        assert!(
+            earlier.contains(&format!("rollback table {}", hex(active))),
+            "round {round}: earlier load (of {}) says {earlier}, expected rollback {}",
+            hex(earlier_id),
+            hex(active)
+        );
+        assert_eq!(
+            on_disk(&state),
+            (Some(later_id), Some(earlier_id)),
+            "round {round}: the image on disk"
+        );
+        // The get saw the board before, between or after the loads: always a whole table.
+        let got_id = CalibrationTable::decode(&std::fs::read(&got).unwrap())
+            .expect("get wrote a valid table")
+            .id();
+        assert!(
+            [active, a_id, b_id].contains(&got_id),
+            "round {round}: get returned {}",
+            hex(got_id)
+        );
+        active = later_id;
+    }
+    // The firmware itself, booting on the final image, agrees with the host's reading of it.
+    assert_eq!(tables_after_boot(&state), on_disk(&state));
+    eprintln!("30 rounds: {waited} of 90 commands waited for the board");
+    assert!(waited > 0, "no command ever waited: the race was not run");
+}
+
+#[test]
+fn no_wait_refuses_a_busy_board_naming_the_holder() {
+    let state = Scratch::new("board-state-nowait");
+    std::fs::create_dir_all(&*state).unwrap();
+    // This test holds the lock as another accomp would.
+    let lock = std::fs::OpenOptions::new()
+        .create(true)
+        .truncate(true)
+        .write(true)
+        .open(state.join("accomp-board.lock"))
+        .unwrap();
+    lock.lock().unwrap();
+    std::fs::write(state.join("accomp-board.lock"), "4242\n").unwrap();
+    let out = state.join("got.acal");
+    let started = Instant::now();
+    let o = accomp(
+        &state,
+        &[
+            "table",
+            "get",
+            "--target",
+            "qemu",
+            "--no-wait",
+            "-o",
+            out.to_str().unwrap(),
+        ],
+    );
+    assert!(!o.status.success());
+    let e = stderr(&o);
+    assert!(
+        e.contains("in use by pid 4242") && e.contains("--no-wait"),
+        "{e}"
+    );
+    assert!(started.elapsed() < Duration::from_secs(10));
+    // Without --no-wait it waits, says so, and goes on once the lock is released.
+    let child = accomp_cmd(
+        &state,
+        &[
+            "table",
+            "get",
+            "--target",
+            "qemu",
+            "-o",
+            out.to_str().unwrap(),
+        ],
+    )
+    .stderr(Stdio::piped())
+    .spawn()
+    .unwrap();
+    std::thread::sleep(Duration::from_millis(500));
+    drop(lock);
+    let o = child.wait_with_output().unwrap();
+    let e = stderr(&o);
+    assert!(e.contains("in use by pid 4242, waiting"), "{e}");
+    // A blank board has no table to get: the refusal is the firmware's, after the wait.
+    assert!(!e.contains("--no-wait"), "{e}");
+}
+
+#[test]
+fn a_short_flash_image_is_refused_with_its_size_kept_intact_and_reset_state_moves_it_aside() {
+    let state = Scratch::new("board-state-short");
+    let work = Scratch::new("board-state-short-files");
+    let (t, _) = write_table(&work, 7);
+    assert!(
+        accomp(&state, &["load", "--target", "qemu", t.to_str().unwrap()])
+            .status
+            .success()
+    );
+    let image = state.join(FLASH_IMAGE);
+    let full = std::fs::read(&image).unwrap();
+    let cut = full[..1000].to_vec();
+    std::fs::write(&image, &cut).unwrap();
+    let got = work.join("got.acal");
+    for args in [
+        vec![
+            "table",
+            "get",
+            "--target",
+            "qemu",
+            "-o",
+            got.to_str().unwrap(),
+        ],
+        vec!["load", "--target", "qemu", t.to_str().unwrap()],
+    ] {
+        let o = accomp(&state, &args);
+        assert!(!o.status.success(), "{args:?} accepted a 1000-byte image");
+        let e = stderr(&o);
+        assert!(
+            e.contains(&image.display().to_string())
+                && e.contains("1000 bytes")
+                && e.contains("expected 3072"),
+            "{args:?}: {e}"
+        );
+        assert_eq!(
+            std::fs::read(&image).unwrap(),
+            cut,
+            "{args:?} touched the image"
+        );
+    }
+    let o = accomp(
+        &state,
+        &[
+            "table",
+            "get",
+            "--target",
+            "qemu",
+            "--reset-state",
+            "-o",
+            got.to_str().unwrap(),
+        ],
+    );
+    let e = stderr(&o);
+    assert!(e.contains("moved to"), "{e}");
+    let aside: Vec<PathBuf> = std::fs::read_dir(&*state)
+        .unwrap()
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.to_string_lossy().contains(".damaged-"))
+        .collect();
+    assert_eq!(aside.len(), 1, "{aside:?}");
+    assert_eq!(
+        std::fs::read(&aside[0]).unwrap(),
+        cut,
+        "the damaged image was not kept"
+    );
+    assert_eq!(std::fs::metadata(&image).unwrap().len(), 3072);
+    // The board starts blank after the reset (so the get finds no table).
+    assert!(!o.status.success());
+    assert_eq!(on_disk(&state), (None, None));
+}
+
+#[test]
+fn an_immutable_state_folder_is_refused_by_name_before_anything_is_sent() {
+    let state = Scratch::new("board-state-immutable");
+    let work = Scratch::new("board-state-immutable-files");
+    let (t1, id1) = write_table(&work, 11);
+    let (t2, _) = write_table(&work, 12);
+    assert!(
+        accomp(&state, &["load", "--target", "qemu", t1.to_str().unwrap()])
+            .status
+            .success()
+    );
+    let before = std::fs::read(state.join(FLASH_IMAGE)).unwrap();
+    // Root writes through permission bits; the immutable attribute stops root too.
+    let chattr = Command::new("chattr").arg("+i").arg(&*state).status();
+    assert!(
+        chattr.is_ok_and(|s| s.success()),
+        "chattr +i is needed for this test (e2fsprogs, a file system with attributes)"
+    );
+    let o = accomp(&state, &["load", "--target", "qemu", t2.to_str().unwrap()]);
+    let _ = Command::new("chattr").arg("-i").arg(&*state).status();
+    assert!(
+        !o.status.success(),
+        "load into an immutable folder succeeded"
+    );
+    let e = stderr(&o);
+    assert!(
+        e.contains(&state.display().to_string()) && e.contains("nothing sent"),
+        "{e}"
+    );
+    assert!(!e.contains("verified"), "{e}");
+    assert_eq!(std::fs::read(state.join(FLASH_IMAGE)).unwrap(), before);
+    assert_eq!(on_disk(&state), (Some(id1), None));
+}
+
+#[test]
+fn a_full_state_file_system_is_refused_before_anything_is_sent() {
+    let mnt = Scratch::new("board-state-full");
+    // 64 KiB of tmpfs, filled to less than one image.
+    let mounted = Command::new("mount")
+        .args(["-t", "tmpfs", "-o", "size=64k", "tmpfs"])
+        .arg(&*mnt)
+        .status();
+    assert!(
+        mounted.is_ok_and(|s| s.success()),
+        "mounting a tmpfs is needed for this test (root)"
+    );
+    let work = Scratch::new("board-state-full-files");
+    let (t, _) = write_table(&work, 21);
+    let state = mnt.join("state");
+    std::fs::create_dir_all(&state).unwrap();
+    let filler = mnt.join("filler");
+    {
+        use std::io::Write as _;
+        let mut f = std::fs::File::create(&filler).unwrap();
+        while f.write_all(&[0u8; 512]).and_then(|()| f.sync_all()).is_ok() {}
+    }
+    let o = accomp(&state, &["load", "--target", "qemu", t.to_str().unwrap()]);
+    let _ = std::fs::remove_file(&filler);
+    let _ = Command::new("umount").arg(&*mnt).status();
+    assert!(
+        !o.status.success(),
+        "load onto a full file system succeeded"
+    );
+    let e = stderr(&o);
+    assert!(
+        e.contains(&state.display().to_string()) && e.contains("nothing sent"),
+        "{e}"
+    );
+    assert!(!e.contains("verified"), "{e}");
+}
+
+/// `accomp-qemu-<pid>-*` folders in the temp dir.
+fn temp_dirs_of(pid: u32) -> Vec<PathBuf> {
+    let prefix = format!("accomp-qemu-{pid}-");
+    std::fs::read_dir(std::env::temp_dir())
+        .map(|r| {
+            r.flatten()
+                .filter(|e| e.file_name().to_string_lossy().starts_with(&prefix))
+                .map(|e| e.path())
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
+#[test]
+fn a_state_path_under_a_regular_file_is_named_and_leaves_no_temporary_folder() {
+    let work = Scratch::new("board-state-badpath");
+    let file = work.join("a-file");
+    std::fs::write(&file, "not a folder").unwrap();
+    let state = file.join("state");
+    let child = accomp_cmd(&state, &["table", "get", "--target", "qemu", "-o"])
+        .arg(work.join("got.acal"))
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let pid = child.id();
+    let o = child.wait_with_output().unwrap();
+    assert!(!o.status.success());
+    let e = stderr(&o);
+    assert!(
+        e.contains(&state.display().to_string()) && e.contains("cannot create the folder"),
+        "{e}"
+    );
+    assert!(
+        !e.contains("qemu-system-arm"),
+        "blamed on the emulator: {e}"
+    );
+    assert!(temp_dirs_of(pid).is_empty(), "{:?} left", temp_dirs_of(pid));
+}
+
+/// Direct children of `pid`.
+fn children_of(pid: u32) -> Vec<u32> {
+    let mut out = Vec::new();
+    for e in std::fs::read_dir("/proc").unwrap().flatten() {
+        let Ok(p) = e.file_name().to_string_lossy().parse::<u32>() else {
+            continue;
+        };
+        if let Ok(stat) = std::fs::read_to_string(format!("/proc/{p}/stat")) {
+            let after = stat.rsplit(')').next().unwrap_or("");
+            if after.split_whitespace().nth(1).and_then(|s| s.parse().ok()) == Some(pid) {
+                out.push(p);
+            }
+        }
+    }
+    out
+}
+
+fn running(pid: u32) -> bool {
+    std::fs::read_to_string(format!("/proc/{pid}/stat")).is_ok_and(|s| {
+        !s.rsplit(')')
+            .next()
+            .unwrap_or("")
+            .trim_start()
+            .starts_with('Z')
+    })
+}
+
+#[test]
+fn kill_9_of_accomp_leaves_no_emulator_and_the_next_run_reclaims_its_folder() {
+    let state = Scratch::new("board-state-kill9");
+    let work = Scratch::new("board-state-kill9-files");
+    let csv = work.join("in.csv");
+    let mut text = String::from("time_s,output_v,temperature_c\n");
+    for i in 0..200_000 {
+        text += &format!("{},1.3,50\n", i as f64 * 0.1);
+    }
+    std::fs::write(&csv, text).unwrap();
+    let (cal, _) = write_table(&work, 31);
+    let (other, _) = write_table(&work, 32);
+    assert!(accomp(
+        &state,
+        &["load", "--target", "qemu", other.to_str().unwrap()]
+    )
+    .status
+    .success());
+    let mut child = accomp_cmd(&state, &["compensate", "--target", "qemu", "--calibration"])
+        .arg(&cal)
+        .arg("--input")
+        .arg(&csv)
+        .arg("--output")
+        .arg(work.join("out.csv"))
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let pid = child.id();
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let qemu = loop {
+        let kids = children_of(pid);
+        if let Some(&q) = kids.first() {
+            break q;
+        }
+        assert!(Instant::now() < deadline, "QEMU never started");
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    // Let it boot and stream a little.
+    std::thread::sleep(Duration::from_millis(500));
+    assert!(
+        child.try_wait().unwrap().is_none(),
+        "compensate ended before the kill"
+    );
+    child.kill().unwrap(); // SIGKILL
+    child.wait().unwrap();
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while running(qemu) && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    assert!(
+        !running(qemu),
+        "QEMU {qemu} still running after its parent was killed"
+    );
+    // SIGKILL leaves no chance to remove the folder: the next launch reclaims it, and the
+    // board's lock died with the process.
+    assert!(
+        !temp_dirs_of(pid).is_empty(),
+        "no folder left: nothing to reclaim was tested"
+    );
+    let o = accomp(
+        &state,
+        &[
+            "table",
+            "get",
+            "--target",
+            "qemu",
+            "--no-wait",
+            "-o",
+            work.join("g.acal").to_str().unwrap(),
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        temp_dirs_of(pid).is_empty(),
+        "{:?} not reclaimed",
+        temp_dirs_of(pid)
+    );
+}
+
+#[test]
+fn compensate_says_that_it_activates_its_table_and_the_board_keeps_it() {
+    let state = Scratch::new("board-state-compensate");
+    let work = Scratch::new("board-state-compensate-files");
+    let (old, old_id) = write_table(&work, 41);
+    let (cal, cal_id) = write_table(&work, 42);
+    assert!(
+        accomp(&state, &["load", "--target", "qemu", old.to_str().unwrap()])
+            .status
+            .success()
+    );
+    let csv = work.join("in.csv");
+    std::fs::write(&csv, "time_s,output_v,temperature_c\n0,1.3,50\n1,1.3,50\n").unwrap();
+    let out = work.join("out.csv");
+    let o = accomp(
+        &state,
+        &[
+            "compensate",
+            "--target",
+            "qemu",
+            "--calibration",
+            cal.to_str().unwrap(),
+            "--input",
+            csv.to_str().unwrap(),
+            "--output",
+            out.to_str().unwrap(),
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let e = stderr(&o);
+    assert!(
+        e.contains(&format!("activating table {} on the device", hex(cal_id))),
+        "{e}"
+    );
+    assert_eq!(on_disk(&state), (Some(cal_id), Some(old_id)));
+}

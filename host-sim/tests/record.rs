@@ -1,0 +1,454 @@
+//! `accomp record` against the virtual board, through a real pseudo-terminal: `accomp
+//! board-sim` runs as its own process (killed and restarted like a board that loses power),
+//! the recorder as a process (killed like a PC that crashes) or in this process (when the test
+//! needs to step the PC's clock). Every test checks the rows against the scenario's physics and
+//! the event lines against what was done to the link.
+
+use std::io::{BufRead, BufReader, Write};
+use std::path::{Path, PathBuf};
+use std::process::{Child, ChildStdin, Command, Stdio};
+use std::sync::atomic::AtomicBool;
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+
+use accomp_host::device::board_sim::Station;
+use accomp_host::device::record::{self, Options};
+use accomp_host::log::Log;
+use accomp_host::sim::scenario::Scenario;
+
+const BIN: &str = env!("CARGO_BIN_EXE_accomp");
+
+fn temp_dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("accomp-record-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// A running `accomp board-sim`, killed on drop.
+struct BoardSim {
+    child: Child,
+    stdin: ChildStdin,
+}
+
+impl BoardSim {
+    fn start(dir: &Path, speed: u32, seed: u64) -> BoardSim {
+        let mut child = Command::new(BIN)
+            .args(["board-sim", "paper-1g", "--speed", &speed.to_string()])
+            .args(["--seed", &seed.to_string()])
+            .arg("--link")
+            .arg(dir.join("board"))
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        let stdout = child.stdout.take().unwrap();
+        let mut first = String::new();
+        BufReader::new(stdout).read_line(&mut first).unwrap();
+        assert!(first.starts_with("port: /dev/"), "first line {first:?}");
+        let stdin = child.stdin.take().unwrap();
+        BoardSim { child, stdin }
+    }
+
+    fn command(&mut self, c: &str) {
+        writeln!(self.stdin, "{c}").unwrap();
+        self.stdin.flush().unwrap();
+    }
+
+    fn kill(mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+impl Drop for BoardSim {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// A recorder process, killed on drop (a failed assertion must not leave it running).
+struct Recorder(Child);
+
+impl Recorder {
+    fn spawn(mut c: Command) -> Recorder {
+        Recorder(c.spawn().unwrap())
+    }
+    fn wait_success(&mut self) -> bool {
+        self.0.wait().unwrap().success()
+    }
+    fn kill(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+impl Drop for Recorder {
+    fn drop(&mut self) {
+        self.kill();
+    }
+}
+
+fn port(dir: &Path) -> String {
+    format!("serial:{}", dir.join("board").display())
+}
+
+/// Loads the paper's table into the board (a table makes temperature and a_i valid).
+fn load_table(dir: &Path) {
+    let table = dir.join("table.acal");
+    std::fs::write(&table, accomp_host::device::paper_table().encode()).unwrap();
+    let ok = Command::new(BIN)
+        .args(["load", "--target", &port(dir)])
+        .arg(&table)
+        .stderr(Stdio::null())
+        .status()
+        .unwrap();
+    assert!(ok.success());
+}
+
+fn record_cmd(dir: &Path, out: &Path, extra: &[&str]) -> Command {
+    let mut c = Command::new(BIN);
+    c.args(["record", "--target", &port(dir), "-o"])
+        .arg(out)
+        .args(extra)
+        .stderr(Stdio::null());
+    c
+}
+
+/// The rows of a record: (time_s, seq, board_time_us, output_v, rtd_ohms, tilt_arcsec,
+/// status) and its event lines (kind, details).
+struct Rec {
+    rows: Vec<(f64, u32, u64, f64, f64, f64, String)>,
+    events: Vec<(String, String)>,
+    headers: usize,
+}
+
+fn read_rec(path: &Path) -> Rec {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut rows = Vec::new();
+    let mut events = Vec::new();
+    let mut headers = 0;
+    for l in text.lines() {
+        if let Some(e) = l.strip_prefix("# event: ") {
+            let mut w = e.splitn(3, ' ');
+            let _utc = w.next();
+            events.push((
+                w.next().unwrap_or("").to_string(),
+                w.next().unwrap_or("").to_string(),
+            ));
+        } else if l.starts_with("time_s,") {
+            headers += 1;
+        } else if !l.starts_with('#') && !l.is_empty() {
+            let f: Vec<&str> = l.split(',').collect();
+            let num = |i: usize| f[i].parse::<f64>().unwrap_or(f64::NAN);
+            rows.push((
+                num(0),
+                f[1].parse().unwrap(),
+                f[2].parse().unwrap(),
+                num(4),
+                num(6),
+                num(7),
+                f[11].to_string(),
+            ));
+        }
+    }
+    // The project's reader takes the record as it is.
+    Log::read_path(path).unwrap();
+    Rec {
+        rows,
+        events,
+        headers,
+    }
+}
+
+fn kinds(r: &Rec) -> Vec<&str> {
+    r.events.iter().map(|(k, _)| k.as_str()).collect()
+}
+
+fn assert_time_increases(r: &Rec) {
+    for w in r.rows.windows(2) {
+        assert!(w[1].0 > w[0].0, "time_s {} then {}", w[0].0, w[1].0);
+    }
+}
+
+fn wait_rows(path: &Path, n: usize) {
+    let t = Instant::now();
+    while t.elapsed() < Duration::from_secs(20) {
+        if let Ok(s) = std::fs::read_to_string(path) {
+            if s.lines()
+                .filter(|l| l.starts_with(|c: char| c.is_ascii_digit()))
+                .count()
+                >= n
+            {
+                return;
+            }
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    panic!("{} never reached {n} rows", path.display());
+}
+
+#[test]
+fn recorded_samples_are_the_scenarios_physics_in_seq_and_board_time() {
+    let dir = temp_dir("truth");
+    let _board = BoardSim::start(&dir, 1000, 7);
+    load_table(&dir);
+    let out = dir.join("rec.csv");
+    let ok = record_cmd(
+        &dir,
+        &out,
+        &["--samples", "500", "--site", "lab B", "--note", "t"],
+    )
+    .status()
+    .unwrap();
+    assert!(ok.success());
+    let r = read_rec(&out);
+    assert_eq!(r.rows.len(), 500);
+    assert_eq!(r.headers, 1);
+    assert_eq!(kinds(&r).first(), Some(&"start"));
+    assert_eq!(kinds(&r).last(), Some(&"stop"));
+    let log = Log::read_path(&out).unwrap();
+    assert_eq!(log.meta("site"), Some("lab B"));
+    assert!(log
+        .meta("calibration_id")
+        .is_some_and(|v| v.starts_with("0x")));
+
+    // seq without a gap (it counts readings since boot, streamed or not: the first row's is
+    // the readings before the stream started), time_s following the board clock exactly
+    // (virtual board: no drift applied; µs stamps printed with 6 decimals).
+    let (t0, seq0, b0, ..) = r.rows[0];
+    for (i, row) in r.rows.iter().enumerate() {
+        assert_eq!(row.1, seq0 + i as u32);
+        let board_s = (row.2 - b0) as f64 * 1e-6;
+        assert!((row.0 - t0 - board_s).abs() < 2e-6, "row {i}");
+    }
+    // Values: the station's physics at the frame's board time (the board booted at world
+    // time 0), within the converters' resolution and the 0.4 s the tilt half lags.
+    let scenario = Scenario::preset("paper-1g").unwrap();
+    let mut station = Station::new(&scenario, 7).unwrap();
+    let k_tilt = scenario.tiltmeter.scale_arcsec_per_v;
+    let table = accomp_host::device::paper_table();
+    for row in &r.rows {
+        let p = station.at(row.2 as f64 * 1e-6);
+        assert!(
+            (row.3 - p.accel_v).abs() < 2e-6,
+            "output {} vs {}",
+            row.3,
+            p.accel_v
+        );
+        assert!(
+            (row.4 - p.rtd_ohms).abs() < 5e-3,
+            "rtd {} vs {}",
+            row.4,
+            p.rtd_ohms
+        );
+        // The table's tilt scale converts the code back; the scenario's made the voltage.
+        let tilt = p.tilt_v * k_tilt;
+        let got = row.5 * k_tilt / table.tilt.scale_arcsec_per_v;
+        assert!((got - tilt).abs() < 0.05, "tilt {got} vs {tilt}");
+        assert_eq!(row.6, "OK");
+    }
+    // Writing over it needs --force.
+    let again = record_cmd(&dir, &out, &["--samples", "5"])
+        .status()
+        .unwrap();
+    assert!(!again.success());
+    assert_eq!(read_rec(&out).rows.len(), 500);
+}
+
+#[test]
+fn the_record_goes_on_when_the_board_is_killed_and_restarted_on_the_same_link() {
+    let dir = temp_dir("restart");
+    let board = BoardSim::start(&dir, 1000, 1);
+    load_table(&dir);
+    let out = dir.join("rec.csv");
+    let mut rec = Recorder::spawn(record_cmd(&dir, &out, &["--samples", "3000"]));
+    wait_rows(&out, 800);
+    board.kill();
+    std::thread::sleep(Duration::from_millis(800));
+    let _board = BoardSim::start(&dir, 1000, 1);
+    assert!(rec.wait_success());
+    let r = read_rec(&out);
+    assert_eq!(r.rows.len(), 3000);
+    let k = kinds(&r);
+    for kind in ["link_lost", "reconnected", "board_reset"] {
+        assert!(k.contains(&kind), "no {kind} event in {k:?}");
+    }
+    let restart = r.rows.windows(2).position(|w| w[1].1 < w[0].1).unwrap();
+    // The new boot's clock and seq start again (seq counts its readings since boot).
+    assert!(r.rows[restart + 1].2 < r.rows[restart].2);
+    assert_time_increases(&r);
+    // The table survived in the board's flash: the frames are still compensated.
+    assert_eq!(r.rows.last().unwrap().6, "OK");
+}
+
+#[test]
+fn a_killed_recorder_is_continued_with_append() {
+    let dir = temp_dir("append");
+    let _board = BoardSim::start(&dir, 1000, 2);
+    load_table(&dir);
+    let out = dir.join("rec.csv");
+    let mut rec = Recorder::spawn(record_cmd(&dir, &out, &[]));
+    wait_rows(&out, 400);
+    rec.kill();
+    let before = read_rec(&out);
+    // A crash cuts the last line on top of it.
+    {
+        let mut f = std::fs::OpenOptions::new().append(true).open(&out).unwrap();
+        f.write_all(b"123.4,99").unwrap();
+    }
+    std::thread::sleep(Duration::from_millis(300));
+    let ok = record_cmd(&dir, &out, &["--append", "--samples", "300"])
+        .status()
+        .unwrap();
+    assert!(ok.success());
+    let r = read_rec(&out);
+    assert_eq!(r.headers, 1, "one header: the same record goes on");
+    assert_eq!(r.rows.len(), before.rows.len() + 300);
+    let k = kinds(&r);
+    for kind in ["trimmed", "append", "seq_gap"] {
+        assert!(k.contains(&kind), "no {kind} event in {k:?}");
+    }
+    // The frames streamed while no recorder ran are counted in the gap.
+    let last_before = before.rows.last().unwrap().1;
+    let first_after = r.rows[before.rows.len()].1;
+    let gap = r.events.iter().find(|(k, _)| k == "seq_gap").unwrap();
+    let lost = first_after - last_before - 1;
+    assert!(gap.1.starts_with(&format!("lost={lost} ")), "{gap:?}");
+    assert_time_increases(&r);
+    // Same boot: time_s follows the board clock across the recorder's absence.
+    let (a, b) = (&r.rows[before.rows.len() - 1], &r.rows[before.rows.len()]);
+    assert!(((b.0 - a.0) - (b.2 - a.2) as f64 * 1e-6).abs() < 2e-6);
+}
+
+#[test]
+fn a_board_reset_and_garbage_on_the_line_are_events_and_lose_nothing_else() {
+    let dir = temp_dir("reset");
+    let mut board = BoardSim::start(&dir, 1000, 3);
+    load_table(&dir);
+    let out = dir.join("rec.csv");
+    let mut rec = Recorder::spawn(record_cmd(&dir, &out, &["--samples", "2500"]));
+    wait_rows(&out, 500);
+    board.command("garbage=300");
+    wait_rows(&out, 1000);
+    board.command("reset");
+    assert!(rec.wait_success());
+    let r = read_rec(&out);
+    let k = kinds(&r);
+    for kind in ["line_noise", "board_reset"] {
+        assert!(k.contains(&kind), "no {kind} event in {k:?}");
+    }
+    assert!(!k.contains(&"link_lost"), "{k:?}");
+    assert_time_increases(&r);
+    let restart = r.rows.windows(2).position(|w| w[1].1 < w[0].1).unwrap();
+    // The new boot's clock and seq start again (seq counts its readings since boot).
+    assert!(r.rows[restart + 1].2 < r.rows[restart].2);
+}
+
+#[test]
+fn an_unplugged_link_keeps_the_boot_and_flag_changes_are_events() {
+    let dir = temp_dir("unplug");
+    let mut board = BoardSim::start(&dir, 1000, 5);
+    load_table(&dir);
+    let out = dir.join("rec.csv");
+    let mut rec = Recorder::spawn(record_cmd(&dir, &out, &["--samples", "3000"]));
+    wait_rows(&out, 400);
+    // ≈ 375 frames with the loop open (the file shows rows half a second late: waiting for
+    // a row count would not separate the two commands).
+    board.command("rtd-open");
+    std::thread::sleep(Duration::from_millis(300));
+    board.command("rtd-open=off");
+    std::thread::sleep(Duration::from_millis(300));
+    board.command("unplug=1");
+    assert!(rec.wait_success());
+    let r = read_rec(&out);
+    let k = kinds(&r);
+    for kind in ["link_lost", "reconnected", "seq_gap"] {
+        assert!(k.contains(&kind), "no {kind} event in {k:?}");
+    }
+    assert!(!k.contains(&"board_reset"), "{k:?}");
+    let status: Vec<&str> = r
+        .events
+        .iter()
+        .filter(|(k, _)| k == "status")
+        .map(|(_, d)| d.as_str())
+        .collect();
+    assert!(
+        status
+            .first()
+            .is_some_and(|d| d.starts_with("OK -> ") && d.contains("RTD_OPEN")),
+        "{status:?}"
+    );
+    assert!(status.iter().any(|d| d.ends_with("-> OK")), "{status:?}");
+    // The open loop's rows are flagged and carry no resistance.
+    assert!(r
+        .rows
+        .iter()
+        .any(|row| row.6.contains("RTD_OPEN") && row.4.is_nan()));
+    // One boot: seq only grows, and across the gap time_s follows the board clock.
+    let gap = r
+        .rows
+        .windows(2)
+        .position(|w| w[1].1 != w[0].1 + 1)
+        .unwrap();
+    let (a, b) = (&r.rows[gap], &r.rows[gap + 1]);
+    assert!(b.1 > a.1);
+    assert!(((b.0 - a.0) - (b.2 - a.2) as f64 * 1e-6).abs() < 1e-3);
+    let lost = r.events.iter().find(|(k, _)| k == "seq_gap").unwrap();
+    assert!(
+        lost.1.starts_with(&format!("lost={} ", b.1 - a.1 - 1)),
+        "{lost:?}"
+    );
+    assert_time_increases(&r);
+}
+
+#[test]
+fn a_pc_clock_step_is_an_event_and_moves_no_row() {
+    let dir = temp_dir("pcstep");
+    // At 100× the board's clock and a PC clock that also runs 100× fast, the board looks like a
+    // crystal to the recorder (blocks of 60 board seconds take 0.6 s).
+    let _board = BoardSim::start(&dir, 100, 4);
+    let opts = Options {
+        port: dir.join("board").display().to_string(),
+        output: dir.join("rec.csv"),
+        samples: Some(800),
+        duration_s: None,
+        append: false,
+        force: false,
+        daily: false,
+        site: None,
+        note: None,
+        rate_hz: None,
+    };
+    let t0 = Instant::now();
+    let unix0 = SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .unwrap()
+        .as_secs_f64();
+    let pc = move || {
+        let fast = t0.elapsed().as_secs_f64() * 100.0;
+        // 300 s back after 5 wall seconds (500 board seconds).
+        unix0 + fast - if fast > 500.0 { 300.0 } else { 0.0 }
+    };
+    let stop = AtomicBool::new(false);
+    let summary = record::record(&opts, &pc, &stop, &mut |_| {}).unwrap();
+    assert_eq!(summary.samples, 800);
+    let r = read_rec(&opts.output);
+    let steps: Vec<f64> = r
+        .events
+        .iter()
+        .filter(|(k, _)| k == "pc_clock_step")
+        .filter_map(|(_, d)| d.strip_prefix("step_s=")?.split(' ').next()?.parse().ok())
+        .collect();
+    assert!(
+        steps.iter().any(|s| (s + 300.0).abs() < 2.0),
+        "steps {steps:?}, events {:?}",
+        r.events
+    );
+    // Every interval of time_s is the board's interval (drift < 1000 ppm applied at most).
+    for w in r.rows.windows(2) {
+        let board = (w[1].2 - w[0].2) as f64 * 1e-6;
+        assert!(((w[1].0 - w[0].0) - board).abs() < 1e-3 * board + 2e-6);
+    }
+}
