@@ -7,6 +7,8 @@
 //! - [`eiv`]: errors in variables: each regressor channel's reading noise, fitted and smoothed.
 //! - [`effects`]: the catalogue of named effects as design-matrix extensions.
 //! - [`hysteresis`]: play / Preisach operators of the thermal hysteresis.
+//! - [`changepoints`]: many steps at once: a noise-model MOSUM scan, the set validated together.
+//! - [`plausibility`]: a flexible effect must stand above the noise and beat the simpler cause.
 //! - [`shape`]: whether an accepted effect's shape describes the data (poor-fit check).
 //! - [`select`]: greedy selection with BIC (effective sample size) and blocked cross-validation.
 //! - [`report`]: text, JSON and the Markdown report with figures.
@@ -15,11 +17,13 @@
 //! measured-data findings: `docs/discovery.md`.
 
 pub mod baseline;
+pub mod changepoints;
 pub mod effects;
 pub mod eiv;
 pub mod hysteresis;
 pub mod import;
 pub mod noise;
+pub mod plausibility;
 pub mod report;
 pub mod residual;
 pub mod select;
