@@ -80,7 +80,19 @@ pub struct Progress {
     pub drift_ppm: f64,
     /// Rows still to write, or record seconds still to go, when a stop is set.
     pub to_go: Option<String>,
+    /// The device's counters as last read, by name (empty before the first read).
+    pub counters: Vec<(&'static str, u64)>,
+    /// Rows written since the previous call, with their record time (s), for a live view;
+    /// at most [`LIVE_ROWS_MAX`] (the oldest beyond are not kept, `live_rows_skipped` counts them).
+    pub rows: Vec<(f64, Frame)>,
+    /// Rows not kept in `rows` since the previous call (more than [`LIVE_ROWS_MAX`] came).
+    pub live_rows_skipped: u64,
+    /// Event lines written since the previous call: (Unix s, kind, details).
+    pub new_events: Vec<(f64, String, String)>,
 }
+
+/// The most rows one [`Progress`] carries (bounds the recorder's memory if nobody drains it).
+pub const LIVE_ROWS_MAX: usize = 65_536;
 
 /// How the record ended.
 #[derive(Debug, Clone, PartialEq)]
@@ -236,11 +248,19 @@ struct Recorder<'a> {
     summary: Summary,
     meta: Vec<(String, String)>,
     existing: Option<file::Existing>,
+    /// Rows and events since the last progress call (for a live view).
+    live_rows: Vec<(f64, Frame)>,
+    live_rows_skipped: u64,
+    live_events: Vec<(f64, String, String)>,
 }
 
 impl Recorder<'_> {
     fn event(&mut self, unix_s: f64, kind: &str, details: String) -> Result<(), RecordFileError> {
         self.summary.events += 1;
+        if self.live_events.len() < LIVE_ROWS_MAX {
+            self.live_events
+                .push((unix_s, kind.to_owned(), details.clone()));
+        }
         match &mut self.file {
             Some(f) => f.event(unix_s, kind, &details),
             None => {
@@ -375,6 +395,11 @@ impl Recorder<'_> {
         if let Some(f) = &mut self.file {
             f.row(t, frame)?;
         }
+        if self.live_rows.len() < LIVE_ROWS_MAX {
+            self.live_rows.push((t, *frame));
+        } else {
+            self.live_rows_skipped += 1;
+        }
         self.summary.samples += 1;
         self.first_record_s.get_or_insert(t);
         Ok(())
@@ -411,7 +436,7 @@ impl Recorder<'_> {
         Ok(())
     }
 
-    fn progress(&self, link: Link) -> Progress {
+    fn progress(&mut self, link: Link) -> Progress {
         let record_s = self.clock.last().map_or(0.0, |l| l.record_s);
         let to_go = match (self.opts.samples, self.opts.duration_s) {
             (Some(n), _) => Some(format!(
@@ -433,6 +458,10 @@ impl Recorder<'_> {
             link,
             drift_ppm: self.clock.drift_ppm(),
             to_go,
+            counters: self.counters.clone().unwrap_or_default(),
+            rows: std::mem::take(&mut self.live_rows),
+            live_rows_skipped: std::mem::take(&mut self.live_rows_skipped),
+            new_events: std::mem::take(&mut self.live_events),
         }
     }
 
@@ -509,6 +538,9 @@ pub fn record(
             .map(|e| e.meta.clone())
             .unwrap_or_default(),
         existing,
+        live_rows: Vec::new(),
+        live_rows_skipped: 0,
+        live_events: Vec::new(),
     };
     if let Some(e) = &r.existing {
         if e.trimmed > 0 {
