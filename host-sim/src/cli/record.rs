@@ -106,6 +106,7 @@ pub fn run(args: &RecordArgs) -> anyhow::Result<()> {
         site: args.site.clone(),
         note: args.note.clone(),
         rate_hz: args.rate,
+        live_rows: tui,
     };
     let stop = Arc::new(AtomicBool::new(false));
     {

@@ -50,6 +50,9 @@ pub struct Options {
     pub note: Option<String>,
     /// SetRate before streaming.
     pub rate_hz: Option<u32>,
+    /// Hand the rows to the progress callback ([`Progress::rows`]) for a live view; off, no
+    /// row is kept (the recorder's memory does not depend on the frame rate).
+    pub live_rows: bool,
 }
 
 /// State of the link, for the status line.
@@ -82,7 +85,8 @@ pub struct Progress {
     pub to_go: Option<String>,
     /// The device's counters as last read, by name (empty before the first read).
     pub counters: Vec<(&'static str, u64)>,
-    /// Rows written since the previous call, with their record time (s), for a live view;
+    /// With [`Options::live_rows`]: rows written since the previous call, with their record
+    /// time (s), for a live view;
     /// at most [`LIVE_ROWS_MAX`] (the oldest beyond are not kept, `live_rows_skipped` counts them).
     pub rows: Vec<(f64, Frame)>,
     /// Rows not kept in `rows` since the previous call (more than [`LIVE_ROWS_MAX`] came).
@@ -395,10 +399,12 @@ impl Recorder<'_> {
         if let Some(f) = &mut self.file {
             f.row(t, frame)?;
         }
-        if self.live_rows.len() < LIVE_ROWS_MAX {
-            self.live_rows.push((t, *frame));
-        } else {
-            self.live_rows_skipped += 1;
+        if self.opts.live_rows {
+            if self.live_rows.len() < LIVE_ROWS_MAX {
+                self.live_rows.push((t, *frame));
+            } else {
+                self.live_rows_skipped += 1;
+            }
         }
         self.summary.samples += 1;
         self.first_record_s.get_or_insert(t);
