@@ -20,7 +20,7 @@ pub struct RecordArgs {
     /// serial:<port>
     #[arg(long)]
     pub target: Target,
-    /// Output file (.csv), or directory with --rotate daily.
+    /// Output file (.csv), or directory with --rotate daily / daily-gz.
     #[arg(short = 'o', long = "output")]
     pub output: PathBuf,
     /// Stop after this many samples written.
@@ -35,7 +35,8 @@ pub struct RecordArgs {
     /// Write over an existing record, or append to one of another board or table.
     #[arg(long)]
     pub force: bool,
-    /// `daily`: one file per UTC day in the output directory.
+    /// `daily`: one file per UTC day in the output directory; `daily-gz`: the same, and every day
+    /// older than yesterday gzip-compressed (`YYYY-MM-DD.csv.gz`, a third of the size).
     #[arg(long, value_enum)]
     pub rotate: Option<Rotate>,
     /// Where the test runs (written into the header).
@@ -58,6 +59,8 @@ pub struct RecordArgs {
 pub enum Rotate {
     /// One file per UTC day.
     Daily,
+    /// One file per UTC day, the days before yesterday gzip-compressed.
+    DailyGz,
 }
 
 fn pc_clock() -> f64 {
@@ -102,7 +105,8 @@ pub fn run(args: &RecordArgs) -> anyhow::Result<()> {
         duration_s: args.duration,
         append: args.append,
         force: args.force,
-        daily: args.rotate == Some(Rotate::Daily),
+        daily: args.rotate.is_some(),
+        compress_days: args.rotate == Some(Rotate::DailyGz),
         site: args.site.clone(),
         note: args.note.clone(),
         rate_hz: args.rate,

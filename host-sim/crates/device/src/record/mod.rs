@@ -44,6 +44,8 @@ pub struct Options {
     pub force: bool,
     /// One file per UTC day in the output directory.
     pub daily: bool,
+    /// With `daily`: gzip the days older than yesterday (`YYYY-MM-DD.csv.gz`).
+    pub compress_days: bool,
     /// Where the test runs.
     pub site: Option<String>,
     /// Free text for the header.
@@ -324,6 +326,8 @@ impl Recorder<'_> {
                 RecordFile::create(layout, meta, pc_s, self.opts.force)?
             }
         };
+        let mut file = file;
+        file.compress_finished_days(self.opts.daily && self.opts.compress_days);
         self.file = Some(file);
         for (t, k, d) in std::mem::take(&mut self.queued) {
             if let Some(f) = &mut self.file {
@@ -784,6 +788,15 @@ pub fn record(
         let _ = d.client.call(Request::StreamStop);
     }
     let t = pc();
+    // A day being compressed is finished before the record ends (no stale .tmp left).
+    let compressed = r
+        .file
+        .as_mut()
+        .map(|f| f.finish_compression())
+        .unwrap_or_default();
+    for (kind, details) in compressed {
+        r.event(t, &kind, details)?;
+    }
     r.summary.reason = reason.clone();
     let (n, lost) = (r.summary.samples, r.summary.lost);
     r.event(
