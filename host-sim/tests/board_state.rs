@@ -517,3 +517,40 @@ fn kill_9_of_accomp_leaves_no_emulator_and_the_next_run_reclaims_its_folder() {
         temp_dirs_of(pid)
     );
 }
+
+#[test]
+fn compensate_says_that_it_activates_its_table_and_the_board_keeps_it() {
+    let state = Scratch::new("board-state-compensate");
+    let work = Scratch::new("board-state-compensate-files");
+    let (old, old_id) = write_table(&work, 41);
+    let (cal, cal_id) = write_table(&work, 42);
+    assert!(
+        accomp(&state, &["load", "--target", "qemu", old.to_str().unwrap()])
+            .status
+            .success()
+    );
+    let csv = work.join("in.csv");
+    std::fs::write(&csv, "time_s,output_v,temperature_c\n0,1.3,50\n1,1.3,50\n").unwrap();
+    let out = work.join("out.csv");
+    let o = accomp(
+        &state,
+        &[
+            "compensate",
+            "--target",
+            "qemu",
+            "--calibration",
+            cal.to_str().unwrap(),
+            "--input",
+            csv.to_str().unwrap(),
+            "--output",
+            out.to_str().unwrap(),
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let e = stderr(&o);
+    assert!(
+        e.contains(&format!("activating table {} on the device", hex(cal_id))),
+        "{e}"
+    );
+    assert_eq!(on_disk(&state), (Some(cal_id), Some(old_id)));
+}

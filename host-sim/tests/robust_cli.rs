@@ -313,6 +313,26 @@ fn parameters_out_of_range_are_refused_with_the_name_and_the_range() {
     let e = stderr(&o);
     assert!(e.contains("twin ensemble (base): 3/3 members"), "{e}");
     assert!(e.contains("twin ensemble (extended): 3/3 members"), "{e}");
+    let o = Command::new(env!("CARGO_BIN_EXE_accomp"))
+        .args([
+            "simulate",
+            "paper-0g",
+            "--days",
+            "1",
+            "--interval",
+            "1",
+            "-o",
+        ])
+        .arg(dir.path("p.csv"))
+        .env("ACCOMP_PROGRESS_EVERY_S", "0")
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("simulate paper-0g: 16384/86400 rows"),
+        "{}",
+        stderr(&o)
+    );
     // Scenario fields.
     let preset = stdout(&accomp(&["simulate", "--print-preset", "paper-1g"]));
     let out = dir.path("s.csv");
@@ -350,7 +370,7 @@ fn parameters_out_of_range_are_refused_with_the_name_and_the_range() {
     // ±1e308 in a log: the statistics overflow; refused by column, no `inf` printed.
     let big = dir.path("big.csv");
     let mut text = String::from("time_s,output_v\n");
-    for i in 0..100 {
+    for i in 0..200 {
         text += &format!(
             "{},{}\n",
             i * 60,
@@ -363,6 +383,25 @@ fn parameters_out_of_range_are_refused_with_the_name_and_the_range() {
     assert!(!stdout(&o).contains("inf"), "{}", stdout(&o));
     assert!(
         stderr(&o).contains("\"output_v\"") && stderr(&o).contains("overflow"),
+        "{}",
+        stderr(&o)
+    );
+    let o = accomp(&["discover", big.to_str().unwrap()]);
+    assert!(!o.status.success(), "discover printed {}", stdout(&o));
+    assert!(
+        stderr(&o).contains("values up to 1e308 overflow the fit"),
+        "{}",
+        stderr(&o)
+    );
+    let plots = dir.path("p");
+    let o = accomp(&[
+        "plot",
+        big.to_str().unwrap(),
+        "--out-dir",
+        plots.to_str().unwrap(),
+    ]);
+    assert!(
+        stderr(&o).contains("is not finite (values so large"),
         "{}",
         stderr(&o)
     );
@@ -394,7 +433,7 @@ fn a_constant_log_has_std_0_and_no_blank_allan_plot() {
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(
         stderr(&o).contains(
-            "skipped the Allan deviation plot: the Allan deviation of `output_v` is 0 at every τ"
+            "skipped the Allan deviation plot: the Allan deviation of `output_v` is 0 (a constant column) at every τ"
         ),
         "{}",
         stderr(&o)
@@ -441,5 +480,47 @@ fn utf16_text_and_a_reversed_tsf_are_named_for_what_they_are() {
         stderr(&o).contains("the file looks reversed"),
         "{}",
         stderr(&o)
+    );
+}
+
+#[test]
+fn a_ten_year_gap_in_a_record_does_not_stall_discover() {
+    // Two days at 60 s, the second ten years after the first: the periodogram's frequency grid
+    // followed the ten-year span (1e7 frequencies × 2880 points, over 5 minutes); it follows
+    // the time the data cover.
+    let dir = Scratch::new("robust-gap");
+    let log = simulated_log(&dir);
+    let text = std::fs::read_to_string(&log).unwrap();
+    let mut rows = 0;
+    let shifted: Vec<String> = text
+        .lines()
+        .map(|l| {
+            if !l.starts_with(|c: char| c.is_ascii_digit()) {
+                return l.to_owned();
+            }
+            rows += 1;
+            if rows <= 1440 {
+                return l.to_owned();
+            }
+            let (t, rest) = l.split_once(',').unwrap();
+            let t: f64 = t.parse().unwrap();
+            format!("{},{rest}", t + 10.0 * 365.25 * 86_400.0)
+        })
+        .collect();
+    let gap = dir.path("gap.csv");
+    std::fs::write(&gap, shifted.join("\n") + "\n").unwrap();
+    let started = Instant::now();
+    let o = accomp(&["discover", gap.to_str().unwrap(), "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stdout(&o).contains("gap"),
+        "the gap is not announced: {}",
+        stdout(&o)
+    );
+    // A hang guard, not a benchmark (the figure is in the report of the change).
+    assert!(
+        started.elapsed() < Duration::from_secs(120),
+        "{:?}",
+        started.elapsed()
     );
 }

@@ -118,13 +118,22 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
         ProgressStyle::with_template("simulate {bar:40} {pos}/{len} rows, {eta} left")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
+    // Off a terminal the bar is not drawn: a line a minute instead.
+    let lines = crate::numerics::parallel::ProgressLines::new(
+        format!("simulate {}", sc.name),
+        sc.samples() as usize,
+        "rows",
+    );
     let started = std::time::Instant::now();
     let (summary, file) = simulate(
         &sc,
         args.seed,
         &Options { codes: args.codes },
         file,
-        &mut |done, _| bar.set_position(done),
+        &mut |done, _| {
+            bar.set_position(done);
+            lines.set(done as usize);
+        },
     )
     .with_context(|| format!("writing {}", output.display()))?;
     // A full disk can refuse the data only now (delayed allocation): said, never exit 0.

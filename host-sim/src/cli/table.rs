@@ -260,6 +260,8 @@ pub fn run(args: &TableArgs) -> Result<()> {
             let bytes = match read_table_bytes(path) {
                 Ok(b) => b,
                 Err(e) => {
+                    // With its cause: `cannot read <file>: <system error>`.
+                    let e = anyhow::Error::from(e);
                     if *json {
                         println!(
                             "{}",

@@ -127,11 +127,8 @@ pub enum PlotError {
         available: String,
     },
     /// Every Allan deviation is exactly 0 (constant columns): a log-log plot would be blank.
-    #[error(
-        "the Allan deviation of {0} is 0 at every τ (a constant column): nothing to draw on \
-         log axes"
-    )]
-    ZeroDeviation(String),
+    #[error("the Allan deviation of {0} is {1} at every τ: nothing to draw on log axes")]
+    ZeroDeviation(String, &'static str),
     /// A column has no finite reading at all.
     #[error("column `{0}` has no finite reading to plot")]
     EmptyColumn(String),
@@ -223,7 +220,7 @@ pub fn plot_log(log: &Log, opts: &PlotOptions) -> Result<PlotOutcome, PlotError>
         for kind in [Kind::Temperature, output_kind, Kind::Tilt, Kind::Adev] {
             match build(log, opts, kind) {
                 Ok(f) => figures.push((kind, f)),
-                Err(e @ (PlotError::MissingColumn { .. } | PlotError::ZeroDeviation(_))) => {
+                Err(e @ (PlotError::MissingColumn { .. } | PlotError::ZeroDeviation(..))) => {
                     out.skipped.push(format!("{}: {e}", kind.names().1));
                 }
                 Err(e) => return Err(e),
@@ -565,6 +562,9 @@ fn adev_figure(log: &Log, opts: &PlotOptions) -> Result<Figure, PlotError> {
     let grid = Grid::from_time(log.time_s())?;
     let mut curves = Vec::new();
     let mut units = Vec::new();
+    // Whether any deviation was not finite (values that overflow), for the message when none
+    // can be drawn.
+    let mut overflow = false;
     for (i, s) in std::iter::once(&raw).chain(&comp).enumerate() {
         let on_grid = grid.place(&s.values);
         let phase =
@@ -572,8 +572,9 @@ fn adev_figure(log: &Log, opts: &PlotOptions) -> Result<Figure, PlotError> {
                 column: s.name.clone(),
                 source,
             })?;
-        let points: Vec<(f64, f64, f64, f64)> = phase
-            .deviation(Statistic::Oadev, TauSet::Octave)
+        let devs = phase.deviation(Statistic::Oadev, TauSet::Octave);
+        overflow |= devs.iter().any(|p| !p.dev.is_finite());
+        let points: Vec<(f64, f64, f64, f64)> = devs
             .iter()
             .filter(|p| p.dev.is_finite() && p.dev > 0.0 && p.ci_high.is_finite())
             .map(|p| (p.tau_s, p.dev, p.ci_low, p.ci_high))
@@ -598,7 +599,12 @@ fn adev_figure(log: &Log, opts: &PlotOptions) -> Result<Figure, PlotError> {
             .chain(&comp)
             .map(|s| format!("`{}`", s.name))
             .collect();
-        return Err(PlotError::ZeroDeviation(names.join(", ")));
+        let what = if overflow {
+            "not finite (values so large that their differences overflow)"
+        } else {
+            "0 (a constant column)"
+        };
+        return Err(PlotError::ZeroDeviation(names.join(", "), what));
     }
     units.dedup();
     let unit = units.join(" / ");

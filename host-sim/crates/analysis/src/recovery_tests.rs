@@ -263,6 +263,7 @@ fn transients_steps_and_lines_are_recovered_where_they_were_put() {
             ScenarioEffect::Step {
                 time_s: 1.3 * DAY,
                 size: 2e-5,
+                duration_s: 0.0,
             },
             Effect::Step { duration_s: 0.0 },
             "time_s",

@@ -394,7 +394,7 @@ pub fn default_columns(log: &Log) -> Vec<String> {
     log.column_names()
         .iter()
         .filter(|n| n.as_str() != TIME_COLUMN && n.as_str() != "input_g")
-        .filter(|n| matches!(unit_suffix(n), Some("v" | "g")))
+        .filter(|n| matches!(unit_suffix(n).as_deref(), Some("v" | "g")))
         .filter(|n| log.column(n).is_some())
         .cloned()
         .collect()
@@ -402,7 +402,7 @@ pub fn default_columns(log: &Log) -> Vec<String> {
 
 /// Unit and multiplier that bring a column to its reported unit.
 pub fn column_unit(log: &Log, name: &str) -> Result<(String, f64), StabilityError> {
-    match unit_suffix(name) {
+    match unit_suffix(name).as_deref() {
         Some("g") => Ok(("g".into(), 1.0)),
         Some("v") => match log.meta_f64(SCALE_FACTOR_KEY)? {
             Some(k1) if k1 > 0.0 => Ok(("g".into(), 1.0 / k1)),
@@ -896,5 +896,36 @@ mod tests {
         assert!(col["adev"][0]["adev"].is_f64() && col["adev"][0]["ci_low"].is_f64());
         assert!(col["mdev"][0]["mdev"].is_f64() && col["mdev"][0]["edf"].is_f64());
         assert!(rep.to_table().contains("OADEV"));
+    }
+
+    /// The column names on which this command and `discover` read different units before they
+    /// both asked `accomp_log::unit_suffix` (stability took `gravity_m_s2` as `s2` and `output_V`
+    /// as volts without the scale factor; discover took `m_s2` and `v`).
+    #[test]
+    fn stability_and_discover_read_the_same_unit_of_a_column() {
+        use crate::discover::import::{dataset_from_log, DatasetOptions};
+        let rows: String = (0..120)
+            .map(|i| format!("{i},{},{}\n", 1.0 + 1e-6 * f64::from(i % 3), 20.0))
+            .collect();
+        for (name, unit, per_g) in [
+            ("gravity_m_s2", "m_s2", accomp::tide::STANDARD_GRAVITY_M_S2),
+            (
+                "gravity_NM_S2",
+                "nm_s2",
+                accomp::tide::STANDARD_GRAVITY_M_S2 * 1e9,
+            ),
+            ("output_V", "g", 2.5),
+        ] {
+            let text = format!("# scale_factor_v_per_g: 2.5\ntime_s,{name},temperature_c\n{rows}");
+            let log = Log::parse_str(&text).unwrap();
+            let (stability_unit, k) = column_unit(&log, name).unwrap();
+            assert_eq!(stability_unit, unit, "{name}");
+            let ds = dataset_from_log(&log, &DatasetOptions::default()).unwrap();
+            let discover_per_g = ds.unit_per_g.unwrap();
+            assert!((discover_per_g - per_g).abs() <= 1e-12 * per_g, "{name}");
+            if unit == "g" {
+                assert!((k * discover_per_g - 1.0).abs() < 1e-15, "{name}");
+            }
+        }
     }
 }

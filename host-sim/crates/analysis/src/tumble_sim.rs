@@ -98,15 +98,24 @@ pub struct TumbleSimConfig {
     pub test_column: bool,
 }
 
+/// Why the simulated instrument's models cannot be built (the core refuses them).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum ModelError {
+    /// The core's temperature scale refuses the range.
+    #[error("temperature scale: {0}")]
+    Scale(String),
+    /// A polynomial has more terms than the core's models take.
+    #[error("polynomial order")]
+    Order,
+}
+
 /// The paper's printed order-2 models (Tables 2–5, raw °C) as the "true" instrument, with a
 /// δo model of our own (the paper prints none): 0.8′ at 30 °C falling 0.01′/°C. The scale spans
 /// 20–75 °C so that temperature noise around the 30 and 65 °C set points is never clamped.
-pub fn paper_order2_models() -> Result<ThermalCompensator, String> {
+pub fn paper_order2_models() -> Result<ThermalCompensator, ModelError> {
     let scale = TemperatureScale::for_range(Celsius(20.0), Celsius(75.0))
-        .map_err(|e| format!("temperature scale: {e:?}"))?;
-    let mono = |m: &[f64]| {
-        TempPoly::from_monomial_celsius(m, &scale).ok_or_else(|| "polynomial order".to_string())
-    };
+        .map_err(|e| ModelError::Scale(format!("{e:?}")))?;
+    let mono = |m: &[f64]| TempPoly::from_monomial_celsius(m, &scale).ok_or(ModelError::Order);
     Ok(ThermalCompensator {
         scale,
         reference: Celsius(50.0),
@@ -123,7 +132,7 @@ pub fn paper_order2_models() -> Result<ThermalCompensator, String> {
 impl TumbleSimConfig {
     /// Table 1's eight temperatures (30..65 °C in 5 °C steps), four positions, 10 readings each,
     /// 2 µV (≈ 1.5 µg) reading noise, 0.2" index error, rotation about the pendulum axis (δp).
-    pub fn table1_default(seed: u64) -> Result<Self, String> {
+    pub fn table1_default(seed: u64) -> Result<Self, ModelError> {
         Ok(TumbleSimConfig {
             seed,
             positions: 4,

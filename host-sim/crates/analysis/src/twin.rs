@@ -16,6 +16,7 @@ use accomp::units::RAD_PER_ARCSEC;
 use crate::discover::import::{unit_per_g_for_suffix, ChannelKind, Dataset};
 use crate::discover::noise::NoiseModel;
 use crate::sim::accelerometer::{axes, true_coefficients, DividingHead, HeadPosition};
+use crate::sim::catalogue::EffectKind;
 use crate::sim::effects::{ChainSetup, Drive, EffectChain, ScenarioEffect, SIMULATED_AMBIENT};
 use crate::sim::gravimeter::{GravimeterParams, InstrumentParams, UNITS};
 use crate::sim::noise::{gauss, stream, AllanParams};
@@ -441,11 +442,14 @@ impl Twin {
         let offset = t.scenario.effects.len();
         let mut accepted = Vec::new();
         for (i, e) in effects.iter().enumerate() {
-            let ok = e.validate(offset + i).and_then(|()| {
-                EffectChain::new(std::slice::from_ref(e), setup.clone())
-                    .map(|_| ())
-                    .map_err(|x| x.to_string())
-            });
+            let ok = e
+                .validate(offset + i)
+                .map_err(|x| x.to_string())
+                .and_then(|()| {
+                    EffectChain::new(std::slice::from_ref(e), setup.clone())
+                        .map(|_| ())
+                        .map_err(|x| x.to_string())
+                });
             match ok {
                 Ok(()) => accepted.push(e.clone()),
                 Err(why) => t
@@ -918,35 +922,36 @@ pub fn scenario_effects_from_discovery(
         let need =
             |key: &str| p(key).ok_or_else(|| format!("parameter {key} missing or not finite"));
         let e: Result<ScenarioEffect, String> = (|| {
-            Ok(match name {
-                "thermal_lag" => ScenarioEffect::ThermalLag {
+            Ok(match a.effect.kind() {
+                EffectKind::ThermalLag => ScenarioEffect::ThermalLag {
                     tau_s: need("tau_s")?,
                     coefficient: need("coefficient")?,
                 },
-                "thermal_hysteresis" => ScenarioEffect::ThermalHysteresis {
+                EffectKind::ThermalHysteresis => ScenarioEffect::ThermalHysteresis {
                     half_width: need("half_width")?,
                     play_half_width_c: need("play_half_width_c")?,
                 },
-                "self_heating" => ScenarioEffect::SelfHeating {
+                EffectKind::SelfHeating => ScenarioEffect::SelfHeating {
                     tau_s: need("tau_s")?,
                     coefficient: need("coefficient")?,
                 },
-                "warmup" => {
+                EffectKind::Warmup => {
                     let tau_s = need("tau_s")?;
                     ScenarioEffect::Warmup {
                         tau_s,
                         amplitude: need("amplitude")? * (t0 / tau_s).exp(),
                     }
                 }
-                "aging_drift" => ScenarioEffect::AgingDrift {
+                EffectKind::AgingDrift => ScenarioEffect::AgingDrift {
                     tau_s: need("tau_s")?,
                     amplitude: need("amplitude")?,
                 },
-                "step" => ScenarioEffect::Step {
+                EffectKind::Step => ScenarioEffect::Step {
                     time_s: need("time_s")?,
                     size: need("size")?,
+                    duration_s: p("duration_s").unwrap_or(0.0),
                 },
-                "tidal_gravity" => match &d.tidal {
+                EffectKind::TidalGravity => match &d.tidal {
                     Ok(t) if !t.groups.is_empty() => ScenarioEffect::TidalGravity {
                         amplitude_factor: 0.0,
                         delay_s: 0.0,
@@ -970,18 +975,18 @@ pub fn scenario_effects_from_discovery(
                         groups: Vec::new(),
                     },
                 },
-                "tidal_tilt" => ScenarioEffect::TidalTilt {
+                EffectKind::TidalTilt => ScenarioEffect::TidalTilt {
                     amplitude_factor: need("amplitude_factor")?,
                     azimuth_deg: need("azimuth_deg")?,
                 },
-                "building_tilt" => ScenarioEffect::BuildingTilt {
+                EffectKind::BuildingTilt => ScenarioEffect::BuildingTilt {
                     amplitude: need("amplitude")?,
                     phase_rad: need("phase_rad")?,
                 },
-                "tilt_coupling" => ScenarioEffect::TiltCoupling {
+                EffectKind::TiltCoupling => ScenarioEffect::TiltCoupling {
                     gain: need("gain")?,
                 },
-                "ambient_coupling" => {
+                EffectKind::AmbientCoupling => {
                     let channel = a.effect.channel().unwrap_or_default().to_owned();
                     let in_record = d.dataset.channels.iter().any(|c| c.name == channel);
                     if !in_record && !SIMULATED_AMBIENT.contains(&channel.as_str()) {
@@ -995,15 +1000,15 @@ pub fn scenario_effects_from_discovery(
                         lag_s: p("lag_s").unwrap_or(0.0).max(0.0),
                     }
                 }
-                "pressure_admittance" => ScenarioEffect::PressureAdmittance {
+                EffectKind::PressureAdmittance => ScenarioEffect::PressureAdmittance {
                     coefficient: need("coefficient")?,
                 },
-                "periodic" => ScenarioEffect::Periodic {
+                EffectKind::Periodic => ScenarioEffect::Periodic {
                     period_s: need("period_s")?,
                     amplitude: need("amplitude")?,
                     phase_rad: need("phase_rad")?,
                 },
-                "channel_noise" => {
+                EffectKind::ChannelNoise => {
                     let channel = a.effect.channel().unwrap_or_default().to_owned();
                     ScenarioEffect::ChannelNoise {
                         channel,
@@ -1012,12 +1017,11 @@ pub fn scenario_effects_from_discovery(
                             .ok_or("parameter noise missing")?,
                     }
                 }
-                other => return Err(format!("the simulator has no model of {other:?}")),
             })
         })();
         match e.and_then(|e| {
             let i = out.len();
-            e.validate(i).map(|()| e)
+            e.validate(i).map(|()| e).map_err(|x| x.to_string())
         }) {
             Ok(e) => out.push(e),
             Err(why) => refused.push((name.to_owned(), why)),
@@ -1259,6 +1263,7 @@ mod tests {
             ScenarioEffect::Step {
                 time_s: 3600.0,
                 size: 5.0,
+                duration_s: 0.0,
             },
             ScenarioEffect::TidalGravity {
                 amplitude_factor: 0.0,
@@ -1296,6 +1301,7 @@ mod from_discovery_tests {
         hidden.effects = vec![ScenarioEffect::Step {
             time_s: 1.4 * 86_400.0 + 150.0,
             size: 2e-5,
+            duration_s: 0.0,
         }];
         let bytes = simulate(&hidden, 5, &Options::default(), Vec::new(), &mut |_, _| {})
             .unwrap()
@@ -1315,7 +1321,7 @@ mod from_discovery_tests {
         let step = effects
             .iter()
             .find_map(|e| match e {
-                ScenarioEffect::Step { time_s, size } => Some((*time_s, *size)),
+                ScenarioEffect::Step { time_s, size, .. } => Some((*time_s, *size)),
                 _ => None,
             })
             .unwrap_or_else(|| panic!("no step among {effects:?} (refused {refused:?})"));

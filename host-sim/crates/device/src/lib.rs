@@ -50,17 +50,20 @@ pub enum Target {
     Serial(String),
 }
 
+/// A `--target` that is none of host, qemu, serial:<port>.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("unknown target `{0}`: use host, qemu or serial:<port>")]
+pub struct UnknownTarget(pub String);
+
 impl std::str::FromStr for Target {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
+    type Err = UnknownTarget;
+    fn from_str(s: &str) -> Result<Self, UnknownTarget> {
         match s {
             "host" => Ok(Target::Host),
             "qemu" => Ok(Target::Qemu),
             _ => match s.strip_prefix("serial:") {
                 Some(port) if !port.is_empty() => Ok(Target::Serial(port.to_string())),
-                _ => Err(format!(
-                    "unknown target `{s}`: use host, qemu or serial:<port>"
-                )),
+                _ => Err(UnknownTarget(s.to_owned())),
             },
         }
     }

@@ -337,10 +337,26 @@ pub fn is_text_column_name(name: &str) -> bool {
     name == "status" || name.ends_with("_status") || name.ends_with("_flags")
 }
 
-/// The unit suffix of a column name: the part after the last `_` (`"temperature_c"` → `"c"`).
-pub fn unit_suffix(name: &str) -> Option<&str> {
-    name.rsplit_once('_')
-        .map(|(_, u)| u)
+/// Units whose own name holds an `_`: taken whole (`gravity_m_s2` is in `m_s2`, not `s2`).
+const COMPOUND_UNITS: [&str; 2] = ["nm_s2", "m_s2"];
+
+/// The gravity units a gravimeter column can be in (`gravity_<unit>`), each known to
+/// [`unit_per_g_for_suffix`].
+pub const GRAVITY_UNITS: [&str; 4] = ["mgal", "ugal", "nm_s2", "m_s2"];
+
+/// The unit of a column, from its name, in lower case: the part after the last `_`
+/// (`temperature_c` → `c`, `output_V` → `v`), or a whole compound unit (`gravity_nm_s2` →
+/// `nm_s2`). `None` when the name has no suffix. Every reader of a column's unit asks here.
+pub fn unit_suffix(name: &str) -> Option<String> {
+    let l = name.to_ascii_lowercase();
+    if let Some(u) = COMPOUND_UNITS
+        .iter()
+        .find(|u| l.strip_suffix(*u).is_some_and(|head| head.ends_with('_')))
+    {
+        return Some((*u).to_owned());
+    }
+    l.rsplit_once('_')
+        .map(|(_, u)| u.to_owned())
         .filter(|u| !u.is_empty())
 }
 
@@ -1212,8 +1228,21 @@ mod tests {
 
     #[test]
     fn unit_suffix_is_the_part_after_the_last_underscore() {
-        assert_eq!(unit_suffix("temperature_c"), Some("c"));
-        assert_eq!(unit_suffix("a_i_exact_g"), Some("g"));
+        assert_eq!(unit_suffix("temperature_c").as_deref(), Some("c"));
+        assert_eq!(unit_suffix("a_i_exact_g").as_deref(), Some("g"));
         assert_eq!(unit_suffix("status"), None);
+    }
+
+    #[test]
+    fn unit_suffix_takes_compound_units_whole_and_ignores_case() {
+        assert_eq!(unit_suffix("gravity_m_s2").as_deref(), Some("m_s2"));
+        assert_eq!(unit_suffix("gravity_nm_s2").as_deref(), Some("nm_s2"));
+        assert_eq!(unit_suffix("output_V").as_deref(), Some("v"));
+        assert_eq!(unit_suffix("Tilt_ARCSEC").as_deref(), Some("arcsec"));
+        for u in GRAVITY_UNITS {
+            let name = format!("gravity_{u}");
+            assert_eq!(unit_suffix(&name).as_deref(), Some(u), "{name}");
+            assert!(unit_per_g_for_suffix(u).is_some(), "{u}");
+        }
     }
 }

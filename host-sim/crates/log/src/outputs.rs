@@ -10,7 +10,29 @@ use std::fs::File;
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
-use anyhow::Context as _;
+/// Why an output cannot be written: each names the path, and says whether work was skipped.
+#[derive(Debug, thiserror::Error)]
+pub enum OutputError {
+    /// The output is refused before any computing (wrong kind of path, missing folder).
+    #[error("{0} (nothing computed)")]
+    Refused(String),
+    /// The file system refused the output; the context names the path and what was done.
+    #[error("{context}: {reason}")]
+    Io {
+        /// What was being done, naming the path.
+        context: String,
+        /// The operating system's reason.
+        reason: std::io::Error,
+    },
+}
+
+/// Attaches the path-naming context to an I/O error.
+fn io<T>(r: std::io::Result<T>, context: impl FnOnce() -> String) -> Result<T, OutputError> {
+    r.map_err(|reason| OutputError::Io {
+        context: context(),
+        reason,
+    })
+}
 
 /// The folder a file path lands in ("." for a bare name).
 fn parent_of(path: &Path) -> PathBuf {
@@ -33,34 +55,31 @@ fn probe(dir: &Path) -> std::io::Result<()> {
 
 /// Checks that `path` can be written as a file: not a directory, its folder exists and takes
 /// a file. Creates nothing that stays.
-pub fn check_file(path: &Path) -> anyhow::Result<()> {
+pub fn check_file(path: &Path) -> Result<(), OutputError> {
     if path.is_dir() {
-        anyhow::bail!(
-            "output {}: is a directory, a file is expected (nothing computed)",
+        return Err(OutputError::Refused(format!(
+            "output {}: is a directory, a file is expected",
             path.display()
-        );
+        )));
     }
     let dir = parent_of(path);
     if !dir.is_dir() {
-        anyhow::bail!(
-            "output {}: its folder {} does not exist (nothing computed)",
+        return Err(OutputError::Refused(format!(
+            "output {}: its folder {} does not exist",
             path.display(),
             dir.display()
-        );
+        )));
     }
     if path.exists() {
         // Opened for writing without truncating: the existing file stays as it is.
-        std::fs::OpenOptions::new()
-            .write(true)
-            .open(path)
-            .with_context(|| {
-                format!(
-                    "output {}: cannot be written (nothing computed)",
-                    path.display()
-                )
-            })?;
+        io(std::fs::OpenOptions::new().write(true).open(path), || {
+            format!(
+                "output {}: cannot be written (nothing computed)",
+                path.display()
+            )
+        })?;
     }
-    probe(&dir).with_context(|| {
+    io(probe(&dir), || {
         format!(
             "output {}: its folder {} cannot be written (nothing computed)",
             path.display(),
@@ -71,20 +90,20 @@ pub fn check_file(path: &Path) -> anyhow::Result<()> {
 
 /// Checks that `dir` can take the files of an output folder: created if missing, a directory,
 /// writable.
-pub fn check_dir(dir: &Path) -> anyhow::Result<()> {
+pub fn check_dir(dir: &Path) -> Result<(), OutputError> {
     if dir.exists() && !dir.is_dir() {
-        anyhow::bail!(
-            "output folder {}: is a file, a directory is expected (nothing computed)",
+        return Err(OutputError::Refused(format!(
+            "output folder {}: is a file, a directory is expected",
             dir.display()
-        );
+        )));
     }
-    std::fs::create_dir_all(dir).with_context(|| {
+    io(std::fs::create_dir_all(dir), || {
         format!(
             "output folder {}: cannot be created (nothing computed)",
             dir.display()
         )
     })?;
-    probe(dir).with_context(|| {
+    io(probe(dir), || {
         format!(
             "output folder {}: cannot be written (nothing computed)",
             dir.display()
@@ -94,19 +113,19 @@ pub fn check_dir(dir: &Path) -> anyhow::Result<()> {
 
 /// Writes `bytes` to `path` and syncs it: every failure, a short write on a full disk
 /// included, is an error naming the path.
-pub fn write_file(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
-    let mut f = File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
-    f.write_all(bytes)
-        .and_then(|()| f.sync_all())
-        .with_context(|| format!("writing {} ({} bytes)", path.display(), bytes.len()))
+pub fn write_file(path: &Path, bytes: &[u8]) -> Result<(), OutputError> {
+    let mut f = io(File::create(path), || {
+        format!("cannot create {}", path.display())
+    })?;
+    io(f.write_all(bytes).and_then(|()| f.sync_all()), || {
+        format!("writing {} ({} bytes)", path.display(), bytes.len())
+    })
 }
 
 /// Flushes a buffered output file and syncs it to the disk, the error naming the path.
-pub fn finish(w: std::io::BufWriter<File>, path: &Path) -> anyhow::Result<()> {
-    let f = w
-        .into_inner()
-        .map_err(|e| e.into_error())
-        .with_context(|| format!("writing {}", path.display()))?;
-    f.sync_all()
-        .with_context(|| format!("writing {}", path.display()))
+pub fn finish(w: std::io::BufWriter<File>, path: &Path) -> Result<(), OutputError> {
+    let f = io(w.into_inner().map_err(|e| e.into_error()), || {
+        format!("writing {}", path.display())
+    })?;
+    io(f.sync_all(), || format!("writing {}", path.display()))
 }

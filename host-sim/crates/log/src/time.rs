@@ -1,5 +1,6 @@
 //! UTC instants as seconds since the Unix epoch, parsed from and printed as ISO 8601
-//! (`YYYY-MM-DDTHH:MM:SS[.fff]Z`). Leap seconds are ignored (POSIX time), which is far below what
+//! (`YYYY-MM-DDTHH:MM:SS[.fff]Z`): the one place the host reads and writes a time stamp (the
+//! simulator's `start_utc`, the discovery's record formats). Leap seconds are ignored (POSIX time), which is far below what
 //! a daily tide or thermal cycle can notice. The calendar (which days exist, day counts) is
 //! jiff's; only the f64 seconds are ours, because the simulator and the analyses count time in
 //! f64 seconds.
@@ -9,6 +10,8 @@ use std::fmt;
 use jiff::civil::{Date, DateTime};
 use jiff::tz::TimeZone;
 use jiff::Timestamp;
+
+use accomp::tide::UtcTime;
 
 /// POSIX seconds of a civil UTC date and time (whole seconds), `None` for a day or time that
 /// does not exist or a year outside jiff's −9999..=9999.
@@ -51,27 +54,136 @@ pub struct Utc(pub f64);
 #[error("not an ISO 8601 UTC time (YYYY-MM-DDTHH:MM:SSZ): {0:?}")]
 pub struct UtcParseError(pub String);
 
+/// The fields of `YYYY-MM-DD[T ]HH:MM[:SS[.fraction]][Z]`, unchecked.
+struct Fields {
+    date: (i64, i64, i64),
+    hour_minute: (i64, i64),
+    /// `None` when the text stops at the minutes.
+    second: Option<f64>,
+    /// Whether the text ends in `Z`.
+    zulu: bool,
+}
+
+fn fields(text: &str) -> Option<Fields> {
+    let t = text.trim();
+    let (t, zulu) = match t.strip_suffix('Z') {
+        Some(t) => (t, true),
+        None => (t, false),
+    };
+    let (date, time) = t.split_once(['T', ' '])?;
+    let mut dp = date.split('-');
+    let num = |p: Option<&str>| p?.parse::<i64>().ok();
+    let date = (num(dp.next())?, num(dp.next())?, num(dp.next())?);
+    let mut tp = time.split(':');
+    let hour_minute = (num(tp.next())?, num(tp.next())?);
+    let second = match tp.next() {
+        Some(s) => Some(s.parse::<f64>().ok()?),
+        None => None,
+    };
+    if dp.next().is_some() || tp.next().is_some() {
+        return None;
+    }
+    Some(Fields {
+        date,
+        hour_minute,
+        second,
+        zulu,
+    })
+}
+
+/// Parses a record's time stamp, `YYYY-MM-DD[T ]HH:MM[:SS[.fff]][Z]`, to Unix seconds (the
+/// lenient reading of [`Utc::parse`]: `Z` and seconds may be left out; see
+/// [`civil_unix_seconds`] for the range).
+pub fn parse_utc(text: &str) -> Option<f64> {
+    let f = fields(text)?;
+    let small = |v: i64| u8::try_from(v).ok();
+    civil_unix_seconds(
+        i32::try_from(f.date.0).ok()?,
+        small(f.date.1)?,
+        small(f.date.2)?,
+        small(f.hour_minute.0)?,
+        small(f.hour_minute.1)?,
+        f.second.unwrap_or(0.0),
+    )
+}
+
+/// Unix seconds of a checked calendar instant: whole seconds from jiff's calendar
+/// ([`posix_seconds`], exact integer arithmetic — the Julian-date route of
+/// `UtcTime::unix_seconds` loses ~10 µs to the f64 day count, which would jitter `time_s`), the
+/// fraction added after. `None` for a day or time that does not exist, or outside what the tide
+/// model takes (`accomp::tide::UtcTime`: years 1600–2400; a leap second's 60.x s is accepted
+/// there and counted POSIX-style, as the next minute's first second).
+pub fn civil_unix_seconds(
+    year: i32,
+    month: u8,
+    day: u8,
+    hour: u8,
+    minute: u8,
+    second: f64,
+) -> Option<f64> {
+    UtcTime::new(year, month, day, hour, minute, second).ok()?;
+    let whole = posix_seconds(
+        i64::from(year),
+        i64::from(month),
+        i64::from(day),
+        i64::from(hour),
+        i64::from(minute),
+        0,
+    )?;
+    Some(whole as f64 + second)
+}
+
+/// Formats Unix seconds as `YYYY-MM-DDTHH:MM:SS.sssZ` (always milliseconds; the date from
+/// jiff, proleptic Gregorian). [`Utc`]'s `Display` leaves out a zero fraction.
+pub fn format_utc(unix_s: f64) -> String {
+    let u = Utc(unix_s);
+    match u.civil_ms() {
+        Some(c) => format!("{}.{:03}Z", c.to_seconds(), c.ms),
+        None => u.to_string(),
+    }
+}
+
+/// An instant to the millisecond on the civil UTC calendar.
+struct CivilMs {
+    date: Date,
+    hms: (i64, i64, i64),
+    ms: i64,
+}
+
+impl CivilMs {
+    /// `YYYY-MM-DDTHH:MM:SS` (no fraction, no zone).
+    fn to_seconds(&self) -> String {
+        let (y, m, d) = (self.date.year(), self.date.month(), self.date.day());
+        let (h, mi, s) = self.hms;
+        format!("{y:04}-{m:02}-{d:02}T{h:02}:{mi:02}:{s:02}")
+    }
+}
+
 impl Utc {
     /// Parses `YYYY-MM-DDTHH:MM:SS[.fraction]Z` (a space may replace the `T`).
     pub fn parse(s: &str) -> Result<Utc, UtcParseError> {
         let err = || UtcParseError(s.to_string());
-        let t = s.trim();
-        let t = t.strip_suffix('Z').ok_or_else(err)?;
-        let (date, time) = t.split_once(['T', ' ']).ok_or_else(err)?;
-        let mut dp = date.split('-');
-        let num = |p: Option<&str>| -> Result<i64, UtcParseError> {
-            p.ok_or_else(err)?.parse::<i64>().map_err(|_| err())
-        };
-        let (y, mo, d) = (num(dp.next())?, num(dp.next())?, num(dp.next())?);
-        let mut tp = time.split(':');
-        let (h, mi) = (num(tp.next())?, num(tp.next())?);
-        let sec: f64 = tp.next().ok_or_else(err)?.parse().map_err(|_| err())?;
-        if dp.next().is_some() || tp.next().is_some() || !(0.0..60.0).contains(&sec) {
+        let f = fields(s).ok_or_else(err)?;
+        let sec = f.second.ok_or_else(err)?;
+        if !f.zulu || !(0.0..60.0).contains(&sec) {
             return Err(err());
         }
+        let ((y, mo, d), (h, mi)) = (f.date, f.hour_minute);
         // jiff decides whether the day and the clock time exist.
         let whole = posix_seconds(y, mo, d, h, mi, 0).ok_or_else(err)?;
         Ok(Utc(whole as f64 + sec))
+    }
+
+    /// The civil date and time, rounded to the millisecond (`None` beyond jiff's years).
+    fn civil_ms(self) -> Option<CivilMs> {
+        let ms = (self.0 * 1000.0).round() as i64;
+        let days = ms.div_euclid(86_400_000);
+        let rem = ms.rem_euclid(86_400_000);
+        Some(CivilMs {
+            date: utc_date(days * 86_400)?,
+            hms: (rem / 3_600_000, rem / 60_000 % 60, rem / 1000 % 60),
+            ms: rem % 1000,
+        })
     }
 
     /// The instant `dt_s` seconds later.
@@ -88,10 +200,7 @@ impl Utc {
 impl fmt::Display for Utc {
     /// `YYYY-MM-DDTHH:MM:SSZ`, with milliseconds only when the instant has a fraction.
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let ms = (self.0 * 1000.0).round() as i64;
-        let days = ms.div_euclid(86_400_000);
-        let rem = ms.rem_euclid(86_400_000);
-        let Some(date) = utc_date(days * 86_400) else {
+        let Some(c) = self.civil_ms() else {
             // Beyond jiff's years (never met by a real log): the seconds themselves.
             return write!(
                 f,
@@ -99,16 +208,9 @@ impl fmt::Display for Utc {
                 self.0
             );
         };
-        let (y, m, d) = (date.year(), date.month(), date.day());
-        let (h, mi, s, frac) = (
-            rem / 3_600_000,
-            rem / 60_000 % 60,
-            rem / 1000 % 60,
-            rem % 1000,
-        );
-        write!(f, "{y:04}-{m:02}-{d:02}T{h:02}:{mi:02}:{s:02}")?;
-        if frac != 0 {
-            write!(f, ".{frac:03}")?;
+        write!(f, "{}", c.to_seconds())?;
+        if c.ms != 0 {
+            write!(f, ".{:03}", c.ms)?;
         }
         write!(f, "Z")
     }
@@ -141,6 +243,31 @@ mod tests {
         ] {
             assert_eq!(Utc::parse(s).unwrap().to_string(), s);
         }
+    }
+
+    /// The simulator's strict reading and the discovery's lenient one were two parsers; they
+    /// now share the fields and agree wherever both accept a text.
+    #[test]
+    fn strict_and_lenient_readings_agree() {
+        for s in [
+            "2000-01-01T12:00:00Z",
+            "2024-02-29 23:59:30.5Z",
+            "2021-06-08T00:00:00.000Z",
+            "2020-07-31T12:15:00.015Z",
+        ] {
+            assert_eq!(parse_utc(s), Some(Utc::parse(s).unwrap().0), "{s}");
+            assert_eq!(
+                Utc::parse(&format_utc(Utc::parse(s).unwrap().0)),
+                Utc::parse(s)
+            );
+        }
+        // The lenient reading also takes what a record's header may hold.
+        assert_eq!(parse_utc("2021-06-08 00:00"), Some(1_623_110_400.0));
+        assert_eq!(parse_utc("2021-06-08T00:00:00"), Some(1_623_110_400.0));
+        assert_eq!(format_utc(1_623_110_400.0), "2021-06-08T00:00:00.000Z");
+        // Rounding to the millisecond carries into the minute (was "00:00:60.000").
+        assert_eq!(format_utc(1_623_110_459.999_6), "2021-06-08T00:01:00.000Z");
+        assert_eq!(parse_utc("2021-06-08-01T00:00:00Z"), None);
     }
 
     #[test]

@@ -70,6 +70,16 @@ impl ProgressLines {
     /// One step done; prints a line when the interval has passed.
     pub fn inc(&self) {
         self.done.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        self.maybe_print();
+    }
+
+    /// `done` steps done; prints a line when the interval has passed.
+    pub fn set(&self, done: usize) {
+        self.done.store(done, std::sync::atomic::Ordering::Relaxed);
+        self.maybe_print();
+    }
+
+    fn maybe_print(&self) {
         let Some(every) = self.every else {
             return;
         };

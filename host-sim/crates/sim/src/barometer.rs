@@ -55,9 +55,10 @@ pub struct BarometerParams {
 const ISA_T0_K: f64 = 288.15;
 /// ISA tropospheric lapse rate, K/m.
 const ISA_LAPSE_K_PER_M: f64 = 0.0065;
-/// g·M/(R·L) of the ISA troposphere (g0 = 9.80665 m/s², M = 0.028 964 4 kg/mol,
+/// g·M/(R·L) of the ISA troposphere (g0 standard gravity, M = 0.028 964 4 kg/mol,
 /// R = 8.314 462 6 J/(mol·K), L = 0.0065 K/m).
-const ISA_EXPONENT: f64 = 9.806_65 * 0.028_964_4 / (8.314_462_6 * ISA_LAPSE_K_PER_M);
+const ISA_EXPONENT: f64 =
+    crate::STANDARD_GRAVITY_M_S2 * 0.028_964_4 / (8.314_462_6 * ISA_LAPSE_K_PER_M);
 
 /// Earth radius of the geopotential-height conversion (US Standard Atmosphere 1976), m.
 const GEOPOTENTIAL_RADIUS_M: f64 = 6_356_766.0;

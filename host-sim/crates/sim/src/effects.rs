@@ -24,6 +24,7 @@ use accomp::tide::harmonic::{sin_cos, DoodsonArguments};
 use accomp::tide::{Station, MAS_PER_RAD, NM_S2_PER_M_S2, STANDARD_GRAVITY_M_S2};
 
 use super::noise::{gauss, SimRng};
+use crate::catalogue::{step_fraction, EffectKind};
 
 /// Channels whose reading `channel_noise` can disturb (log column names).
 pub const NOISY_CHANNELS: [&str; 3] = ["temperature_c", "tilt_arcsec", "pressure_hpa"];
@@ -86,13 +87,17 @@ pub enum ScenarioEffect {
         /// Amplitude, unit.
         amplitude: f64,
     },
-    /// `size`·H(t − time_s): a bias jump.
+    /// `size`·[`step_fraction`](crate::catalogue::step_fraction)(t, time_s, duration_s): a bias
+    /// change, abrupt (duration 0) or over a linear ramp centred on `time_s`.
     Step {
-        /// When, seconds from the start of the run.
+        /// When (the middle of the ramp), seconds from the start of the run.
         time_s: f64,
         /// Jump, unit (`amplitude` is accepted as another name).
         #[serde(alias = "amplitude")]
         size: f64,
+        /// Transition duration, s (0, the default: abrupt).
+        #[serde(default, skip_serializing_if = "is_zero")]
+        duration_s: f64,
     },
     /// A correction of the tide gravity: `amplitude_factor`·tide(t − delay_s) (the model tide
     /// projected on the input axis, in the output unit), plus the wave-group terms.
@@ -160,31 +165,59 @@ pub enum ScenarioEffect {
     },
 }
 
+/// A scenario effect out of its range: which entry, which field, why.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("effects[{index}] ({kind}): {field} {why}")]
+pub struct InvalidEffect {
+    /// Index in the scenario's `[[effects]]`.
+    pub index: usize,
+    /// The entry's kind.
+    pub kind: &'static str,
+    /// The field (or fields) at fault.
+    pub field: String,
+    /// What it must be.
+    pub why: String,
+}
+
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
+}
+
 impl ScenarioEffect {
-    /// The catalogue name.
-    pub fn name(&self) -> &'static str {
+    /// Its entry in the catalogue.
+    pub fn kind(&self) -> EffectKind {
         match self {
-            ScenarioEffect::ThermalLag { .. } => "thermal_lag",
-            ScenarioEffect::ThermalHysteresis { .. } => "thermal_hysteresis",
-            ScenarioEffect::SelfHeating { .. } => "self_heating",
-            ScenarioEffect::Warmup { .. } => "warmup",
-            ScenarioEffect::AgingDrift { .. } => "aging_drift",
-            ScenarioEffect::Step { .. } => "step",
-            ScenarioEffect::TidalGravity { .. } => "tidal_gravity",
-            ScenarioEffect::TidalTilt { .. } => "tidal_tilt",
-            ScenarioEffect::BuildingTilt { .. } => "building_tilt",
-            ScenarioEffect::TiltCoupling { .. } => "tilt_coupling",
-            ScenarioEffect::AmbientCoupling { .. } => "ambient_coupling",
-            ScenarioEffect::PressureAdmittance { .. } => "pressure_admittance",
-            ScenarioEffect::Periodic { .. } => "periodic",
-            ScenarioEffect::ChannelNoise { .. } => "channel_noise",
+            ScenarioEffect::ThermalLag { .. } => EffectKind::ThermalLag,
+            ScenarioEffect::ThermalHysteresis { .. } => EffectKind::ThermalHysteresis,
+            ScenarioEffect::SelfHeating { .. } => EffectKind::SelfHeating,
+            ScenarioEffect::Warmup { .. } => EffectKind::Warmup,
+            ScenarioEffect::AgingDrift { .. } => EffectKind::AgingDrift,
+            ScenarioEffect::Step { .. } => EffectKind::Step,
+            ScenarioEffect::TidalGravity { .. } => EffectKind::TidalGravity,
+            ScenarioEffect::TidalTilt { .. } => EffectKind::TidalTilt,
+            ScenarioEffect::BuildingTilt { .. } => EffectKind::BuildingTilt,
+            ScenarioEffect::TiltCoupling { .. } => EffectKind::TiltCoupling,
+            ScenarioEffect::AmbientCoupling { .. } => EffectKind::AmbientCoupling,
+            ScenarioEffect::PressureAdmittance { .. } => EffectKind::PressureAdmittance,
+            ScenarioEffect::Periodic { .. } => EffectKind::Periodic,
+            ScenarioEffect::ChannelNoise { .. } => EffectKind::ChannelNoise,
         }
     }
 
-    /// Checks the ranges; the message names the entry (`effects[i] (kind)`) and the field.
-    pub fn validate(&self, index: usize) -> Result<(), String> {
+    /// The catalogue name.
+    pub fn name(&self) -> &'static str {
+        self.kind().name()
+    }
+
+    /// Checks the ranges; the error names the entry (`effects[i] (kind)`) and the field.
+    pub fn validate(&self, index: usize) -> Result<(), InvalidEffect> {
         let at = |field: &str, why: &str| {
-            Err(format!("effects[{index}] ({}): {field} {why}", self.name()))
+            Err(InvalidEffect {
+                index,
+                kind: self.name(),
+                field: field.to_owned(),
+                why: why.to_owned(),
+            })
         };
         let finite = |v: f64| v.is_finite();
         let positive = |v: f64| v.is_finite() && v > 0.0;
@@ -218,12 +251,19 @@ impl ScenarioEffect {
                     return at("amplitude", "must be finite");
                 }
             }
-            ScenarioEffect::Step { time_s, size } => {
+            ScenarioEffect::Step {
+                time_s,
+                size,
+                duration_s,
+            } => {
                 if !finite(*time_s) {
                     return at("time_s", "must be finite");
                 }
                 if !finite(*size) {
                     return at("size", "must be finite");
+                }
+                if !(finite(*duration_s) && *duration_s >= 0.0) {
+                    return at("duration_s", "must be ≥ 0");
                 }
             }
             ScenarioEffect::TidalGravity {
@@ -543,8 +583,14 @@ impl EffectChain {
                 (ScenarioEffect::AgingDrift { tau_s, amplitude }, _) => {
                     amplitude * (1.0 + t.max(0.0) / tau_s).ln()
                 }
-                (ScenarioEffect::Step { time_s, size }, _) if t >= *time_s => *size,
-                (ScenarioEffect::Step { .. }, _) => 0.0,
+                (
+                    ScenarioEffect::Step {
+                        time_s,
+                        size,
+                        duration_s,
+                    },
+                    _,
+                ) => size * step_fraction(t, *time_s, *duration_s),
                 (
                     ScenarioEffect::TidalGravity {
                         amplitude_factor,
@@ -821,7 +867,8 @@ mod tests {
             w.effects[0],
             ScenarioEffect::Step {
                 time_s: 100.0,
-                size: 2.0
+                size: 2.0,
+                duration_s: 0.0,
             }
         );
         assert_eq!(w.effects[1].name(), "tidal_gravity");
@@ -836,7 +883,7 @@ mod tests {
             tau_s: -1.0,
             amplitude: 1.0,
         };
-        let m = e.validate(3).unwrap_err();
+        let m = e.validate(3).unwrap_err().to_string();
         assert!(m.contains("effects[3] (warmup): tau_s"), "{m}");
         let e = ScenarioEffect::TidalGravity {
             amplitude_factor: 0.0,
@@ -847,12 +894,12 @@ mod tests {
                 phase_deg: 0.0,
             }],
         };
-        assert!(e.validate(0).unwrap_err().contains("X9"));
+        assert!(e.validate(0).unwrap_err().to_string().contains("X9"));
         let e = ScenarioEffect::ChannelNoise {
             channel: "output_v".into(),
             noise: 1.0,
         };
-        assert!(e.validate(0).unwrap_err().contains("output_v"));
+        assert!(e.validate(0).unwrap_err().to_string().contains("output_v"));
         assert_eq!(group_band("P1K1+J1"), Some((0.986, 1.5)));
     }
 
@@ -884,6 +931,7 @@ mod tests {
             &[ScenarioEffect::Step {
                 time_s: 50.0,
                 size: 3.0,
+                duration_s: 0.0,
             }],
             setup(),
         )

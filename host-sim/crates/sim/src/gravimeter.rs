@@ -22,7 +22,17 @@ use super::noise::AllanParams;
 
 /// Gravity units the gravimeter can write: the record column suffixes `accomp discover` reads
 /// (`accomp_log::unit_per_g_for_suffix`).
-pub const UNITS: [&str; 4] = ["mgal", "ugal", "nm_s2", "m_s2"];
+pub use accomp_log::GRAVITY_UNITS as UNITS;
+
+/// A gravimeter parameter out of its range (`instrument.<field> <why>`).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("instrument.{field} {why}")]
+pub struct InvalidInstrument {
+    /// The `[instrument]` field.
+    pub field: &'static str,
+    /// What it must be.
+    pub why: String,
+}
 
 /// The gravimeter.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -79,13 +89,16 @@ impl GravimeterParams {
     }
 
     /// Checks the ranges.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), InvalidInstrument> {
         if !UNITS.contains(&self.unit.as_str()) {
-            return Err(format!(
-                "instrument.unit {:?} is not a gravity unit ({})",
-                self.unit,
-                UNITS.join(", ")
-            ));
+            return Err(InvalidInstrument {
+                field: "unit",
+                why: format!(
+                    "{:?} is not a gravity unit ({})",
+                    self.unit,
+                    UNITS.join(", ")
+                ),
+            });
         }
         let finite = [
             ("offset", self.offset),
@@ -97,17 +110,26 @@ impl GravimeterParams {
             ),
         ];
         if let Some((name, _)) = finite.iter().find(|(_, v)| !v.is_finite()) {
-            return Err(format!("instrument.{name} must be finite"));
+            return Err(InvalidInstrument {
+                field: name,
+                why: "must be finite".into(),
+            });
         }
         if !(self.tide_delay_s.is_finite() && self.tide_delay_s.abs() <= 7200.0) {
-            return Err("instrument.tide_delay_s must be within ±7200 s".into());
+            return Err(InvalidInstrument {
+                field: "tide_delay_s",
+                why: "must be within ±7200 s".into(),
+            });
         }
         let n = &self.noise;
         if [n.white_adev_1s, n.flicker_floor, n.random_walk_per_sqrt_s]
             .iter()
             .any(|v| !(v.is_finite() && *v >= 0.0))
         {
-            return Err("instrument.noise levels must be finite and ≥ 0".into());
+            return Err(InvalidInstrument {
+                field: "noise",
+                why: "levels must be finite and ≥ 0".into(),
+            });
         }
         Ok(())
     }

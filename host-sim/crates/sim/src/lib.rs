@@ -10,7 +10,8 @@
 //! - `adc.rs`: ADS1262 and AD7124 codes as the board sees them;
 //! - `noise.rs`: seeded processes (AR(1), random walk, flicker, Allan noise);
 //! - `gravimeter.rs`: a gravimeter in place of the accelerometer (output in a gravity unit);
-//! - `effects.rs`: the discovery catalogue's effects as optional scenario physics;
+//! - `catalogue.rs`: the catalogue of effects (names, parameters, units), which the discovery
+//!   reads too; `effects.rs`: its effects as optional scenario physics;
 //! - `scenario.rs`: the TOML scenario and presets; UTC (`time`) and the log writer (`writer`)
 //!   are `accomp-log`'s.
 //!
@@ -19,6 +20,7 @@
 pub mod accelerometer;
 pub mod adc;
 pub mod barometer;
+pub mod catalogue;
 pub mod effects;
 pub mod gravimeter;
 pub mod noise;
@@ -46,8 +48,8 @@ use tilt::{tiltmeter_reading, Foundation};
 use time::Utc;
 use writer::{Column, LogWriter};
 
-/// Standard gravity, m/s² (the tide's gravity change is turned into g with it).
-pub const STANDARD_GRAVITY_M_S2: f64 = 9.806_65;
+/// Standard gravity, m/s² (the tide's gravity change is turned into g with it): the core's.
+pub use accomp::tide::STANDARD_GRAVITY_M_S2;
 
 /// Random streams, one per part (see [`noise::stream`]).
 mod streams {
@@ -712,6 +714,7 @@ mod tests {
         zero.effects = vec![ScenarioEffect::Step {
             time_s: 3600.0,
             size: 0.0,
+            duration_s: 0.0,
         }];
         assert_eq!(run(&base, 7, false), run(&zero, 7, false));
         // Reading noise on the temperature: only temperature_c moves.

@@ -82,6 +82,12 @@ pub enum ScenarioError {
     /// A value is out of its physical range.
     #[error("scenario: {0}")]
     Invalid(String),
+    /// An `[[effects]]` entry is out of its range.
+    #[error("scenario: {0}")]
+    Effect(#[from] crate::effects::InvalidEffect),
+    /// The `[instrument]` gravimeter is out of its range.
+    #[error("scenario: {0}")]
+    Instrument(#[from] crate::gravimeter::InvalidInstrument),
     /// Neither a file nor a preset of that name.
     #[error("no scenario file or preset named {0:?} (presets: {presets})", presets = PRESETS.join(", "))]
     Unknown(String),
@@ -207,10 +213,10 @@ impl Scenario {
             return bad("barometer peak hours must be finite");
         }
         if let Some(InstrumentParams::Gravimeter(g)) = &self.instrument {
-            g.validate().map_err(ScenarioError::Invalid)?;
+            g.validate()?;
         }
         for (i, e) in self.effects.iter().enumerate() {
-            e.validate(i).map_err(ScenarioError::Invalid)?;
+            e.validate(i)?;
         }
         Ok(())
     }
@@ -763,7 +769,8 @@ mod tests {
         assert_eq!(ok.gravimeter().map(|g| g.column()), Some("gravity_ugal"));
         assert!(matches!(
             Scenario::from_toml(&grav("volt")),
-            Err(ScenarioError::Invalid(m)) if m.contains("instrument.unit") && m.contains("volt")
+            Err(ScenarioError::Instrument(e)) if e.field == "unit"
+                && e.to_string().contains("instrument.unit") && e.to_string().contains("volt")
         ));
         let unknown = format!("{text}\n[[effects]]\nkind = \"gremlins\"\nsize = 1.0\n");
         assert!(matches!(
@@ -773,7 +780,8 @@ mod tests {
         let bad = format!("{text}\n[[effects]]\nkind = \"periodic\"\nperiod_s = 0.0\namplitude = 1.0\nphase_rad = 0.0\n");
         assert!(matches!(
             Scenario::from_toml(&bad),
-            Err(ScenarioError::Invalid(m)) if m.contains("effects[0] (periodic): period_s")
+            Err(ScenarioError::Effect(e)) if e.index == 0 && e.field == "period_s"
+                && e.to_string().contains("effects[0] (periodic): period_s")
         ));
     }
 

@@ -391,15 +391,31 @@ pub fn static_baseline(ds: &Dataset) -> Baseline {
     }
 }
 
+/// Why a calibration baseline cannot be built.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum BaselineError {
+    /// The record has no temperature channel to evaluate the table's models at.
+    #[error("a calibration baseline needs a temperature channel")]
+    NoTemperature,
+    /// The table's temperature models refuse a row's temperature.
+    #[error("calibration model at {temperature_c} °C: {why}")]
+    Model {
+        /// The row's temperature, °C.
+        temperature_c: f64,
+        /// The core's error.
+        why: String,
+    },
+}
+
 /// Baseline from a calibration table: eq. (1) with the temperature models at the measured
 /// temperature, eq. (5) tilt, subtracted with a fixed coefficient; offset and drift free.
 pub fn calibrated_baseline(
     ds: &Dataset,
     table: &accomp::table::CalibrationTable,
-) -> Result<Baseline, String> {
+) -> Result<Baseline, BaselineError> {
     let temp = ds
         .channel(ChannelKind::Temperature)
-        .ok_or("a calibration baseline needs a temperature channel")?;
+        .ok_or(BaselineError::NoTemperature)?;
     let input = ds.input_g.unwrap_or(table.orientation.nominal_input.0);
     let changing = ds.changing_input();
     let tilt = tilt_term_g(ds);
@@ -408,7 +424,10 @@ pub fn calibrated_baseline(
         let (k, _) = table
             .thermal
             .coefficients_at(accomp::units::Celsius(temp.values[i]))
-            .map_err(|e| format!("calibration model at {} °C: {e:?}", temp.values[i]))?;
+            .map_err(|e| BaselineError::Model {
+                temperature_c: temp.values[i],
+                why: format!("{e:?}"),
+            })?;
         let (nominal, cross) = match changing {
             // A head programme: the row's input; the cross axis that turns with it is taken
             // along the pendulum axis (spindle along the output axis, s = +1, the simulator's

@@ -4,6 +4,7 @@
 //! by a golden-section refinement. Physics and magnitudes: `docs/discovery.md`.
 
 use super::import::{ChannelKind, Dataset};
+use crate::sim::catalogue::{step_fraction, EffectKind};
 use accomp::tide::Station;
 
 /// One effect of the catalogue, bound to a channel where it needs one.
@@ -49,23 +50,29 @@ pub enum Effect {
 }
 
 impl Effect {
+    /// Its entry in the catalogue of effects (`accomp_sim::catalogue`), which the simulator reads
+    /// too.
+    pub fn kind(&self) -> EffectKind {
+        match self {
+            Effect::ThermalLag => EffectKind::ThermalLag,
+            Effect::ThermalHysteresis => EffectKind::ThermalHysteresis,
+            Effect::SelfHeating => EffectKind::SelfHeating,
+            Effect::Warmup => EffectKind::Warmup,
+            Effect::AgingDrift => EffectKind::AgingDrift,
+            Effect::Step { .. } => EffectKind::Step,
+            Effect::TidalGravity => EffectKind::TidalGravity,
+            Effect::TidalTilt => EffectKind::TidalTilt,
+            Effect::BuildingTilt => EffectKind::BuildingTilt,
+            Effect::TiltCoupling => EffectKind::TiltCoupling,
+            Effect::AmbientCoupling(_) => EffectKind::AmbientCoupling,
+            Effect::PressureAdmittance => EffectKind::PressureAdmittance,
+            Effect::Periodic => EffectKind::Periodic,
+        }
+    }
+
     /// Catalogue name.
     pub fn name(&self) -> &'static str {
-        match self {
-            Effect::ThermalLag => "thermal_lag",
-            Effect::ThermalHysteresis => "thermal_hysteresis",
-            Effect::SelfHeating => "self_heating",
-            Effect::Warmup => "warmup",
-            Effect::AgingDrift => "aging_drift",
-            Effect::Step { .. } => "step",
-            Effect::TidalGravity => "tidal_gravity",
-            Effect::TidalTilt => "tidal_tilt",
-            Effect::BuildingTilt => "building_tilt",
-            Effect::TiltCoupling => "tilt_coupling",
-            Effect::AmbientCoupling(_) => "ambient_coupling",
-            Effect::PressureAdmittance => "pressure_admittance",
-            Effect::Periodic => "periodic",
-        }
+        self.kind().name()
     }
 
     /// The channel it is bound to, if any.
@@ -78,7 +85,7 @@ impl Effect {
 
     /// Whether the effect can be accepted more than once (at other parameters).
     pub fn repeatable(&self) -> bool {
-        matches!(self, Effect::Step { .. } | Effect::Periodic)
+        self.kind().repeatable()
     }
 }
 
@@ -162,14 +169,9 @@ pub fn log_grid(lo: f64, hi: f64, n: usize) -> Vec<f64> {
 /// A step's column: 0 before, 1 after, a linear ramp of `duration_s` centred on `time_s` in
 /// between (`duration_s` ≤ 0: the jump, 1 from `time_s` on).
 pub fn step_column(t: &[f64], time_s: f64, duration_s: f64) -> Vec<f64> {
-    if duration_s > 0.0 {
-        let start = time_s - 0.5 * duration_s;
-        t.iter()
-            .map(|x| ((x - start) / duration_s).clamp(0.0, 1.0))
-            .collect()
-    } else {
-        t.iter().map(|x| f64::from(*x >= time_s)).collect()
-    }
+    t.iter()
+        .map(|&x| step_fraction(x, time_s, duration_s))
+        .collect()
 }
 
 /// Longest transition a `step` may take, s: a slower change is a drift (`aging_drift`,
@@ -508,6 +510,45 @@ pub fn parameters(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The discovery names what the catalogue lists, with the catalogue's parameters in its
+    /// order, for every effect it looks for: what the simulator injects under the same names.
+    #[test]
+    fn every_effect_reports_the_catalogue_parameters() {
+        let all = [
+            Effect::ThermalLag,
+            Effect::ThermalHysteresis,
+            Effect::SelfHeating,
+            Effect::Warmup,
+            Effect::AgingDrift,
+            Effect::Step { duration_s: 0.0 },
+            Effect::TidalGravity,
+            Effect::TidalTilt,
+            Effect::BuildingTilt,
+            Effect::TiltCoupling,
+            Effect::AmbientCoupling("room_c".into()),
+            Effect::PressureAdmittance,
+            Effect::Periodic,
+        ];
+        let discovered: Vec<EffectKind> = EffectKind::ALL
+            .into_iter()
+            .filter(|k| k.discovered())
+            .collect();
+        assert_eq!(all.iter().map(Effect::kind).collect::<Vec<_>>(), discovered);
+        let ds = Dataset {
+            unit_per_g: None,
+            ..Dataset::test_g(vec![0.0, 1.0], vec![0.0, 0.0], 1.0)
+        };
+        let theta = Param {
+            value: 1.0,
+            sigma: 0.1,
+        };
+        for e in &all {
+            let named = parameters(e, &ds, theta, &[1.0, 1.0], &[0.1, 0.1]);
+            let keys: Vec<&str> = named.iter().map(|(k, _)| k.as_str()).collect();
+            assert_eq!(keys, e.kind().parameter_names(), "{}", e.name());
+        }
+    }
 
     #[test]
     fn lag_filter_reaches_63_percent_after_one_time_constant() {

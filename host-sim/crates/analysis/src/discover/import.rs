@@ -7,8 +7,6 @@
 //! (filters, differences and whitening restart there).
 
 use crate::log::{Log, LogError};
-use crate::sim::time::{posix_seconds, utc_date};
-use accomp::tide::UtcTime;
 use std::path::Path;
 
 pub use accomp_log::{unit_per_g_for_suffix, M_S2_PER_MGAL};
@@ -63,61 +61,7 @@ pub const AQG_START_UTC: &str = "2020-07-31T12:15:00.015Z";
 /// Beijing time − UTC, hours.
 pub const BEIJING_UTC_OFFSET_H: i64 = 8;
 
-/// Parses `YYYY-MM-DDTHH:MM:SS[.fff][Z]` (or with a space) to Unix seconds.
-pub fn parse_utc(text: &str) -> Option<f64> {
-    let s = text.trim().trim_end_matches('Z');
-    let (date, time) = s.split_once(['T', ' '])?;
-    let mut d = date.split('-');
-    let year: i32 = d.next()?.parse().ok()?;
-    let month: u8 = d.next()?.parse().ok()?;
-    let day: u8 = d.next()?.parse().ok()?;
-    let mut t = time.split(':');
-    let hour: u8 = t.next()?.parse().ok()?;
-    let minute: u8 = t.next()?.parse().ok()?;
-    let second: f64 = t.next().unwrap_or("0").parse().ok()?;
-    civil_unix_seconds(year, month, day, hour, minute, second)
-}
-
-/// Unix seconds of a checked calendar instant: whole seconds from jiff's calendar
-/// (`sim::time::posix_seconds`, exact integer arithmetic — the Julian-date route of
-/// `UtcTime::unix_seconds` loses ~10 µs to the f64 day count, which would jitter `time_s`), the
-/// fraction added after. `None` for a day or time that does not exist, or outside what the tide
-/// model takes (`accomp::tide::UtcTime`: years 1600–2400; a leap second's 60.x s is accepted
-/// there and counted POSIX-style, as the next minute's first second).
-pub fn civil_unix_seconds(
-    year: i32,
-    month: u8,
-    day: u8,
-    hour: u8,
-    minute: u8,
-    second: f64,
-) -> Option<f64> {
-    UtcTime::new(year, month, day, hour, minute, second).ok()?;
-    let whole = posix_seconds(
-        i64::from(year),
-        i64::from(month),
-        i64::from(day),
-        i64::from(hour),
-        i64::from(minute),
-        0,
-    )?;
-    Some(whole as f64 + second)
-}
-
-/// Formats Unix seconds as `YYYY-MM-DDTHH:MM:SS.sssZ` (the date from jiff, proleptic
-/// Gregorian).
-pub fn format_utc(unix_s: f64) -> String {
-    let days = (unix_s / 86_400.0).floor();
-    let sod = unix_s - days * 86_400.0;
-    let Some(date) = utc_date(days as i64 * 86_400) else {
-        return format!("{unix_s} s since 1970 (outside the calendar's years −9999..=9999)");
-    };
-    let (year, month, day) = (date.year(), date.month(), date.day());
-    let h = (sod / 3600.0).floor();
-    let m = ((sod - h * 3600.0) / 60.0).floor();
-    let s = sod - h * 3600.0 - m * 60.0;
-    format!("{year:04}-{month:02}-{day:02}T{h:02}:{m:02}:{s:06.3}Z")
-}
+pub use crate::log::time::{civil_unix_seconds, format_utc, parse_utc};
 
 fn read_text(path: &Path) -> Result<String, ImportError> {
     let (_, max_bytes) = crate::log::reader::limits();
@@ -399,15 +343,9 @@ pub struct Dataset {
     pub warnings: Vec<String>,
 }
 
+/// A column's unit (lower case, "" without a suffix), as `accomp_log` reads it.
 fn suffix_of(name: &str) -> String {
-    for s in ["nm_s2", "m_s2"] {
-        if name.ends_with(&format!("_{s}")) {
-            return s.into();
-        }
-    }
-    name.rsplit_once('_')
-        .map(|(_, s)| s.to_ascii_lowercase())
-        .unwrap_or_default()
+    accomp_log::unit_suffix(name).unwrap_or_default()
 }
 
 /// Picks the output column: `requested`, else the first whose name starts with `output`,
@@ -639,6 +577,19 @@ pub fn dataset_from_log(log: &Log, opts: &DatasetOptions) -> Result<Dataset, Imp
         return Err(ImportError::Shape(format!(
             "only {} usable rows: the models need at least {MIN_POINTS}",
             keep.len()
+        )));
+    }
+    // The fit squares deviations: kept values whose squares overflow (±1e308 throughout, so
+    // none is absurd against the others) would print an infinite residual as a result.
+    if let Some(big) = keep
+        .iter()
+        .map(|&i| y_raw[i].abs())
+        .max_by(f64::total_cmp)
+        .filter(|m| (m * m).is_infinite())
+    {
+        return Err(ImportError::Shape(format!(
+            "output column {out_name}: values up to {big:e} overflow the fit (their squares are \
+             infinite): not a measurement"
         )));
     }
     let mut dts: Vec<f64> = keep.windows(2).map(|w| t[w[1]] - t[w[0]]).collect();

@@ -7,6 +7,8 @@
 //! - [`eiv`]: errors in variables: each regressor channel's reading noise, fitted and smoothed.
 //! - [`effects`]: the catalogue of named effects as design-matrix extensions.
 //! - [`hysteresis`]: play / Preisach operators of the thermal hysteresis.
+//! - [`changepoints`]: many steps at once: a noise-model MOSUM scan, the set validated together.
+//! - [`plausibility`]: a flexible effect must stand above the noise and beat the simpler cause.
 //! - [`shape`]: whether an accepted effect's shape describes the data (poor-fit check).
 //! - [`select`]: greedy selection with BIC (effective sample size) and blocked cross-validation.
 //! - [`report`]: text, JSON and the Markdown report with figures.
@@ -15,11 +17,13 @@
 //! measured-data findings: `docs/discovery.md`.
 
 pub mod baseline;
+pub mod changepoints;
 pub mod effects;
 pub mod eiv;
 pub mod hysteresis;
 pub mod import;
 pub mod noise;
+pub mod plausibility;
 pub mod report;
 pub mod residual;
 pub mod select;
@@ -70,7 +74,7 @@ pub struct Discovery {
     /// Shape checks of the accepted effects (a poor fit is said, see `shape`).
     pub shape_checks: Vec<shape::ShapeCheck>,
     /// Wave-group tidal analysis of a gravity record, or why it was not run.
-    pub tidal: Result<tidal::TidalAnalysis, String>,
+    pub tidal: Result<tidal::TidalAnalysis, tidal::NotRun>,
 }
 
 /// The shared series of the candidates.
@@ -103,7 +107,7 @@ pub fn discover(
     ds: Dataset,
     table: Option<&accomp::table::CalibrationTable>,
     cfg: &select::Config,
-) -> Result<Discovery, String> {
+) -> Result<Discovery, baseline::BaselineError> {
     let measured_channels = ds.channels.clone();
     // Errors in variables: each channel's reading noise and smoother are fitted and reported;
     // see FIT_ON_SMOOTHED_CHANNELS for whether the effects are fitted on the smoothed states.
@@ -193,7 +197,7 @@ pub fn discover_path(
     }
     let mut ds = import::dataset_from_log(&log, &opts)?;
     note_bad_rows(&mut ds, &bad);
-    let d = discover(ds, table, cfg).map_err(anyhow::Error::msg)?;
+    let d = discover(ds, table, cfg)?;
     Ok((d, bad))
 }
 
@@ -223,7 +227,7 @@ fn tidal_analysis(
     base_cols: &[Vec<f64>],
     ctx: &effects::Context,
     accepted: &[select::Accepted],
-) -> Result<tidal::TidalAnalysis, String> {
+) -> Result<tidal::TidalAnalysis, tidal::NotRun> {
     if let Some(why) = tidal::not_applicable(ds) {
         return Err(why);
     }

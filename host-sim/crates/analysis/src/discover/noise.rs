@@ -610,7 +610,14 @@ impl NoiseModel {
         if !f0.is_finite() {
             return fail("the likelihood is not finite at any starting point".into());
         }
-        // Nelder–Mead in D dimensions.
+        // Nelder–Mead in D dimensions. Written here rather than taken from argmin on purpose:
+        // every trial point is clamped to the box [lo, hi] (argmin's NelderMead is unbounded);
+        // the first simplex and each shrink are evaluated as one parallel batch (par_map over
+        // Kalman filters, the cost of the discovery); and the budget is a count of likelihood
+        // evaluations (ML_EVALS_WARM/COLD in select.rs, 36/110), which is what bounds the
+        // discovery's run time, where argmin counts iterations of varying cost. Its result is
+        // the discovery's published figures (docs/discovery.md): another minimiser's path would
+        // change them.
         let steps: P = if warm {
             [0.7, 0.7, 0.25, 0.3]
         } else {

@@ -62,6 +62,10 @@ pub fn json(d: &Discovery) -> Value {
             if let Some(c) = a.effect.channel() {
                 o["channel"] = json!(c);
             }
+            // "ambiguous: A or B": the other cause, its parameters and what would separate them.
+            if let Some(amb) = &a.ambiguous_with {
+                o["ambiguous_with"] = json!(amb);
+            }
             // The Preisach distribution of play widths the hysteresis column is made of.
             if a.effect == super::effects::Effect::ThermalHysteresis {
                 if let Some(p) = &s.hysteresis {
@@ -257,6 +261,26 @@ pub fn text(d: &Discovery) -> String {
             100.0 * a.gain_out_of_sample(),
             100.0 * a.gain_forward()
         );
+        if let Some(amb) = &a.ambiguous_with {
+            let ps: Vec<String> = amb
+                .other_parameters
+                .iter()
+                .map(|(k, p)| format!("{k} = {:.4e}", p.value))
+                .collect();
+            let _ = writeln!(
+                o,
+                "     ambiguous: {} or {} (ΔBIC {:.1} vs {:.1}, fitted shapes overlap {:.2}); {} \
+                 would be: {}; to separate them: {}",
+                a.effect.name(),
+                amb.other,
+                a.delta_bic,
+                amb.other_delta_bic,
+                amb.overlap,
+                amb.other,
+                ps.join(", "),
+                amb.separates
+            );
+        }
         if a.effect == super::effects::Effect::ThermalHysteresis {
             if let Some(p) = &s.hysteresis {
                 let w: Vec<String> = p

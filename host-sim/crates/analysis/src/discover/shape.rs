@@ -302,6 +302,7 @@ mod tests {
             },
             params: Vec::new(),
             params_at_acceptance: Vec::new(),
+            ambiguous_with: None,
             delta_bic: -100.0,
             std_before: 1.0,
             std_after: 1.0,

@@ -325,27 +325,49 @@ fn band_noise(t_s: &[f64], r: &[f64], from_cpd: f64, to_cpd: f64) -> f64 {
     sum / count as f64 * (n / std::f64::consts::PI).sqrt()
 }
 
+/// Why the tidal analysis did not run on a record.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum NotRun {
+    /// The output is not in a gravity unit.
+    #[error("not a gravity record (output unit '{0}', not mGal, µGal, nm/s² or m/s²)")]
+    NotGravity(String),
+    /// The tide cannot be computed without the time and the place.
+    #[error("no start_utc or site (latitude_deg, longitude_deg)")]
+    NoTimeOrSite,
+    /// The output's unit per g is not known.
+    #[error("output unit per g unknown")]
+    NoUnitPerG,
+    /// Too short to separate the bands.
+    #[error(
+        "record spans {:.1} h, under the {:.0} h that separate the diurnal and semidiurnal \
+         bands from each other and from the drift",
+        span_s / 3600.0,
+        MIN_SPAN_S / 3600.0
+    )]
+    TooShort {
+        /// The record's span, s.
+        span_s: f64,
+    },
+    /// The core's tide model refuses the site.
+    #[error("site: {0}")]
+    Site(String),
+}
+
 /// Why a record is not analysed, or `None` when it can be.
-pub fn not_applicable(ds: &Dataset) -> Option<String> {
-    if !matches!(ds.output_unit.as_str(), "mgal" | "ugal" | "nm_s2" | "m_s2") {
-        return Some(format!(
-            "not a gravity record (output unit '{}', not mGal, µGal, nm/s² or m/s²)",
-            ds.output_unit
-        ));
+pub fn not_applicable(ds: &Dataset) -> Option<NotRun> {
+    if !crate::log::GRAVITY_UNITS.contains(&ds.output_unit.as_str()) {
+        return Some(NotRun::NotGravity(ds.output_unit.clone()));
     }
     if ds.start_unix_s.is_none() || ds.site.is_none() {
-        return Some("no start_utc or site (latitude_deg, longitude_deg)".into());
+        return Some(NotRun::NoTimeOrSite);
     }
     if ds.unit_per_g.is_none() {
-        return Some("output unit per g unknown".into());
+        return Some(NotRun::NoUnitPerG);
     }
     if ds.span_s() < MIN_SPAN_S {
-        return Some(format!(
-            "record spans {:.1} h, under the {:.0} h that separate the diurnal and semidiurnal \
-             bands from each other and from the drift",
-            ds.span_s() / 3600.0,
-            MIN_SPAN_S / 3600.0
-        ));
+        return Some(NotRun::TooShort {
+            span_s: ds.span_s(),
+        });
     }
     None
 }
@@ -356,14 +378,14 @@ pub fn analyse(
     ds: &Dataset,
     target: &[f64],
     nuisance: &[Vec<f64>],
-) -> Result<TidalAnalysis, String> {
+) -> Result<TidalAnalysis, NotRun> {
     if let Some(why) = not_applicable(ds) {
         return Err(why);
     }
-    let (lat, lon, h) = ds.site.ok_or("no site")?;
-    let start = ds.start_unix_s.ok_or("no start_utc")?;
-    let st = Station::new(lat, lon, h).map_err(|e| format!("site: {e:?}"))?;
-    let u = ds.unit_per_g.ok_or("unit per g")?;
+    let (lat, lon, h) = ds.site.ok_or(NotRun::NoTimeOrSite)?;
+    let start = ds.start_unix_s.ok_or(NotRun::NoTimeOrSite)?;
+    let st = Station::new(lat, lon, h).map_err(|e| NotRun::Site(format!("{e:?}")))?;
+    let u = ds.unit_per_g.ok_or(NotRun::NoUnitPerG)?;
     // nm/s² → output unit (a vertical gravity record: the tide adds to what it measures).
     let to_unit = u / (STANDARD_GRAVITY_M_S2 * NM_S2_PER_M_S2);
     let gt = GroupTides::new(&st, start, &ds.t_s, ds.span_s());
@@ -663,21 +685,19 @@ fn fit_delay(groups: &mut [GroupFit]) -> DelayFit {
 
 /// Text for the discovery report: the analysis, or one line saying why a record was not
 /// analysed (nothing for records that are not gravity records at all).
-pub fn text_of(t: &Result<TidalAnalysis, String>) -> String {
+pub fn text_of(t: &Result<TidalAnalysis, NotRun>) -> String {
     match t {
         Ok(a) => a.text(),
-        Err(why) if !why.starts_with("not a gravity record") => {
-            format!("tidal analysis (wave groups): not run, {why}\n")
-        }
-        Err(_) => String::new(),
+        Err(NotRun::NotGravity(_)) => String::new(),
+        Err(why) => format!("tidal analysis (wave groups): not run, {why}\n"),
     }
 }
 
 /// JSON for the discovery report (`"not_run"` with the reason when it was not run).
-pub fn json_of(t: &Result<TidalAnalysis, String>) -> serde_json::Value {
+pub fn json_of(t: &Result<TidalAnalysis, NotRun>) -> serde_json::Value {
     match t {
         Ok(a) => serde_json::to_value(a).unwrap_or(serde_json::Value::Null),
-        Err(why) => serde_json::json!({ "not_run": why }),
+        Err(why) => serde_json::json!({ "not_run": why.to_string() }),
     }
 }
 

@@ -20,8 +20,8 @@ use accomp::model::{CrossAxis, StaticCoefficients};
 use accomp::units::{Gs, Radians, RAD_PER_ARCMIN, RAD_PER_ARCSEC};
 use serde::Serialize;
 
-/// Standard gravity g_n (m/s²), the unit `local_gravity_m_s2` is divided by.
-pub const STANDARD_GRAVITY_M_S2: f64 = 9.80665;
+/// Standard gravity g_n (m/s²), the unit `local_gravity_m_s2` is divided by: the core's.
+pub use accomp::tide::STANDARD_GRAVITY_M_S2;
 /// Default dividing-head index error (arcsec, 1σ): the paper's head indexes to 0.2".
 pub const DEFAULT_INDEX_ERROR_ARCSEC: f64 = 0.2;
 /// Default gap (s) between rows that starts a new test when the log has no `test` column.

@@ -174,7 +174,7 @@ where
     let spin = stage_spinner("catalogue search on the measured − twin residual");
     let cause = super::discover(resid_ds, None, cfg);
     spin.finish_and_clear();
-    let cause = cause?;
+    let cause = cause.map_err(|e| e.to_string())?;
     lap("catalogue search");
     let spin = stage_spinner("extension and the twin's noise model");
     // 2. The extension: the accepted effects as the twin's effects; each one's contribution is

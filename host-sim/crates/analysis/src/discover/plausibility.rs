@@ -1,0 +1,239 @@
+//! Whether a flexible effect is physically plausible, beyond buying likelihood.
+//!
+//! A flexible column (the 24-width Preisach distribution of `thermal_hysteresis`) can take the
+//! shape of almost any leftover that correlates with the temperature programme: in null logs
+//! with white + 1/f flicker + random-walk noise it was accepted at 0.04–0.26 µg with ΔBIC
+//! −50 … −600, far below the noise at the time scale it acts on. Two checks that do not depend
+//! on the likelihood's charge for freedom:
+//!
+//! 1. **Above the noise floor at its own time scale** ([`noise_floor`]): the fitted
+//!    contribution's Allan deviation must exceed the noise model's at some averaging time τ
+//!    of the record's octave grid. A bias that never stands above the noise at any τ is not
+//!    a cause the record shows, whatever a many-parameter fit makes of it: a loop of branch
+//!    half-width h switching every T has σ_A(T) ≈ √2·h, so a 1 µg loop on a 0.5–1 µg flicker
+//!    floor passes, a 0.2 µg one does not.
+//! 2. **Better than the simpler explanation out of sample** ([`simpler_than`]): a loop must
+//!    predict held-out blocks better than a first-order thermal lag (two parameters, one
+//!    mechanism). When it does not, the lag is the explanation the record supports.
+
+use super::effects::Effect;
+use super::import::Dataset;
+use super::noise::NoiseModel;
+
+/// The contribution's Allan deviation against the noise model's, at the τ where it stands
+/// highest above it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Floor {
+    /// Averaging time, s.
+    pub tau_s: f64,
+    /// The contribution's Allan deviation there, output unit.
+    pub effect_adev: f64,
+    /// The noise model's Allan deviation there, output unit.
+    pub noise_adev: f64,
+}
+
+impl Floor {
+    /// The contribution over the noise (≥ 1: above the floor).
+    pub fn ratio(&self) -> f64 {
+        self.effect_adev / self.noise_adev.max(f64::MIN_POSITIVE)
+    }
+}
+
+/// Least ratio of a flexible effect's Allan deviation to the noise model's at its best τ.
+pub const FLOOR_RATIO_MIN: f64 = 1.0;
+
+/// The effects whose freedom is large enough to absorb noise, so they must pass [`noise_floor`].
+pub fn is_flexible(e: &Effect) -> bool {
+    matches!(e, Effect::ThermalHysteresis)
+}
+
+/// The simpler physical explanations a flexible effect must beat out of sample.
+pub fn simpler_than(e: &Effect) -> Vec<Effect> {
+    match e {
+        Effect::ThermalHysteresis => vec![Effect::ThermalLag],
+        _ => Vec::new(),
+    }
+}
+
+/// The contribution's Allan deviation against `noise`'s on the record's octave τ grid (the
+/// same estimator as the residual's: gaps placed on the time grid); `None` when no τ fits.
+pub fn noise_floor(ds: &Dataset, contribution: &[f64], noise: &NoiseModel) -> Option<Floor> {
+    super::residual::adev(ds, contribution)
+        .into_iter()
+        .filter(|(tau, dev)| *tau > 0.0 && dev.is_finite())
+        .map(|(tau_s, effect_adev)| Floor {
+            tau_s,
+            effect_adev,
+            noise_adev: model_avar(noise, ds.dt_s, tau_s).max(0.0).sqrt(),
+        })
+        .max_by(|a, b| a.ratio().total_cmp(&b.ratio()))
+}
+
+/// The noise model's Allan variance at `tau_s` from its state-space levels (white of variance
+/// `white_var` per point of spacing `dt_s`, the flicker components, the random walk), so that a
+/// model without fitted Allan coefficients (the white fallback) has its floor too.
+pub fn model_avar(noise: &NoiseModel, dt_s: f64, tau_s: f64) -> f64 {
+    let f: f64 = noise
+        .flicker
+        .iter()
+        .map(|&(t, v)| v * super::noise::ou_avar(tau_s, t))
+        .sum();
+    noise.white_var * dt_s / tau_s + f + noise.rw_per_s * tau_s / 3.0
+}
+
+/// Why a flexible effect's fitted contribution is not above the noise, if it is not.
+pub fn below_floor(ds: &Dataset, contribution: &[f64], noise: &NoiseModel) -> Option<String> {
+    let f = noise_floor(ds, contribution, noise)?;
+    (f.ratio() < FLOOR_RATIO_MIN).then(|| {
+        format!(
+            "its contribution never stands above the noise: at best (τ = {:.0} s) its Allan \
+             deviation is {:.3e} against the noise model's {:.3e} ({:.2}×, at least \
+             {FLOOR_RATIO_MIN} needed) — a flexible column fitting the noise, not a cause",
+            f.tau_s,
+            f.effect_adev,
+            f.noise_adev,
+            f.ratio()
+        )
+    })
+}
+
+/// Two candidates of one round whose ΔBIC differ by less than this explain the data equally
+/// (the lag-or-loop margin of `hysteresis`).
+pub const AMBIGUOUS_DBIC: f64 = super::hysteresis::LAG_OR_LOOP_DBIC;
+
+/// ... when their fitted shapes (projections of the whitened residual on each, off the current
+/// model) overlap by at least this (cosine): they explain the same part of the residual.
+pub const AMBIGUOUS_OVERLAP: f64 = 0.8;
+
+/// An accepted effect that another cause explains equally: reported as "ambiguous: A or B".
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct Ambiguity {
+    /// The other cause.
+    pub other: String,
+    /// Its ΔBIC in the round the effect was accepted in.
+    pub other_delta_bic: f64,
+    /// Its parameters fitted in the effect's place.
+    pub other_parameters: Vec<(String, super::effects::Param)>,
+    /// Cosine between the two fitted shapes (whitened, off the current model).
+    pub overlap: f64,
+    /// What measurement would separate them.
+    pub separates: String,
+}
+
+/// The fitted shape of `cols` (whitened and off the current model) in the whitened residual
+/// `r_w`: the residual's projection on their span (Gram–Schmidt).
+pub fn fitted_shape(cols: &[Vec<f64>], r_w: &[f64]) -> Vec<f64> {
+    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+    let mut q: Vec<Vec<f64>> = Vec::new();
+    for c in cols {
+        let mut v = c.clone();
+        for b in &q {
+            let k = dot(&v, b);
+            v.iter_mut().zip(b).for_each(|(x, y)| *x -= k * y);
+        }
+        let nv = dot(&v, &v).sqrt();
+        if nv > 0.0 && nv.is_finite() {
+            q.push(v.into_iter().map(|x| x / nv).collect());
+        }
+    }
+    let mut p = vec![0.0; r_w.len()];
+    for b in &q {
+        let k = dot(r_w, b);
+        p.iter_mut().zip(b).for_each(|(x, y)| *x += k * y);
+    }
+    p
+}
+
+/// Cosine between two fitted shapes (0 when either is zero).
+pub fn overlap(a: &[f64], b: &[f64]) -> f64 {
+    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+    let d = (dot(a, a) * dot(b, b)).sqrt();
+    if d > 0.0 {
+        dot(a, b) / d
+    } else {
+        0.0
+    }
+}
+
+/// What measurement would tell two causes apart.
+pub fn separating_measurement(a: &Effect, b: &Effect) -> String {
+    use Effect::*;
+    let pair = |x: &Effect, y: &Effect| {
+        (std::mem::discriminant(a) == std::mem::discriminant(x)
+            && std::mem::discriminant(b) == std::mem::discriminant(y))
+            || (std::mem::discriminant(a) == std::mem::discriminant(y)
+                && std::mem::discriminant(b) == std::mem::discriminant(x))
+    };
+    if pair(&ThermalLag, &ThermalHysteresis) {
+        "temperature ramps of different rates (a lag's offset scales with the rate, a loop's \
+         does not) or a hold after a ramp (a lag settles, a loop stays on its branch)"
+            .into()
+    } else if pair(&Warmup, &AgingDrift) {
+        "a longer record (an exponential settles, a logarithm keeps growing)".into()
+    } else if pair(&TiltCoupling, &BuildingTilt) || pair(&TiltCoupling, &TidalTilt) {
+        "a tilt excursion off the solar day (a deliberate tilt of the pier or the mount)".into()
+    } else if pair(&Step { duration_s: 0.0 }, &Warmup)
+        || pair(&Step { duration_s: 0.0 }, &AgingDrift)
+    {
+        "a record that continues past the change (a step holds its level, a drift goes on)".into()
+    } else {
+        format!(
+            "a record in which the {} and {} columns differ more than here",
+            a.name(),
+            b.name()
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn white(var: f64) -> NoiseModel {
+        NoiseModel::white(var)
+    }
+
+    #[test]
+    fn two_columns_fitting_the_same_leftover_overlap_and_an_orthogonal_one_does_not() {
+        let n = 400;
+        let r: Vec<f64> = (0..n).map(|i| (i as f64 * 0.05).sin()).collect();
+        let a = vec![r.clone()];
+        // Nearly the same shape (a small phase shift): overlap near 1.
+        let b = vec![(0..n)
+            .map(|i| (i as f64 * 0.05 + 0.1).sin())
+            .collect::<Vec<_>>()];
+        // An orthogonal one (a cosine over whole cycles would be; a constant here) explains little.
+        let c = vec![vec![1.0; n]];
+        let (pa, pb, pc) = (
+            fitted_shape(&a, &r),
+            fitted_shape(&b, &r),
+            fitted_shape(&c, &r),
+        );
+        assert!(overlap(&pa, &pb) > 0.99, "{}", overlap(&pa, &pb));
+        assert!(overlap(&pa, &pc) > 0.0 && overlap(&pa, &pc) < AMBIGUOUS_OVERLAP);
+        assert!(
+            separating_measurement(&Effect::ThermalHysteresis, &Effect::ThermalLag)
+                .contains("different rates")
+        );
+    }
+
+    #[test]
+    fn a_square_wave_stands_above_white_noise_of_its_size_but_not_one_tenth_of_it() {
+        // ±1 switching every 100 samples, 60 s spacing; white noise σ = 1 per sample has
+        // σ_A(6000 s) = 1/√100 = 0.1, the wave's σ_A(6000 s) = √2.
+        let n = 4000;
+        let t: Vec<f64> = (0..n).map(|i| 60.0 * i as f64).collect();
+        let sq: Vec<f64> = (0..n)
+            .map(|i| if (i / 100) % 2 == 0 { 1.0 } else { -1.0 })
+            .collect();
+        let ds = Dataset::test_g(t, vec![0.0; n], 60.0);
+        let f = noise_floor(&ds, &sq, &white(1.0)).expect("floor");
+        assert!(f.ratio() > 5.0, "{f:?}");
+        assert!(below_floor(&ds, &sq, &white(1.0)).is_none());
+        // The same wave at 1 % against white noise of σ 1 is nowhere above it (σ_A of the
+        // noise at the longest τ ≈ 1/√(n/2) ≈ 0.022, the wave's ≤ 0.014).
+        let small: Vec<f64> = sq.iter().map(|v| 0.01 * v).collect();
+        let why = below_floor(&ds, &small, &white(1.0)).expect("refused");
+        assert!(why.contains("never stands above the noise"), "{why}");
+    }
+}

@@ -1,0 +1,355 @@
+//! The catalogue of effects, once: every effect the discovery names and a scenario's
+//! `[[effects]]` injects, with its parameters as both write them (the discovery's report and JSON,
+//! the scenario's TOML keys) and their units. The discovery's `Effect` and the simulator's
+//! [`ScenarioEffect`](crate::effects::ScenarioEffect) each say which entry they are (`kind()`),
+//! and their tests check that the parameters they write are the ones listed here, in this order.
+//!
+//! "output" in a unit is the record's output unit (V, g, µGal, ...).
+
+/// One entry of the catalogue.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum EffectKind {
+    /// The proof mass lags the mount temperature.
+    ThermalLag,
+    /// Different bias on heating and cooling branches.
+    ThermalHysteresis,
+    /// Torquer self-heating after an input change.
+    SelfHeating,
+    /// Exponential transient after power-on.
+    Warmup,
+    /// Logarithmic aging.
+    AgingDrift,
+    /// A bias change, abrupt or over a linear ramp ([`step_fraction`]).
+    Step,
+    /// A correction of the solid-earth tide gravity.
+    TidalGravity,
+    /// The solid-earth tide tilt along the sensitive axis (0 g records).
+    TidalTilt,
+    /// Diurnal building tilt (0 g records).
+    BuildingTilt,
+    /// Gain error of the tiltmeter's eq. (5) tilt term.
+    TiltCoupling,
+    /// An auxiliary channel through a first-order lag.
+    AmbientCoupling,
+    /// Barometric admittance.
+    PressureAdmittance,
+    /// A line at a period matching no known cause.
+    Periodic,
+    /// White reading noise on a measured channel: simulated, not a discovery candidate (the
+    /// discovery reports a channel's noise with its channels, not as an effect).
+    ChannelNoise,
+}
+
+/// A parameter: its name in the discovery's output and in the scenario, and its unit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ParamSpec {
+    /// Name (report, JSON, scenario TOML key).
+    pub name: &'static str,
+    /// Unit ("output" = the record's output unit; "1" = dimensionless).
+    pub unit: &'static str,
+}
+
+impl EffectKind {
+    /// Every entry, in the catalogue's order.
+    pub const ALL: [EffectKind; 14] = [
+        EffectKind::ThermalLag,
+        EffectKind::ThermalHysteresis,
+        EffectKind::SelfHeating,
+        EffectKind::Warmup,
+        EffectKind::AgingDrift,
+        EffectKind::Step,
+        EffectKind::TidalGravity,
+        EffectKind::TidalTilt,
+        EffectKind::BuildingTilt,
+        EffectKind::TiltCoupling,
+        EffectKind::AmbientCoupling,
+        EffectKind::PressureAdmittance,
+        EffectKind::Periodic,
+        EffectKind::ChannelNoise,
+    ];
+
+    /// The name (the scenario's `kind`, the discovery's effect name).
+    pub fn name(self) -> &'static str {
+        match self {
+            EffectKind::ThermalLag => "thermal_lag",
+            EffectKind::ThermalHysteresis => "thermal_hysteresis",
+            EffectKind::SelfHeating => "self_heating",
+            EffectKind::Warmup => "warmup",
+            EffectKind::AgingDrift => "aging_drift",
+            EffectKind::Step => "step",
+            EffectKind::TidalGravity => "tidal_gravity",
+            EffectKind::TidalTilt => "tidal_tilt",
+            EffectKind::BuildingTilt => "building_tilt",
+            EffectKind::TiltCoupling => "tilt_coupling",
+            EffectKind::AmbientCoupling => "ambient_coupling",
+            EffectKind::PressureAdmittance => "pressure_admittance",
+            EffectKind::Periodic => "periodic",
+            EffectKind::ChannelNoise => "channel_noise",
+        }
+    }
+
+    /// The entry of a name.
+    pub fn from_name(name: &str) -> Option<EffectKind> {
+        EffectKind::ALL.into_iter().find(|k| k.name() == name)
+    }
+
+    /// Whether the discovery looks for it.
+    pub fn discovered(self) -> bool {
+        self != EffectKind::ChannelNoise
+    }
+
+    /// Whether the discovery can accept it more than once (at other parameters).
+    pub fn repeatable(self) -> bool {
+        matches!(self, EffectKind::Step | EffectKind::Periodic)
+    }
+
+    /// The parameters, in the order the discovery reports them. The scenario takes the same
+    /// keys; a few entries bind a channel (`ambient_coupling`, `channel_noise`: `channel`) and
+    /// `tidal_gravity` also takes the tidal analysis's `delay_s` and wave `groups`.
+    pub fn parameters(self) -> &'static [ParamSpec] {
+        match self {
+            EffectKind::ThermalLag => &[
+                ParamSpec {
+                    name: "tau_s",
+                    unit: "s",
+                },
+                ParamSpec {
+                    name: "coefficient",
+                    unit: "output/°C",
+                },
+            ],
+            EffectKind::ThermalHysteresis => &[
+                ParamSpec {
+                    name: "half_width",
+                    unit: "output",
+                },
+                ParamSpec {
+                    name: "play_half_width_c",
+                    unit: "°C",
+                },
+            ],
+            EffectKind::SelfHeating => &[
+                ParamSpec {
+                    name: "tau_s",
+                    unit: "s",
+                },
+                ParamSpec {
+                    name: "coefficient",
+                    unit: "output/g²",
+                },
+            ],
+            EffectKind::Warmup | EffectKind::AgingDrift => &[
+                ParamSpec {
+                    name: "tau_s",
+                    unit: "s",
+                },
+                ParamSpec {
+                    name: "amplitude",
+                    unit: "output",
+                },
+            ],
+            EffectKind::Step => &[
+                ParamSpec {
+                    name: "time_s",
+                    unit: "s",
+                },
+                ParamSpec {
+                    name: "size",
+                    unit: "output",
+                },
+                ParamSpec {
+                    name: "duration_s",
+                    unit: "s",
+                },
+            ],
+            EffectKind::TidalGravity => &[ParamSpec {
+                name: "amplitude_factor",
+                unit: "1",
+            }],
+            EffectKind::TidalTilt => &[
+                ParamSpec {
+                    name: "amplitude_factor",
+                    unit: "1",
+                },
+                ParamSpec {
+                    name: "azimuth_deg",
+                    unit: "°",
+                },
+            ],
+            EffectKind::BuildingTilt => &[
+                ParamSpec {
+                    name: "amplitude",
+                    unit: "output",
+                },
+                ParamSpec {
+                    name: "phase_rad",
+                    unit: "rad",
+                },
+            ],
+            EffectKind::TiltCoupling => &[ParamSpec {
+                name: "gain",
+                unit: "1",
+            }],
+            EffectKind::AmbientCoupling => &[
+                ParamSpec {
+                    name: "coefficient",
+                    unit: "output/channel unit",
+                },
+                ParamSpec {
+                    name: "lag_s",
+                    unit: "s",
+                },
+            ],
+            EffectKind::PressureAdmittance => &[ParamSpec {
+                name: "coefficient",
+                unit: "output/Pa",
+            }],
+            EffectKind::Periodic => &[
+                ParamSpec {
+                    name: "period_s",
+                    unit: "s",
+                },
+                ParamSpec {
+                    name: "amplitude",
+                    unit: "output",
+                },
+                ParamSpec {
+                    name: "phase_rad",
+                    unit: "rad",
+                },
+            ],
+            EffectKind::ChannelNoise => &[ParamSpec {
+                name: "noise",
+                unit: "channel unit (°C, rad, Pa)",
+            }],
+        }
+    }
+
+    /// The parameter names, in order.
+    pub fn parameter_names(self) -> Vec<&'static str> {
+        self.parameters().iter().map(|p| p.name).collect()
+    }
+}
+
+/// How far a `step` of `duration_s` centred on `time_s` has gone at `t`: 0 before, 1 after, a
+/// linear ramp in between; `duration_s` 0 is the jump H(t − time_s). The discovery's step column
+/// and the simulator's step are both this.
+#[inline]
+pub fn step_fraction(t: f64, time_s: f64, duration_s: f64) -> f64 {
+    if duration_s > 0.0 {
+        let start = time_s - 0.5 * duration_s;
+        ((t - start) / duration_s).clamp(0.0, 1.0)
+    } else {
+        f64::from(t >= time_s)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::effects::ScenarioEffect;
+
+    #[test]
+    fn names_are_unique_and_read_back() {
+        for k in EffectKind::ALL {
+            assert_eq!(EffectKind::from_name(k.name()), Some(k));
+        }
+        assert_eq!(EffectKind::from_name("no_such_effect"), None);
+    }
+
+    /// One scenario entry of each kind, every parameter set (non-zero, so none is skipped).
+    fn one_of_each() -> Vec<ScenarioEffect> {
+        use ScenarioEffect as S;
+        vec![
+            S::ThermalLag {
+                tau_s: 1.0,
+                coefficient: 1.0,
+            },
+            S::ThermalHysteresis {
+                half_width: 1.0,
+                play_half_width_c: 1.0,
+            },
+            S::SelfHeating {
+                tau_s: 1.0,
+                coefficient: 1.0,
+            },
+            S::Warmup {
+                tau_s: 1.0,
+                amplitude: 1.0,
+            },
+            S::AgingDrift {
+                tau_s: 1.0,
+                amplitude: 1.0,
+            },
+            S::Step {
+                time_s: 1.0,
+                size: 1.0,
+                duration_s: 1.0,
+            },
+            S::TidalGravity {
+                amplitude_factor: 1.0,
+                delay_s: 1.0,
+                groups: Vec::new(),
+            },
+            S::TidalTilt {
+                amplitude_factor: 1.0,
+                azimuth_deg: 1.0,
+            },
+            S::BuildingTilt {
+                amplitude: 1.0,
+                phase_rad: 1.0,
+            },
+            S::TiltCoupling { gain: 1.0 },
+            S::AmbientCoupling {
+                channel: "room_c".into(),
+                coefficient: 1.0,
+                lag_s: 1.0,
+            },
+            S::PressureAdmittance { coefficient: 1.0 },
+            S::Periodic {
+                period_s: 1.0,
+                amplitude: 1.0,
+                phase_rad: 1.0,
+            },
+            S::ChannelNoise {
+                channel: "temperature_c".into(),
+                noise: 1.0,
+            },
+        ]
+    }
+
+    /// The scenario injects what the catalogue lists: its `kind` is the catalogue's name and its
+    /// keys are the catalogue's parameters (plus the channel an entry binds and the tidal
+    /// analysis's delay and groups, which are not fitted parameters).
+    #[test]
+    fn every_scenario_effect_writes_the_catalogue_name_and_parameters() {
+        let all = one_of_each();
+        let kinds: Vec<EffectKind> = all.iter().map(ScenarioEffect::kind).collect();
+        assert_eq!(kinds, EffectKind::ALL);
+        for e in &all {
+            let toml::Value::Table(t) = toml::Value::try_from(e).unwrap() else {
+                panic!("{e:?} is not a table")
+            };
+            assert_eq!(t["kind"].as_str(), Some(e.name()));
+            let mut keys: Vec<&str> = t
+                .keys()
+                .map(String::as_str)
+                .filter(|k| !matches!(*k, "kind" | "channel" | "delay_s" | "groups"))
+                .collect();
+            let mut expected = e.kind().parameter_names();
+            keys.sort_unstable();
+            expected.sort_unstable();
+            assert_eq!(keys, expected, "{}", e.name());
+        }
+    }
+
+    #[test]
+    fn a_step_ramps_linearly_over_its_duration_and_jumps_without_one() {
+        assert_eq!(step_fraction(9.9, 10.0, 0.0), 0.0);
+        assert_eq!(step_fraction(10.0, 10.0, 0.0), 1.0);
+        assert_eq!(step_fraction(4.0, 10.0, 10.0), 0.0);
+        assert_eq!(step_fraction(10.0, 10.0, 10.0), 0.5);
+        assert_eq!(step_fraction(12.5, 10.0, 10.0), 0.75);
+        assert_eq!(step_fraction(16.0, 10.0, 10.0), 1.0);
+    }
+}
