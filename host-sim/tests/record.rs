@@ -417,9 +417,11 @@ fn a_pc_clock_step_is_an_event_and_moves_no_row() {
         append: false,
         force: false,
         daily: false,
+        compress_days: false,
         site: None,
         note: None,
         rate_hz: None,
+        live_rows: false,
     };
     let t0 = Instant::now();
     let unix0 = SystemTime::now()

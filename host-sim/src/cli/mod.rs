@@ -14,6 +14,7 @@ pub mod fit;
 pub mod load;
 pub mod plot;
 pub mod record;
+pub mod record_tui;
 pub mod simulate;
 pub mod simulate_tumble;
 pub mod stability;

@@ -150,6 +150,62 @@ impl Grid {
         })
     }
 
+    /// For a recorder's log (`accomp record`): as [`Grid::from_time`], but a row off the grid —
+    /// a board reset, whose new boot samples at another phase — starts a new continuous segment
+    /// instead of refusing the log. Each segment keeps its own time stamps; it is placed at the
+    /// grid point nearest its first row, with at least one empty point before it, so no Allan
+    /// term spans two segments (terms touching a gap are skipped): the deviation pools the terms
+    /// within the segments and nothing is resampled. Returns the grid and the first row of every
+    /// segment after the first; refuses (with the first off-grid row) beyond [`MAX_SEGMENTS`].
+    pub fn from_time_segmented(t: &[f64]) -> Result<(Self, Vec<usize>), GridError> {
+        let n = t.len();
+        if n < 3 {
+            return Err(GridError::TooShort);
+        }
+        let (first, last) = (t[0], t[n - 1]);
+        let mut d: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
+        let mid = d.len() / 2;
+        let (_, &mut tau0, _) = d.select_nth_unstable_by(mid, f64::total_cmp);
+        let grid = ((last - first) / tau0).round() as usize + 1;
+        if grid > 4 * n {
+            return Err(GridError::TooSparse { grid, samples: n });
+        }
+        let mut index = Vec::with_capacity(n);
+        let mut starts = Vec::new();
+        let mut prev: Option<usize> = None;
+        // Phase of the current segment: its time stamps sit at first + shift + k tau0.
+        let mut shift = 0.0;
+        for (i, &ti) in t.iter().enumerate() {
+            let k_f = ((ti - first - shift) / tau0).round();
+            let off = (ti - first - shift) - k_f * tau0;
+            let mut k = k_f.max(0.0) as usize;
+            if off.abs() > 0.25 * tau0 || prev.is_some_and(|p| k <= p) {
+                if starts.len() == MAX_SEGMENTS {
+                    return Err(GridError::OffGrid {
+                        index: starts[0],
+                        time_s: t[starts[0]],
+                        tau0_s: tau0,
+                    });
+                }
+                let p = prev.unwrap_or(0);
+                k = (((ti - first) / tau0).round().max(0.0) as usize).max(p + 2);
+                shift = (ti - first) - k as f64 * tau0;
+                starts.push(i);
+            }
+            prev = Some(k);
+            index.push(k);
+        }
+        let len = prev.map_or(0, |p| p + 1);
+        Ok((
+            Grid {
+                tau0_s: tau0,
+                index: Some(index),
+                len,
+            },
+            starts,
+        ))
+    }
+
     /// The column laid on the grid: samples where they fall, NaN at missing points.
     pub fn place(&self, y: &[f64]) -> Vec<f64> {
         match &self.index {
@@ -358,6 +414,13 @@ pub fn column_unit(log: &Log, name: &str) -> Result<(String, f64), StabilityErro
     }
 }
 
+/// Most continuous segments a recorder's log is split into for the Allan deviation
+/// ([`Grid::from_time_segmented`]); beyond, the time base is taken as no grid.
+pub const MAX_SEGMENTS: usize = 1000;
+
+/// Metadata key that marks a recorder's log (`accomp record <version>`).
+pub const RECORDER_KEY: &str = "recorder";
+
 /// Above this many grid points `TauSet::All` is refused (O(N^2)).
 pub const MAX_ALL_TAUS_LEN: usize = 200_000;
 
@@ -373,7 +436,34 @@ pub fn analyse(log: &Log, opts: &Options) -> Result<Report, StabilityError> {
         opts.columns.clone()
     };
     let t = log.time_s();
-    let grid = Grid::from_time(t);
+    let recorder_log = log
+        .meta(RECORDER_KEY)
+        .is_some_and(|r| r.starts_with("accomp record"));
+    // A recorder's log over a board reset is split into its continuous segments (announced in
+    // the Allan note); any other log off the grid gets no Allan curve, as before.
+    let (grid, segment_starts) = match Grid::from_time(t) {
+        Err(e @ GridError::OffGrid { .. }) if recorder_log => match Grid::from_time_segmented(t) {
+            Ok((g, starts)) => (Ok(g), starts),
+            Err(_) => (Err(e), Vec::new()),
+        },
+        other => (other, Vec::new()),
+    };
+    let segment_note =
+        (!segment_starts.is_empty()).then(|| {
+            let shown: Vec<String> = segment_starts
+                .iter()
+                .take(5)
+                .map(|&i| format!("{}", t[i]))
+                .collect();
+            format!(
+            "{} continuous segments: the sampling phase changes at time_s = {}{} (board resets \
+             in a recorder's log); the Allan deviation pools the terms within each segment, none \
+             spans two, nothing is resampled",
+            segment_starts.len() + 1,
+            shown.join(", "),
+            if segment_starts.len() > 5 { ", …" } else { "" }
+        )
+        });
     if let (Ok(g), TauSet::All, true) = (&grid, opts.taus, opts.allan) {
         if g.len > MAX_ALL_TAUS_LEN {
             return Err(StabilityError::TooLongForAllTaus(g.len));
@@ -432,6 +522,7 @@ pub fn analyse(log: &Log, opts: &Options) -> Result<Report, StabilityError> {
                         Ok(p) => {
                             rep.adev = p.deviation(Statistic::Oadev, opts.taus);
                             rep.mdev = p.deviation(Statistic::Mdev, opts.taus);
+                            rep.allan_note.clone_from(&segment_note);
                         }
                         Err(e) => rep.allan_note = Some(e.to_string()),
                     }
@@ -723,6 +814,44 @@ mod tests {
         let c = &rep.columns[0];
         assert!(c.adev.is_empty() && c.allan_note.is_some());
         assert!(c.std.is_some() && c.regression.is_some());
+    }
+
+    #[test]
+    fn a_recorders_log_over_a_reset_gets_the_allan_deviation_pooled_within_its_segments() {
+        // Boot 1: t = 0..9 s, readings 0, 1, 0, 1, …; boot 2 samples 0.4 s off that grid:
+        // t = 10.4..20.4 s, readings constant 5. At tau = 1 s the segments' own terms are the
+        // 9 first differences of boot 1 (each ±1) and the 10 of boot 2 (each 0):
+        // σ² = Σ Δy² / (2 · terms) = 9 / 38; the difference across the reset is no term.
+        let mut text = String::from("# recorder: accomp record 0.1.0\ntime_s,k1_g\n");
+        for k in 0..10 {
+            text.push_str(&format!("{k},{}\n", k % 2));
+        }
+        for k in 0..11 {
+            text.push_str(&format!("{},5\n", 10.4 + f64::from(k)));
+        }
+        let opts = Options {
+            columns: vec!["k1_g".into()],
+            ..Options::default()
+        };
+        let rep = analyse(&Log::parse_str(&text).unwrap(), &opts).unwrap();
+        let c = &rep.columns[0];
+        let p = &c.adev[0];
+        assert_eq!((p.m, p.n_terms), (1, 19));
+        assert!((p.dev - (9.0f64 / 38.0).sqrt()).abs() < 1e-12, "{}", p.dev);
+        let note = c.allan_note.as_deref().unwrap();
+        assert!(
+            note.starts_with("2 continuous segments") && note.contains("10.4"),
+            "{note}"
+        );
+        // The same rows without the recorder's mark: refused as off the grid, as before.
+        let plain = text.replacen("# recorder: accomp record 0.1.0\n", "", 1);
+        let rep = analyse(&Log::parse_str(&plain).unwrap(), &opts).unwrap();
+        assert!(rep.columns[0].adev.is_empty());
+        assert!(rep.columns[0]
+            .allan_note
+            .as_deref()
+            .unwrap()
+            .contains("off the"));
     }
 
     #[test]

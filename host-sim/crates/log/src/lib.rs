@@ -50,26 +50,61 @@ pub mod time;
 pub mod writer;
 use reader::{ReadError, Records};
 
-/// The bytes of a log file, or of a directory of daily files (`*.csv` in name order, as
-/// `accomp record --rotate daily` writes them) read as one record: every file after the first
-/// must have the same header row and `start_utc` (its metadata and header are skipped, so
-/// `time_s` runs on), or the directory is refused naming the file.
+/// Whether a record file is gzip-compressed (`.gz`, as `rec.csv.gz`): it is decompressed as it
+/// is read.
+pub fn is_gzip(path: &Path) -> bool {
+    path.extension().is_some_and(|e| e == "gz")
+}
+
+/// One file of a record, decompressed as it is read when it is `.gz`. The byte limit is checked
+/// on the file's size here and on the bytes read (decompressed) by the reader, so a `.csv.gz`
+/// has the same row and byte limits as the `.csv` it holds.
+fn open_one(path: &Path) -> Result<Box<dyn BufRead + Send>, LogError> {
+    reader::check_file_size(path)?;
+    let f = File::open(path)?;
+    Ok(if is_gzip(path) {
+        // Multi-member: a file compressed in pieces (or appended to) is read whole.
+        Box::new(BufReader::with_capacity(
+            1 << 20,
+            flate2::read::MultiGzDecoder::new(BufReader::with_capacity(1 << 16, f)),
+        ))
+    } else {
+        Box::new(BufReader::with_capacity(1 << 20, f))
+    })
+}
+
+/// The bytes of a log file (`.csv`, or `.csv.gz` decompressed as it is read), or of a directory
+/// of daily files (`*.csv` and `*.csv.gz` in name order, as `accomp record --rotate daily` writes
+/// them) read as one record: every file after the first must have the same header row and
+/// `start_utc` (its metadata and header are skipped, so `time_s` runs on), or the directory is
+/// refused naming the file. A day present both plain and compressed is refused, naming both.
 pub fn open_record(path: &Path) -> Result<Box<dyn BufRead + Send>, LogError> {
     if !path.is_dir() {
-        reader::check_file_size(path)?;
-        let f = File::open(path)?;
-        return Ok(Box::new(BufReader::with_capacity(1 << 20, f)));
+        return open_one(path);
     }
     let mut files: Vec<std::path::PathBuf> = std::fs::read_dir(path)?
         .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.is_file() && p.extension().is_some_and(|e| e == "csv"))
+        .filter(|p| {
+            p.is_file()
+                && p.file_name()
+                    .and_then(|n| n.to_str())
+                    .is_some_and(|n| n.ends_with(".csv") || n.ends_with(".csv.gz"))
+        })
         .collect();
     files.sort();
+    for w in files.windows(2) {
+        if is_gzip(&w[1]) && w[1].with_extension("") == w[0] {
+            return Err(LogError::Shape(format!(
+                "{} and {}: the same day twice (plain and compressed); remove one",
+                w[0].display(),
+                w[1].display()
+            )));
+        }
+    }
     let mut first: Option<(String, Option<String>)> = None;
     let mut chain: Box<dyn Read + Send> = Box::new(std::io::empty());
     for f in files {
-        reader::check_file_size(&f)?;
-        let mut r = BufReader::with_capacity(1 << 20, File::open(&f)?);
+        let mut r = open_one(&f)?;
         // The preamble: `#` lines and blank lines up to the header row.
         let mut preamble = Vec::new();
         let mut start = None;
@@ -895,6 +930,62 @@ mod tests {
         1.0, 1.5 ,60.5,clamped\r\n\
         \n\
         2,,61,ok\n";
+
+    fn gzip(bytes: &[u8]) -> Vec<u8> {
+        let mut e = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+        e.write_all(bytes).unwrap();
+        e.finish().unwrap()
+    }
+
+    fn scratch(name: &str) -> std::path::PathBuf {
+        let d = std::env::temp_dir().join(format!("accomp-log-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    }
+
+    #[test]
+    fn a_csv_gz_reads_as_the_csv_it_holds() {
+        let d = scratch("gz");
+        std::fs::write(d.join("rec.csv"), GOOD).unwrap();
+        std::fs::write(d.join("rec.csv.gz"), gzip(GOOD.as_bytes())).unwrap();
+        let plain = Log::read_path(d.join("rec.csv")).unwrap();
+        let gz = Log::read_path(d.join("rec.csv.gz")).unwrap();
+        assert_eq!(gz.len(), 3);
+        assert_eq!(gz.time_s(), plain.time_s());
+        assert_eq!(gz.meta("start_utc"), Some("2024-03-01T00:00:00Z"));
+        // Two gzip members (a file compressed in pieces) read as one.
+        let (a, b) = GOOD.split_at(GOOD.find("1.0,").unwrap());
+        let mut two = gzip(a.as_bytes());
+        two.extend(gzip(b.as_bytes()));
+        std::fs::write(d.join("two.csv.gz"), two).unwrap();
+        assert_eq!(Log::read_path(d.join("two.csv.gz")).unwrap().len(), 3);
+        // A cut compressed file is an error, not a shorter record.
+        let full = gzip(GOOD.as_bytes());
+        std::fs::write(d.join("cut.csv.gz"), &full[..full.len() - 12]).unwrap();
+        assert!(Log::read_path(d.join("cut.csv.gz")).is_err());
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    #[test]
+    fn a_directory_of_plain_and_compressed_days_is_one_record_but_not_a_day_twice() {
+        let d = scratch("days");
+        let day2 =
+            "# start_utc: 2024-03-01T00:00:00Z\ntime_s,output_v,temperature_c,status\n3,2,62,ok\n";
+        std::fs::write(d.join("2024-03-01.csv.gz"), gzip(GOOD.as_bytes())).unwrap();
+        std::fs::write(d.join("2024-03-02.csv"), day2).unwrap();
+        let log = Log::read_path(&d).unwrap();
+        assert_eq!(log.time_s(), &[0.0, 1.0, 2.0, 3.0]);
+        std::fs::write(d.join("2024-03-02.csv.gz"), gzip(day2.as_bytes())).unwrap();
+        match Log::read_path(&d) {
+            Err(LogError::Shape(m)) => assert!(
+                m.contains("2024-03-02.csv and") && m.contains("2024-03-02.csv.gz"),
+                "{m}"
+            ),
+            other => panic!("expected the day twice refused, got {other:?}"),
+        }
+        let _ = std::fs::remove_dir_all(&d);
+    }
 
     #[test]
     fn reads_metadata_columns_gaps_and_status() {

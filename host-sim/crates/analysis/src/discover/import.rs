@@ -238,7 +238,8 @@ fn first_nonblank_line(path: &Path) -> Result<String, ImportError> {
         path: path.display().to_string(),
         source,
     };
-    let mut r = std::io::BufReader::new(std::fs::File::open(path).map_err(io)?);
+    // Through the record opener: a `.csv.gz` is guessed on its text, a directory on its first file.
+    let mut r = crate::log::open_record(path)?;
     let mut buf = Vec::new();
     let limit = crate::log::reader::MAX_LINE_BYTES;
     for _ in 0..limit {

@@ -8,7 +8,13 @@
 //!
 //! `--rotate daily` makes the output a directory of one file per UTC day (`YYYY-MM-DD.csv`),
 //! each with the full header and the same `start_utc`, so that `time_s` runs on across files
-//! and the readers take the directory as one record.
+//! and the readers take the directory as one record. With compression on
+//! ([`RecordFile::compress_finished_days`], `--rotate daily-gz`), every plain day older than
+//! yesterday is gzip-compressed (level 1) in a background thread when a new day begins:
+//! `X.csv` → `X.csv.gz.tmp` (synced) → renamed `X.csv.gz` → `X.csv` removed, each step only
+//! after the one before succeeded, so a crash leaves at worst a stale `.tmp` (redone next time)
+//! or both files (the reader then refuses the day twice, naming both). Yesterday stays plain
+//! because an event line stamped by the PC's clock may still land in it just after midnight.
 
 use std::fs::{File, OpenOptions};
 use std::io::{self, BufWriter, Read, Seek, SeekFrom, Write};
@@ -237,6 +243,63 @@ pub struct RecordFile {
     last_sync: Instant,
     /// Bytes written (rows and events) since opening.
     pub bytes: u64,
+    /// Compress finished days (daily layout).
+    compress: bool,
+    /// The compression running in the background: the lines it reports when done.
+    compressing: Option<std::thread::JoinHandle<Vec<(String, String)>>>,
+}
+
+/// gzip-compresses `X.csv` into `X.csv.gz` (see the module docs for the order of the steps).
+/// Returns the event (kind, details) that says what happened.
+pub fn compress_day(plain: &Path) -> (String, String) {
+    let gz = plain.with_extension("csv.gz");
+    let tmp = plain.with_extension("csv.gz.tmp");
+    let run = || -> io::Result<(u64, u64)> {
+        let mut src = File::open(plain)?;
+        let out = File::create(&tmp)?;
+        let mut e = flate2::write::GzEncoder::new(
+            BufWriter::with_capacity(1 << 16, out),
+            flate2::Compression::fast(),
+        );
+        let n = io::copy(&mut src, &mut e)?;
+        let out = e.finish()?.into_inner().map_err(|e| e.into_error())?;
+        out.sync_all()?;
+        let m = out.metadata()?.len();
+        std::fs::rename(&tmp, &gz)?;
+        if let Some(dir) = gz.parent() {
+            File::open(dir)?.sync_all()?;
+        }
+        std::fs::remove_file(plain)?;
+        Ok((n, m))
+    };
+    match run() {
+        Ok((n, m)) => (
+            "compressed".into(),
+            format!("{} -> {} ({n} -> {m} bytes)", plain.display(), gz.display()),
+        ),
+        Err(e) => (
+            "compress_failed".into(),
+            format!("{}: {e} (the plain file is kept)", plain.display()),
+        ),
+    }
+}
+
+/// Plain `YYYY-MM-DD.csv` files of `dir` older than `before` (a day name).
+fn plain_days_before(dir: &Path, before: &str) -> Vec<PathBuf> {
+    let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
+        .map(|rd| {
+            rd.filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| {
+                    p.extension().is_some_and(|e| e == "csv")
+                        && p.file_stem()
+                            .and_then(|s| s.to_str())
+                            .is_some_and(|s| s < before)
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    v.sort();
+    v
 }
 
 impl RecordFile {
@@ -262,6 +325,8 @@ impl RecordFile {
             line: Vec::with_capacity(256),
             last_sync: Instant::now(),
             bytes: 0,
+            compress: false,
+            compressing: None,
         };
         r.write_header()?;
         Ok(r)
@@ -292,7 +357,46 @@ impl RecordFile {
             line: Vec::with_capacity(256),
             last_sync: Instant::now(),
             bytes: 0,
+            compress: false,
+            compressing: None,
         })
+    }
+
+    /// Compress finished days from now on (daily layout; see the module docs).
+    pub fn compress_finished_days(&mut self, on: bool) {
+        self.compress = on;
+    }
+
+    /// Waits for a compression in the background and returns what it reports (event lines).
+    pub fn finish_compression(&mut self) -> Vec<(String, String)> {
+        self.compressing
+            .take()
+            .and_then(|h| h.join().ok())
+            .unwrap_or_default()
+    }
+
+    /// Starts compressing the plain days older than yesterday (at a new day `unix_s`).
+    fn start_compression(&mut self, unix_s: f64) -> Result<(), RecordFileError> {
+        let Layout::Daily(dir) = self.layout.clone() else {
+            return Ok(());
+        };
+        if !self.compress {
+            return Ok(());
+        }
+        if self.compressing.as_ref().is_some_and(|h| !h.is_finished()) {
+            // Still busy with the days before: the next new day picks the rest up.
+            return Ok(());
+        }
+        for (kind, details) in self.finish_compression() {
+            self.event(unix_s, &kind, &details)?;
+        }
+        let days = plain_days_before(&dir, &day_name(unix_s - 86_400.0));
+        if !days.is_empty() {
+            self.compressing = Some(std::thread::spawn(move || {
+                days.iter().map(|d| compress_day(d)).collect()
+            }));
+        }
+        Ok(())
     }
 
     fn path_for(layout: &Layout, unix_s: f64) -> Result<(PathBuf, String), RecordFileError> {
@@ -347,10 +451,14 @@ impl RecordFile {
             .open(&path)
             .map_err(io_err(&path))?;
         self.w = BufWriter::with_capacity(1 << 16, f);
+        let forward = day > self.day;
         self.path = path;
         self.day = day;
         if !exists {
             self.write_header()?;
+        }
+        if forward {
+            self.start_compression(unix_s)?;
         }
         Ok(())
     }
@@ -531,6 +639,36 @@ mod tests {
         // An open RTD's infinite resistance is written as a gap.
         assert!(log.column("rtd_ohms").unwrap().iter().all(|v| v.is_nan()));
         assert_eq!(log.column("seq").unwrap(), &[0.0, 1.0, 2.0, 3.0]);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn days_before_yesterday_are_compressed_and_still_read_as_one_record() {
+        let dir = std::env::temp_dir().join(format!("accomp-rec-gz-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let start = Utc::parse("2026-03-01T23:59:59Z").unwrap().0;
+        let meta = vec![("start_utc".to_string(), Utc(start).to_string())];
+        let mut f = RecordFile::create(Layout::Daily(dir.clone()), meta, start, false).unwrap();
+        f.compress_finished_days(true);
+        // Rows on 03-01, 03-02 and 03-03: entering 03-03 compresses 03-01 (older than yesterday).
+        for (k, t) in [0.0, 1.0, 86_401.0].into_iter().enumerate() {
+            f.row(t, &frame(k as u32)).unwrap();
+        }
+        let done = f.finish_compression();
+        assert_eq!(done.len(), 1, "{done:?}");
+        assert_eq!(done[0].0, "compressed", "{done:?}");
+        f.sync().unwrap();
+        let mut names: Vec<String> = std::fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        names.sort();
+        assert_eq!(
+            names,
+            ["2026-03-01.csv.gz", "2026-03-02.csv", "2026-03-03.csv"]
+        );
+        let log = accomp_log::Log::read_path(&dir).unwrap();
+        assert_eq!(log.time_s(), &[0.0, 1.0, 86_401.0]);
         let _ = std::fs::remove_dir_all(&dir);
     }
 

@@ -44,12 +44,17 @@ pub struct Options {
     pub force: bool,
     /// One file per UTC day in the output directory.
     pub daily: bool,
+    /// With `daily`: gzip the days older than yesterday (`YYYY-MM-DD.csv.gz`).
+    pub compress_days: bool,
     /// Where the test runs.
     pub site: Option<String>,
     /// Free text for the header.
     pub note: Option<String>,
     /// SetRate before streaming.
     pub rate_hz: Option<u32>,
+    /// Hand the rows to the progress callback ([`Progress::rows`]) for a live view; off, no
+    /// row is kept (the recorder's memory does not depend on the frame rate).
+    pub live_rows: bool,
 }
 
 /// State of the link, for the status line.
@@ -80,7 +85,20 @@ pub struct Progress {
     pub drift_ppm: f64,
     /// Rows still to write, or record seconds still to go, when a stop is set.
     pub to_go: Option<String>,
+    /// The device's counters as last read, by name (empty before the first read).
+    pub counters: Vec<(&'static str, u64)>,
+    /// With [`Options::live_rows`]: rows written since the previous call, with their record
+    /// time (s), for a live view;
+    /// at most [`LIVE_ROWS_MAX`] (the oldest beyond are not kept, `live_rows_skipped` counts them).
+    pub rows: Vec<(f64, Frame)>,
+    /// Rows not kept in `rows` since the previous call (more than [`LIVE_ROWS_MAX`] came).
+    pub live_rows_skipped: u64,
+    /// Event lines written since the previous call: (Unix s, kind, details).
+    pub new_events: Vec<(f64, String, String)>,
 }
+
+/// The most rows one [`Progress`] carries (bounds the recorder's memory if nobody drains it).
+pub const LIVE_ROWS_MAX: usize = 65_536;
 
 /// How the record ended.
 #[derive(Debug, Clone, PartialEq)]
@@ -236,11 +254,19 @@ struct Recorder<'a> {
     summary: Summary,
     meta: Vec<(String, String)>,
     existing: Option<file::Existing>,
+    /// Rows and events since the last progress call (for a live view).
+    live_rows: Vec<(f64, Frame)>,
+    live_rows_skipped: u64,
+    live_events: Vec<(f64, String, String)>,
 }
 
 impl Recorder<'_> {
     fn event(&mut self, unix_s: f64, kind: &str, details: String) -> Result<(), RecordFileError> {
         self.summary.events += 1;
+        if self.live_events.len() < LIVE_ROWS_MAX {
+            self.live_events
+                .push((unix_s, kind.to_owned(), details.clone()));
+        }
         match &mut self.file {
             Some(f) => f.event(unix_s, kind, &details),
             None => {
@@ -300,6 +326,8 @@ impl Recorder<'_> {
                 RecordFile::create(layout, meta, pc_s, self.opts.force)?
             }
         };
+        let mut file = file;
+        file.compress_finished_days(self.opts.daily && self.opts.compress_days);
         self.file = Some(file);
         for (t, k, d) in std::mem::take(&mut self.queued) {
             if let Some(f) = &mut self.file {
@@ -375,6 +403,13 @@ impl Recorder<'_> {
         if let Some(f) = &mut self.file {
             f.row(t, frame)?;
         }
+        if self.opts.live_rows {
+            if self.live_rows.len() < LIVE_ROWS_MAX {
+                self.live_rows.push((t, *frame));
+            } else {
+                self.live_rows_skipped += 1;
+            }
+        }
         self.summary.samples += 1;
         self.first_record_s.get_or_insert(t);
         Ok(())
@@ -411,7 +446,7 @@ impl Recorder<'_> {
         Ok(())
     }
 
-    fn progress(&self, link: Link) -> Progress {
+    fn progress(&mut self, link: Link) -> Progress {
         let record_s = self.clock.last().map_or(0.0, |l| l.record_s);
         let to_go = match (self.opts.samples, self.opts.duration_s) {
             (Some(n), _) => Some(format!(
@@ -433,6 +468,10 @@ impl Recorder<'_> {
             link,
             drift_ppm: self.clock.drift_ppm(),
             to_go,
+            counters: self.counters.clone().unwrap_or_default(),
+            rows: std::mem::take(&mut self.live_rows),
+            live_rows_skipped: std::mem::take(&mut self.live_rows_skipped),
+            new_events: std::mem::take(&mut self.live_events),
         }
     }
 
@@ -509,6 +548,9 @@ pub fn record(
             .map(|e| e.meta.clone())
             .unwrap_or_default(),
         existing,
+        live_rows: Vec::new(),
+        live_rows_skipped: 0,
+        live_events: Vec::new(),
     };
     if let Some(e) = &r.existing {
         if e.trimmed > 0 {
@@ -746,6 +788,15 @@ pub fn record(
         let _ = d.client.call(Request::StreamStop);
     }
     let t = pc();
+    // A day being compressed is finished before the record ends (no stale .tmp left).
+    let compressed = r
+        .file
+        .as_mut()
+        .map(|f| f.finish_compression())
+        .unwrap_or_default();
+    for (kind, details) in compressed {
+        r.event(t, &kind, details)?;
+    }
     r.summary.reason = reason.clone();
     let (n, lost) = (r.summary.samples, r.summary.lost);
     r.event(
