@@ -381,6 +381,17 @@ fn classify(name: &str) -> Option<(ChannelKind, f64)> {
     {
         return None;
     }
+    // Bookkeeping of a recorded or demo log, not a physical channel: a sequence number and the
+    // clocks rise with time, so as regressors they would pose as a drift or an "ambient"
+    // coupling; the floor is the same output compensated with the simulation's truth.
+    if l == "seq"
+        || l.ends_with("_seq")
+        || l.ends_with("time_s")
+        || l.ends_with("time_us")
+        || l.starts_with("floor_")
+    {
+        return None;
+    }
     if l == "input_g" {
         return Some((ChannelKind::Input, 1.0));
     }
@@ -867,6 +878,33 @@ mod tests {
         assert_eq!(ds.len(), 1002);
         assert_eq!(ds.input_at(350), Some(1.0));
         assert_eq!(ds.input_at(351), Some(0.0));
+    }
+
+    #[test]
+    fn sequence_numbers_and_clocks_of_a_record_are_not_channels() {
+        // The columns `accomp record` and the demo write beside the physical ones.
+        for name in [
+            "seq",
+            "fw_seq",
+            "board_time_us",
+            "unix_time_s",
+            "fw_time_s",
+            "floor_a_i_g",
+        ] {
+            assert_eq!(classify(name), None, "{name}");
+        }
+        assert_eq!(
+            classify("temperature_c").map(|c| c.0),
+            Some(ChannelKind::Other)
+        );
+        assert_eq!(
+            classify("tilt_arcsec").map(|c| c.0),
+            Some(ChannelKind::Tilt)
+        );
+        assert_eq!(
+            classify("pressure_hpa").map(|c| c.0),
+            Some(ChannelKind::Pressure)
+        );
     }
 
     #[test]
