@@ -125,6 +125,7 @@ pub fn json(d: &Discovery) -> Value {
             "adev_after": d.adev_after,
         },
         "tidal_analysis": super::tidal::json_of(&d.tidal),
+        "full_rate": super::fullrate::json_of(&d.full_rate),
     })
 }
 
@@ -330,6 +331,7 @@ pub fn text(d: &Discovery) -> String {
     for ((t, a), (_, b)) in d.adev_before.iter().zip(&d.adev_after).step_by(3) {
         let _ = writeln!(o, "  ADEV({t:.0} s): {a:.3e} → {b:.3e} {unit}");
     }
+    o.push_str(&super::fullrate::text_of(&d.full_rate, unit));
     o.push_str(&super::tidal::text_of(&d.tidal));
     o
 }
