@@ -20,6 +20,7 @@ pub mod baseline;
 pub mod changepoints;
 pub mod effects;
 pub mod eiv;
+mod error;
 pub mod hysteresis;
 pub mod import;
 pub mod noise;
@@ -30,6 +31,8 @@ pub mod select;
 pub mod shape;
 pub mod simulate;
 pub mod tidal;
+
+pub use error::DiscoverError;
 
 use effects::{Context, Effect};
 use import::{Dataset, DatasetOptions, Format};
@@ -185,7 +188,7 @@ pub fn discover_path(
     opts: &DatasetOptions,
     table: Option<&accomp::table::CalibrationTable>,
     cfg: &select::Config,
-) -> anyhow::Result<(Discovery, Vec<import::BadRow>)> {
+) -> Result<(Discovery, Vec<import::BadRow>), DiscoverError> {
     let (log, bad) = import::load_for_dataset(path, format, opts.output.as_deref())?;
     let mut opts = opts.clone();
     if let Some(t) = table {
