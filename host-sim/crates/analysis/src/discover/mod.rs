@@ -10,19 +10,26 @@
 //! - [`changepoints`]: many steps at once: a noise-model MOSUM scan, the set validated together.
 //! - [`plausibility`]: a flexible effect must stand above the noise and beat the simpler cause.
 //! - [`shape`]: whether an accepted effect's shape describes the data (poor-fit check).
-//! - [`select`]: greedy selection with BIC (effective sample size) and blocked cross-validation.
+//! - [`select`]: greedy selection with BIC (effective sample size) and blocked cross-validation;
+//!   its parts: [`current_model`] (the model under its fitted noise model), [`fitters`] (each
+//!   candidate's best fit and ΔBIC), [`acceptance`] (the checks after the BIC), [`validation`]
+//!   (cross-validation, forward chaining), [`joint`] (the final joint fit).
 //! - [`report`]: text, JSON and the Markdown report with figures.
 //!
 //! The command's arguments and output: `accomp_host::cli::discover`. Method, catalogue, rates and
 //! measured-data findings: `docs/discovery.md`.
 
+pub mod acceptance;
 pub mod baseline;
 pub mod changepoints;
+pub mod current_model;
 pub mod effects;
 pub mod eiv;
 mod error;
+pub mod fitters;
 pub mod hysteresis;
 pub mod import;
+pub mod joint;
 pub mod noise;
 pub mod plausibility;
 pub mod report;
@@ -31,6 +38,7 @@ pub mod select;
 pub mod shape;
 pub mod simulate;
 pub mod tidal;
+pub mod validation;
 
 pub use error::DiscoverError;
 
