@@ -29,12 +29,12 @@ pub fn simulate_dataset(
     };
     super::simulate(
         ds,
-        |noise| crate::twin::Twin::new(ds, base.clone(), noise).map_err(|e| e.to_string()),
+        |noise| crate::twin::Twin::new(ds, base.clone(), noise),
         label,
         ensemble,
         cfg,
     )
-    .map_err(anyhow::Error::msg)
+    .map_err(anyhow::Error::from)
 }
 
 /// Writes the extended scenario, if asked.
