@@ -10,6 +10,7 @@
 //! - [`fullrate`]: lags faster than the bins, fitted on the full-rate rows in the frequency domain.
 //! - [`changepoints`]: many steps at once: a noise-model MOSUM scan, the set validated together.
 //! - [`plausibility`]: a flexible effect must stand above the noise and beat the simpler cause.
+//! - [`table_error`]: with a calibration, errors of the table's temperature models, corrected.
 //! - [`shape`]: whether an accepted effect's shape describes the data (poor-fit check).
 //! - [`select`]: greedy selection with BIC (effective sample size) and blocked cross-validation;
 //!   its parts: [`current_model`] (the model under its fitted noise model), [`fitters`] (each
@@ -39,6 +40,7 @@ pub mod residual;
 pub mod select;
 pub mod shape;
 pub mod simulate;
+pub mod table_error;
 pub mod tidal;
 pub mod validation;
 
@@ -92,6 +94,8 @@ pub struct Discovery {
     /// of at least [`fullrate::MIN_ROWS_PER_BIN`] rows; `Err` says why it could not run; `None`
     /// when the record was not binned that coarsely.
     pub full_rate: Option<Result<fullrate::FullRate, String>>,
+    /// With a calibration table: the test of its temperature models ([`table_error`]).
+    pub table_check: Option<table_error::TableCheck>,
 }
 
 /// The shared series of the candidates.
@@ -129,9 +133,15 @@ pub fn discover(
     // Errors in variables: each channel's reading noise and smoother are fitted and reported;
     // see FIT_ON_SMOOTHED_CHANNELS for whether the effects are fitted on the smoothed states.
     let (ds, channel_noise) = eiv::denoise(&ds, FIT_ON_SMOOTHED_CHANNELS);
-    let base = match table {
-        Some(t) => baseline::calibrated_baseline(&ds, t)?,
-        None => baseline::static_baseline(&ds),
+    // With a table, its temperature models are tested first: an error found there enters the
+    // baseline, so the catalogue is searched on what the table does not explain.
+    let (base, table_check) = match table {
+        Some(t) => {
+            let b = baseline::calibrated_baseline(&ds, t)?;
+            let (check, extended) = table_error::check(&ds, t, &b, cfg);
+            (extended, Some(check))
+        }
+        None => (baseline::static_baseline(&ds), None),
     };
     let ctx = context(&ds, &base);
     let (cands, not_candidates) = effects::candidates(&ds, &ctx, base.tilt_subtracted);
@@ -192,6 +202,7 @@ pub fn discover(
         measured_channels,
         tidal,
         full_rate: None,
+        table_check,
         dataset: ds,
     })
 }
