@@ -12,7 +12,8 @@
 //!   its largest ratio and the excess deviation √(σ²_A − σ²_model) there.
 //! - **A spectral line.** The residual whitened by the noise model (its Kalman innovations) is
 //!   white if the model holds; its Lomb–Scargle periodogram's strongest peak with a false-alarm
-//!   probability below [`LINE_FAP`] is a line, reported with its period and the amplitude of
+//!   probability below [`LINE_FAP`] and at least two cycles in the record is a line, reported
+//!   with its period and the amplitude of
 //!   the sinusoid fitted to the (unwhitened) residual at that frequency.
 
 use super::import::Dataset;
@@ -104,7 +105,14 @@ pub fn find(ds: &Dataset, resid: &[f64], noise: &NoiseModel) -> Vec<Structure> {
     let white = w.whiten(resid);
     if white.len() == ds.t_s.len() {
         let spec = residual::periodogram(&ds.t_s, &white, 4096);
-        if let Some(l) = spec.lines.iter().find(|l| l.fap < LINE_FAP) {
+        // At least two cycles in the record (as the catalogue's `periodic`): a "line" of one
+        // cycle is a slow drift's share of the lowest frequency, not a period.
+        let span = ds.span_s();
+        if let Some(l) = spec
+            .lines
+            .iter()
+            .find(|l| l.fap < LINE_FAP && l.period_s <= span / 2.0)
+        {
             out.push(Structure::Line {
                 frequency_hz: l.frequency_hz,
                 period_s: l.period_s,
