@@ -29,6 +29,9 @@ mod bsp;
 // 100 kHz: requests went unanswered).
 #[cfg(target_os = "none")]
 rtic_monotonics::systick_monotonic!(Mono, 1_000);
+/// The SysTick monotonic's tick rate (the macro above takes it as a literal).
+#[cfg(target_os = "none")]
+const MONO_HZ: u64 = 1_000;
 
 #[cfg(target_os = "none")]
 #[rtic::app(device = stm32f4xx_hal::pac, peripherals = true, dispatchers = [SPI3, UART4])]
@@ -350,9 +353,11 @@ mod app {
         }
     }
 
-    /// The board's hardware time base extended to 64 bits.
-    static TIME_BASE: cortex_m::interrupt::Mutex<core::cell::RefCell<Extended64>> =
-        cortex_m::interrupt::Mutex::new(core::cell::RefCell::new(Extended64::new()));
+    /// The board's hardware time base extended to 64 bits. A `Cell`, not a `RefCell`: the
+    /// extension is copied out and back inside the critical section, so there is no borrow
+    /// that could fail (a `RefCell`'s "already borrowed" panic would bring `core::fmt` along).
+    static TIME_BASE: cortex_m::interrupt::Mutex<core::cell::Cell<Extended64>> =
+        cortex_m::interrupt::Mutex::new(core::cell::Cell::new(Extended64::new()));
 
     /// Firmware time in µs: the board's hardware time base (front-end: TIM2 at 1 MHz, which
     /// counts on through a flash-erase stall), or the SysTick monotonic where there is none.
@@ -361,9 +366,21 @@ mod app {
             // A few instructions with interrupts masked: the count and the extension agree.
             Some(_) => cortex_m::interrupt::free(|cs| {
                 let count = bsp::time_base_count().unwrap_or(0);
-                TIME_BASE.borrow(cs).borrow_mut().extend(count)
+                let cell = TIME_BASE.borrow(cs);
+                let mut time = cell.get();
+                let us = time.extend(count);
+                cell.set(time);
+                us
             }),
-            None => Mono::now().duration_since_epoch().as_micros(),
+            // Ticks × µs per tick by hand: fugit's `as_micros` checks the product with a
+            // formatted panic (`core::fmt`'s padding in flash); a 64-bit count of 1 ms ticks
+            // reaches 2⁶⁴ µs only after 584,000 years, and saturates there.
+            None => {
+                use rtic_monotonics::rtic_time::monotonic::TimerQueueBasedInstant as _;
+                Mono::now()
+                    .ticks()
+                    .saturating_mul(1_000_000 / crate::MONO_HZ)
+            }
         }
     }
 

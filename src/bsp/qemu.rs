@@ -155,14 +155,25 @@ impl PersistentFlash {
         let Some(bytes) = self.ram.as_bytes().get(from as usize..to as usize) else {
             return;
         };
-        let written = file
-            .seek(SeekFrom::Start(u64::from(from)))
-            .and_then(|_| file.write_all(bytes));
-        if written.is_err() {
+        let written = file.seek(SeekFrom::Start(u64::from(from))).is_ok() && write_all(file, bytes);
+        if !written {
             defmt::warn!("host flash file write failed: tables kept in RAM only");
             self.file = None;
         }
     }
+}
+
+/// Writes all of `bytes`; false if the host refused some. `Write::write_all` does the same
+/// with a slice index (`&buf[n..]`) whose bounds check would bring `core::fmt`'s integer
+/// formatting into the firmware for a panic the host's byte counts never cause.
+fn write_all(file: &mut semihosting::fs::File, mut bytes: &[u8]) -> bool {
+    while !bytes.is_empty() {
+        match file.write(bytes) {
+            Ok(n) if n > 0 => bytes = bytes.get(n..).unwrap_or(&[]),
+            _ => return false,
+        }
+    }
+    true
 }
 
 /// The power-cut hook's operation number and persisted quarters, if the test asked for one.
