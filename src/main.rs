@@ -7,7 +7,7 @@
 //!
 //! | priority | task | may do |
 //! |---|---|---|
-//! | 3 | `drdy` (EXTI4) | timestamp, read one conversion, switch the mux: bounded SPI, no wait |
+//! | 3 | `drdy` (EXTI1) | timestamp, read one conversion, switch the mux: bounded SPI, no wait |
 //! | 2 | `uart_rx` (USART1) | drain the received bytes (front-end: the DMA ring) into the frame decoder |
 //! | 2 | `ads_supervisor`, `rtd_task` | one tick of a sequencer each: bounded SPI, no wait |
 //! | 1 | `worker`, `watchdog` | pipeline, protocol, flash; progress checks and IWDG feeding |
@@ -45,7 +45,7 @@ mod app {
         encode_frame, DeviceMessage, FrameDecoder, FrameError, MAX_FRAME_LEN, PROTOCOL_VERSION,
     };
     use accomp::service::{BootTable, Service};
-    use accomp::timebase::Extended64;
+    use accomp::timebase::{drdy_edge_time, Extended64, StampSource};
     use heapless::Vec;
     use rtic_monotonics::fugit::ExtU64 as _;
     use rtic_monotonics::Timebase as _;
@@ -88,6 +88,9 @@ mod app {
     static ACQ_PROGRESS: AtomicU32 = AtomicU32::new(0);
     /// Items the worker has processed: worker progress.
     static WORKER_PROGRESS: AtomicU32 = AtomicU32::new(0);
+    /// DRDY readings stamped with the handler's read of the time base because no capture of
+    /// the edge was pending (front-end: CC2IF clear): late by the interrupt latency.
+    static DRDY_HANDLER_STAMPS: AtomicU32 = AtomicU32::new(0);
     /// Data rate asked for by SetRate, for the supervisor to apply (0: nothing new).
     static REQUESTED_RATE: AtomicU32 = AtomicU32::new(0);
 
@@ -187,10 +190,21 @@ mod app {
 
     /// ADS1262 DRDY fell: timestamp it, read the conversion and switch the mux (a few SPI
     /// transactions at 5.25 MHz, no waiting), hand a finished pair to the worker. The QEMU board
-    /// never enables EXTI4.
-    #[task(binds = EXTI4, priority = 3, shared = [ads], local = [drdy_pin, drdy_to_worker])]
+    /// never enables EXTI1.
+    ///
+    /// The stamp is the edge's: the count the time base latched at the DRDY edge (front-end:
+    /// TIM2_CH2 input capture), read before the counter itself so that it is never the newer of
+    /// the two. Without a pending capture the handler's read stands in, later by the interrupt
+    /// latency; such readings are counted and logged by the watchdog task.
+    #[task(binds = EXTI1, priority = 3, shared = [ads], local = [drdy_pin, drdy_to_worker])]
     fn drdy(mut cx: drdy::Context) {
-        let now = now_us();
+        let captured = bsp::drdy_capture();
+        let read = now_us();
+        // The extended time's low 32 bits are the counter's count at that read.
+        let (now, source) = drdy_edge_time(read, read as u32, captured);
+        if source == StampSource::HandlerRead {
+            DRDY_HANDLER_STAMPS.fetch_add(1, Ordering::Relaxed);
+        }
         bsp::acknowledge_drdy(cx.local.drdy_pin);
         ACQ_PROGRESS.fetch_add(1, Ordering::Relaxed);
         if let Some(reading) = cx.shared.ads.lock(|ads| ads.on_drdy(now)) {
@@ -258,8 +272,17 @@ mod app {
         let mut acquisition = ACQ_PROGRESS.load(Ordering::Relaxed);
         let mut worker = WORKER_PROGRESS.load(Ordering::Relaxed);
         let mut heartbeat_sent = false;
+        let mut handler_stamps = 0;
         loop {
             Mono::delay(WATCHDOG_CHECK_MS.millis()).await;
+            let stamps = DRDY_HANDLER_STAMPS.load(Ordering::Relaxed);
+            if stamps != handler_stamps {
+                defmt::warn!(
+                    "{} DRDY readings stamped by the handler (no edge capture)",
+                    stamps.wrapping_sub(handler_stamps)
+                );
+                handler_stamps = stamps;
+            }
             let a = ACQ_PROGRESS.load(Ordering::Relaxed);
             let w = WORKER_PROGRESS.load(Ordering::Relaxed);
             let acquisition_alive = !bsp::HAS_ADCS || a != acquisition;

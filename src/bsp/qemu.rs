@@ -244,7 +244,7 @@ pub fn init(dp: pac::Peripherals) -> Parts {
     }
 }
 
-/// No ADCs in QEMU: samples arrive as InjectSample frames; EXTI4 is never enabled and the
+/// No ADCs in QEMU: samples arrive as InjectSample frames; EXTI1 is never enabled and the
 /// acquisition tasks are not spawned.
 pub const HAS_ADCS: bool = false;
 
@@ -252,7 +252,7 @@ pub const HAS_ADCS: bool = false;
 pub struct AdsAcquisition;
 
 impl AdsAcquisition {
-    /// Never called (EXTI4 is not enabled).
+    /// Never called (EXTI1 is not enabled).
     pub fn on_drdy(&mut self, _now_us: u64) -> Option<AdsReading> {
         None
     }
@@ -283,6 +283,11 @@ pub struct DrdyPin;
 
 /// Nothing to acknowledge.
 pub fn acknowledge_drdy(_pin: &mut DrdyPin) {}
+
+/// No DRDY edge to capture.
+pub fn drdy_capture() -> Option<u32> {
+    None
+}
 
 /// QEMU's netduinoplus2 has no IWDG model: feeding is a no-op (the watchdog task still checks
 /// worker progress the same way).
