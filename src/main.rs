@@ -25,13 +25,10 @@ compile_error!("choose exactly one board: `board-qemu` (default) or `board-front
 #[cfg(target_os = "none")]
 mod bsp;
 
-// 1 kHz ticks: ms timestamps suffice, and faster ticks starved QEMU's UART (tried 20 kHz and
-// 100 kHz: requests went unanswered).
+// 1 kHz ticks for the tasks' delays (time stamps come from TIM2): faster ticks starved QEMU's
+// UART (tried 20 kHz and 100 kHz: requests went unanswered).
 #[cfg(target_os = "none")]
 rtic_monotonics::systick_monotonic!(Mono, 1_000);
-/// The SysTick monotonic's tick rate (the macro above takes it as a literal).
-#[cfg(target_os = "none")]
-const MONO_HZ: u64 = 1_000;
 
 #[cfg(target_os = "none")]
 #[rtic::app(device = stm32f4xx_hal::pac, peripherals = true, dispatchers = [SPI3, UART4])]
@@ -275,6 +272,9 @@ mod app {
         let mut handler_stamps = 0;
         loop {
             Mono::delay(WATCHDOG_CHECK_MS.millis()).await;
+            // Reads the time base at least once per second on both boards, far more often than
+            // the 71.6 min its 32-bit count takes to wrap (the extension needs one read a wrap).
+            let _ = now_us();
             let stamps = DRDY_HANDLER_STAMPS.load(Ordering::Relaxed);
             if stamps != handler_stamps {
                 defmt::warn!(
@@ -382,29 +382,17 @@ mod app {
     static TIME_BASE: cortex_m::interrupt::Mutex<core::cell::Cell<Extended64>> =
         cortex_m::interrupt::Mutex::new(core::cell::Cell::new(Extended64::new()));
 
-    /// Firmware time in µs: the board's hardware time base (front-end: TIM2 at 1 MHz, which
-    /// counts on through a flash-erase stall), or the SysTick monotonic where there is none.
+    /// Firmware time in µs: the board's TIM2 at 1 MHz extended to 64 bits (both boards; on the
+    /// front-end it counts on through a flash-erase stall). A few instructions with interrupts
+    /// masked, so that the count and the extension agree.
     fn now_us() -> u64 {
-        match bsp::time_base_count() {
-            // A few instructions with interrupts masked: the count and the extension agree.
-            Some(_) => cortex_m::interrupt::free(|cs| {
-                let count = bsp::time_base_count().unwrap_or(0);
-                let cell = TIME_BASE.borrow(cs);
-                let mut time = cell.get();
-                let us = time.extend(count);
-                cell.set(time);
-                us
-            }),
-            // Ticks × µs per tick by hand: fugit's `as_micros` checks the product with a
-            // formatted panic (`core::fmt`'s padding in flash); a 64-bit count of 1 ms ticks
-            // reaches 2⁶⁴ µs only after 584,000 years, and saturates there.
-            None => {
-                use rtic_monotonics::rtic_time::monotonic::TimerQueueBasedInstant as _;
-                Mono::now()
-                    .ticks()
-                    .saturating_mul(1_000_000 / crate::MONO_HZ)
-            }
-        }
+        cortex_m::interrupt::free(|cs| {
+            let cell = TIME_BASE.borrow(cs);
+            let mut time = cell.get();
+            let us = time.extend(bsp::time_base_count());
+            cell.set(time);
+            us
+        })
     }
 
     fn send(tx: &mut bsp::UartTx, msg: &DeviceMessage) {

@@ -235,7 +235,8 @@ pub fn init(mut dp: pac::Peripherals) -> Parts {
     drdy.trigger_on_edge(&mut dp.EXTI, Edge::Falling);
     drdy.enable_interrupt(&mut dp.EXTI);
 
-    start_time_base(&rcc, &dp.TIM2);
+    super::start_time_base(&rcc, &dp.TIM2, TIM2_CLOCK_HZ);
+    start_drdy_capture(&dp.TIM2);
 
     Parts {
         rx,
@@ -344,15 +345,9 @@ pub fn read_byte(rx: &mut UartRx) -> Option<u8> {
 /// "the timer clock frequencies are twice the APB frequency").
 const TIM2_CLOCK_HZ: u32 = 2 * bus::APB1_HZ;
 
-/// TIM2 as the time base: 32-bit up-counter at 1 MHz, free running over its whole range
-/// (RM0090 §18: PSC divides by PSC + 1, loaded at the update event UG forces), and its channel 2
-/// capturing the count at each falling DRDY edge on PA1 (RM0090 §18.3.5 "Input capture mode").
-fn start_time_base(rcc: &pac::RCC, tim2: &pac::TIM2) {
-    // Through the HAL's Rcc (it derefs to the RCC registers): APB1ENR.TIM2EN.
-    rcc.apb1enr().modify(|_, w| w.tim2en().set_bit());
-    tim2.psc()
-        .write(|w| w.psc().set((TIM2_CLOCK_HZ / 1_000_000 - 1) as u16));
-    tim2.arr().write(|w| w.arr().set(u32::MAX));
+/// TIM2's channel 2 capturing the time base's count at each falling DRDY edge on PA1 (RM0090
+/// §18.3.5 "Input capture mode").
+fn start_drdy_capture(tim2: &pac::TIM2) {
     // CC2 as an input from TI2 (TIMx_CCMR1 CC2S = 01, §18.4.7), no input prescaler (IC2PSC 00:
     // every edge) and no filter (IC2F 0000: the ADS1262's DRDY is a push-pull CMOS output).
     // CC2S is writable only while CC2E is 0, so before the capture is enabled.
@@ -363,8 +358,6 @@ fn start_time_base(rcc: &pac::RCC, tim2: &pac::TIM2) {
     // SAFETY: CCER bits 7:4 are channel 2's CC2NP, -, CC2P, CC2E.
     tim2.ccer()
         .modify(|r, w| unsafe { w.bits((r.bits() & !0xF0) | CCER_CC2P | CCER_CC2E) });
-    tim2.egr().write(|w| w.ug().set_bit());
-    tim2.cr1().modify(|_, w| w.cen().set_bit());
 }
 
 /// TIMx_CCER.CC2E: capture on channel 2 enabled (RM0090 §18.4.9).
@@ -400,13 +393,6 @@ pub fn drdy_capture() -> Option<u32> {
         tim2.sr().write(|w| unsafe { w.bits(SR_FLAGS & !SR_CC2OF) });
     }
     Some(capture)
-}
-
-/// The time base's count in µs (wraps every 71.6 min; `accomp::timebase` extends it).
-pub fn time_base_count() -> Option<u32> {
-    // SAFETY: a read of the counter register of a timer this module configured and nothing
-    // else writes; reading CNT has no side effect.
-    Some(unsafe { (*pac::TIM2::ptr()).cnt().read().bits() })
 }
 
 /// The Clock Security System saw the crystal fail (the NMI ran).

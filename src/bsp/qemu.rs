@@ -27,11 +27,11 @@ pub fn clock_failed() -> bool {
     false
 }
 
-/// No hardware time base under QEMU (its STM32 timer model is not verified): the firmware's
-/// time is the SysTick monotonic, which nothing stalls there.
-pub fn time_base_count() -> Option<u32> {
-    None
-}
+/// The kernel clock of QEMU's TIM2 model (`stm32f2xx-timer`): its `clock-frequency` property,
+/// which the netduinoplus2 machine leaves at the model's default of 1 GHz (`info qtree` in the
+/// QEMU monitor); the model counts QEMU's virtual nanoseconds × that clock / (PSC + 1), so
+/// PSC = 999 gives the front-end's 1 MHz (docs/architecture.md, "QEMU").
+const TIM2_CLOCK_HZ: u32 = 1_000_000_000;
 
 /// QEMU clocks SysTick at 168 MHz whatever RCC says (docs/architecture.md), so that is the figure the
 /// monotonic needs to count milliseconds.
@@ -222,6 +222,7 @@ pub fn init(dp: pac::Peripherals) -> Parts {
     let mut rcc = dp.RCC.freeze(Config::hsi());
     let gpioa = dp.GPIOA.split(&mut rcc);
     let (tx, rx) = super::uart1(dp.USART1, (gpioa.pa9, gpioa.pa10), &mut rcc);
+    super::start_time_base(&rcc, &dp.TIM2, TIM2_CLOCK_HZ);
     // Taken once, in init: None would mean init ran twice.
     let ram = match cortex_m::singleton!(: RamCalibrationFlash = RamCalibrationFlash::new()) {
         Some(f) => f,
