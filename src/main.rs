@@ -78,8 +78,10 @@ mod app {
 
     /// Frames lost because the inbound queue was full (added to the service's counter).
     static QUEUE_DROPS: AtomicU32 = AtomicU32::new(0);
-    /// Readings lost because the inbound queue was full: their seq numbers are the gap, the
-    /// next reading says QUEUE_FULL, Info counts them.
+    /// Readings lost because the inbound queue was full — accelerometer pairs, whose seq
+    /// numbers are the gap, and RTD readings (the next pairs join the previous RTD reading, at
+    /// most `RTD_MAX_AGE_US` old): the next pair says QUEUE_FULL, Info's `queue_full` counts
+    /// them.
     static READINGS_DROPPED: AtomicU32 = AtomicU32::new(0);
     /// Readings produced by the ADS1262 sequencer (DRDY or timeout): acquisition progress.
     static ACQ_PROGRESS: AtomicU32 = AtomicU32::new(0);
@@ -255,7 +257,14 @@ mod app {
         loop {
             Mono::delay(period_us.micros()).await;
             if let Some(reading) = cx.local.rtd.on_tick(now_us()) {
-                let _ = cx.local.rtd_to_worker.try_send(Inbound::Rtd(reading));
+                if cx
+                    .local
+                    .rtd_to_worker
+                    .try_send(Inbound::Rtd(reading))
+                    .is_err()
+                {
+                    READINGS_DROPPED.fetch_add(1, Ordering::Relaxed);
+                }
             }
         }
     }

@@ -40,6 +40,10 @@ pub const HAS_ADCS: bool = true;
 /// Core clock after the PLL (crystal or HSI); SysTick runs from it.
 pub const SYSTICK_HZ: u32 = 168_000_000;
 
+/// TIM2's kernel clock: APB1 (42 MHz) × 2, since the APB1 prescaler is not 1 (RM0090 §6.2,
+/// "the timer clock frequencies are twice the APB frequency").
+const TIM2_CLOCK_HZ: u32 = 2 * bus::APB1_HZ;
+
 /// How long the crystal gets to start (ST's HAL uses the same HSE_STARTUP_TIMEOUT, 100 ms).
 const HSE_TIMEOUT_MS: u32 = 100;
 
@@ -122,6 +126,35 @@ fn start_crystal(rcc: &pac::RCC) -> bool {
     false
 }
 
+/// Whether the PLL locks from the crystal (`from_crystal`) or the HSI within [`CLOCK_POLLS`]
+/// polls of PLLRDY (DS8626 "Main PLL characteristics": t_LOCK ≤ 200 µs; 10,000 polls take
+/// ≥ 2.5 ms on the 16 MHz HSI the core runs on here). Factors 168 MHz from a 1 MHz VCO input
+/// (M = source / 1 MHz, N 336, P 2, Q 7), as the CSS handler's. The PLL is switched off again
+/// (wait bounded too): PLLCFGR may be written only while it is off (RM0090 §6.3.2), and the
+/// HAL's `freeze` writes its own factors, then finds the PLL locking as it just did.
+fn pll_locks(rcc: &pac::RCC, from_crystal: bool) -> bool {
+    // SAFETY: PLLCFGR field values within their ranges (RM0090 §6.3.2), PLL off.
+    rcc.pllcfgr()
+        .write(|w| unsafe { w.bits(pllcfgr(from_crystal)) });
+    rcc.cr().modify(|_, w| w.pllon().set_bit());
+    let locked = poll(|| rcc.cr().read().pllrdy().bit_is_set());
+    rcc.cr().modify(|_, w| w.pllon().clear_bit());
+    poll(|| rcc.cr().read().pllrdy().bit_is_clear());
+    locked
+}
+
+/// RCC_PLLCFGR for 168 MHz from a 1 MHz VCO input (RM0090 §6.3.2): M = 8 (the 8 MHz crystal,
+/// PLLSRC = 1) or 16 (the 16 MHz HSI), N 336, P 2 (PLLP 00), Q 7 (48 MHz).
+const fn pllcfgr(from_crystal: bool) -> u32 {
+    let (m, source) = if from_crystal { (8, 1 << 22) } else { (16, 0) };
+    m | (336 << 6) | source | (7 << 24)
+}
+
+/// Polls `done` at most [`CLOCK_POLLS`] times; true once it held.
+fn poll(mut done: impl FnMut() -> bool) -> bool {
+    (0..CLOCK_POLLS).any(|_| done())
+}
+
 /// Clocks (crystal or HSI fallback), USART1 115200 8N1, SPI1 (ADS1262, mode 1) and SPI2
 /// (AD7124, mode 3) at the frequencies of [`accomp::board`], the two sequencers
 /// (they initialise their converters from their first tick), DRDY falling edge on PA1 (EXTI1 and
@@ -133,7 +166,18 @@ pub fn init(mut dp: pac::Peripherals) -> Parts {
     let mut watchdog = IndependentWatchdog::new(dp.IWDG);
     watchdog.stop_on_debug(&dp.DBGMCU, true);
     watchdog.start(WATCHDOG_MS.millis());
-    let crystal = start_crystal(&dp.RCC);
+    let mut crystal = start_crystal(&dp.RCC);
+    // The HAL's `freeze` waits for PLLRDY without a bound: lock the PLL once here first, with a
+    // bounded wait, from the source `freeze` will use.
+    if crystal && !pll_locks(&dp.RCC, true) {
+        dp.RCC.cr().modify(|_, w| w.hseon().clear_bit());
+        crystal = false;
+    }
+    if !crystal && !pll_locks(&dp.RCC, false) {
+        // A PLL that locks from neither source: the part is broken. Reset (and try again)
+        // rather than hang; the bus, UART and time-base prescalers all assume 168 MHz.
+        fatal(Fatal::Clock)
+    }
     let config = if crystal {
         Config::hse(8.MHz())
     } else {
@@ -341,10 +385,6 @@ pub fn read_byte(rx: &mut UartRx) -> Option<u8> {
     })
 }
 
-/// TIM2's kernel clock: APB1 (42 MHz) × 2, since the APB1 prescaler is not 1 (RM0090 §6.2,
-/// "the timer clock frequencies are twice the APB frequency").
-const TIM2_CLOCK_HZ: u32 = 2 * bus::APB1_HZ;
-
 /// TIM2's channel 2 capturing the time base's count at each falling DRDY edge on PA1 (RM0090
 /// §18.3.5 "Input capture mode").
 fn start_drdy_capture(tim2: &pac::TIM2) {
@@ -422,20 +462,12 @@ unsafe fn NonMaskableInt() {
     rcc.cir().modify(|_, w| w.cssc().set_bit());
     CLOCK_FAILED.store(true, Ordering::Relaxed);
     // SAFETY: PLLCFGR field values within their ranges (RM0090 §6.3.2): M 16, N 336, P /2,
-    // source HSI, Q 7.
-    rcc.pllcfgr()
-        .write(|w| unsafe { w.bits(16 | (336 << 6) | (7 << 24)) });
+    // source HSI, Q 7; the PLL is off (the CSS switched it off).
+    rcc.pllcfgr().write(|w| unsafe { w.bits(pllcfgr(false)) });
     rcc.cr().modify(|_, w| w.pllon().set_bit());
-    let mut polls = 0;
-    while rcc.cr().read().pllrdy().bit_is_clear() && polls < CLOCK_POLLS {
-        polls += 1;
-    }
-    if rcc.cr().read().pllrdy().bit_is_set() {
+    if poll(|| rcc.cr().read().pllrdy().bit_is_set()) {
         rcc.cfgr().modify(|_, w| w.sw().pll());
-        let mut polls = 0;
-        while !rcc.cfgr().read().sws().is_pll() && polls < CLOCK_POLLS {
-            polls += 1;
-        }
+        poll(|| rcc.cfgr().read().sws().is_pll());
     }
 }
 

@@ -57,6 +57,9 @@ pub enum Fatal {
     Uart = 3,
     /// The worker task could not be spawned.
     Spawn = 4,
+    /// The PLL locked neither from the crystal nor from the HSI (front-end).
+    #[cfg(feature = "board-frontend")]
+    Clock = 6,
     /// The calibration flash could not be set up (QEMU: its RAM flash singleton was taken).
     #[cfg(feature = "board-qemu")]
     Flash = 5,
