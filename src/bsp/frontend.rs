@@ -50,7 +50,7 @@ const HSE_TIMEOUT_MS: u32 = 100;
 /// Independent watchdog period, 16 s nominal (prescaler 128, reload 4000 at the LSI's nominal
 /// 32 kHz). Its shortest value, at the LSI's maximum 47 kHz (datasheet DS8626, "LSI oscillator
 /// characteristics"), is 16 s × 32/47 = 10.9 s, and half of that, 5.45 s, covers the longest
-/// stretch without a feed the firmware allows: 4.8 s (docs/drivers.md, "Faults, watchdog"),
+/// stretch without a feed the firmware allows: 4.85 s (docs/drivers.md, "Faults, watchdog"),
 /// mostly a 128 KiB sector erase that stalls the core (≤ 2 s at x32), which no code running
 /// from flash can feed through. At the LSI's minimum 17 kHz a hang resets after ≤ 30 s.
 pub const WATCHDOG_MS: u32 = 16_000;
