@@ -9,15 +9,12 @@
 //! The station is generated here from the core (the chip models and this test need nothing
 //! above it). Run: `cargo test -p accomp-chipsim --test board_sim`.
 
-use std::cell::RefCell;
 use std::rc::Rc;
 
-use accomp::acquisition::{
-    AdsReading, AdsSequencer, InterruptDrdy, RtdSequencer, SampleAssembler, SpiSettings,
-};
+use accomp::acquisition::SpiSettings;
 use accomp::board;
-use accomp::drivers::ad7124::{self, Ad7124};
-use accomp::drivers::ads1262::{self, Ads1262, DataRate};
+use accomp::drivers::ad7124;
+use accomp::drivers::ads1262::{self, DataRate};
 use accomp::model::StaticCoefficients;
 use accomp::pipeline::{process_prepared, Frame, Status};
 use accomp::prepared::PreparedCalibration;
@@ -26,15 +23,10 @@ use accomp::table::CalibrationTable;
 use accomp::units::{Celsius, Gs, RAD_PER_ARCSEC};
 use embedded_hal::spi::{MODE_1, MODE_3};
 
-use accomp_chipsim::{Ad7124Model, Ads1262Model, BusRefusal, Clock, SimDelay, SimSpi};
-
-type AdsSeq = AdsSequencer<SimSpi<Ads1262Model>, InterruptDrdy, SimDelay>;
-type RtdSeq = RtdSequencer<SimSpi<Ad7124Model>, InterruptDrdy, SimDelay>;
+use accomp_chipsim::{Acquired, Ad7124Model, Ads1262Model, Board, BusRefusal, Clock};
 
 const S: u64 = 1_000_000;
 const H: u64 = 3600 * S;
-/// Supervisor tick of the ADS1262 sequencer in the firmware (bsp/frontend.rs).
-const ADS_TICK_US: u64 = 20_000;
 
 /// The thermostat, the foundation and the accelerometer: physical values at time t.
 struct Station {
@@ -79,19 +71,13 @@ impl Station {
     }
 }
 
-/// The board on the bench: two chip models, the sequencers, the assembler and the pipeline.
+/// The board on the bench: the chip models, sequencers and assembler ([`Board`]), the station
+/// on their inputs, and the pipeline.
 struct Bench {
-    clock: Clock,
-    ads: Rc<RefCell<Ads1262Model>>,
-    rtd: Rc<RefCell<Ad7124Model>>,
-    ads_seq: AdsSeq,
-    rtd_seq: RtdSeq,
-    assembler: SampleAssembler,
+    board: Board,
     prepared: PreparedCalibration,
     station: Station,
     frames: Vec<Frame>,
-    next_ads_tick: u64,
-    next_rtd_tick: u64,
     /// Physics overrides while a fault is on.
     accel_override_v: Option<f64>,
     rtd_override_ohms: Option<f64>,
@@ -101,45 +87,16 @@ impl Bench {
     fn with_buses(ads_bus: SpiSettings, rtd_bus: SpiSettings) -> Self {
         let clock = Clock::default();
         clock.set(1_000);
-        let ads = Rc::new(RefCell::new(Ads1262Model::new(clock.clone())));
-        let rtd = Rc::new(RefCell::new(Ad7124Model::new(clock.clone())));
-        let ads_driver = Ads1262::new(
-            SimSpi {
-                chip: ads.clone(),
-                bus: ads_bus,
-            },
-            InterruptDrdy,
-            SimDelay(clock.clone()),
-            board::ads1262_config(),
-        );
-        let rtd_driver = Ad7124::new(
-            SimSpi {
-                chip: rtd.clone(),
-                bus: rtd_bus,
-            },
-            InterruptDrdy,
-            SimDelay(clock.clone()),
-            board::ad7124_config(),
-        );
         let table = paper_order2_table();
         let prepared = PreparedCalibration::new(&table).expect("the paper table prepares");
-        let mut b = Bench {
-            clock,
-            ads,
-            rtd,
-            ads_seq: AdsSequencer::new(ads_driver),
-            rtd_seq: RtdSequencer::new(rtd_driver),
-            assembler: SampleAssembler::new(S),
+        Bench {
+            board: Board::with_buses(clock, ads_bus, rtd_bus),
             prepared,
             station: Station { table },
             frames: Vec::new(),
-            next_ads_tick: 0,
-            next_rtd_tick: 0,
             accel_override_v: None,
             rtd_override_ohms: None,
-        };
-        b.apply_physics();
-        b
+        }
     }
 
     fn new() -> Self {
@@ -147,97 +104,64 @@ impl Bench {
     }
 
     fn now(&self) -> u64 {
-        self.clock.now()
+        self.board.now()
     }
 
     /// Power-up as the firmware does it: no blocking init, the sequencers bring their chips up
     /// in steps from their first ticks. Runs 1.5 s and says whether both are running.
     fn boot(&mut self) -> (bool, bool) {
-        let now = self.now();
-        self.next_ads_tick = now + ADS_TICK_US;
-        self.next_rtd_tick = now + self.rtd_seq.period_us();
-        self.run_until(now + 1_500_000);
+        self.run_until(self.now() + 1_500_000);
         (
-            self.ads_seq.is_running(),
-            self.rtd_seq.counters().reinits == 1,
+            self.board.ads_seq.is_running(),
+            self.board.rtd_seq.counters().reinits == 1,
         )
     }
 
-    fn apply_physics(&mut self) {
-        let t = self.now();
-        let accel = self
-            .accel_override_v
-            .unwrap_or_else(|| self.station.output_v(t));
-        let tilt = self.station.tilt_arcsec(t) / self.station.table.tilt.scale_arcsec_per_v;
-        let ohms = self
-            .rtd_override_ohms
-            .unwrap_or_else(|| self.station.rtd_ohms(t));
-        {
-            let mut a = self.ads.borrow_mut();
-            a.advance();
-            a.accel_v = accel;
-            a.tilt_v = tilt;
-        }
-        let mut r = self.rtd.borrow_mut();
-        r.advance();
-        r.rtd_ohms = ohms;
-    }
-
-    fn emit(&mut self, reading: AdsReading) {
-        let raw = self.assembler.assemble(&reading);
-        let mut frame = process_prepared(reading.seq, reading.time_us, &raw, Some(&self.prepared));
-        frame.lost = reading.lost;
-        self.frames.push(frame);
+    /// Runs `f` on the board with the station (and the fault overrides) on its inputs and the
+    /// pipeline behind it.
+    fn drive(
+        &mut self,
+        f: impl FnOnce(
+            &mut Board,
+            &mut dyn FnMut(u64, &mut Ads1262Model, &mut Ad7124Model),
+            &mut dyn FnMut(Acquired),
+        ),
+    ) {
+        let Bench {
+            board,
+            prepared,
+            station,
+            frames,
+            accel_override_v,
+            rtd_override_ohms,
+        } = self;
+        let mut inputs = |t: u64, a: &mut Ads1262Model, r: &mut Ad7124Model| {
+            a.accel_v = accel_override_v.unwrap_or_else(|| station.output_v(t));
+            a.tilt_v = station.tilt_arcsec(t) / station.table.tilt.scale_arcsec_per_v;
+            r.rtd_ohms = rtd_override_ohms.unwrap_or_else(|| station.rtd_ohms(t));
+        };
+        let mut out = |acq: Acquired| {
+            let mut frame = process_prepared(
+                acq.reading.seq,
+                acq.reading.time_us,
+                &acq.raw,
+                Some(prepared),
+            );
+            frame.lost = acq.reading.lost;
+            frames.push(frame);
+        };
+        f(board, &mut inputs, &mut out);
     }
 
     /// The core stalls for `duration_us` (a flash erase: no instruction fetch, no handler runs)
-    /// while the converters go on converting. Then the DRDY interrupt that became pending during
-    /// the stall runs first (EXTI4 has the highest priority), then the overdue ticks.
+    /// while the converters go on converting ([`Board::stall`]).
     fn stall(&mut self, duration_us: u64) {
-        let edges = self.ads.borrow().drdy_edges;
-        let end = self.now() + duration_us;
-        self.clock.set(end);
-        self.apply_physics();
-        if self.ads.borrow().drdy_edges != edges {
-            if let Some(r) = self.ads_seq.on_drdy(end) {
-                self.emit(r);
-            }
-        }
-        self.next_ads_tick = self.next_ads_tick.max(end);
-        self.next_rtd_tick = self.next_rtd_tick.max(end);
+        self.drive(|b, i, o| b.stall(duration_us, &mut &mut *i, &mut &mut *o));
     }
 
-    /// Event-driven run: DRDY edges of the ADS1262 model (the EXTI interrupt), the ADS1262
-    /// supervisor tick, and the RTD task's tick, in time order.
+    /// Event-driven run to `end_us` ([`Board::run_until`]).
     fn run_until(&mut self, end_us: u64) {
-        loop {
-            let drdy = self.ads.borrow().next_drdy().unwrap_or(u64::MAX);
-            let t = drdy.min(self.next_ads_tick).min(self.next_rtd_tick);
-            if t > end_us {
-                self.clock.set(end_us);
-                self.apply_physics();
-                return;
-            }
-            self.clock.set(t);
-            self.apply_physics();
-            if t == drdy {
-                if let Some(r) = self.ads_seq.on_drdy(t) {
-                    self.emit(r);
-                }
-            }
-            if t == self.next_rtd_tick {
-                if let Some(r) = self.rtd_seq.on_tick(t) {
-                    self.assembler.rtd(r);
-                }
-                self.next_rtd_tick = t + self.rtd_seq.period_us();
-            }
-            if t == self.next_ads_tick {
-                if let Some(r) = self.ads_seq.on_tick(t) {
-                    self.emit(r);
-                }
-                self.next_ads_tick = t + ADS_TICK_US;
-            }
-        }
+        self.drive(|b, i, o| b.run_until(end_us, &mut &mut *i, &mut &mut *o));
     }
 }
 
@@ -277,7 +201,10 @@ fn both_chips_come_up_on_the_board_buses_in_their_own_modes() {
     assert_eq!(board::AD7124_BUS.mode, MODE_3);
     let at_boot = b.frames.len();
     b.run_until(b.now() + 10 * S);
-    assert_eq!(b.ads.borrow().refusals + b.rtd.borrow().refusals, 0);
+    assert_eq!(
+        b.board.ads.borrow().refusals + b.board.rtd.borrow().refusals,
+        0
+    );
     // sinc4 at 10 SPS: each channel settles in 4 periods, a pair every 0.8 s.
     let n = b.frames.len() - at_boot;
     assert!((12..=13).contains(&n), "{n} frames in 10 s");
@@ -298,13 +225,13 @@ fn a_wrong_spi_mode_or_clock_is_refused_and_every_frame_says_so() {
     let mut b = Bench::with_buses(board::ADS1262_BUS, old);
     let boot_result = {
         let now = b.now();
-        b.rtd_seq.boot(now)
+        b.board.rtd_seq.boot(now)
     };
     assert_eq!(
         boot_result.err(),
         Some(ad7124::Error::Spi(BusRefusal::WrongMode))
     );
-    assert!(b.rtd.borrow().refusals > 0);
+    assert!(b.board.rtd.borrow().refusals > 0);
     // The right mode, but faster than the AD7124's 100 ns SCLK pulse widths allow.
     let fast = SpiSettings {
         mode: MODE_3,
@@ -313,14 +240,14 @@ fn a_wrong_spi_mode_or_clock_is_refused_and_every_frame_says_so() {
     let mut c = Bench::with_buses(board::ADS1262_BUS, fast);
     let now = c.now();
     assert_eq!(
-        c.rtd_seq.boot(now).err(),
+        c.board.rtd_seq.boot(now).err(),
         Some(ad7124::Error::Spi(BusRefusal::ClockTooFast))
     );
     // The ADS1262 in mode 3.
     let mut d = Bench::with_buses(old_with(MODE_3), board::AD7124_BUS);
     let now = d.now();
     assert_eq!(
-        d.ads_seq.boot(now).err(),
+        d.board.ads_seq.boot(now).err(),
         Some(ads1262::Error::Spi(BusRefusal::WrongMode))
     );
 
@@ -347,7 +274,7 @@ fn set_rate_reprograms_the_ads1262_data_rate() {
     let mut b = Bench::new();
     b.boot();
     b.run_until(b.now() + 5 * S);
-    b.ads_seq.request_rate(DataRate::Sps50);
+    b.board.ads_seq.request_rate(DataRate::Sps50);
     let from = b.now() + 2 * S;
     b.run_until(b.now() + 12 * S);
     // sinc4 at 50 SPS: 4 × 20 ms per channel, a pair every 160 ms.
@@ -392,14 +319,14 @@ fn a_multi_day_stability_run_names_every_fault_and_recovers() {
             2 * H,
             5 * S,
             Status::DRDY_TIMEOUT,
-            |b, on| b.ads.borrow_mut().stuck_drdy = on,
+            |b, on| b.board.ads.borrow_mut().stuck_drdy = on,
         ),
         (
             "ADS1262 MISO 0xFF",
             4 * H,
             4 * S,
             Status::ADC_NOT_RESPONDING,
-            |b, on| b.ads.borrow_mut().miso_high = on,
+            |b, on| b.board.ads.borrow_mut().miso_high = on,
         ),
         (
             "ADS1262 checksum error",
@@ -408,7 +335,7 @@ fn a_multi_day_stability_run_names_every_fault_and_recovers() {
             Status::ADC_CHECKSUM,
             |b, on| {
                 if on {
-                    b.ads.borrow_mut().corrupt_reads = 1
+                    b.board.ads.borrow_mut().corrupt_reads = 1
                 }
             },
         ),
@@ -419,7 +346,7 @@ fn a_multi_day_stability_run_names_every_fault_and_recovers() {
             Status::ADC_RESET,
             |b, on| {
                 if on {
-                    b.ads.borrow_mut().power_glitch()
+                    b.board.ads.borrow_mut().power_glitch()
                 }
             },
         ),
@@ -441,7 +368,7 @@ fn a_multi_day_stability_run_names_every_fault_and_recovers() {
             16 * H,
             4 * S,
             Status::ADC_NOT_RESPONDING,
-            |b, on| b.rtd.borrow_mut().miso_high = on,
+            |b, on| b.board.rtd.borrow_mut().miso_high = on,
         ),
         (
             "AD7124 CRC error",
@@ -450,7 +377,7 @@ fn a_multi_day_stability_run_names_every_fault_and_recovers() {
             Status::ADC_CHECKSUM,
             |b, on| {
                 if on {
-                    b.rtd.borrow_mut().corrupt_reads = 1
+                    b.board.rtd.borrow_mut().corrupt_reads = 1
                 }
             },
         ),
@@ -461,7 +388,7 @@ fn a_multi_day_stability_run_names_every_fault_and_recovers() {
             Status::ADC_RESET,
             |b, on| {
                 if on {
-                    b.rtd.borrow_mut().power_glitch()
+                    b.board.rtd.borrow_mut().power_glitch()
                 }
             },
         ),
@@ -470,7 +397,7 @@ fn a_multi_day_stability_run_names_every_fault_and_recovers() {
             22 * H,
             4 * S,
             Status::DRDY_TIMEOUT,
-            |b, on| b.rtd.borrow_mut().stuck = on,
+            |b, on| b.board.rtd.borrow_mut().stuck = on,
         ),
         // The second day again at a faster ADS1262 rate (SetRate 20 SPS), with a DRDY stall.
         (
@@ -478,7 +405,7 @@ fn a_multi_day_stability_run_names_every_fault_and_recovers() {
             30 * H,
             3 * S,
             Status::DRDY_TIMEOUT,
-            |b, on| b.ads.borrow_mut().stuck_drdy = on,
+            |b, on| b.board.ads.borrow_mut().stuck_drdy = on,
         ),
     ];
     let rate_change_at = start + 26 * H;
@@ -487,7 +414,7 @@ fn a_multi_day_stability_run_names_every_fault_and_recovers() {
         let on = start + at;
         if !rate_changed && on > rate_change_at {
             b.run_until(rate_change_at);
-            b.ads_seq.request_rate(DataRate::Sps20);
+            b.board.ads_seq.request_rate(DataRate::Sps20);
             rate_changed = true;
         }
         b.run_until(on);
@@ -513,7 +440,10 @@ fn a_multi_day_stability_run_names_every_fault_and_recovers() {
         "{} frames, expected ≈ {expected:.0}",
         frames.len()
     );
-    assert_eq!(b.ads.borrow().refusals + b.rtd.borrow().refusals, 0);
+    assert_eq!(
+        b.board.ads.borrow().refusals + b.board.rtd.borrow().refusals,
+        0
+    );
 
     // 1. Never a silent number: every frame without a status bit is right.
     let mut clean = 0;
@@ -570,7 +500,7 @@ fn a_multi_day_stability_run_names_every_fault_and_recovers() {
         .unwrap_or(0);
     assert!(max_gap <= 2 * S, "longest gap {max_gap} µs");
     assert!(clean as f64 > 0.999 * frames.len() as f64);
-    let c = b.ads_seq.counters();
+    let c = b.board.ads_seq.counters();
     assert!(c.reinits >= 4 && c.timeouts >= 4, "{c:?}");
 }
 
@@ -584,7 +514,7 @@ fn a_core_stall_longer_than_a_pair_leaves_a_seq_gap_flagged_stall_and_nothing_el
     let mut b = Bench::new();
     assert_eq!(b.boot(), (true, true));
     b.run_until(b.now() + 20 * S);
-    let pair_us = b.ads_seq.pair_period_us();
+    let pair_us = b.board.ads_seq.pair_period_us();
     let first = b.frames.len();
     b.stall(2 * S);
     b.run_until(b.now() + 20 * S);
@@ -676,7 +606,7 @@ impl Device {
         use accomp::protocol::{DeviceMessage, HostFrame};
         self.next_id += 1;
         let before = self.erases.get();
-        let clock = b.clock.clone();
+        let clock = b.board.clock.clone();
         let erases = self.erases.clone();
         // The device's clock during the call: an erase stalls it ERASE_STALL_US.
         let now = move || clock.now() + u64::from(erases.get() - before) * ERASE_STALL_US;
@@ -699,7 +629,7 @@ impl Device {
     /// The worker's erase ahead; true when it erased.
     fn erase_ahead(&mut self, b: &mut Bench) -> bool {
         let before = self.erases.get();
-        let clock = b.clock.clone();
+        let clock = b.board.clock.clone();
         let erases = self.erases.clone();
         let now = move || clock.now() + u64::from(erases.get() - before) * ERASE_STALL_US;
         let erased = self.service.erase_ahead(&now) == Ok(true);
@@ -793,7 +723,7 @@ fn tables_changed_while_streaming_lose_readings_only_to_counted_flagged_erase_st
     b.run_until(b.now() + 10 * S);
 
     let frames = b.frames[first..].to_vec();
-    let pair_us = b.ads_seq.pair_period_us();
+    let pair_us = b.board.ads_seq.pair_period_us();
     let mut lost = 0u64;
     let mut stalls = 0;
     for w in frames.windows(2) {

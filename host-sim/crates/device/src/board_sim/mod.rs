@@ -9,36 +9,22 @@
 //! (the scenario) keeps running across board resets. The simulator steps at the scenario's
 //! interval and the inputs are interpolated linearly between its steps.
 //!
-//! What the firmware's `main.rs` does with RTIC tasks is done here in one event loop, in time
-//! order: ADS1262 DRDY edges, the supervisor tick, the RTD task's tick; requests are handled
-//! between events, as the worker does.
+//! What the firmware's `main.rs` does with RTIC tasks is done by the chip simulator's
+//! [`Board`] in one event loop, in time order: ADS1262 DRDY edges, the supervisor tick, the RTD
+//! task's tick; requests are handled between events, as the worker does.
 
 pub mod flash;
 pub mod pty;
 
-use std::cell::RefCell;
-use std::rc::Rc;
-
-use accomp::acquisition::{AdsSequencer, InterruptDrdy, RtdSequencer, SampleAssembler};
-use accomp::board;
-use accomp::drivers::ad7124::Ad7124;
-use accomp::drivers::ads1262::{Ads1262, DataRate};
+use accomp::drivers::ads1262::DataRate;
 use accomp::protocol::{
     encode_frame, Board, BootReport, DeviceMessage, FrameDecoder, MAX_FRAME_LEN, PROTOCOL_VERSION,
 };
 use accomp::service::Service;
 
-use accomp_chipsim::{Ad7124Model, Ads1262Model, Clock, SimDelay, SimSpi};
+use accomp_chipsim::{Acquired, Ad7124Model, Ads1262Model, Clock};
 use accomp_sim::{scenario::Scenario, Sample, SimError, Simulator};
 use flash::BoardFlash;
-
-type AdsSeq = AdsSequencer<SimSpi<Ads1262Model>, InterruptDrdy, SimDelay>;
-type RtdSeq = RtdSequencer<SimSpi<Ad7124Model>, InterruptDrdy, SimDelay>;
-
-/// Supervisor tick of the ADS1262 sequencer (the firmware's `ADS_TICK_MS`).
-const ADS_TICK_US: u64 = 20_000;
-/// An RTD reading further than this from a pair is not joined to it (the firmware's value).
-const RTD_MAX_AGE_US: u64 = 1_000_000;
 
 /// The physical inputs at a moment of the world's time.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -112,16 +98,9 @@ pub struct Faults {
 
 /// One board: chips, sequencers, the service, and the bytes it has to send.
 pub struct VirtualBoard {
-    clock: Clock,
-    ads: Rc<RefCell<Ads1262Model>>,
-    rtd: Rc<RefCell<Ad7124Model>>,
-    ads_seq: AdsSeq,
-    rtd_seq: RtdSeq,
-    assembler: SampleAssembler,
+    board: accomp_chipsim::Board,
     service: Service<BoardFlash>,
     decoder: FrameDecoder<MAX_FRAME_LEN>,
-    next_ads_tick: u64,
-    next_rtd_tick: u64,
     rate_hz: u32,
     /// World time at this board's boot, µs.
     boot_world_us: u64,
@@ -139,44 +118,15 @@ impl VirtualBoard {
         let clock = Clock::default();
         // The board's clock starts at its power-up; 1 ms for the reset sequence.
         clock.set(1_000);
-        let ads = Rc::new(RefCell::new(Ads1262Model::new(clock.clone())));
-        let rtd = Rc::new(RefCell::new(Ad7124Model::new(clock.clone())));
-        let ads_driver = Ads1262::new(
-            SimSpi {
-                chip: ads.clone(),
-                bus: board::ADS1262_BUS,
-            },
-            InterruptDrdy,
-            SimDelay(clock.clone()),
-            board::ads1262_config(),
-        );
-        let rtd_driver = Ad7124::new(
-            SimSpi {
-                chip: rtd.clone(),
-                bus: board::AD7124_BUS,
-            },
-            InterruptDrdy,
-            SimDelay(clock.clone()),
-            board::ad7124_config(),
-        );
         let layout = flash::SLOT_LAYOUT;
         let mut service = Service::new(Board::Frontend, flash, layout);
         service.set_boot_report(BootReport {
             reset_cause,
             clock_fallback: false,
         });
-        let rtd_seq = RtdSequencer::new(rtd_driver);
-        let now = clock.now();
         let mut b = VirtualBoard {
-            next_ads_tick: now + ADS_TICK_US,
-            next_rtd_tick: now + rtd_seq.period_us(),
+            board: accomp_chipsim::Board::new(clock),
             rate_hz: service.rate_hz(),
-            clock,
-            ads,
-            rtd,
-            ads_seq: AdsSequencer::new(ads_driver),
-            rtd_seq,
-            assembler: SampleAssembler::new(RTD_MAX_AGE_US),
             service,
             decoder: FrameDecoder::new(),
             boot_world_us: world_us,
@@ -185,16 +135,19 @@ impl VirtualBoard {
             frames_sent: 0,
         };
         // READY once the receiver is live.
-        b.send(&DeviceMessage::Ready {
-            board: Board::Frontend,
-            protocol: PROTOCOL_VERSION,
-        });
+        send(
+            &mut b.tx,
+            &DeviceMessage::Ready {
+                board: Board::Frontend,
+                protocol: PROTOCOL_VERSION,
+            },
+        );
         b
     }
 
     /// The board's own time, µs since boot.
     pub fn now_us(&self) -> u64 {
-        self.clock.now()
+        self.board.now()
     }
 
     /// World time at the board's boot, µs.
@@ -215,13 +168,6 @@ impl VirtualBoard {
         Ok(b)
     }
 
-    fn send(&mut self, msg: &DeviceMessage) {
-        let mut out = [0u8; MAX_FRAME_LEN];
-        if let Ok(n) = encode_frame(msg, &mut out) {
-            self.tx.extend_from_slice(&out[..n]);
-        }
-    }
-
     /// Bytes from the PC: requests are answered in order (the worker's part).
     pub fn receive(&mut self, bytes: &[u8]) {
         for &b in bytes {
@@ -229,18 +175,18 @@ impl VirtualBoard {
                 continue;
             };
             let frame = frame.map(<[u8]>::to_vec);
-            let now = self.clock.now();
+            let now = self.board.now();
             if let Some(reply) = self
                 .service
                 .handle_frame(frame.as_deref().map_err(|e| *e), &|| now)
             {
-                self.send(&reply);
+                send(&mut self.tx, &reply);
             }
         }
         if self.service.rate_hz() != self.rate_hz {
             self.rate_hz = self.service.rate_hz();
             if let Some(r) = DataRate::from_sps(self.rate_hz) {
-                self.ads_seq.request_rate(r);
+                self.board.ads_seq.request_rate(r);
             }
         }
     }
@@ -251,74 +197,51 @@ impl VirtualBoard {
             // The board's clock stands still during the call (the stall of an `erase-stall`
             // fault is wall time: the board's clock jumps after it, the sequencer sees the
             // missed conversions), so the erase-stall time counted here is 0 µs.
-            let now = self.clock.now();
+            let now = self.board.now();
             let _ = self.service.erase_ahead(&|| now);
         }
     }
 
-    fn apply_physics(&mut self, station: &mut Station) {
-        let t = self.clock.now();
-        let p = station.at((self.boot_world_us + t) as f64 * 1e-6);
-        {
-            let mut a = self.ads.borrow_mut();
-            a.advance();
+    /// Runs the board until its clock reads `end_us`: DRDY edges, supervisor and RTD ticks in
+    /// time order, each seeing the physics of its moment; finished pairs go through the
+    /// service (seq, losses, pipeline) and out on the UART while streaming.
+    pub fn run_until(&mut self, end_us: u64, station: &mut Station) {
+        let VirtualBoard {
+            board,
+            service,
+            boot_world_us,
+            tx,
+            faults,
+            frames_sent,
+            ..
+        } = self;
+        let mut inputs = |t: u64, a: &mut Ads1262Model, r: &mut Ad7124Model| {
+            let p = station.at((*boot_world_us + t) as f64 * 1e-6);
             a.accel_v = p.accel_v;
             a.tilt_v = p.tilt_v;
-            a.stuck_drdy = self.faults.drdy_stall;
-        }
-        let mut r = self.rtd.borrow_mut();
-        r.advance();
-        r.rtd_ohms = if self.faults.rtd_open {
-            f64::INFINITY
-        } else {
-            p.rtd_ohms
+            a.stuck_drdy = faults.drdy_stall;
+            r.rtd_ohms = if faults.rtd_open {
+                f64::INFINITY
+            } else {
+                p.rtd_ohms
+            };
         };
-    }
-
-    fn emit(&mut self, reading: accomp::acquisition::AdsReading) {
-        let raw = self.assembler.assemble(&reading);
         // The firmware's worker: seq and STALL losses from the sequencer.
-        if let Some(msg) = self
-            .service
-            .acquired(reading.seq, reading.lost, &raw, reading.time_us)
-        {
-            self.send(&msg);
-            self.frames_sent += 1;
-        }
+        let mut out = |acq: Acquired| {
+            let r = acq.reading;
+            if let Some(msg) = service.acquired(r.seq, r.lost, &acq.raw, r.time_us) {
+                send(tx, &msg);
+                *frames_sent += 1;
+            }
+        };
+        board.run_until(end_us, &mut inputs, &mut out);
     }
+}
 
-    /// Runs the board until its clock reads `end_us`: DRDY edges, supervisor and RTD ticks in
-    /// time order, each seeing the physics of its moment.
-    pub fn run_until(&mut self, end_us: u64, station: &mut Station) {
-        loop {
-            let drdy = self.ads.borrow().next_drdy().unwrap_or(u64::MAX);
-            let t = drdy.min(self.next_ads_tick).min(self.next_rtd_tick);
-            if t > end_us {
-                if end_us > self.clock.now() {
-                    self.clock.set(end_us);
-                }
-                self.apply_physics(station);
-                return;
-            }
-            self.clock.set(t.max(self.clock.now()));
-            self.apply_physics(station);
-            if t == drdy {
-                if let Some(r) = self.ads_seq.on_drdy(t) {
-                    self.emit(r);
-                }
-            }
-            if t == self.next_rtd_tick {
-                if let Some(r) = self.rtd_seq.on_tick(t) {
-                    self.assembler.rtd(r);
-                }
-                self.next_rtd_tick = t + self.rtd_seq.period_us();
-            }
-            if t == self.next_ads_tick {
-                if let Some(r) = self.ads_seq.on_tick(t) {
-                    self.emit(r);
-                }
-                self.next_ads_tick = t + ADS_TICK_US;
-            }
-        }
+/// Appends `msg` as a frame to the UART's outgoing bytes.
+fn send(tx: &mut Vec<u8>, msg: &DeviceMessage) {
+    let mut out = [0u8; MAX_FRAME_LEN];
+    if let Ok(n) = encode_frame(msg, &mut out) {
+        tx.extend_from_slice(&out[..n]);
     }
 }
