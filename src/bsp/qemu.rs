@@ -251,6 +251,8 @@ impl AdsAcquisition {
     }
     /// Nothing to reprogram.
     pub fn request_rate(&mut self, _rate: DataRate) {}
+    /// Never called (EXTI4 is not enabled).
+    pub fn restart_pair(&mut self) {}
 }
 
 /// Stand-in for the AD7124 sequencer.

@@ -207,7 +207,9 @@ impl Board {
     /// The core stalls for `duration_us` (a flash erase or program: no instruction fetch, no
     /// handler runs, RM0090 §3.5) while the converters go on converting. Then the DRDY
     /// interrupt that became pending during the stall runs first (EXTI4 has the highest
-    /// priority), then the overdue ticks (at their next event).
+    /// priority), then the overdue ticks (at their next event). The DRDY handler runs while
+    /// the flash driver's operation is still in progress (it preempts the worker that waits for
+    /// it): as in `src/main.rs`, it drops the conversion, whose time it does not know.
     pub fn stall(
         &mut self,
         duration_us: u64,
@@ -219,6 +221,7 @@ impl Board {
         self.clock.set(end);
         self.apply(inputs);
         if self.ads.borrow().drdy_edges != edges {
+            self.ads_seq.restart_pair();
             self.drdy(end, out);
         }
         self.next_ads_tick = self.next_ads_tick.max(end);

@@ -11,8 +11,12 @@ pub mod ad7124;
 pub mod ads1262;
 pub mod board;
 pub mod bus;
+pub mod flash;
+pub mod usart;
 
 pub use ad7124::Ad7124Model;
 pub use ads1262::Ads1262Model;
 pub use board::{Acquired, Board, Inputs};
 pub use bus::{BusRefusal, Chip, Clock, SimDelay, SimSpi};
+pub use flash::{FlashTiming, TimedFlash};
+pub use usart::UsartRx;

@@ -770,3 +770,621 @@ fn tables_changed_while_streaming_lose_readings_only_to_counted_flagged_erase_st
         check_clean_frame(&b.station, f).unwrap();
     }
 }
+
+/// The firmware's UART receive ring (`RX_RING_LEN` in src/bsp/frontend.rs).
+const RX_RING_LEN: usize = 2048;
+/// The firmware's inbound queue (`INBOUND_CAPACITY` in src/main.rs).
+const INBOUND_CAPACITY: usize = 16;
+
+/// What the interrupts hand the worker (src/main.rs `Inbound`; RTD readings go straight to the
+/// assembler inside [`Board`]).
+enum Inbound {
+    Frame(Result<Vec<u8>, accomp::protocol::FrameError>),
+    Ads(Acquired),
+}
+
+/// A message on its way to the host: when its last byte is out, and for a sample the model's
+/// true DRDY time of its accelerometer conversion.
+struct ToHost {
+    at_us: u64,
+    msg: accomp::protocol::DeviceMessage,
+    true_drdy_us: Option<u64>,
+}
+
+/// A flash stall of the core: when, how long, and whether the stream was on.
+#[derive(Debug, Clone, Copy)]
+struct Stall {
+    at_us: u64,
+    us: u64,
+    streaming: bool,
+    /// Caused by a request (a commit), not by the worker's erase ahead.
+    by_request: bool,
+}
+
+type BoardFlash = accomp_chipsim::TimedFlash<accomp::storage::RamFlash<3072, 1024, 4>>;
+
+/// The whole front-end in time: the [`Board`] on the chip models, USART1 with its DMA ring
+/// (RM0090 §30, §10) receiving the host's bytes at 115,200 Bd, the firmware's receive path (the
+/// core's `RxRing` and `FrameDecoder`, read as `bsp::frontend::read_byte` does), the worker's
+/// `Service` on a flash whose erases and programs take their datasheet time and stall the core
+/// meanwhile, the transmit line back to the host, and the host.
+struct Rig {
+    board: Board,
+    station: Station,
+    usart: accomp_chipsim::UsartRx<RX_RING_LEN>,
+    ring: accomp::rx_ring::RxRing<RX_RING_LEN>,
+    /// Ring position when a line error was last counted (as in `read_byte`).
+    error_head: usize,
+    uart_overruns: u32,
+    decoder: accomp::protocol::FrameDecoder<{ accomp::protocol::MAX_FRAME_LEN }>,
+    /// Host → device bytes with the time each one's stop bit is sampled.
+    line: std::collections::VecDeque<(u64, u8)>,
+    line_free_us: u64,
+    bytes_sent: u64,
+    inbound: std::collections::VecDeque<Inbound>,
+    readings_dropped: u32,
+    service: accomp::service::Service<BoardFlash>,
+    busy_us: Rc<std::cell::Cell<u64>>,
+    tx_free_us: u64,
+    to_host: Vec<ToHost>,
+    stalls: Vec<Stall>,
+    next_id: u32,
+    /// The rate last handed to the sequencer (None: the board's default).
+    rate: Option<DataRate>,
+}
+
+impl Rig {
+    /// Powers the board up on `flash` (its clock from 1 ms).
+    fn boot(flash: BoardFlash) -> Rig {
+        let clock = Clock::default();
+        clock.set(1_000);
+        let busy_us = flash.busy_us.clone();
+        let mut usart = accomp_chipsim::UsartRx::new();
+        // start_rx_dma: the circular stream enabled, then USART_CR3.DMAR.
+        usart.dmar = true;
+        let service = accomp::service::Service::new(
+            accomp::protocol::Board::Frontend,
+            flash,
+            accomp::storage::SlotLayout::consecutive(1024),
+        );
+        Rig {
+            board: Board::new(clock),
+            station: Station {
+                table: paper_order2_table(),
+            },
+            usart,
+            ring: accomp::rx_ring::RxRing::new(),
+            error_head: 0,
+            uart_overruns: 0,
+            decoder: accomp::protocol::FrameDecoder::new(),
+            line: Default::default(),
+            line_free_us: 0,
+            bytes_sent: 0,
+            inbound: Default::default(),
+            readings_dropped: 0,
+            service,
+            busy_us,
+            tx_free_us: 0,
+            to_host: Vec::new(),
+            stalls: Vec::new(),
+            next_id: 0,
+            rate: None,
+        }
+    }
+
+    fn now(&self) -> u64 {
+        self.board.now()
+    }
+
+    /// The chips up to `t_us`: handlers run, finished pairs queue for the worker.
+    fn chips_until(&mut self, t_us: u64) {
+        let Rig {
+            board,
+            station,
+            inbound,
+            readings_dropped,
+            ..
+        } = self;
+        board.run_until(
+            t_us,
+            &mut |t: u64, a: &mut Ads1262Model, r: &mut Ad7124Model| {
+                station_inputs(station, t, a, r)
+            },
+            &mut |acq: Acquired| push_reading(inbound, readings_dropped, acq),
+        );
+    }
+
+    /// Runs everything until `end_us`, the worker after every event.
+    fn run_until(&mut self, end_us: u64) {
+        loop {
+            let byte_at = self.line.front().map_or(u64::MAX, |b| b.0);
+            let t = self.board.next_event_us().min(byte_at).min(end_us);
+            self.chips_until(t);
+            self.worker();
+            if t < byte_at {
+                if t >= end_us {
+                    return;
+                }
+                continue;
+            }
+            let (_, b) = self.line.pop_front().unwrap();
+            self.usart.byte_received(b);
+            // The USART1 interrupt (priority 2) runs: the core is not stalled here.
+            self.uart_rx();
+            self.worker();
+        }
+    }
+
+    /// The firmware's `uart_rx` task: drains the DMA ring into the frame decoder (what
+    /// `bsp::frontend::read_byte` does with the registers, on the models').
+    fn uart_rx(&mut self) {
+        use accomp::rx_ring::RxRing;
+        use accomp_chipsim::usart::sr;
+        loop {
+            let status = self.usart.read_sr();
+            let ndtr = self.usart.ndtr();
+            let head = RxRing::<RX_RING_LEN>::head(ndtr);
+            if status & sr::ORE != 0 && head != self.error_head {
+                self.error_head = head;
+                self.uart_overruns += 1;
+            }
+            let ring = &self.usart.ring;
+            let Some(byte) = self.ring.next(ndtr, |i| ring[i]) else {
+                return;
+            };
+            if let Some(frame) = self.decoder.push(byte) {
+                if self.inbound.len() < INBOUND_CAPACITY {
+                    self.inbound
+                        .push_back(Inbound::Frame(frame.map(<[u8]>::to_vec)));
+                } else {
+                    self.service.count_dropped();
+                }
+            }
+        }
+    }
+
+    /// The core stalls `us` for the flash: the chips convert, the USART and its DMA receive,
+    /// no handler or task runs. Afterwards the pending interrupts run.
+    fn stall(&mut self, us: u64, by_request: bool) {
+        let at_us = self.now();
+        self.stalls.push(Stall {
+            at_us,
+            us,
+            streaming: self.service.streaming(),
+            by_request,
+        });
+        let end = at_us + us;
+        while self.line.front().is_some_and(|b| b.0 <= end) {
+            let (_, b) = self.line.pop_front().unwrap();
+            self.usart.byte_received(b);
+        }
+        let Rig {
+            board,
+            station,
+            inbound,
+            readings_dropped,
+            ..
+        } = self;
+        board.stall(
+            us,
+            &mut |t: u64, a: &mut Ads1262Model, r: &mut Ad7124Model| {
+                station_inputs(station, t, a, r)
+            },
+            &mut |acq: Acquired| push_reading(inbound, readings_dropped, acq),
+        );
+        self.uart_rx();
+    }
+
+    /// The worker: every queued item in order, the answer sent after any flash stall, then the
+    /// erase ahead when nothing waits (src/main.rs `worker`).
+    fn worker(&mut self) {
+        use accomp::pipeline::LossFlags;
+        use accomp::protocol::{decode_message, HostFrame, Request};
+        while let Some(item) = self.inbound.pop_front() {
+            self.service.losses_mut().uart_rx_overrun = self.uart_overruns;
+            let busy_before = self.busy_us.get();
+            let (clock, busy) = (self.board.clock.clone(), self.busy_us.clone());
+            let now = move || clock.now() + (busy.get() - busy_before);
+            let (reply, true_drdy_us) = match item {
+                Inbound::Frame(frame) => {
+                    let is_commit = frame.as_ref().is_ok_and(|body| {
+                        matches!(
+                            decode_message::<HostFrame>(body).map(|f| f.request),
+                            Ok(Request::UploadCommit { .. }
+                                | Request::Rollback
+                                | Request::Activate { .. })
+                        )
+                    });
+                    let reply = self
+                        .service
+                        .handle_frame(frame.as_deref().map_err(|e| *e), &now);
+                    let stalled = self.busy_us.get() - busy_before;
+                    if stalled > 0 {
+                        assert!(is_commit, "only a commit touches the flash");
+                        self.stall(stalled, true);
+                    }
+                    (reply, None)
+                }
+                Inbound::Ads(acq) => {
+                    let mut lost = acq.reading.lost;
+                    let dropped = std::mem::take(&mut self.readings_dropped);
+                    if dropped > 0 {
+                        lost.0 |= LossFlags::QUEUE_FULL;
+                        let l = self.service.losses_mut();
+                        l.queue_full = l.queue_full.wrapping_add(dropped);
+                    }
+                    let r = acq.reading;
+                    (
+                        self.service.acquired(r.seq, lost, &acq.raw, r.time_us),
+                        acq.true_accel_drdy_us,
+                    )
+                }
+            };
+            if let Some(msg) = reply {
+                self.transmit(msg, true_drdy_us);
+            }
+            // SetRate: the worker hands the rate to the supervisor, which requests it.
+            if let Some(rate) = DataRate::from_sps(self.service.rate_hz()) {
+                if Some(rate) != self.rate {
+                    self.rate = Some(rate);
+                    self.board.ads_seq.request_rate(rate);
+                }
+            }
+            if self.service.erase_pending() && self.inbound.is_empty() {
+                let busy_before = self.busy_us.get();
+                let (clock, busy) = (self.board.clock.clone(), self.busy_us.clone());
+                let now = move || clock.now() + (busy.get() - busy_before);
+                let _ = self.service.erase_ahead(&now);
+                let stalled = self.busy_us.get() - busy_before;
+                if stalled > 0 {
+                    self.stall(stalled, false);
+                }
+            }
+        }
+    }
+
+    /// The transmitter (blocking, byte after byte at the baud rate).
+    fn transmit(&mut self, msg: accomp::protocol::DeviceMessage, true_drdy_us: Option<u64>) {
+        let mut buf = [0u8; accomp::protocol::MAX_FRAME_LEN];
+        let n = accomp::protocol::encode_frame(&msg, &mut buf).expect("every message encodes");
+        let start = self.tx_free_us.max(self.now());
+        self.tx_free_us = accomp_chipsim::usart::byte_done_us(start, n as u64 - 1);
+        self.to_host.push(ToHost {
+            at_us: self.tx_free_us,
+            msg,
+            true_drdy_us,
+        });
+    }
+
+    /// The host sends a request: its bytes go on the line back to back after what is already
+    /// on it.
+    fn send(&mut self, request: accomp::protocol::Request) -> u32 {
+        use accomp::protocol::{encode_frame, HostFrame, MAX_FRAME_LEN};
+        self.next_id += 1;
+        let id = self.next_id;
+        let mut buf = [0u8; MAX_FRAME_LEN];
+        let n = encode_frame(&HostFrame { id, request }, &mut buf).unwrap();
+        let start = self.line_free_us.max(self.now());
+        for (k, &b) in buf[..n].iter().enumerate() {
+            self.line
+                .push_back((accomp_chipsim::usart::byte_done_us(start, k as u64), b));
+        }
+        self.line_free_us = self.line.back().map_or(start, |b| b.0);
+        self.bytes_sent += n as u64;
+        id
+    }
+
+    /// Sends a request and runs until its answer has reached the host.
+    fn call(&mut self, request: accomp::protocol::Request) -> accomp::protocol::Response {
+        use accomp::protocol::DeviceMessage;
+        let id = self.send(request.clone());
+        let deadline = self.now() + 10 * S;
+        loop {
+            let now = self.now();
+            if let Some(m) = self.to_host.iter().find(|m| {
+                m.at_us <= now
+                    && matches!(m.msg, DeviceMessage::Response { id: i, .. }
+                        | DeviceMessage::Error { id: i, .. } if i == id)
+            }) {
+                match &m.msg {
+                    DeviceMessage::Response { body, .. } => return body.clone(),
+                    other => panic!("{request:?}: {other:?}"),
+                }
+            }
+            assert!(now < deadline, "{request:?} unanswered");
+            self.run_until(now + 500);
+        }
+    }
+
+    fn info(&mut self) -> accomp::protocol::DeviceInfo {
+        match self.call(accomp::protocol::Request::Info) {
+            accomp::protocol::Response::Info(i) => i,
+            other => panic!("{other:?}"),
+        }
+    }
+
+    /// Uploads `table` over the line as the host client does, chunk by chunk, and commits.
+    fn upload(&mut self, table: &CalibrationTable) {
+        use accomp::protocol::{upload_body_crc32, Request, Response, CHUNK_LEN};
+        let bytes = table.encode();
+        let upload_id = 7000 + self.next_id;
+        self.call(Request::UploadBegin {
+            upload_id,
+            total_len: bytes.len() as u32,
+            body_crc32: upload_body_crc32(&bytes),
+        });
+        for (k, chunk) in bytes.chunks(CHUNK_LEN).enumerate() {
+            self.call(Request::UploadChunk {
+                upload_id,
+                offset: (k * CHUNK_LEN) as u32,
+                data: heapless::Vec::from_slice(chunk).unwrap(),
+            });
+        }
+        assert_eq!(
+            self.call(Request::UploadCommit { upload_id }),
+            Response::Committed {
+                table_id: table.id()
+            }
+        );
+    }
+
+    /// The sample frames sent after the first `from` messages that reached the host so far,
+    /// with their true DRDY times.
+    fn delivered(&self, from: usize) -> Vec<(Frame, Option<u64>)> {
+        let now = self.now();
+        self.to_host[from..]
+            .iter()
+            .filter(|m| m.at_us <= now)
+            .filter_map(|m| match &m.msg {
+                accomp::protocol::DeviceMessage::Sample { id: 0, frame } => {
+                    Some((*frame, m.true_drdy_us))
+                }
+                _ => None,
+            })
+            .collect()
+    }
+}
+
+fn station_inputs(station: &Station, t: u64, a: &mut Ads1262Model, r: &mut Ad7124Model) {
+    a.accel_v = station.output_v(t);
+    a.tilt_v = station.tilt_arcsec(t) / station.table.tilt.scale_arcsec_per_v;
+    r.rtd_ohms = station.rtd_ohms(t);
+}
+
+/// The DRDY interrupt's `try_send`: a full queue loses the reading, counted for the next one.
+fn push_reading(
+    inbound: &mut std::collections::VecDeque<Inbound>,
+    dropped: &mut u32,
+    acq: Acquired,
+) {
+    if inbound.len() < INBOUND_CAPACITY {
+        inbound.push_back(Inbound::Ads(acq));
+    } else {
+        *dropped += 1;
+    }
+}
+
+/// Checks one stream as the host received it: every pair slot of the ADC's conversion clock is
+/// a delivered frame or a number skipped in `seq`, each gap is flagged on the frame after it,
+/// the gaps add up to the device's `conversions_lost`, and every time stamp is within 50 µs of
+/// the model's true DRDY time. Returns the number of gaps.
+fn check_stream(
+    name: &str,
+    frames: &[(Frame, Option<u64>)],
+    pair_us: u64,
+    conversions_lost: u32,
+    station: &Station,
+) -> usize {
+    use accomp::pipeline::LossFlags;
+    assert!(frames.len() > 100, "{name}: {} frames", frames.len());
+    let mut lost = 0u64;
+    let mut gaps = 0;
+    // The first pair of a stream may still be of the rate before SetRate: slots from the second.
+    for (k, w) in frames.windows(2).enumerate() {
+        let (a, b) = (&w[0].0, &w[1].0);
+        assert!(b.seq > a.seq, "{name}: seq runs forward");
+        let gap = u64::from(b.seq - a.seq - 1);
+        let flagged = b.lost.0 & (LossFlags::STALL | LossFlags::QUEUE_FULL) != 0;
+        if gap > 0 {
+            eprintln!(
+                "{name}: gap {gap} before {} at {} {:?} (prev at {})",
+                b.seq, b.time_us, b.lost, a.time_us
+            );
+        }
+        assert_eq!(
+            gap > 0,
+            flagged,
+            "{name}: frame {} gap {gap} lost {:?}",
+            b.seq,
+            b.lost
+        );
+        if k > 0 {
+            let slots = (b.time_us - a.time_us + pair_us / 2) / pair_us;
+            assert_eq!(
+                gap + 1,
+                slots,
+                "{name}: frame {}: every pair slot accounted",
+                b.seq
+            );
+        }
+        lost += gap;
+        gaps += usize::from(gap > 0);
+    }
+    assert_eq!(
+        lost,
+        u64::from(conversions_lost),
+        "{name}: gaps = conversions_lost"
+    );
+    let mut worst = 0;
+    for (f, true_us) in frames {
+        let t = true_us.unwrap_or_else(|| panic!("{name}: frame {} carries no conversion", f.seq));
+        worst = worst.max(f.time_us.abs_diff(t));
+        // Before the first upload of a factory-blank board the frames say NO_CALIBRATION.
+        if f.status == Status::default() {
+            check_clean_frame(station, f).unwrap();
+        } else {
+            assert_eq!(
+                f.status,
+                Status(Status::NO_CALIBRATION),
+                "{name}: frame {}",
+                f.seq
+            );
+        }
+    }
+    assert!(
+        worst <= 50,
+        "{name}: a time stamp {worst} µs off the true DRDY time"
+    );
+    gaps
+}
+
+/// The timed simulation of the whole front-end: streaming at the highest data rate the firmware
+/// configures (400 SPS: a pair every 20 ms), tables uploaded over the modelled UART (USART1 →
+/// circular DMA → the firmware's ring, bytes every 86.8 µs at 115,200 Bd, ORE when a byte is not
+/// taken in time) and committed and rolled back in the middle, a reboot with an old table in the
+/// spare slot and the host starting its stream at once, and every flash erase (2 s) and program
+/// (100 µs a byte) stalling the core meanwhile (RM0090 §3.5, DS8626 worst case).
+///
+/// Asserted: no UART byte lost (ORE never set, every byte sent received); every conversion pair
+/// delivered or accounted for by a seq gap, a flag and `conversions_lost`; time stamps within
+/// 50 µs of the model's true DRDY times across every stall; the only stalls while streaming are
+/// the commits the host asked for (the erase ahead waits for the stream to stop), each counted in
+/// Info when it erased.
+#[test]
+fn a_400_sps_stream_through_uploads_rollback_and_reboot_loses_no_byte_and_accounts_for_every_conversion(
+) {
+    use accomp::protocol::{Request, Response, MAX_RATE_HZ};
+    let tables: Vec<CalibrationTable> = (1..=5u8)
+        .map(|d| {
+            let mut t = paper_order2_table();
+            t.date.day = d;
+            t
+        })
+        .collect();
+    let flash = accomp_chipsim::TimedFlash::new(
+        accomp::storage::RamFlash::new(),
+        accomp_chipsim::FlashTiming::MAX,
+    );
+    let erases = flash.erases.clone();
+
+    // First boot, a factory-blank flash: three uploads (each into a blank slot: programming
+    // only) and a rollback (into the slot of table 1: an erase) while streaming.
+    let mut rig = Rig::boot(flash);
+    rig.run_until(rig.now() + 1_500_000);
+    assert_eq!(rig.call(Request::SetRate { hz: MAX_RATE_HZ }), Response::Ok);
+    assert_eq!(rig.call(Request::StreamStart), Response::Ok);
+    let before = rig.info().losses;
+    let from = rig.to_host.len();
+    rig.run_until(rig.now() + S);
+    for t in &tables[..3] {
+        rig.upload(t);
+        rig.run_until(rig.now() + S);
+    }
+    assert_eq!(rig.call(Request::Rollback), Response::Ok);
+    rig.run_until(rig.now() + 2 * S);
+    let info = rig.info();
+    assert_eq!(info.active_table, Some(tables[1].id()));
+    let pair_us = rig.board.ads_seq.pair_period_us();
+    assert_eq!(pair_us, 20_000, "400 SPS, sinc4: 4 × 2.5 ms per input");
+    let frames = rig.delivered(from);
+    let gaps = check_stream(
+        "first boot",
+        &frames,
+        pair_us,
+        info.losses.conversions_lost - before.conversions_lost,
+        &rig.station,
+    );
+    assert_eq!(
+        gaps, 4,
+        "one gap per commit (the programming alone is > half a pair)"
+    );
+    assert_eq!(
+        info.losses.erase_stalls - before.erase_stalls,
+        1,
+        "the rollback's erase"
+    );
+    assert!(info.losses.erase_stall_us - before.erase_stall_us >= 2 * S);
+    let uart = (rig.usart.received, rig.usart.overrun_bytes, rig.bytes_sent);
+    assert_eq!(
+        uart,
+        (rig.bytes_sent, 0, rig.bytes_sent),
+        "received, overrun, sent"
+    );
+    assert_eq!((info.losses.uart_rx_overrun, info.frames_dropped), (0, 0));
+    let stalls = rig.stalls.clone();
+
+    // Power cut while streaming: the erase ahead after the rollback never ran, the spare holds
+    // table 2's old copy. The host starts its stream as soon as the board is up.
+    let flash = rig.service.into_flash().unwrap();
+    let mut rig = Rig::boot(flash);
+    rig.send(Request::StreamStart);
+    rig.send(Request::SetRate { hz: MAX_RATE_HZ });
+    rig.run_until(rig.now() + 1_500_000);
+    let before = rig.info();
+    let from = rig.to_host.len();
+    assert_eq!(
+        (before.active_table, before.previous_table),
+        (Some(tables[1].id()), Some(tables[2].id()))
+    );
+    rig.run_until(rig.now() + 3 * S);
+    rig.upload(&tables[3]); // the spare still holds an old table: this commit erases
+    rig.run_until(rig.now() + 2 * S);
+    let info = rig.info();
+    let frames = rig.delivered(from);
+    let gaps = check_stream(
+        "after the reboot",
+        &frames,
+        pair_us,
+        info.losses.conversions_lost - before.losses.conversions_lost,
+        &rig.station,
+    );
+    assert_eq!(gaps, 1, "one gap: the commit's");
+    assert_eq!(info.losses.erase_stalls - before.losses.erase_stalls, 1);
+    // Stopped, the erase ahead runs; the next stream's upload only programs.
+    let erased = erases.get();
+    assert_eq!(rig.call(Request::StreamStop), Response::Ok);
+    rig.run_until(rig.now() + 3 * S);
+    assert_eq!(
+        erases.get(),
+        erased + 1,
+        "the erase ahead once the stream stopped"
+    );
+    let before = rig.info();
+    assert_eq!(rig.call(Request::StreamStart), Response::Ok);
+    let from = rig.to_host.len();
+    rig.run_until(rig.now() + S);
+    rig.upload(&tables[4]);
+    rig.run_until(rig.now() + 2 * S);
+    let info = rig.info();
+    let frames = rig.delivered(from);
+    let gaps = check_stream(
+        "upload into the erased spare",
+        &frames,
+        pair_us,
+        info.losses.conversions_lost - before.losses.conversions_lost,
+        &rig.station,
+    );
+    assert_eq!(gaps, 1, "the programming's gap");
+    assert_eq!(
+        info.losses.erase_stalls, before.losses.erase_stalls,
+        "no erase"
+    );
+    assert_eq!(info.active_table, Some(tables[4].id()));
+    let uart = (rig.usart.received, rig.usart.overrun_bytes, rig.bytes_sent);
+    assert_eq!(
+        uart,
+        (rig.bytes_sent, 0, rig.bytes_sent),
+        "received, overrun, sent"
+    );
+    assert_eq!((info.losses.uart_rx_overrun, info.frames_dropped), (0, 0));
+
+    // Every stall during a stream was a commit the host asked for.
+    for s in stalls.iter().chain(&rig.stalls) {
+        assert!(
+            !s.streaming || s.by_request,
+            "the erase ahead stalled the core {} µs at {} µs while streaming",
+            s.us,
+            s.at_us
+        );
+    }
+}
