@@ -1231,6 +1231,10 @@ fn check_stream(
             );
         }
     }
+    eprintln!(
+        "{name}: {} frames, {gaps} gaps, {lost} pairs lost, worst stamp {worst} µs off",
+        frames.len()
+    );
     assert!(
         worst <= 50,
         "{name}: a time stamp {worst} µs off the true DRDY time"
