@@ -553,63 +553,40 @@ fn a_core_stall_longer_than_a_pair_leaves_a_seq_gap_flagged_stall_and_nothing_el
     }
 }
 
-/// The calibration flash of the service under test, counting its sector erases: each one stalls
-/// the simulated core for the worst-case 128 KiB erase (2 s at x32, DS8626).
-struct ErasingFlash {
-    ram: accomp::storage::RamFlash<3072, 1024, 4>,
-    erases: Rc<std::cell::Cell<u32>>,
-}
-
-mod erasing_flash {
-    use super::ErasingFlash;
-    use accomp::storage::RamFlashError;
-    use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
-
-    impl ErrorType for ErasingFlash {
-        type Error = RamFlashError;
-    }
-    impl ReadNorFlash for ErasingFlash {
-        const READ_SIZE: usize = 1;
-        fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), RamFlashError> {
-            self.ram.read(offset, bytes)
-        }
-        fn capacity(&self) -> usize {
-            self.ram.capacity()
-        }
-    }
-    impl NorFlash for ErasingFlash {
-        const WRITE_SIZE: usize = 4;
-        const ERASE_SIZE: usize = 1024;
-        fn erase(&mut self, from: u32, to: u32) -> Result<(), RamFlashError> {
-            self.erases.set(self.erases.get() + 1);
-            self.ram.erase(from, to)
-        }
-        fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), RamFlashError> {
-            self.ram.write(offset, bytes)
-        }
-    }
-}
+/// Only the erases stall here (2 s each, DS8626 worst case at x32); the whole front-end test
+/// below adds the programming time.
+const ERASES_ONLY: accomp_chipsim::FlashTiming = accomp_chipsim::FlashTiming {
+    sector_erase_us: 2 * S,
+    byte_program_us: 0,
+};
 
 /// The device side around the simulated board: the real `Service` on a flash whose erases
 /// stall the simulated core, called as the firmware's worker calls it.
 struct Device {
-    service: accomp::service::Service<ErasingFlash>,
-    erases: Rc<std::cell::Cell<u32>>,
+    service: accomp::service::Service<BoardFlash>,
+    busy_us: Rc<std::cell::Cell<u64>>,
     next_id: u32,
 }
 
 /// Worst-case sector erase (128 KiB at x32, DS8626 "Flash memory programming").
-const ERASE_STALL_US: u64 = 2 * S;
+const ERASE_STALL_US: u64 = ERASES_ONLY.sector_erase_us;
 
 impl Device {
+    /// The device's clock during a flash operation: the core stalls for it.
+    fn clock(&self, b: &Bench) -> impl Fn() -> u64 {
+        let (clock, busy, before) = (
+            b.board.clock.clone(),
+            self.busy_us.clone(),
+            self.busy_us.get(),
+        );
+        move || clock.now() + (busy.get() - before)
+    }
+
     fn request(&mut self, b: &mut Bench, request: accomp::protocol::Request) {
         use accomp::protocol::{DeviceMessage, HostFrame};
         self.next_id += 1;
-        let before = self.erases.get();
-        let clock = b.board.clock.clone();
-        let erases = self.erases.clone();
-        // The device's clock during the call: an erase stalls it ERASE_STALL_US.
-        let now = move || clock.now() + u64::from(erases.get() - before) * ERASE_STALL_US;
+        let before = self.busy_us.get();
+        let now = self.clock(b);
         let answer = self.service.handle(
             HostFrame {
                 id: self.next_id,
@@ -621,26 +598,24 @@ impl Device {
             matches!(answer, DeviceMessage::Response { .. }),
             "{answer:?}"
         );
-        self.stall_for_erases(b, before);
+        self.stall_for_flash(b, before);
         // The worker's erase ahead once the answer is out.
         self.erase_ahead(b);
     }
 
     /// The worker's erase ahead; true when it erased.
     fn erase_ahead(&mut self, b: &mut Bench) -> bool {
-        let before = self.erases.get();
-        let clock = b.board.clock.clone();
-        let erases = self.erases.clone();
-        let now = move || clock.now() + u64::from(erases.get() - before) * ERASE_STALL_US;
+        let before = self.busy_us.get();
+        let now = self.clock(b);
         let erased = self.service.erase_ahead(&now) == Ok(true);
-        self.stall_for_erases(b, before);
+        self.stall_for_flash(b, before);
         erased
     }
 
-    fn stall_for_erases(&self, b: &mut Bench, before: u32) {
-        let n = self.erases.get() - before;
-        if n > 0 {
-            b.stall(u64::from(n) * ERASE_STALL_US);
+    fn stall_for_flash(&self, b: &mut Bench, before: u64) {
+        let us = self.busy_us.get() - before;
+        if us > 0 {
+            b.stall(us);
         }
     }
 
@@ -679,16 +654,13 @@ impl Device {
 fn tables_changed_while_streaming_lose_readings_only_to_counted_flagged_erase_stalls() {
     use accomp::pipeline::LossFlags;
     use accomp::protocol::{Board, Request};
-    let erases = Rc::new(std::cell::Cell::new(0));
-    let flash = ErasingFlash {
-        ram: accomp::storage::RamFlash::new(),
-        erases: erases.clone(),
-    };
+    let flash = accomp_chipsim::TimedFlash::new(accomp::storage::RamFlash::new(), ERASES_ONLY);
+    let erases = flash.erases.clone();
     let layout = accomp::storage::SlotLayout::consecutive(1024);
     let mut b = Bench::new();
     let mut dev = Device {
+        busy_us: flash.busy_us.clone(),
         service: accomp::service::Service::new(Board::Frontend, flash, layout),
-        erases: erases.clone(),
         next_id: 0,
     };
     let tables: Vec<CalibrationTable> = (1..=5u8)
