@@ -110,6 +110,14 @@ pub struct VirtualBoard {
     pub faults: Faults,
     /// Frames streamed since boot.
     pub frames_sent: u64,
+    /// The flash's count of erase-stall time, µs.
+    stalled_us: std::sync::Arc<std::sync::atomic::AtomicU64>,
+    /// Stall time of erases run by the service that the chips have not lived through yet.
+    pending_stall_us: u64,
+    /// The time the board was last run to ([`Self::run_until`]).
+    run_end_us: u64,
+    /// Received bytes not handled yet (held during a stall).
+    held: Vec<u8>,
 }
 
 impl VirtualBoard {
@@ -118,7 +126,9 @@ impl VirtualBoard {
         let clock = Clock::default();
         // The board's clock starts at its power-up; 1 ms for the reset sequence.
         clock.set(1_000);
+        let run_end_us = clock.now();
         let layout = flash::SLOT_LAYOUT;
+        let stalled_us = flash.stalled_us.clone();
         let mut service = Service::new(Board::Frontend, flash, layout);
         service.set_boot_report(BootReport {
             reset_cause,
@@ -133,6 +143,10 @@ impl VirtualBoard {
             tx: Vec::new(),
             faults: Faults::default(),
             frames_sent: 0,
+            stalled_us,
+            pending_stall_us: 0,
+            run_end_us,
+            held: Vec::new(),
         };
         // READY once the receiver is live.
         send(
@@ -168,21 +182,39 @@ impl VirtualBoard {
         Ok(b)
     }
 
-    /// Bytes from the PC: requests are answered in order (the worker's part).
+    /// Bytes from the PC: requests are answered in order (the worker's part). While the core
+    /// is stalled by a flash erase the bytes wait (the UART's DMA ring keeps them) and are
+    /// answered once the board has run past the stall.
     pub fn receive(&mut self, bytes: &[u8]) {
-        for &b in bytes {
+        self.held.extend_from_slice(bytes);
+        self.take_held();
+    }
+
+    /// True while a flash erase stalls the core: one ran and the chips have not lived through
+    /// it yet, or the board's clock is still ahead of the time it was last run to.
+    fn stalled(&self) -> bool {
+        self.pending_stall_us > 0 || self.board.now() > self.run_end_us
+    }
+
+    fn take_held(&mut self) {
+        let mut used = 0;
+        while used < self.held.len() && !self.stalled() {
+            let b = self.held[used];
+            used += 1;
             let Some(frame) = self.decoder.push(b) else {
                 continue;
             };
             let frame = frame.map(<[u8]>::to_vec);
-            let now = self.board.now();
+            let clock = self.flash_clock();
             if let Some(reply) = self
                 .service
-                .handle_frame(frame.as_deref().map_err(|e| *e), &|| now)
+                .handle_frame(frame.as_deref().map_err(|e| *e), &|| clock.now())
             {
                 send(&mut self.tx, &reply);
             }
+            self.pending_stall_us += clock.stalled();
         }
+        self.held.drain(..used);
         if self.service.rate_hz() != self.rate_hz {
             self.rate_hz = self.service.rate_hz();
             if let Some(r) = DataRate::from_sps(self.rate_hz) {
@@ -193,12 +225,21 @@ impl VirtualBoard {
 
     /// Erases the spare slot when the firmware would (after an answer, no request waiting).
     pub fn idle(&mut self) {
-        if self.service.erase_pending() {
-            // The board's clock stands still during the call (the stall of an `erase-stall`
-            // fault is wall time: the board's clock jumps after it, the sequencer sees the
-            // missed conversions), so the erase-stall time counted here is 0 µs.
-            let now = self.board.now();
-            let _ = self.service.erase_ahead(&|| now);
+        if self.service.erase_pending() && self.held.is_empty() && !self.stalled() {
+            let clock = self.flash_clock();
+            let _ = self.service.erase_ahead(&|| clock.now());
+            self.pending_stall_us += clock.stalled();
+        }
+    }
+
+    /// The board's clock as the service sees it during a flash operation: an erase stall of
+    /// the `erase-stall` fault moves it on (the time base counts through the stall), so Info
+    /// counts the stall's length.
+    fn flash_clock(&self) -> FlashClock {
+        FlashClock {
+            now_us: self.board.now(),
+            stalled_us: self.stalled_us.clone(),
+            before_us: self.stalled_us.load(std::sync::atomic::Ordering::Relaxed),
         }
     }
 
@@ -206,6 +247,7 @@ impl VirtualBoard {
     /// time order, each seeing the physics of its moment; finished pairs go through the
     /// service (seq, losses, pipeline) and out on the UART while streaming.
     pub fn run_until(&mut self, end_us: u64, station: &mut Station) {
+        let stall_us = std::mem::take(&mut self.pending_stall_us);
         let VirtualBoard {
             board,
             service,
@@ -234,7 +276,32 @@ impl VirtualBoard {
                 *frames_sent += 1;
             }
         };
+        // An erase stalled the core: the chips converted meanwhile, no handler ran; the DRDY
+        // served after it finds the sequencer's pair clock behind (a STALL gap in seq).
+        if stall_us > 0 {
+            board.stall(stall_us, &mut inputs, &mut out);
+        }
         board.run_until(end_us, &mut inputs, &mut out);
+        self.run_end_us = end_us;
+        self.take_held();
+    }
+}
+
+/// The service's clock during a flash operation ([`VirtualBoard::flash_clock`]).
+struct FlashClock {
+    now_us: u64,
+    stalled_us: std::sync::Arc<std::sync::atomic::AtomicU64>,
+    before_us: u64,
+}
+
+impl FlashClock {
+    /// Stall time since the clock was taken, µs.
+    fn stalled(&self) -> u64 {
+        self.stalled_us.load(std::sync::atomic::Ordering::Relaxed) - self.before_us
+    }
+
+    fn now(&self) -> u64 {
+        self.now_us + self.stalled()
     }
 }
 
@@ -243,5 +310,136 @@ fn send(tx: &mut Vec<u8>, msg: &DeviceMessage) {
     let mut out = [0u8; MAX_FRAME_LEN];
     if let Ok(n) = encode_frame(msg, &mut out) {
         tx.extend_from_slice(&out[..n]);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::atomic::Ordering;
+
+    use accomp::pipeline::{Frame, LossFlags};
+    use accomp::protocol::{
+        decode_message, upload_body_crc32, HostFrame, Request, Response, CHUNK_LEN,
+    };
+
+    use super::*;
+
+    /// A host on the board's line: requests in, every message out decoded.
+    struct Host {
+        board: VirtualBoard,
+        station: Station,
+        decoder: FrameDecoder<MAX_FRAME_LEN>,
+        frames: Vec<Frame>,
+        next_id: u32,
+    }
+
+    impl Host {
+        /// Sends a request and runs the board in 10 ms steps until its answer is out.
+        fn call(&mut self, request: Request) -> Response {
+            self.next_id += 1;
+            let id = self.next_id;
+            let mut buf = [0u8; MAX_FRAME_LEN];
+            let n = encode_frame(&HostFrame { id, request }, &mut buf).unwrap();
+            self.board.receive(&buf[..n]);
+            self.board.idle();
+            for _ in 0..1000 {
+                let tx = std::mem::take(&mut self.board.tx);
+                let mut answer = None;
+                for b in tx {
+                    if let Some(Ok(body)) = self.decoder.push(b) {
+                        match decode_message::<DeviceMessage>(body).unwrap() {
+                            DeviceMessage::Sample { frame, .. } => self.frames.push(frame),
+                            DeviceMessage::Response { id: i, body } if i == id => {
+                                answer = Some(body)
+                            }
+                            other => panic!("{other:?}"),
+                        }
+                    }
+                }
+                if let Some(a) = answer {
+                    return a;
+                }
+                self.run(10_000);
+            }
+            panic!("request {id} unanswered");
+        }
+
+        fn run(&mut self, us: u64) {
+            let end = self.board.now_us() + us;
+            self.board.run_until(end, &mut self.station);
+            self.board.idle();
+        }
+
+        fn upload(&mut self, day: u8) {
+            let mut t = crate::paper_table();
+            t.date.day = day;
+            let bytes = t.encode();
+            let upload_id = 100 + u32::from(day);
+            self.call(Request::UploadBegin {
+                upload_id,
+                total_len: bytes.len() as u32,
+                body_crc32: upload_body_crc32(&bytes),
+            });
+            for (k, c) in bytes.chunks(CHUNK_LEN).enumerate() {
+                self.call(Request::UploadChunk {
+                    upload_id,
+                    offset: (k * CHUNK_LEN) as u32,
+                    data: heapless::Vec::from_slice(c).unwrap(),
+                });
+            }
+            assert_eq!(
+                self.call(Request::UploadCommit { upload_id }),
+                Response::Committed { table_id: t.id() }
+            );
+        }
+    }
+
+    /// `erase-stall=2000` and a table loaded while streaming onto a spare that holds an old
+    /// table: the commit's erase stalls the board 2 s of its clock — the pairs it missed are a
+    /// seq gap flagged STALL, and Info counts the stall with its 2,000,000 µs.
+    #[test]
+    fn an_erase_stall_fault_stalls_the_board_clock_and_info_counts_its_length() {
+        let scenario = accomp_sim::scenario::Scenario::preset("paper-1g").unwrap();
+        let flash = BoardFlash::open(None).unwrap();
+        // The fault control's switch, as `board-sim`'s `erase-stall=2000` sets it.
+        let flash_stall = flash.erase_stall_ms.clone();
+        let mut host = Host {
+            board: VirtualBoard::boot(flash, 0, 0),
+            station: Station::new(&scenario, 1).unwrap(),
+            decoder: FrameDecoder::new(),
+            frames: Vec::new(),
+            next_id: 0,
+        };
+        host.board.tx.clear();
+        host.run(2_000_000);
+        assert_eq!(host.call(Request::StreamStart), Response::Ok);
+        for day in 1..=3 {
+            host.upload(day); // blank slots: no erase
+        }
+        host.run(5_000_000);
+        let stall = host.board.stalled_us.clone();
+        flash_stall.store(2000, Ordering::Relaxed);
+        host.upload(4); // the spare holds table 1: this commit erases
+        host.run(5_000_000);
+        assert_eq!(stall.load(Ordering::Relaxed), 2_000_000);
+        let Response::Info(info) = host.call(Request::Info) else {
+            panic!("Info")
+        };
+        assert_eq!(info.losses.erase_stalls, 1);
+        assert_eq!(info.losses.erase_stall_us, 2_000_000);
+        let gaps: Vec<(u32, LossFlags)> = host
+            .frames
+            .windows(2)
+            .filter(|w| w[1].seq != w[0].seq + 1)
+            .map(|w| (w[1].seq - w[0].seq - 1, w[1].lost))
+            .collect();
+        // 2 s at 10 SPS (0.8 s pairs): two pairs missed, or three with the dropped one.
+        assert_eq!(gaps.len(), 1, "{gaps:?}");
+        assert!((2..=3).contains(&gaps[0].0), "{gaps:?}");
+        assert!(gaps[0].1.has(LossFlags::STALL));
+        assert_eq!(
+            u64::from(gaps[0].0),
+            u64::from(info.losses.conversions_lost)
+        );
     }
 }
