@@ -3,7 +3,8 @@
 
 use std::path::PathBuf;
 
-use crate::discover::import::{self, DatasetOptions, Format};
+use super::values::{ImageFormat, RecordFormat};
+use crate::discover::import::{self, DatasetOptions};
 use crate::discover::simulate::{self, output, simulate_dataset, write_report, write_scenario};
 use crate::discover::{discover_path, note_bad_rows, report, select};
 
@@ -23,10 +24,10 @@ pub struct DiscoverArgs {
     pub report: Option<PathBuf>,
     /// Image format of the report's figures.
     #[arg(long, value_enum, default_value = "png")]
-    pub report_format: crate::plot::Format,
+    pub report_format: ImageFormat,
     /// Record format.
     #[arg(long, value_enum, default_value = "auto")]
-    pub format: Format,
+    pub format: RecordFormat,
     /// Output column (default: first `output*`, `gravity*` or `a_i*` column).
     #[arg(long)]
     pub output: Option<String>,
@@ -82,13 +83,13 @@ pub fn run(args: &DiscoverArgs) -> anyhow::Result<()> {
     };
     let (d, _bad) = discover_path(
         &args.log,
-        args.format,
+        args.format.0,
         &opts,
         table.as_ref(),
         &select::Config::default(),
     )?;
     if let Some(dir) = &args.report {
-        report::write_report(&d, dir, args.report_format)?;
+        report::write_report(&d, dir, args.report_format.0)?;
     }
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report::json(&d))?);
@@ -100,7 +101,7 @@ pub fn run(args: &DiscoverArgs) -> anyhow::Result<()> {
 
 /// Loads the record as the discovery does (same binning and notes).
 pub fn load(args: &DiscoverArgs) -> anyhow::Result<import::Dataset> {
-    let (log, bad) = import::load_for_dataset(&args.log, args.format, args.output.as_deref())?;
+    let (log, bad) = import::load_for_dataset(&args.log, args.format.0, args.output.as_deref())?;
     let opts = DatasetOptions {
         output: args.output.clone(),
         max_points: args.max_points,
@@ -128,7 +129,7 @@ fn run_simulate(args: &DiscoverArgs) -> anyhow::Result<()> {
     )?;
     write_scenario(&mut s, args.write_scenario.as_deref())?;
     if let Some(dir) = &args.report {
-        write_report(&s, dir, args.report_format)?;
+        write_report(&s, dir, args.report_format.0)?;
     }
     let unit = s.cause.dataset.output_unit.clone();
     if args.json {

@@ -59,7 +59,7 @@ const GREY: RGBColor = RGBColor(60, 60, 60);
 const COMPENSATED_COLORS: [RGBColor; 3] = [BLUE, GREEN, PURPLE];
 
 /// Image format.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Format {
     /// Raster, text drawn with the embedded DejaVu Sans.
     Png,
@@ -78,7 +78,7 @@ impl Format {
 }
 
 /// Which figure(s).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Kind {
     /// Every figure the log has columns for.
     All,

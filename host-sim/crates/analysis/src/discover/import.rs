@@ -12,7 +12,7 @@ use std::path::Path;
 pub use accomp_log::{unit_per_g_for_suffix, M_S2_PER_MGAL};
 
 /// Record formats `accomp discover` reads.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Format {
     /// Guess from the extension and the header.
     Auto,

@@ -10,18 +10,26 @@
 //! - [`changepoints`]: many steps at once: a noise-model MOSUM scan, the set validated together.
 //! - [`plausibility`]: a flexible effect must stand above the noise and beat the simpler cause.
 //! - [`shape`]: whether an accepted effect's shape describes the data (poor-fit check).
-//! - [`select`]: greedy selection with BIC (effective sample size) and blocked cross-validation.
+//! - [`select`]: greedy selection with BIC (effective sample size) and blocked cross-validation;
+//!   its parts: [`current_model`] (the model under its fitted noise model), [`fitters`] (each
+//!   candidate's best fit and ΔBIC), [`acceptance`] (the checks after the BIC), [`validation`]
+//!   (cross-validation, forward chaining), [`joint`] (the final joint fit).
 //! - [`report`]: text, JSON and the Markdown report with figures.
 //!
 //! The command's arguments and output: `accomp_host::cli::discover`. Method, catalogue, rates and
 //! measured-data findings: `docs/discovery.md`.
 
+pub mod acceptance;
 pub mod baseline;
 pub mod changepoints;
+pub mod current_model;
 pub mod effects;
 pub mod eiv;
+mod error;
+pub mod fitters;
 pub mod hysteresis;
 pub mod import;
+pub mod joint;
 pub mod noise;
 pub mod plausibility;
 pub mod report;
@@ -30,6 +38,9 @@ pub mod select;
 pub mod shape;
 pub mod simulate;
 pub mod tidal;
+pub mod validation;
+
+pub use error::DiscoverError;
 
 use effects::{Context, Effect};
 use import::{Dataset, DatasetOptions, Format};
@@ -185,7 +196,7 @@ pub fn discover_path(
     opts: &DatasetOptions,
     table: Option<&accomp::table::CalibrationTable>,
     cfg: &select::Config,
-) -> anyhow::Result<(Discovery, Vec<import::BadRow>)> {
+) -> Result<(Discovery, Vec<import::BadRow>), DiscoverError> {
     let (log, bad) = import::load_for_dataset(path, format, opts.output.as_deref())?;
     let mut opts = opts.clone();
     if let Some(t) = table {

@@ -4,7 +4,7 @@
 //! the residual before/after vs time, its Lomb–Scargle spectrum with the significant lines
 //! marked, and its Allan deviation before/after with confidence bands.
 
-use super::{residual, Discovery};
+use super::{residual, DiscoverError, Discovery};
 use crate::plot::decimate::buckets;
 use crate::plot::draw::{
     self, AdevCurve, AdevFigure, Figure, Marker, Panel, TimeFigure, Trace, XYCurve, XYFigure,
@@ -561,8 +561,11 @@ pub fn figures(d: &Discovery) -> Vec<(&'static str, &'static str, Figure)> {
 ///
 /// A figure that cannot be drawn (e.g. a record too short for any Allan deviation point) is left
 /// out with a note in the report instead of failing the whole report.
-pub fn write_report(d: &Discovery, dir: &Path, format: Format) -> anyhow::Result<()> {
-    std::fs::create_dir_all(dir)?;
+pub fn write_report(d: &Discovery, dir: &Path, format: Format) -> Result<(), DiscoverError> {
+    std::fs::create_dir_all(dir).map_err(|source| DiscoverError::CreateDir {
+        dir: dir.to_path_buf(),
+        source,
+    })?;
     let mut md = String::new();
     let _ = writeln!(md, "# Model discovery report\n\n```text\n{}```\n", text(d));
     let _ = writeln!(md, "## Figures\n");

@@ -18,6 +18,7 @@
 pub mod cause;
 pub mod ensemble;
 mod entry;
+mod error;
 pub mod gain;
 pub mod mismatch;
 pub mod output;
@@ -25,6 +26,7 @@ pub mod spectra;
 pub mod twin;
 
 pub use entry::{simulate_dataset, write_report, write_scenario};
+pub use error::SimulateError;
 
 use super::import::Dataset;
 use super::noise::NoiseModel;
@@ -64,9 +66,11 @@ pub type Refused = Vec<(String, String)>;
 pub trait TwinModel: Sync + Sized {
     /// One effect the twin can be extended by (a scenario `[[effects]]` entry).
     type Effect: Clone;
+    /// Why the twin cannot run.
+    type Error: std::error::Error + Send + Sync + 'static;
     /// The output at the record's time stamps: `None` the deterministic part, `Some(seed)` one
     /// ensemble member with the simulator's noise.
-    fn run(&self, seed: Option<u64>) -> Result<Vec<f64>, String>;
+    fn run(&self, seed: Option<u64>) -> Result<Vec<f64>, Self::Error>;
     /// The accepted effects of a discovery as the twin's effects (name, effect), with the
     /// effects it cannot express (name, why).
     fn effects_from(&self, d: &Discovery) -> (Vec<(String, Self::Effect)>, Refused);
@@ -140,17 +144,13 @@ pub fn simulate<T, F>(
     scenario: String,
     ensemble: usize,
     cfg: &select::Config,
-) -> Result<Simulation, String>
+) -> Result<Simulation, SimulateError>
 where
     T: TwinModel,
-    F: Fn(Option<&NoiseModel>) -> Result<T, String>,
+    F: Fn(Option<&NoiseModel>) -> Result<T, T::Error>,
 {
     if !ENSEMBLE_RANGE.contains(&ensemble) {
-        return Err(format!(
-            "ensemble of {ensemble} members: {}..={} are taken",
-            ENSEMBLE_RANGE.start(),
-            ENSEMBLE_RANGE.end()
-        ));
+        return Err(SimulateError::EnsembleSize { members: ensemble });
     }
     let mut warnings = Vec::new();
     let mut timing_s = Vec::new();
@@ -160,11 +160,11 @@ where
         clock = std::time::Instant::now();
     };
     // 1. The prediction and the residual's catalogue search (the cause).
-    let quiet = build(None)?;
+    let quiet = build(None).map_err(SimulateError::twin)?;
     if !quiet.is_simulator() {
         warnings.push("the twin is not the station simulator (a test stand-in)".to_owned());
     }
-    let det = quiet.run(None)?;
+    let det = quiet.run(None).map_err(SimulateError::twin)?;
     check_len(&det, ds)?;
     let mut resid_ds = ds.clone();
     for (y, p) in resid_ds.y.iter_mut().zip(&det) {
@@ -174,18 +174,21 @@ where
     let spin = stage_spinner("catalogue search on the measured − twin residual");
     let cause = super::discover(resid_ds, None, cfg);
     spin.finish_and_clear();
-    let cause = cause.map_err(|e| e.to_string())?;
+    let cause = cause?;
     lap("catalogue search");
     let spin = stage_spinner("extension and the twin's noise model");
     // 2. The extension: the accepted effects as the twin's effects; each one's contribution is
     //    what it adds to the twin's prediction (the simulator's own rendering of it).
     let (effects, refused) = quiet.effects_from(&cause);
     let ext_quiet = quiet.extended(&effects.iter().map(|e| e.1.clone()).collect::<Vec<_>>());
-    let det_ext = ext_quiet.run(None)?;
+    let det_ext = ext_quiet.run(None).map_err(SimulateError::twin)?;
     check_len(&det_ext, ds)?;
     let mut contrib = Vec::new();
     for (name, e) in &effects {
-        let p = quiet.extended(std::slice::from_ref(e)).run(None)?;
+        let p = quiet
+            .extended(std::slice::from_ref(e))
+            .run(None)
+            .map_err(SimulateError::twin)?;
         check_len(&p, ds)?;
         contrib.push((name.clone(), sub(&p, &det)));
     }
@@ -254,7 +257,7 @@ where
     spin.finish_and_clear();
     lap("extension and noise fit");
     // 4. Ensembles and comparisons, before and after.
-    let twin = build(Some(&noise))?;
+    let twin = build(Some(&noise)).map_err(SimulateError::twin)?;
     let ext = twin.extended(&effects.iter().map(|e| e.1.clone()).collect::<Vec<_>>());
     let mut provenance = ext.provenance();
     provenance.push(noise_source);
@@ -355,19 +358,18 @@ fn sub(a: &[f64], b: &[f64]) -> Vec<f64> {
     a.iter().zip(b).map(|(x, y)| x - y).collect()
 }
 
-fn check_len(p: &[f64], ds: &Dataset) -> Result<(), String> {
+fn check_len(p: &[f64], ds: &Dataset) -> Result<(), SimulateError> {
     if p.len() != ds.len() {
-        return Err(format!(
-            "the twin returned {} values for a record of {} points",
-            p.len(),
-            ds.len()
-        ));
+        return Err(SimulateError::Length {
+            got: p.len(),
+            points: ds.len(),
+        });
     }
     if let Some(i) = p.iter().position(|v| !v.is_finite()) {
-        return Err(format!(
-            "the twin's prediction is not finite at point {i} (t = {} s)",
-            ds.t_s[i]
-        ));
+        return Err(SimulateError::NotFinite {
+            index: i,
+            t_s: ds.t_s[i],
+        });
     }
     Ok(())
 }

@@ -11,7 +11,7 @@
 use super::{Refused, TwinModel};
 use crate::discover::Discovery;
 use crate::sim::effects::ScenarioEffect;
-use crate::twin::{scenario_effects_from_discovery, Twin};
+use crate::twin::{scenario_effects_from_discovery, Twin, TwinError};
 
 /// Significance a wave-group analysis admittance needs to be added.
 pub const ADMITTANCE_SIGMAS: f64 = 3.0;
@@ -21,9 +21,10 @@ const PA_PER_HPA: f64 = 100.0;
 
 impl TwinModel for Twin {
     type Effect = ScenarioEffect;
+    type Error = TwinError;
 
-    fn run(&self, seed: Option<u64>) -> Result<Vec<f64>, String> {
-        Twin::run(self, seed).map_err(|e| e.to_string())
+    fn run(&self, seed: Option<u64>) -> Result<Vec<f64>, TwinError> {
+        Twin::run(self, seed)
     }
 
     fn effects_from(&self, d: &Discovery) -> (Vec<(String, ScenarioEffect)>, Refused) {

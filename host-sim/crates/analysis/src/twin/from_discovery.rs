@@ -1,0 +1,194 @@
+//! The accepted effects of a discovery as the twin's scenario entries.
+
+use super::*;
+
+/// The accepted effects of a discovery as scenario entries, with their joint-fit parameters
+/// (`select::Accepted::params`, which the final joint fit wrote), and the effects that cannot
+/// be expressed, each with why.
+///
+/// `tidal_gravity` is written from the wave-group analysis when the discovery has one (a
+/// factor and a phase per group against the model's elastic tide: the delay is in the phases),
+/// else as its single `amplitude_factor`. `warmup`'s amplitude is moved from the record's first
+/// instant to t = 0 (exactly: A·e^{−(t−t₀)/τ} = A·e^{t₀/τ}·e^{−t/τ}).
+pub fn scenario_effects_from_discovery(
+    d: &crate::discover::Discovery,
+) -> (Vec<ScenarioEffect>, Vec<(String, String)>) {
+    let mut out = Vec::new();
+    let mut refused = Vec::new();
+    let t0 = d.dataset.t_s.first().copied().unwrap_or(0.0);
+    for a in &d.selection.accepted {
+        let name = a.effect.name();
+        let p = |key: &str| -> Option<f64> {
+            a.params
+                .iter()
+                .find(|(k, _)| k == key)
+                .map(|(_, v)| v.value)
+                .filter(|v| v.is_finite())
+        };
+        let need =
+            |key: &str| p(key).ok_or_else(|| format!("parameter {key} missing or not finite"));
+        let e: Result<ScenarioEffect, String> = (|| {
+            Ok(match a.effect.kind() {
+                EffectKind::ThermalLag => ScenarioEffect::ThermalLag {
+                    tau_s: need("tau_s")?,
+                    coefficient: need("coefficient")?,
+                },
+                EffectKind::ThermalHysteresis => ScenarioEffect::ThermalHysteresis {
+                    half_width: need("half_width")?,
+                    play_half_width_c: need("play_half_width_c")?,
+                },
+                EffectKind::SelfHeating => ScenarioEffect::SelfHeating {
+                    tau_s: need("tau_s")?,
+                    coefficient: need("coefficient")?,
+                },
+                EffectKind::Warmup => {
+                    let tau_s = need("tau_s")?;
+                    ScenarioEffect::Warmup {
+                        tau_s,
+                        amplitude: need("amplitude")? * (t0 / tau_s).exp(),
+                    }
+                }
+                EffectKind::AgingDrift => ScenarioEffect::AgingDrift {
+                    tau_s: need("tau_s")?,
+                    amplitude: need("amplitude")?,
+                },
+                EffectKind::Step => ScenarioEffect::Step {
+                    time_s: need("time_s")?,
+                    size: need("size")?,
+                    duration_s: p("duration_s").unwrap_or(0.0),
+                },
+                EffectKind::TidalGravity => match &d.tidal {
+                    Ok(t) if !t.groups.is_empty() => ScenarioEffect::TidalGravity {
+                        amplitude_factor: 0.0,
+                        delay_s: 0.0,
+                        groups: t
+                            .groups
+                            .iter()
+                            .filter(|g| {
+                                g.amplitude_factor_vs_elastic_model.value.is_finite()
+                                    && g.phase_vs_elastic_model_deg.value.is_finite()
+                            })
+                            .map(|g| crate::sim::effects::TideGroupTerm {
+                                name: g.name.clone(),
+                                factor: g.amplitude_factor_vs_elastic_model.value,
+                                phase_deg: g.phase_vs_elastic_model_deg.value,
+                            })
+                            .collect(),
+                    },
+                    _ => ScenarioEffect::TidalGravity {
+                        amplitude_factor: need("amplitude_factor")?,
+                        delay_s: 0.0,
+                        groups: Vec::new(),
+                    },
+                },
+                EffectKind::TidalTilt => ScenarioEffect::TidalTilt {
+                    amplitude_factor: need("amplitude_factor")?,
+                    azimuth_deg: need("azimuth_deg")?,
+                },
+                EffectKind::BuildingTilt => ScenarioEffect::BuildingTilt {
+                    amplitude: need("amplitude")?,
+                    phase_rad: need("phase_rad")?,
+                },
+                EffectKind::TiltCoupling => ScenarioEffect::TiltCoupling {
+                    gain: need("gain")?,
+                },
+                EffectKind::AmbientCoupling => {
+                    let channel = a.effect.channel().unwrap_or_default().to_owned();
+                    let in_record = d.dataset.channels.iter().any(|c| c.name == channel);
+                    if !in_record && !SIMULATED_AMBIENT.contains(&channel.as_str()) {
+                        return Err(format!(
+                            "channel {channel:?} is neither in the record nor simulated"
+                        ));
+                    }
+                    ScenarioEffect::AmbientCoupling {
+                        channel,
+                        coefficient: need("coefficient")?,
+                        lag_s: p("lag_s").unwrap_or(0.0).max(0.0),
+                    }
+                }
+                EffectKind::PressureAdmittance => ScenarioEffect::PressureAdmittance {
+                    coefficient: need("coefficient")?,
+                },
+                EffectKind::Periodic => ScenarioEffect::Periodic {
+                    period_s: need("period_s")?,
+                    amplitude: need("amplitude")?,
+                    phase_rad: need("phase_rad")?,
+                },
+                EffectKind::ChannelNoise => {
+                    let channel = a.effect.channel().unwrap_or_default().to_owned();
+                    ScenarioEffect::ChannelNoise {
+                        channel,
+                        noise: p("noise")
+                            .or_else(|| p("level"))
+                            .ok_or("parameter noise missing")?,
+                    }
+                }
+            })
+        })();
+        match e.and_then(|e| {
+            let i = out.len();
+            e.validate(i).map(|()| e).map_err(|x| x.to_string())
+        }) {
+            Ok(e) => out.push(e),
+            Err(why) => refused.push((name.to_owned(), why)),
+        }
+    }
+    (out, refused)
+}
+
+#[cfg(test)]
+mod from_discovery_tests {
+    use super::*;
+    use crate::discover::import::{dataset_from_log, DatasetOptions};
+    use crate::log::Log;
+    use crate::sim::{simulate, Options};
+
+    #[test]
+    fn a_discovered_step_becomes_a_scenario_effect_that_simulates() {
+        // A 3-day paper-1g log at 5 min with its noise and a 15 µg step at 1.4 d.
+        let mut s = Scenario::preset("paper-1g").unwrap();
+        s.run.duration_s = 3.0 * 86_400.0;
+        s.run.interval_s = 300.0;
+        let mut hidden = s.clone();
+        hidden.effects = vec![ScenarioEffect::Step {
+            time_s: 1.4 * 86_400.0 + 150.0,
+            size: 2e-5,
+            duration_s: 0.0,
+        }];
+        let bytes = simulate(&hidden, 5, &Options::default(), Vec::new(), &mut |_, _| {})
+            .unwrap()
+            .1;
+        let ds = dataset_from_log(
+            &Log::read(&bytes[..]).unwrap(),
+            &DatasetOptions {
+                output: None,
+                max_points: 1_000_000,
+                unit_per_g_from_calibration: None,
+            },
+        )
+        .unwrap();
+        let d = crate::discover::discover(ds, None, &crate::discover::select::Config::default())
+            .unwrap();
+        let (effects, refused) = scenario_effects_from_discovery(&d);
+        let step = effects
+            .iter()
+            .find_map(|e| match e {
+                ScenarioEffect::Step { time_s, size, .. } => Some((*time_s, *size)),
+                _ => None,
+            })
+            .unwrap_or_else(|| panic!("no step among {effects:?} (refused {refused:?})"));
+        assert!(
+            (step.0 - (1.4 * 86_400.0 + 150.0)).abs() <= 300.0,
+            "{step:?}"
+        );
+        assert!((step.1 / 2e-5 - 1.0).abs() < 0.1, "{step:?}");
+        // Written into the scenario, every converted effect validates and runs.
+        let mut ext = s.clone();
+        ext.effects = effects;
+        let back = Scenario::from_toml(&ext.to_toml()).unwrap();
+        assert_eq!(back, ext);
+        let mut short = back;
+        short.run.duration_s = 3600.0;
+        simulate(&short, 1, &Options::default(), Vec::new(), &mut |_, _| {}).unwrap();
+    }
+}
