@@ -793,6 +793,8 @@ struct Rig {
     line: std::collections::VecDeque<(u64, u8)>,
     line_free_us: u64,
     bytes_sent: u64,
+    /// Bytes the firmware's reader took out of the ring.
+    bytes_read: u64,
     inbound: std::collections::VecDeque<Inbound>,
     readings_dropped: u32,
     service: accomp::service::Service<BoardFlash>,
@@ -832,6 +834,7 @@ impl Rig {
             line: Default::default(),
             line_free_us: 0,
             bytes_sent: 0,
+            bytes_read: 0,
             inbound: Default::default(),
             readings_dropped: 0,
             service,
@@ -904,6 +907,7 @@ impl Rig {
             let Some(byte) = self.ring.next(ndtr, |i| ring[i]) else {
                 return;
             };
+            self.bytes_read += 1;
             if let Some(frame) = self.decoder.push(byte) {
                 if self.inbound.len() < INBOUND_CAPACITY {
                     self.inbound
@@ -1068,6 +1072,21 @@ impl Rig {
         }
     }
 
+    /// The answer to request `id` that has reached the host (panics if none has).
+    fn answer(&self, id: u32) -> Result<accomp::protocol::Response, accomp::protocol::ErrorReply> {
+        use accomp::protocol::DeviceMessage;
+        let now = self.now();
+        let m = self.to_host.iter().filter(|m| m.at_us <= now);
+        match m.map(|m| &m.msg).find(|msg| {
+            matches!(msg, DeviceMessage::Response { id: i, .. }
+                | DeviceMessage::Error { id: i, .. } if *i == id)
+        }) {
+            Some(DeviceMessage::Response { body, .. }) => Ok(body.clone()),
+            Some(DeviceMessage::Error { error, .. }) => Err(*error),
+            _ => panic!("request {id} unanswered"),
+        }
+    }
+
     fn info(&mut self) -> accomp::protocol::DeviceInfo {
         match self.call(accomp::protocol::Request::Info) {
             accomp::protocol::Response::Info(i) => i,
@@ -1229,7 +1248,7 @@ fn check_stream(
 #[test]
 fn a_400_sps_stream_through_uploads_rollback_and_reboot_loses_no_byte_and_accounts_for_every_conversion(
 ) {
-    use accomp::protocol::{Request, Response, MAX_RATE_HZ};
+    use accomp::protocol::{Request, Response, CHUNK_LEN, MAX_RATE_HZ};
     let tables: Vec<CalibrationTable> = (1..=5u8)
         .map(|d| {
             let mut t = paper_order2_table();
@@ -1256,8 +1275,25 @@ fn a_400_sps_stream_through_uploads_rollback_and_reboot_loses_no_byte_and_accoun
         rig.upload(t);
         rig.run_until(rig.now() + S);
     }
-    assert_eq!(rig.call(Request::Rollback), Response::Ok);
-    rig.run_until(rig.now() + 2 * S);
+    // The rollback, and behind it a host's window of 8 requests in flight (`accomp compensate`
+    // keeps 8): 8 full-size chunk frames (of no upload: each is refused with NoUpload and
+    // changes nothing) arrive during the rollback's 2 s erase stall and wait in the DMA ring.
+    let rollback = rig.send(Request::Rollback);
+    let window: Vec<u32> = (0..8)
+        .map(|_| {
+            rig.send(Request::UploadChunk {
+                upload_id: 1,
+                offset: 0,
+                data: heapless::Vec::from_slice(&[0x55; CHUNK_LEN]).unwrap(),
+            })
+        })
+        .collect();
+    rig.run_until(rig.now() + 3 * S);
+    assert_eq!(rig.answer(rollback), Ok(Response::Ok));
+    for id in window {
+        let code = rig.answer(id).unwrap_err().code;
+        assert_eq!(code, accomp::protocol::ErrorCode::NoUpload as u16);
+    }
     let info = rig.info();
     assert_eq!(info.active_table, Some(tables[1].id()));
     let pair_us = rig.board.ads_seq.pair_period_us();
@@ -1280,11 +1316,12 @@ fn a_400_sps_stream_through_uploads_rollback_and_reboot_loses_no_byte_and_accoun
         "the rollback's erase"
     );
     assert!(info.losses.erase_stall_us - before.erase_stall_us >= 2 * S);
-    let uart = (rig.usart.received, rig.usart.overrun_bytes, rig.bytes_sent);
+    let uart = (rig.usart.received, rig.usart.overrun_bytes, rig.bytes_read);
+    let sent = rig.bytes_sent;
     assert_eq!(
         uart,
-        (rig.bytes_sent, 0, rig.bytes_sent),
-        "received, overrun, sent"
+        (sent, 0, sent),
+        "received, overrun, read from the ring"
     );
     assert_eq!((info.losses.uart_rx_overrun, info.frames_dropped), (0, 0));
     let stalls = rig.stalls.clone();
@@ -1346,11 +1383,12 @@ fn a_400_sps_stream_through_uploads_rollback_and_reboot_loses_no_byte_and_accoun
         "no erase"
     );
     assert_eq!(info.active_table, Some(tables[4].id()));
-    let uart = (rig.usart.received, rig.usart.overrun_bytes, rig.bytes_sent);
+    let uart = (rig.usart.received, rig.usart.overrun_bytes, rig.bytes_read);
+    let sent = rig.bytes_sent;
     assert_eq!(
         uart,
-        (rig.bytes_sent, 0, rig.bytes_sent),
-        "received, overrun, sent"
+        (sent, 0, sent),
+        "received, overrun, read from the ring"
     );
     assert_eq!((info.losses.uart_rx_overrun, info.frames_dropped), (0, 0));
 
