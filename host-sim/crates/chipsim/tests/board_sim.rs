@@ -270,10 +270,16 @@ fn old_with(mode: embedded_hal::spi::Mode) -> SpiSettings {
 }
 
 #[test]
-fn set_rate_reprograms_the_ads1262_data_rate() {
+fn set_rate_reprograms_the_ads1262_data_rate_and_claims_no_stall() {
     let mut b = Bench::new();
     b.boot();
     b.run_until(b.now() + 5 * S);
+    // Requested while the tilt input converts, so the rate is applied at the switch back to the
+    // accelerometer, between two pairs: the last pair's accelerometer DRDY was at `t`, the
+    // next one comes at t + 2 latencies and its tilt half at t + 3.
+    let latency = b.board.ads_seq.channel_latency_us();
+    let t = b.frames.last().unwrap().time_us;
+    b.run_until(t + 2 * latency + latency / 2);
     b.board.ads_seq.request_rate(DataRate::Sps50);
     let from = b.now() + 2 * S;
     b.run_until(b.now() + 12 * S);
@@ -290,6 +296,16 @@ fn set_rate_reprograms_the_ads1262_data_rate() {
         assert!((155_000..=165_000).contains(&g), "pair interval {g} µs");
     }
     assert!(b.frames.iter().all(|f| f.status == Status::default()));
+    // The change of rate loses no reading and claims no stall: the pair clock starts again.
+    for w in b.frames.windows(2) {
+        assert_eq!(w[1].seq, w[0].seq + 1);
+        assert_eq!(
+            w[1].lost,
+            accomp::pipeline::LossFlags(0),
+            "frame {}",
+            w[1].seq
+        );
+    }
 }
 
 /// A fault switched on for a while; frames between `on` and `off + RECOVERY` must show `bit`.
