@@ -13,7 +13,7 @@
 //! flags, (3) runs, (4) reads the flags it caused and names them, and (5) leaves PG/SER cleared
 //! and FLASH_CR locked, also on failure.
 
-use core::sync::atomic::{AtomicBool, Ordering};
+use core::sync::atomic::{compiler_fence, AtomicBool, Ordering};
 
 use embedded_storage::nor_flash::{
     check_erase, check_read, check_write, ErrorType, NorFlash, NorFlashError, NorFlashErrorKind,
@@ -241,6 +241,9 @@ impl<R: FlashRegisters> Stm32f4Flash<R> {
     /// Steps 1–2 of every operation: not busy, sticky flags cleared, FLASH_CR unlocked.
     fn begin(&mut self) -> Result<(), FlashError> {
         OPERATION.store(true, Ordering::Relaxed);
+        // Set before the controller is touched (no instruction emitted: the DRDY handler runs
+        // on this core and sees program order).
+        compiler_fence(Ordering::SeqCst);
         self.wait_ready();
         self.regs.clear_sr(sr::EOP | sr::ERRORS);
         if self.regs.cr() & cr::LOCK != 0 {
@@ -257,6 +260,7 @@ impl<R: FlashRegisters> Stm32f4Flash<R> {
     /// Steps 4–5: the flags this operation raised, PG/SER/SNB cleared, FLASH_CR locked.
     fn end(&mut self) -> Result<(), FlashError> {
         let s = self.wait_ready();
+        compiler_fence(Ordering::SeqCst);
         OPERATION.store(false, Ordering::Relaxed);
         let c = self.regs.cr() & !(cr::PG | cr::SER | cr::MER | cr::SNB_MASK | cr::STRT);
         self.regs.set_cr(c | cr::LOCK);
