@@ -4,6 +4,7 @@
 
 pub mod distributions;
 pub mod fft;
+pub mod lcg;
 pub mod linalg;
 pub mod optimize;
 pub mod parallel;
