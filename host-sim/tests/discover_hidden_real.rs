@@ -265,12 +265,7 @@ fn effects_injected_into_the_real_gravimeter_residual_are_found_by_snr() {
     let mut false_disc = 0;
     for (k, w) in wins.iter().enumerate() {
         let d = run_window(&res.t_s[w.clone()], res.r_mgal[w.clone()].to_vec());
-        let acc: Vec<&str> = d
-            .selection
-            .accepted
-            .iter()
-            .map(|a| a.effect.name())
-            .collect();
+        let acc = hidden::accepted_names(&d);
         eprintln!("real null window {k}: accepted {acc:?}");
         false_disc += usize::from(!acc.is_empty());
     }
@@ -308,12 +303,7 @@ fn effects_injected_into_the_real_gravimeter_residual_are_found_by_snr() {
             let y: Vec<f64> = x.iter().zip(&unit).map(|(a, b)| a + size * b).collect();
             let d = run_window(t, y);
             let ok = inj.found(&d, size);
-            let acc: Vec<&str> = d
-                .selection
-                .accepted
-                .iter()
-                .map(|a| a.effect.name())
-                .collect();
+            let acc = hidden::accepted_names(&d);
             eprintln!(
                 "real SNR {target:.1}: {inj:?} size {:.2} µGal: found={ok} accepted {acc:?}",
                 size * 1e3
