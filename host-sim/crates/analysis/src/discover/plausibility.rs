@@ -168,8 +168,33 @@ pub fn separating_measurement(a: &Effect, b: &Effect) -> String {
         "temperature ramps of different rates (a lag's offset scales with the rate, a loop's \
          does not) or a hold after a ramp (a lag settles, a loop stays on its branch)"
             .into()
-    } else if pair(&Warmup, &AgingDrift) {
-        "a longer record (an exponential settles, a logarithm keeps growing)".into()
+    } else if pair(&ThermalLag, &RateCoupling(String::new()))
+        || pair(
+            &AmbientCoupling(String::new()),
+            &RateCoupling(String::new()),
+        )
+        || pair(&Lag2Coupling(String::new()), &RateCoupling(String::new()))
+    {
+        "a change of the channel's rate held for longer than the lag (a step in the ramp rate, or \
+         a ramp that stops and holds): a rate coupling follows the new rate at once and vanishes \
+         on the hold, a lag settles over its τ"
+            .into()
+    } else if pair(&ThermalLag, &Lag2Coupling(String::new()))
+        || pair(
+            &AmbientCoupling(String::new()),
+            &Lag2Coupling(String::new()),
+        )
+    {
+        "a step of the channel (a first-order lag responds at once, a second-order one starts \
+         with zero slope)"
+            .into()
+    } else if pair(&Warmup, &AgingDrift)
+        || pair(&Warmup, &CreepDrift)
+        || pair(&AgingDrift, &CreepDrift)
+    {
+        "a longer record (an exponential settles, a logarithm keeps growing, a power law \
+         accelerates or settles as t^p)"
+            .into()
     } else if pair(&TiltCoupling, &BuildingTilt) || pair(&TiltCoupling, &TidalTilt) {
         "a tilt excursion off the solar day (a deliberate tilt of the pier or the mount)".into()
     } else if pair(&Step { duration_s: 0.0 }, &Warmup)
