@@ -255,7 +255,7 @@ pub(super) fn simpler_wins(
     scored: &[Scored],
     after: CvScore,
 ) -> Option<String> {
-    super::plausibility::simpler_than(&s.effect)
+    super::plausibility::simpler_than(&s.effect, cur.ds)
         .into_iter()
         .filter_map(|e| scored.iter().find(|c| c.effect == e))
         .find_map(|alt| {

@@ -47,10 +47,24 @@ pub fn is_flexible(e: &Effect) -> bool {
     matches!(e, Effect::ThermalHysteresis)
 }
 
-/// The simpler physical explanations a flexible effect must beat out of sample.
-pub fn simpler_than(e: &Effect) -> Vec<Effect> {
+/// The simpler physical explanations a flexible effect, or a higher-order transfer function,
+/// must beat out of sample: a loop the first-order lag; a second-order lag of a channel that
+/// channel's first-order lag (measured: a first-order lag of 24 min on a one-rate programme was
+/// named `lag2_coupling` with τ 1253 s and a coefficient 0.58 × the true one without it).
+pub fn simpler_than(e: &Effect, ds: &super::import::Dataset) -> Vec<Effect> {
     match e {
         Effect::ThermalHysteresis => vec![Effect::ThermalLag],
+        Effect::Lag2Coupling(c) => {
+            use super::import::ChannelKind;
+            let is = |k: ChannelKind| ds.channel(k).is_some_and(|ch| &ch.name == c);
+            if is(ChannelKind::Temperature) {
+                vec![Effect::ThermalLag]
+            } else if is(ChannelKind::Pressure) {
+                vec![Effect::PressureAdmittance]
+            } else {
+                vec![Effect::AmbientCoupling(c.clone())]
+            }
+        }
         _ => Vec::new(),
     }
 }
