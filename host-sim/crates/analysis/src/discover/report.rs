@@ -129,6 +129,8 @@ pub fn json(d: &Discovery) -> Value {
             "adev_after": d.adev_after,
         },
         "tidal_analysis": super::tidal::json_of(&d.tidal),
+        "full_rate": super::fullrate::json_of(&d.full_rate),
+        "calibration_table": d.table_check.as_ref().map(super::table_error::json_of),
     })
 }
 
@@ -337,6 +339,10 @@ pub fn text(d: &Discovery) -> String {
     let _ = writeln!(o, "  noise: {}", noise_text(&s.final_noise, unit));
     for ((t, a), (_, b)) in d.adev_before.iter().zip(&d.adev_after).step_by(3) {
         let _ = writeln!(o, "  ADEV({t:.0} s): {a:.3e} → {b:.3e} {unit}");
+    }
+    o.push_str(&super::fullrate::text_of(&d.full_rate, unit));
+    if let Some(c) = &d.table_check {
+        o.push_str(&super::table_error::text_of(c, unit));
     }
     o.push_str(&super::tidal::text_of(&d.tidal));
     o
