@@ -176,7 +176,7 @@ fn scenario_effect(
                     phase_rad: need("phase_rad")?,
                 },
                 EffectKind::RateCoupling | EffectKind::Lag2Coupling => {
-                    let channel = a.effect.channel().unwrap_or_default().to_owned();
+                    let channel = a.channel.unwrap_or_default().to_owned();
                     let drives = channel == "temperature_c"
                         || channel.starts_with("pressure")
                         || d.dataset.channels.iter().any(|c| c.name == channel)
@@ -184,7 +184,7 @@ fn scenario_effect(
                     if !drives {
                         return Err(format!("channel {channel:?} is not a driver of the twin"));
                     }
-                    if a.effect.kind() == EffectKind::RateCoupling {
+                    if kind == EffectKind::RateCoupling {
                         ScenarioEffect::RateCoupling {
                             channel,
                             coefficient: need("coefficient")?,
