@@ -785,6 +785,25 @@ impl Dataset {
 }
 
 impl Dataset {
+    /// The unit a channel's values are stored in (Pa for pressure, rad for tilt, °C for a
+    /// `_c` column, else its column suffix), as a coupling's coefficient is per it.
+    pub fn channel_unit(&self, name: &str) -> String {
+        match self
+            .channels
+            .iter()
+            .find(|c| c.name == name)
+            .map(|c| c.kind)
+        {
+            Some(ChannelKind::Pressure) => "Pa".into(),
+            Some(ChannelKind::Tilt) => "rad".into(),
+            _ => match suffix_of(name).as_str() {
+                "c" => "°C".into(),
+                "" => "channel unit".into(),
+                s => s.to_owned(),
+            },
+        }
+    }
+
     /// The first channel of a kind.
     pub fn channel(&self, kind: ChannelKind) -> Option<&Channel> {
         self.channels.iter().find(|c| c.kind == kind)

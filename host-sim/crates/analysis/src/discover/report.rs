@@ -61,6 +61,10 @@ pub fn json(d: &Discovery) -> Value {
             });
             if let Some(c) = a.effect.channel() {
                 o["channel"] = json!(c);
+                o["channel_unit"] = json!(d.dataset.channel_unit(c));
+            }
+            if let Some(f) = a.effect.drift_family() {
+                o["drift_family"] = json!(f);
             }
             // "ambiguous: A or B": the other cause, its parameters and what would separate them.
             if let Some(amb) = &a.ambiguous_with {
@@ -254,7 +258,11 @@ pub fn text(d: &Discovery) -> String {
             "  {}. {}{}: {}\n     ΔBIC {:.1}; std {:.4e} → {:.4e} {unit}; out of sample {:.4e} → {:.4e}; gain {:.1} %; forward gain {:.1} %",
             i + 1,
             a.effect.name(),
-            a.effect.channel().map(|c| format!(" ({c})")).unwrap_or_default(),
+            a.effect
+                .channel()
+                .map(|c| format!(" ({c}, {})", d.dataset.channel_unit(c)))
+                .or_else(|| a.effect.drift_family().map(|f| format!(" (drift, {f})")))
+                .unwrap_or_default(),
             ps.join(", "),
             a.delta_bic,
             a.std_before,
