@@ -323,7 +323,12 @@ where
         &yard,
         "extended",
     )?;
-    let after = mismatch::compare(yard.views(&r_after), &members_ext, &freqs, &channels);
+    let mut after = mismatch::compare(yard.views(&r_after), &members_ext, &freqs, &channels);
+    // What the extended twin still gets wrong is named: unmodelled, with its likely cause.
+    let nyquist_cpd = 0.5 / yard.grid.dt_s * 86_400.0;
+    for m in &mut after.mismatches {
+        m.unmodelled = Some(mismatch::likely_cause(m, nyquist_cpd));
+    }
     lap("ensembles and comparisons");
     // 5. Gain: forward chaining; the extension's contributions refitted on each training part.
     let base_std = gain::forward_std(ds, &det, &[], &noise);
