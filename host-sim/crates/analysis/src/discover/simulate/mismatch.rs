@@ -128,6 +128,8 @@ pub struct Comparison {
     pub member_adev_outside_fraction: f64,
     /// The same for the PSD bands.
     pub member_psd_outside_fraction: f64,
+    /// The first two members' views (drawn beside the record in the report).
+    pub shown: Vec<Views>,
 }
 
 /// Leave-one-member-out: the mean fraction of a member's points outside the envelope of the
@@ -298,6 +300,7 @@ pub fn compare(
         psd_outside_fraction: fraction(&s_psd),
         member_adev_outside_fraction: leave_one_out(&taus, &adev_members),
         member_psd_outside_fraction: leave_one_out(freqs_hz, &psd_members),
+        shown: members.iter().take(2).cloned().collect(),
         adev,
         psd,
         coherence,
