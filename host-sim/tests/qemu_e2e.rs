@@ -9,31 +9,14 @@ use accomp::pipeline::{self, raw_from_physical, ChannelFlags, RawSample, Status}
 use accomp::protocol::{upload_body_crc32, ErrorCode, Request, Response};
 use accomp::table::{CalibrationTable, ENCODED_LEN};
 use accomp::units::{Celsius, Gs, TiltArcsec, Volts};
-use accomp_host::device::{
-    firmware_path, paper_table, qemu::QemuOptions, Client, ClientError, Qemu,
-};
+use accomp_host::device::{paper_table, ClientError};
+
+#[path = "common/qemu.rs"]
+mod qemu;
+use qemu::{boot, Rng};
 
 fn table() -> CalibrationTable {
     paper_table()
-}
-
-fn boot() -> (Qemu, Client) {
-    let elf = firmware_path(None);
-    match Qemu::launch(&elf, &QemuOptions::default()) {
-        Ok(x) => x,
-        Err(e) => panic!("QEMU end-to-end cannot run: {e}"),
-    }
-}
-
-/// Deterministic pseudo-random numbers (xorshift), so a failure can be replayed.
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> f64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
 }
 
 fn same_bits(a: f64, b: f64) -> bool {
@@ -121,6 +104,14 @@ fn ten_thousand_samples_match_the_host_core_bit_for_bit_with_faults_flagged() {
     // Sequence numbers count every processed sample, in order.
     assert!(frames.windows(2).all(|w| w[1].seq == w[0].seq + 1));
     assert!(frames.windows(2).all(|w| w[1].time_us >= w[0].time_us));
+    // The stamps come from TIM2 at 1 MHz, which QEMU models (docs/architecture.md, "QEMU"), as
+    // on the front-end; the 1 kHz SysTick would give whole milliseconds only.
+    let sub_ms = frames.iter().filter(|f| f.time_us % 1_000 != 0).count();
+    assert!(
+        sub_ms > frames.len() / 2,
+        "only {sub_ms} of {} time stamps are not whole milliseconds: not the µs time base",
+        frames.len()
+    );
     drop(qemu);
 }
 

@@ -3,7 +3,8 @@
 
 use std::path::PathBuf;
 
-use crate::discover::import::{self, DatasetOptions, Format};
+use super::values::{ImageFormat, RecordFormat};
+use crate::discover::import::{self, DatasetOptions};
 use crate::discover::simulate::{self, output, simulate_dataset, write_report, write_scenario};
 use crate::discover::{discover_path, note_bad_rows, report, select};
 
@@ -23,10 +24,10 @@ pub struct DiscoverArgs {
     pub report: Option<PathBuf>,
     /// Image format of the report's figures.
     #[arg(long, value_enum, default_value = "png")]
-    pub report_format: crate::plot::Format,
+    pub report_format: ImageFormat,
     /// Record format.
     #[arg(long, value_enum, default_value = "auto")]
-    pub format: Format,
+    pub format: RecordFormat,
     /// Output column (default: first `output*`, `gravity*` or `a_i*` column).
     #[arg(long)]
     pub output: Option<String>,
@@ -47,6 +48,10 @@ pub struct DiscoverArgs {
     /// Write the extended scenario (TOML that `accomp simulate` runs) here.
     #[arg(long, requires = "simulate")]
     pub write_scenario: Option<PathBuf>,
+    /// Write the calibration table with the errors of its temperature models corrected (needs
+    /// `--calibration`; refused when none was found or the core's validator refuses the result).
+    #[arg(long, requires = "calibration")]
+    pub write_table: Option<PathBuf>,
     /// Read a log above the reader's limits (20 million data lines, 4 GiB).
     #[arg(long)]
     pub allow_large: bool,
@@ -61,6 +66,9 @@ pub fn run(args: &DiscoverArgs) -> anyhow::Result<()> {
     }
     if let Some(d) = &args.report {
         crate::outputs::check_dir(d)?;
+    }
+    if let Some(p) = &args.write_table {
+        crate::outputs::check_file(p)?;
     }
     if args.simulate {
         return run_simulate(args);
@@ -82,25 +90,42 @@ pub fn run(args: &DiscoverArgs) -> anyhow::Result<()> {
     };
     let (d, _bad) = discover_path(
         &args.log,
-        args.format,
+        args.format.0,
         &opts,
         table.as_ref(),
         &select::Config::default(),
     )?;
     if let Some(dir) = &args.report {
-        report::write_report(&d, dir, args.report_format)?;
+        report::write_report(&d, dir, args.report_format.0)?;
     }
+    // The report is printed first, so that a refusal to write the table can be read in it.
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report::json(&d))?);
     } else {
         print!("{}", report::text(&d));
+    }
+    if let Some(p) = &args.write_table {
+        let check = d.table_check.as_ref();
+        match (check.and_then(|c| c.corrected.as_ref()), check) {
+            (Some(t), _) => crate::outputs::write_file(p, &t.encode())?,
+            (None, Some(c)) if c.refused.is_some() => anyhow::bail!(
+                "--write-table {}: the corrected table is refused by the validator: {}",
+                p.display(),
+                c.refused.as_deref().unwrap_or_default()
+            ),
+            _ => anyhow::bail!(
+                "--write-table {}: no error of the table's temperature models was found; \
+                 nothing written",
+                p.display()
+            ),
+        }
     }
     Ok(())
 }
 
 /// Loads the record as the discovery does (same binning and notes).
 pub fn load(args: &DiscoverArgs) -> anyhow::Result<import::Dataset> {
-    let (log, bad) = import::load_for_dataset(&args.log, args.format, args.output.as_deref())?;
+    let (log, bad) = import::load_for_dataset(&args.log, args.format.0, args.output.as_deref())?;
     let opts = DatasetOptions {
         output: args.output.clone(),
         max_points: args.max_points,
@@ -128,7 +153,7 @@ fn run_simulate(args: &DiscoverArgs) -> anyhow::Result<()> {
     )?;
     write_scenario(&mut s, args.write_scenario.as_deref())?;
     if let Some(dir) = &args.report {
-        write_report(&s, dir, args.report_format)?;
+        write_report(&s, dir, args.report_format.0)?;
     }
     let unit = s.cause.dataset.output_unit.clone();
     if args.json {

@@ -1,9 +1,8 @@
 //! The command line's glue, one file per subcommand of `accomp` (`main.rs` only dispatches): its
 //! clap arguments, reading the files it names, calling the domain module, printing and writing
 //! what it returns. The domain modules (`fit`, `sim`, `tumble`, `discover`, `plot`, `stability`,
-//! `demo`, `device`) hold no clap arguments; value enums that are the domain's own vocabulary
-//! (`plot::Format`, `plot::Kind`, `discover::import::Format`) derive `clap::ValueEnum` there
-//! rather than being mirrored here.
+//! `demo`, `device`) hold no clap: the domain's value enums (`plot::Format`, `plot::Kind`,
+//! `discover::import::Format`) get their command-line names in [`values`].
 
 pub mod board_sim;
 pub mod compensate;
@@ -20,3 +19,4 @@ pub mod simulate_tumble;
 pub mod stability;
 pub mod table;
 pub mod tumble;
+pub mod values;

@@ -3,6 +3,7 @@
 
 use std::path::PathBuf;
 
+use super::values::{ImageFormat, PlotKind};
 use crate::log::Log;
 use crate::plot::{plot_log, Format, Kind, PlotOptions, DEFAULT_RAW};
 
@@ -15,11 +16,11 @@ pub struct PlotArgs {
     #[arg(long, default_value = "plots")]
     pub out_dir: PathBuf,
     /// Image format.
-    #[arg(long, value_enum, default_value_t = Format::Png)]
-    pub format: Format,
+    #[arg(long, value_enum, default_value_t = ImageFormat(Format::Png))]
+    pub format: ImageFormat,
     /// Which figure(s).
-    #[arg(long, value_enum, default_value_t = Kind::All)]
-    pub kind: Kind,
+    #[arg(long, value_enum, default_value_t = PlotKind(Kind::All))]
+    pub kind: PlotKind,
     /// Uncompensated output column.
     #[arg(long, default_value = DEFAULT_RAW)]
     pub raw: String,
@@ -44,8 +45,8 @@ pub fn run(args: &PlotArgs) -> anyhow::Result<()> {
     let opts = PlotOptions {
         out_dir: args.out_dir.clone(),
         stem,
-        format: args.format,
-        kind: args.kind,
+        format: args.format.0,
+        kind: args.kind.0,
         raw: args.raw.clone(),
         compensated: args.compensated.clone(),
     };

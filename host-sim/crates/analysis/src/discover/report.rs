@@ -4,7 +4,7 @@
 //! the residual before/after vs time, its Lomb–Scargle spectrum with the significant lines
 //! marked, and its Allan deviation before/after with confidence bands.
 
-use super::{residual, Discovery};
+use super::{residual, DiscoverError, Discovery};
 use crate::plot::decimate::buckets;
 use crate::plot::draw::{
     self, AdevCurve, AdevFigure, Figure, Marker, Panel, TimeFigure, Trace, XYCurve, XYFigure,
@@ -61,6 +61,10 @@ pub fn json(d: &Discovery) -> Value {
             });
             if let Some(c) = a.effect.channel() {
                 o["channel"] = json!(c);
+                o["channel_unit"] = json!(d.dataset.channel_unit(c));
+            }
+            if let Some(f) = a.effect.drift_family() {
+                o["drift_family"] = json!(f);
             }
             // "ambiguous: A or B": the other cause, its parameters and what would separate them.
             if let Some(amb) = &a.ambiguous_with {
@@ -125,6 +129,8 @@ pub fn json(d: &Discovery) -> Value {
             "adev_after": d.adev_after,
         },
         "tidal_analysis": super::tidal::json_of(&d.tidal),
+        "full_rate": super::fullrate::json_of(&d.full_rate),
+        "calibration_table": d.table_check.as_ref().map(super::table_error::json_of),
     })
 }
 
@@ -251,7 +257,11 @@ pub fn text(d: &Discovery) -> String {
             "  {}. {}{}: {}\n     ΔBIC {:.1}; std {:.4e} → {:.4e} {unit}; out of sample {:.4e} → {:.4e}; gain {:.1} %; forward gain {:.1} %",
             i + 1,
             a.effect.name(),
-            a.effect.channel().map(|c| format!(" ({c})")).unwrap_or_default(),
+            a.effect
+                .channel()
+                .map(|c| format!(" ({c}, {})", d.dataset.channel_unit(c)))
+                .or_else(|| a.effect.drift_family().map(|f| format!(" (drift, {f})")))
+                .unwrap_or_default(),
             ps.join(", "),
             a.delta_bic,
             a.std_before,
@@ -329,6 +339,10 @@ pub fn text(d: &Discovery) -> String {
     let _ = writeln!(o, "  noise: {}", noise_text(&s.final_noise, unit));
     for ((t, a), (_, b)) in d.adev_before.iter().zip(&d.adev_after).step_by(3) {
         let _ = writeln!(o, "  ADEV({t:.0} s): {a:.3e} → {b:.3e} {unit}");
+    }
+    o.push_str(&super::fullrate::text_of(&d.full_rate, unit));
+    if let Some(c) = &d.table_check {
+        o.push_str(&super::table_error::text_of(c, unit));
     }
     o.push_str(&super::tidal::text_of(&d.tidal));
     o
@@ -561,8 +575,11 @@ pub fn figures(d: &Discovery) -> Vec<(&'static str, &'static str, Figure)> {
 ///
 /// A figure that cannot be drawn (e.g. a record too short for any Allan deviation point) is left
 /// out with a note in the report instead of failing the whole report.
-pub fn write_report(d: &Discovery, dir: &Path, format: Format) -> anyhow::Result<()> {
-    std::fs::create_dir_all(dir)?;
+pub fn write_report(d: &Discovery, dir: &Path, format: Format) -> Result<(), DiscoverError> {
+    std::fs::create_dir_all(dir).map_err(|source| DiscoverError::CreateDir {
+        dir: dir.to_path_buf(),
+        source,
+    })?;
     let mut md = String::new();
     let _ = writeln!(md, "# Model discovery report\n\n```text\n{}```\n", text(d));
     let _ = writeln!(md, "## Figures\n");

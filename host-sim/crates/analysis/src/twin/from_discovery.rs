@@ -175,6 +175,40 @@ fn scenario_effect(
                     amplitude: need("amplitude")?,
                     phase_rad: need("phase_rad")?,
                 },
+                EffectKind::RateCoupling | EffectKind::Lag2Coupling => {
+                    let channel = a.channel.unwrap_or_default().to_owned();
+                    let drives = channel == "temperature_c"
+                        || channel.starts_with("pressure")
+                        || d.dataset.channels.iter().any(|c| c.name == channel)
+                        || SIMULATED_AMBIENT.contains(&channel.as_str());
+                    if !drives {
+                        return Err(format!("channel {channel:?} is not a driver of the twin"));
+                    }
+                    if kind == EffectKind::RateCoupling {
+                        ScenarioEffect::RateCoupling {
+                            channel,
+                            coefficient: need("coefficient")?,
+                        }
+                    } else {
+                        ScenarioEffect::Lag2Coupling {
+                            channel,
+                            tau_s: need("tau_s")?,
+                            coefficient: need("coefficient")?,
+                        }
+                    }
+                }
+                // The discovery's creep starts at the record's first instant, the scenario's at
+                // t = 0: the same curve only when they coincide.
+                EffectKind::CreepDrift if t0.abs() > d.dataset.dt_s => {
+                    return Err(format!(
+                        "the record starts at t = {t0:.0} s and a power law cannot be moved to \
+                         t = 0 exactly"
+                    ))
+                }
+                EffectKind::CreepDrift => ScenarioEffect::CreepDrift {
+                    exponent: need("exponent")?,
+                    amplitude: need("amplitude")?,
+                },
                 EffectKind::ChannelNoise => {
                     let channel = a.channel.unwrap_or_default().to_owned();
                     ScenarioEffect::ChannelNoise {

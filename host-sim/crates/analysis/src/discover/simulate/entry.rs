@@ -3,7 +3,7 @@
 //! report's simulation section.
 
 use super::{output, Simulation};
-use crate::discover::{import, report, select};
+use crate::discover::{import, report, select, DiscoverError};
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -13,14 +13,17 @@ pub fn simulate_dataset(
     scenario: Option<&Path>,
     ensemble: usize,
     cfg: &select::Config,
-) -> anyhow::Result<Simulation> {
-    let base = match scenario {
-        Some(p) => Some(
-            crate::sim::scenario::load(&p.to_string_lossy())
-                .map_err(|e| anyhow::anyhow!("--scenario {}: {e}", p.display()))?,
-        ),
-        None => None,
-    };
+) -> Result<Simulation, DiscoverError> {
+    let base =
+        match scenario {
+            Some(p) => Some(crate::sim::scenario::load(&p.to_string_lossy()).map_err(
+                |source| DiscoverError::Scenario {
+                    path: p.to_path_buf(),
+                    source,
+                },
+            )?),
+            None => None,
+        };
     let label = match scenario {
         Some(p) => p.display().to_string(),
         None => {
@@ -34,20 +37,19 @@ pub fn simulate_dataset(
         ensemble,
         cfg,
     )
-    .map_err(anyhow::Error::from)
+    .map_err(DiscoverError::Simulate)
 }
 
 /// Writes the extended scenario, if asked.
-pub fn write_scenario(s: &mut Simulation, path: Option<&Path>) -> anyhow::Result<()> {
+pub fn write_scenario(s: &mut Simulation, path: Option<&Path>) -> Result<(), DiscoverError> {
     let Some(path) = path else {
         return Ok(());
     };
     let Some(toml) = &s.extended_toml else {
-        anyhow::bail!(
-            "--write-scenario {}: this twin has no scenario to write ({})",
-            path.display(),
-            s.warnings.join("; ")
-        );
+        return Err(DiscoverError::NoScenario {
+            path: path.to_path_buf(),
+            why: s.warnings.join("; "),
+        });
     };
     crate::log::outputs::write_file(path, toml.as_bytes())?;
     s.extended_path = Some(path.to_path_buf());
@@ -55,7 +57,11 @@ pub fn write_scenario(s: &mut Simulation, path: Option<&Path>) -> anyhow::Result
 }
 
 /// Writes the discovery's report plus the simulation's section and figures.
-pub fn write_report(s: &Simulation, dir: &Path, format: crate::plot::Format) -> anyhow::Result<()> {
+pub fn write_report(
+    s: &Simulation,
+    dir: &Path,
+    format: crate::plot::Format,
+) -> Result<(), DiscoverError> {
     report::write_report(&s.cause, dir, format)?;
     let unit = s.cause.dataset.output_unit.clone();
     let mut md = String::new();
