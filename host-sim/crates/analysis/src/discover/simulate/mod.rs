@@ -268,6 +268,16 @@ where
     // filter) fitted by Whittle likelihood to what the extended twin leaves, the drift kept —
     // the comparison keeps it, so the members must carry it.
     let family = match NoiseFamily::fit(&yard.grid.place(&r_after), yard.grid.dt_s) {
+        // Every instrument has a white floor: a fit that does not resolve one has traded it
+        // for other terms (a filter corner with a random walk mimics it) and is not used.
+        Ok(f) if !f.resolved(0) => {
+            warnings.push(
+                "the noise family's white level is not resolved (a degenerate fit): the members \
+                 draw from the likelihood noise model instead"
+                    .to_owned(),
+            );
+            None
+        }
         Ok(f) => Some(f),
         Err(e) => {
             warnings.push(format!(
