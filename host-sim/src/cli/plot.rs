@@ -54,6 +54,9 @@ pub fn run(args: &PlotArgs) -> anyhow::Result<()> {
     for s in &out.skipped {
         eprintln!("skipped {s}");
     }
+    for n in &out.notes {
+        eprintln!("note: {n}");
+    }
     for p in &out.written {
         println!("{}", p.display());
     }
