@@ -524,3 +524,51 @@ fn a_ten_year_gap_in_a_record_does_not_stall_discover() {
         started.elapsed()
     );
 }
+
+#[test]
+fn fit_compensate_and_tumble_take_allow_large_and_their_limits_name_it() {
+    let dir = Scratch::new("robust-allow-large");
+    // 5 GiB of zero bytes, sparse: above the byte limit of every reader (64 MiB for tables and
+    // tumble logs, 4 GiB for sample files) by its size alone.
+    let huge = dir.path("huge.csv");
+    std::fs::File::create(&huge)
+        .unwrap()
+        .set_len(5 << 30)
+        .unwrap();
+    let h = huge.to_str().unwrap();
+    let cal = table_file(&dir);
+    let commands: Vec<Vec<&str>> = vec![
+        vec!["fit", h],
+        vec!["tumble", h],
+        vec![
+            "compensate",
+            "--target",
+            "host",
+            "--calibration",
+            &cal,
+            "--input",
+            h,
+            "--output",
+            "/dev/null",
+        ],
+    ];
+    for args in commands {
+        let o = accomp(&args);
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(1), "{args:?}: {e}");
+        assert!(
+            e.contains("5368709120 bytes") && e.contains("refused (--allow-large lifts it)"),
+            "{args:?}: {e}"
+        );
+        // With the flag the size is no refusal: the zeros are, as a line longer than any.
+        let mut large = args.clone();
+        large.push("--allow-large");
+        let o = accomp(&large);
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(1), "{large:?}: {e}");
+        assert!(
+            e.contains("1048576 bytes, the limit of one line") && !e.contains("5368709120"),
+            "{large:?}: {e}"
+        );
+    }
+}

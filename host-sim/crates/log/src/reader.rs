@@ -234,10 +234,16 @@ pub fn check_file_size(path: &std::path::Path) -> Result<(), ReadError> {
 /// Bytes of the small text files read whole (Table 1 and model CSVs, tumble logs).
 pub const MAX_SMALL_TEXT_BYTES: u64 = 64 << 20;
 
-/// Reads a whole text file of at most `max_bytes`, line by line with no line longer than
-/// [`MAX_LINE_BYTES`]: for the small files read whole (tables, tumble logs, sample files), so
-/// that `/dev/zero` or a huge file is refused with the limit named instead of filling memory.
+/// Reads a whole text file of at most `max_bytes` (no limit under `--allow-large`), line by line
+/// with no line longer than [`MAX_LINE_BYTES`]: for the small files read whole (tables, tumble
+/// logs, sample files), so that `/dev/zero` or a huge file is refused with the limit named
+/// instead of filling memory.
 pub fn read_text_limited(path: &std::path::Path, max_bytes: u64) -> Result<String, ReadError> {
+    let max_bytes = if ALLOW_LARGE.load(std::sync::atomic::Ordering::Relaxed) {
+        u64::MAX
+    } else {
+        max_bytes
+    };
     let f = std::fs::File::open(path)?;
     let len = f.metadata()?.len();
     if len > max_bytes {
