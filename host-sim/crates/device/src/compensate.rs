@@ -157,7 +157,8 @@ pub fn run_to_file(
     let (_, max_bytes) = accomp_log::reader::limits();
     let text = accomp_log::reader::read_text_limited(input, max_bytes)
         .with_context(|| format!("reading {}", input.display()))?;
-    let file = super::samples_csv::parse(&text)?;
+    let file =
+        super::samples_csv::parse(&text).with_context(|| format!("reading {}", input.display()))?;
     let out =
         std::fs::File::create(output).with_context(|| format!("creating {}", output.display()))?;
     let mut out = std::io::BufWriter::new(out);
