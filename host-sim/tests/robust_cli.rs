@@ -654,3 +654,36 @@ fn infinities_are_refused_by_every_reader_with_file_line_and_column() {
         !dir.path("out.csv").exists() || std::fs::read(dir.path("out.csv")).unwrap().is_empty()
     );
 }
+
+#[test]
+fn compensate_prints_progress_lines_when_not_on_a_terminal() {
+    let dir = Scratch::new("robust-compensate-progress");
+    let cal = table_file(&dir);
+    let mut text = String::from("time_s,output_v,temperature_c\n");
+    for i in 0..200 {
+        text += &format!("{i},1.3,60\n");
+    }
+    let input = dir.path("in.csv");
+    std::fs::write(&input, text).unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_accomp"))
+        .args([
+            "compensate",
+            "--target",
+            "host",
+            "--calibration",
+            &cal,
+            "--input",
+        ])
+        .arg(&input)
+        .arg("--output")
+        .arg(dir.path("out.csv"))
+        .env("ACCOMP_PROGRESS_EVERY_S", "0")
+        .output()
+        .unwrap();
+    let e = stderr(&o);
+    assert!(o.status.success(), "{e}");
+    assert!(
+        e.contains(&format!("compensate {}: 200/200 samples", input.display())),
+        "{e}"
+    );
+}

@@ -142,7 +142,7 @@ pub fn compensate_streaming(
 
 /// `accomp compensate` end to end: reads the table and the samples CSV, streams the output CSV
 /// to `output` (rows flushed at least every 200 ms while they arrive) and shows a progress bar
-/// with samples/s on stderr.
+/// with samples/s on stderr (off a terminal, a plain line a minute).
 pub fn run_to_file(
     target: &Target,
     firmware: Option<&Path>,
@@ -174,6 +174,12 @@ pub fn run_to_file(
         .progress_chars("=> "),
     );
     bar.set_message("samples");
+    // Off a terminal the bar is not drawn: a line a minute instead (as `simulate`, `discover`).
+    let lines = accomp_numerics::parallel::ProgressLines::new(
+        format!("compensate {}", input.display()),
+        file.rows.len(),
+        "samples",
+    );
     let started = std::time::Instant::now();
     let mut last_flush = started;
     let mut written = 0u64;
@@ -195,6 +201,7 @@ pub fn run_to_file(
                 bar.set_message("samples");
             }
             bar.set_position(written);
+            lines.set(written as usize);
             if last_flush.elapsed() >= std::time::Duration::from_millis(200) {
                 out.flush()
                     .with_context(|| format!("writing {}", output.display()))?;
