@@ -206,7 +206,16 @@ mod app {
         }
         bsp::acknowledge_drdy(cx.local.drdy_pin);
         ACQ_PROGRESS.fetch_add(1, Ordering::Relaxed);
-        if let Some(reading) = cx.shared.ads.lock(|ads| ads.on_drdy(now)) {
+        // Served after a flash stall: the pair's other half was converted before the stall, and
+        // where no edge was captured (the QEMU board) the conversion's time is unknown. The pair
+        // starts again; the pairs lost are the next frame's seq gap, flagged STALL and counted.
+        let stalled = accomp::drivers::stm32f4_flash::OPERATION.load(Ordering::Relaxed);
+        if let Some(reading) = cx.shared.ads.lock(|ads| {
+            if stalled {
+                ads.restart_pair();
+            }
+            ads.on_drdy(now)
+        }) {
             // A full queue loses this reading: counted, and flagged on the next one.
             if cx
                 .local

@@ -38,12 +38,18 @@ pub const PAPER_ORDER2_MONOMIALS: [[f64; 3]; 4] = [
 
 /// The paper's printed order-2 models as a compensator over 30–65 °C with T0 = `reference`.
 pub fn paper_order2_models(reference: Celsius) -> ThermalCompensator {
-    let s = TABLE1_SCALE;
+    paper_order2_models_over(TABLE1_SCALE, reference)
+}
+
+/// The paper's printed order-2 models on `scale` (a simulator's instrument spans more than the
+/// calibrated range, so that its coefficients are never clamped), δo = 0 (the paper prints
+/// none).
+pub fn paper_order2_models_over(scale: TemperatureScale, reference: Celsius) -> ThermalCompensator {
     // from_monomial_celsius only refuses more than five coefficients; three always convert.
-    let mono = |m: &[f64; 3]| TempPoly::from_monomial_celsius(m, &s).unwrap_or_default();
+    let mono = |m: &[f64; 3]| TempPoly::from_monomial_celsius(m, &scale).unwrap_or_default();
     let [k0, k1, k2, dp] = &PAPER_ORDER2_MONOMIALS;
     ThermalCompensator {
-        scale: s,
+        scale,
         reference,
         models: CoefficientModels {
             bias_g: mono(k0),

@@ -15,25 +15,12 @@ use std::time::Instant;
 
 use accomp_host::allan::{Phase, Statistic, TauSet};
 use accomp_host::log::Log;
+// The test fixture's generator.
 use accomp_host::stability::{analyse, mean_std, regression, Options};
+use accomp_numerics::lcg::Lcg;
 
 const SAMPLES: usize = 41 * 86_400;
 const K1_V_PER_G: f64 = 1.3301;
-
-/// 64-bit LCG, the same as the test fixture's generator.
-struct Lcg(u64);
-impl Lcg {
-    fn uniform(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6_364_136_223_846_793_005)
-            .wrapping_add(1_442_695_040_888_963_407);
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn normal(&mut self) -> f64 {
-        (0..12).map(|_| self.uniform()).sum::<f64>() - 6.0
-    }
-}
 
 const RUNS: usize = 5;
 

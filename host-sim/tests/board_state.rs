@@ -9,25 +9,18 @@ use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 use accomp::table::CalibrationTable;
-use accomp_host::device::qemu::{image_tables, QemuOptions, FLASH_IMAGE, STATE_ENV};
-use accomp_host::device::{firmware_path, paper_table, Qemu};
+use accomp_host::device::paper_table;
+use accomp_host::device::qemu::{image_tables, FLASH_IMAGE, STATE_ENV};
 
 #[path = "common/cli.rs"]
 mod cli;
+#[path = "common/qemu.rs"]
+mod qemu;
 #[path = "common/scratch.rs"]
 mod scratch;
 use cli::stderr;
+use qemu::elf;
 use scratch::Scratch;
-
-fn elf() -> PathBuf {
-    let elf = firmware_path(None);
-    assert!(
-        elf.exists(),
-        "firmware ELF missing at {} (cargo xtask firmware)",
-        elf.display()
-    );
-    elf
-}
 
 /// A table told apart by its date (its id is its CRC).
 fn table(n: u32) -> CalibrationTable {
@@ -58,18 +51,28 @@ fn write_table(dir: &Path, n: u32) -> (PathBuf, u32) {
     (p, t.id())
 }
 
+/// A board's state folder and a folder for the test's files: `board-state-<name>[-files]`.
+fn board(name: &str) -> (Scratch, Scratch) {
+    (
+        Scratch::new(&format!("board-state-{name}")),
+        Scratch::new(&format!("board-state-{name}-files")),
+    )
+}
+
+/// Writes table `n` into `work` and loads it onto the QEMU board of `state` (asserted to
+/// succeed): the table's file and id.
+fn load_table(state: &Path, work: &Path, n: u32) -> (PathBuf, u32) {
+    let (t, id) = write_table(work, n);
+    let o = accomp(state, &["load", "--target", "qemu", t.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    (t, id)
+}
+
 /// (active, previous) as the firmware finds them when it boots on a copy of the state.
 fn tables_after_boot(state: &Path) -> (Option<u32>, Option<u32>) {
     let copy = Scratch::new("board-state-boot");
     std::fs::copy(state.join(FLASH_IMAGE), copy.join(FLASH_IMAGE)).expect("image");
-    let opts = QemuOptions {
-        state_dir: Some(copy.to_path_buf()),
-        ..QemuOptions::default()
-    };
-    let (q, mut c) = Qemu::launch(&elf(), &opts).unwrap_or_else(|e| panic!("QEMU: {e}"));
-    let i = c.info().expect("info");
-    q.shutdown();
-    (i.active_table, i.previous_table)
+    qemu::tables_after_boot(&copy)
 }
 
 fn on_disk(state: &Path) -> (Option<u32>, Option<u32>) {
@@ -83,15 +86,8 @@ fn hex(id: u32) -> String {
 
 #[test]
 fn concurrent_loads_and_a_racing_table_get_lose_no_table_in_30_rounds() {
-    let state = Scratch::new("board-state-race");
-    let work = Scratch::new("board-state-race-files");
-    let (first, first_id) = write_table(&work, 0);
-    assert!(accomp(
-        &state,
-        &["load", "--target", "qemu", first.to_str().unwrap()]
-    )
-    .status
-    .success());
+    let (state, work) = board("race");
+    let (_, first_id) = load_table(&state, &work, 0);
     let mut active = first_id;
     let mut waited = 0;
     for round in 0..30u32 {
@@ -231,14 +227,8 @@ fn no_wait_refuses_a_busy_board_naming_the_holder() {
 
 #[test]
 fn a_short_flash_image_is_refused_with_its_size_kept_intact_and_reset_state_moves_it_aside() {
-    let state = Scratch::new("board-state-short");
-    let work = Scratch::new("board-state-short-files");
-    let (t, _) = write_table(&work, 7);
-    assert!(
-        accomp(&state, &["load", "--target", "qemu", t.to_str().unwrap()])
-            .status
-            .success()
-    );
+    let (state, work) = board("short");
+    let (t, _) = load_table(&state, &work, 7);
     let image = state.join(FLASH_IMAGE);
     let full = std::fs::read(&image).unwrap();
     let cut = full[..1000].to_vec();
@@ -304,15 +294,9 @@ fn a_short_flash_image_is_refused_with_its_size_kept_intact_and_reset_state_move
 
 #[test]
 fn an_immutable_state_folder_is_refused_by_name_before_anything_is_sent() {
-    let state = Scratch::new("board-state-immutable");
-    let work = Scratch::new("board-state-immutable-files");
-    let (t1, id1) = write_table(&work, 11);
+    let (state, work) = board("immutable");
+    let (_, id1) = load_table(&state, &work, 11);
     let (t2, _) = write_table(&work, 12);
-    assert!(
-        accomp(&state, &["load", "--target", "qemu", t1.to_str().unwrap()])
-            .status
-            .success()
-    );
     let before = std::fs::read(state.join(FLASH_IMAGE)).unwrap();
     // Root writes through permission bits; the immutable attribute stops root too.
     let chattr = Command::new("chattr").arg("+i").arg(&*state).status();
@@ -322,32 +306,15 @@ fn an_immutable_state_folder_is_refused_by_name_before_anything_is_sent() {
     );
     let o = accomp(&state, &["load", "--target", "qemu", t2.to_str().unwrap()]);
     let _ = Command::new("chattr").arg("-i").arg(&*state).status();
-    assert!(
-        !o.status.success(),
-        "load into an immutable folder succeeded"
-    );
-    let e = stderr(&o);
-    assert!(
-        e.contains(&state.display().to_string()) && e.contains("nothing sent"),
-        "{e}"
-    );
-    assert!(!e.contains("verified"), "{e}");
+    assert_refused_before_sending(&o, &state, "load into an immutable folder");
     assert_eq!(std::fs::read(state.join(FLASH_IMAGE)).unwrap(), before);
     assert_eq!(on_disk(&state), (Some(id1), None));
 }
 
 #[test]
 fn a_full_state_file_system_is_refused_before_anything_is_sent() {
-    let mnt = Scratch::new("board-state-full");
     // 64 KiB of tmpfs, filled to less than one image.
-    let mounted = Command::new("mount")
-        .args(["-t", "tmpfs", "-o", "size=64k", "tmpfs"])
-        .arg(&*mnt)
-        .status();
-    assert!(
-        mounted.is_ok_and(|s| s.success()),
-        "mounting a tmpfs is needed for this test (root)"
-    );
+    let mnt = Scratch::tmpfs_64k("board-state-full");
     let work = Scratch::new("board-state-full-files");
     let (t, _) = write_table(&work, 21);
     let state = mnt.join("state");
@@ -360,12 +327,14 @@ fn a_full_state_file_system_is_refused_before_anything_is_sent() {
     }
     let o = accomp(&state, &["load", "--target", "qemu", t.to_str().unwrap()]);
     let _ = std::fs::remove_file(&filler);
-    let _ = Command::new("umount").arg(&*mnt).status();
-    assert!(
-        !o.status.success(),
-        "load onto a full file system succeeded"
-    );
-    let e = stderr(&o);
+    mnt.unmount();
+    assert_refused_before_sending(&o, &state, "load onto a full file system");
+}
+
+/// `what` failed, its error naming the state folder and saying nothing was sent (nor verified).
+fn assert_refused_before_sending(o: &Output, state: &Path, what: &str) {
+    assert!(!o.status.success(), "{what} succeeded");
+    let e = stderr(o);
     assert!(
         e.contains(&state.display().to_string()) && e.contains("nothing sent"),
         "{e}"
@@ -441,8 +410,7 @@ fn running(pid: u32) -> bool {
 
 #[test]
 fn kill_9_of_accomp_leaves_no_emulator_and_the_next_run_reclaims_its_folder() {
-    let state = Scratch::new("board-state-kill9");
-    let work = Scratch::new("board-state-kill9-files");
+    let (state, work) = board("kill9");
     let csv = work.join("in.csv");
     let mut text = String::from("time_s,output_v,temperature_c\n");
     for i in 0..200_000 {
@@ -450,13 +418,7 @@ fn kill_9_of_accomp_leaves_no_emulator_and_the_next_run_reclaims_its_folder() {
     }
     std::fs::write(&csv, text).unwrap();
     let (cal, _) = write_table(&work, 31);
-    let (other, _) = write_table(&work, 32);
-    assert!(accomp(
-        &state,
-        &["load", "--target", "qemu", other.to_str().unwrap()]
-    )
-    .status
-    .success());
+    load_table(&state, &work, 32);
     let mut child = accomp_cmd(&state, &["compensate", "--target", "qemu", "--calibration"])
         .arg(&cal)
         .arg("--input")
@@ -520,15 +482,9 @@ fn kill_9_of_accomp_leaves_no_emulator_and_the_next_run_reclaims_its_folder() {
 
 #[test]
 fn compensate_says_that_it_activates_its_table_and_the_board_keeps_it() {
-    let state = Scratch::new("board-state-compensate");
-    let work = Scratch::new("board-state-compensate-files");
-    let (old, old_id) = write_table(&work, 41);
+    let (state, work) = board("compensate");
+    let (_, old_id) = load_table(&state, &work, 41);
     let (cal, cal_id) = write_table(&work, 42);
-    assert!(
-        accomp(&state, &["load", "--target", "qemu", old.to_str().unwrap()])
-            .status
-            .success()
-    );
     let csv = work.join("in.csv");
     std::fs::write(&csv, "time_s,output_v,temperature_c\n0,1.3,50\n1,1.3,50\n").unwrap();
     let out = work.join("out.csv");

@@ -108,7 +108,12 @@ fn a_short_demo_reports_both_experiments_and_compensation_improves_the_1g_stabil
             fw[287] - fw[0] < (t[287] - t[0]) / 100.0,
             "firmware time is not compressed"
         );
-        assert!(log.meta("calibration_id").is_some());
+        // The same form as `accomp record` writes: 0x + 8 hex digits.
+        let id = log.meta("calibration_id").unwrap_or_default();
+        assert!(
+            id.len() == 10 && id.starts_with("0x") && u32::from_str_radix(&id[2..], 16).is_ok(),
+            "{id}"
+        );
     }
 
     // The claim of the demo: compensation removes most of the thermal scatter at 1 g.

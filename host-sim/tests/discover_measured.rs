@@ -8,8 +8,9 @@
 //!   (obtained from NEWTON-g/AQG2MSEED, see data/README.md). Run by hand without it, it fails
 //!   and says so.
 
-use accomp_host::discover::import::{DatasetOptions, Format};
-use accomp_host::discover::{discover_path, select};
+use accomp_host::discover::import::{BadRow, DatasetOptions, Format};
+use accomp_host::discover::select::Accepted;
+use accomp_host::discover::{discover_path, select, Discovery};
 use std::path::{Path, PathBuf};
 
 const GMETROLOGY: &str = concat!(
@@ -33,19 +34,19 @@ fn aqg_record() -> PathBuf {
         .unwrap_or_else(|| PathBuf::from("$ACCOMP_AQG_RECORD is not set"))
 }
 
-fn tidal_factor(d: &accomp_host::discover::Discovery) -> Option<(f64, f64)> {
+/// The accepted earth tide, if named.
+fn tide(d: &Discovery) -> Option<&Accepted> {
     d.selection
         .accepted
         .iter()
         .find(|a| a.effect.name() == "tidal_gravity")
-        .and_then(|a| a.params.iter().find(|(k, _)| k == "amplitude_factor"))
-        .map(|(_, p)| (p.value, p.sigma))
 }
 
-#[test]
-fn gmetrology_record_names_the_earth_tide_with_a_gravimetric_factor_near_one() {
+/// The discovery on the record at `path`, its format guessed, the options default; the report
+/// printed for the test's log, the bad rows returned.
+fn discover_default(path: &Path) -> (Discovery, Vec<BadRow>) {
     let (d, bad) = discover_path(
-        require(Path::new(GMETROLOGY)),
+        require(path),
         Format::Auto,
         &DatasetOptions::default(),
         None,
@@ -53,6 +54,18 @@ fn gmetrology_record_names_the_earth_tide_with_a_gravimetric_factor_near_one() {
     )
     .expect("discovery");
     eprintln!("{}", accomp_host::discover::report::text(&d));
+    (d, bad)
+}
+
+fn tidal_factor(d: &Discovery) -> Option<(f64, f64)> {
+    tide(d)
+        .and_then(|a| a.params.iter().find(|(k, _)| k == "amplitude_factor"))
+        .map(|(_, p)| (p.value, p.sigma))
+}
+
+#[test]
+fn gmetrology_record_names_the_earth_tide_with_a_gravimetric_factor_near_one() {
+    let (d, bad) = discover_default(Path::new(GMETROLOGY));
     assert!(bad.is_empty(), "{bad:?}");
     // The wave-group analysis runs inside discover and reaches the JSON (its figures are
     // tested in tidal_gmetrology.rs).
@@ -70,12 +83,7 @@ fn gmetrology_record_names_the_earth_tide_with_a_gravimetric_factor_near_one() {
     assert!((0.85..1.15).contains(&f), "amplitude_factor {f}");
     // The tide is ~2/3 of the baseline residual there: naming it must cut the held-out
     // residual by more than 30 % on its own.
-    let tide = d
-        .selection
-        .accepted
-        .iter()
-        .find(|a| a.effect.name() == "tidal_gravity")
-        .expect("tide");
+    let tide = tide(&d).expect("tide");
     assert!(
         tide.gain_out_of_sample() > 0.3,
         "tide gain {}",
@@ -172,15 +180,7 @@ fn assert_noise_fitted(d: &accomp_host::discover::Discovery) {
             path; `cargo xtask test` runs it when set"]
 fn aqg_record_names_the_earth_tide() {
     let aqg = aqg_record();
-    let (d, _) = discover_path(
-        require(&aqg),
-        Format::Auto,
-        &DatasetOptions::default(),
-        None,
-        &select::Config::default(),
-    )
-    .expect("discovery");
-    eprintln!("{}", accomp_host::discover::report::text(&d));
+    let (d, _) = discover_default(&aqg);
     let (f, s) = tidal_factor(&d).expect("tidal_gravity not named on the AQG record");
     assert!(
         (f - 1.0).abs() < 3.0 * s.max(0.05),

@@ -11,7 +11,7 @@ mod cli;
 #[path = "common/scratch.rs"]
 mod scratch;
 
-use cli::accomp;
+use cli::{accomp, accomp_ok};
 use scratch::Scratch;
 
 const TABLE1: &str = concat!(
@@ -146,21 +146,19 @@ fn bad_rows_are_reported_with_their_line_number() {
 fn output_table_decodes_and_carries_the_selected_models() {
     let dir = Scratch::new("fit-cli");
     let out_path = dir.path("cal.acal");
-    let out = accomp(&[
-        "fit",
-        table1(),
-        "--json",
-        "-o",
-        out_path.to_str().unwrap(),
-        "--serial",
-        "JN-06 A12124",
-        "--date",
-        "2017-04-01",
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = accomp_ok(
+        &[
+            "fit",
+            table1(),
+            "--json",
+            "-o",
+            out_path.to_str().unwrap(),
+            "--serial",
+            "JN-06 A12124",
+            "--date",
+            "2017-04-01",
+        ],
+        &[],
     );
     let doc: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let bytes = std::fs::read(&out_path).unwrap();

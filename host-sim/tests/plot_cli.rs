@@ -8,7 +8,7 @@ mod cli;
 #[path = "common/scratch.rs"]
 mod scratch;
 
-use cli::accomp;
+use cli::{accomp, accomp_ok};
 use scratch::Scratch;
 
 fn s(p: &Path) -> &str {
@@ -19,18 +19,11 @@ fn s(p: &Path) -> &str {
 fn plots_a_simulated_zero_g_log_as_fig2_fig5_fig4_and_adev() {
     let dir = Scratch::new("plot-cli-sim");
     let log = dir.join("zero.csv");
-    let sim = accomp(&["simulate", "paper-0g", "--seed", "3", "-o", s(&log)]);
-    assert!(
-        sim.status.success(),
-        "{}",
-        String::from_utf8_lossy(&sim.stderr)
-    );
+    accomp_ok(&["simulate", "paper-0g", "--seed", "3", "-o", s(&log)], &[]);
     let figs = dir.join("figs");
-    let out = accomp(&["plot", s(&log), "--out-dir", s(&figs), "--format", "png"]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = accomp_ok(
+        &["plot", s(&log), "--out-dir", s(&figs), "--format", "png"],
+        &[],
     );
     let listed: Vec<String> = String::from_utf8_lossy(&out.stdout)
         .lines()
@@ -61,20 +54,18 @@ fn one_kind_as_svg_and_a_missing_column_named_on_stderr() {
         csv.push_str(&format!("{i},{v}\n"));
     }
     std::fs::write(&log, csv).unwrap();
-    let out = accomp(&[
-        "plot",
-        s(&log),
-        "--out-dir",
-        s(&dir),
-        "--format",
-        "svg",
-        "--kind",
-        "output",
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    accomp_ok(
+        &[
+            "plot",
+            s(&log),
+            "--out-dir",
+            s(&dir),
+            "--format",
+            "svg",
+            "--kind",
+            "output",
+        ],
+        &[],
     );
     let svg = std::fs::read_to_string(dir.join("small_fig3_output_1g.svg")).unwrap();
     assert!(svg.contains("<svg") && svg.trim_end().ends_with("</svg>"));

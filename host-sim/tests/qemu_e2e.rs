@@ -9,31 +9,14 @@ use accomp::pipeline::{self, raw_from_physical, ChannelFlags, RawSample, Status}
 use accomp::protocol::{upload_body_crc32, ErrorCode, Request, Response};
 use accomp::table::{CalibrationTable, ENCODED_LEN};
 use accomp::units::{Celsius, Gs, TiltArcsec, Volts};
-use accomp_host::device::{
-    firmware_path, paper_table, qemu::QemuOptions, Client, ClientError, Qemu,
-};
+use accomp_host::device::{paper_table, ClientError};
+
+#[path = "common/qemu.rs"]
+mod qemu;
+use qemu::{boot, Rng};
 
 fn table() -> CalibrationTable {
     paper_table()
-}
-
-fn boot() -> (Qemu, Client) {
-    let elf = firmware_path(None);
-    match Qemu::launch(&elf, &QemuOptions::default()) {
-        Ok(x) => x,
-        Err(e) => panic!("QEMU end-to-end cannot run: {e}"),
-    }
-}
-
-/// Deterministic pseudo-random numbers (xorshift), so a failure can be replayed.
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> f64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
 }
 
 fn same_bits(a: f64, b: f64) -> bool {

@@ -12,13 +12,16 @@ use std::time::Duration;
 use accomp::protocol::model::TableHistory;
 use accomp::protocol::{upload_body_crc32, Request};
 use accomp::table::{CalibrationTable, ENCODED_LEN};
-use accomp_host::device::qemu::{QemuOptions, FLASH_IMAGE, STATE_ENV};
-use accomp_host::device::{firmware_path, paper_table, Client, Qemu};
+use accomp_host::device::paper_table;
+use accomp_host::device::qemu::{FLASH_IMAGE, STATE_ENV};
 
 #[path = "common/cli.rs"]
 mod cli;
+#[path = "common/qemu.rs"]
+mod qemu;
 #[path = "common/scratch.rs"]
 mod scratch;
+use qemu::{boot_on as boot, elf, tables_after_boot};
 use scratch::Scratch;
 
 fn table(day: u8) -> CalibrationTable {
@@ -30,32 +33,6 @@ fn table(day: u8) -> CalibrationTable {
 /// A fresh folder, removed when the test passes.
 fn fresh_dir(name: &str) -> Scratch {
     Scratch::new(&format!("persist-test-{name}"))
-}
-
-fn elf() -> PathBuf {
-    let elf = firmware_path(None);
-    assert!(
-        elf.exists(),
-        "firmware ELF missing at {} (cargo xtask firmware)",
-        elf.display()
-    );
-    elf
-}
-
-fn boot(state: &Path) -> (Qemu, Client) {
-    let opts = QemuOptions {
-        state_dir: Some(state.to_path_buf()),
-        ..QemuOptions::default()
-    };
-    Qemu::launch(&elf(), &opts).unwrap_or_else(|e| panic!("QEMU: {e}"))
-}
-
-/// (active, previous) table ids after a boot on `state`.
-fn tables_after_boot(state: &Path) -> (Option<u32>, Option<u32>) {
-    let (q, mut c) = boot(state);
-    let i = c.info().expect("info");
-    q.shutdown();
-    (i.active_table, i.previous_table)
 }
 
 /// `/tmp/accomp-qemu-<pid>-*` folders of process `pid`.
@@ -119,7 +96,7 @@ fn load_then_table_get_round_trip_across_two_qemu_runs_and_leave_no_temp_folder(
     assert!(status.success());
     assert!(qemu_dirs_of(pid).is_empty(), "{:?} left", qemu_dirs_of(pid));
     // And a launch in this process: its temporary folder goes with the Qemu.
-    let (q, _c) = Qemu::launch(&elf(), &QemuOptions::default()).expect("QEMU");
+    let (q, _c) = qemu::boot();
     let dir = q.log_dir.clone();
     assert!(dir.exists());
     drop(q);

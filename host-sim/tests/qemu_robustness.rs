@@ -13,27 +13,11 @@ use accomp::pipeline::{self, raw_from_physical, RawSample};
 use accomp::protocol::{upload_body_crc32, DeviceMessage, ErrorCode, Request};
 use accomp::table::{CalibrationTable, CRC32, ENCODED_LEN};
 use accomp::units::{Celsius, TiltArcsec, Volts};
-use accomp_host::device::{
-    firmware_path, paper_table, qemu::QemuOptions, Client, ClientError, Qemu,
-};
+use accomp_host::device::{paper_table, ClientError};
 
-fn boot() -> (Qemu, Client) {
-    match Qemu::launch(&firmware_path(None), &QemuOptions::default()) {
-        Ok(x) => x,
-        Err(e) => panic!("QEMU end-to-end cannot run: {e}"),
-    }
-}
-
-/// Deterministic noise (xorshift64), so a failure can be replayed.
-struct Rng(u64);
-impl Rng {
-    fn next_u64(&mut self) -> u64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        self.0
-    }
-}
+#[path = "common/qemu.rs"]
+mod qemu;
+use qemu::{boot, Rng};
 
 fn raw_at(t: &CalibrationTable, volts: f64, temp_c: f64) -> RawSample {
     raw_from_physical(t, Volts(volts), Celsius(temp_c), TiltArcsec(1.0)).unwrap()
@@ -234,7 +218,7 @@ fn load_without_local_check_shows_the_device_error() {
     nan.thermal.models.bias_g.coeffs[1] = f64::NAN;
     let file = dir.join("nan.cal");
     std::fs::write(&file, nan.encode()).unwrap();
-    let elf = firmware_path(None);
+    let elf = qemu::elf();
     let run = |extra: &[&str]| {
         let out = Command::new(env!("CARGO_BIN_EXE_accomp"))
             .args(["load", "--target", "qemu", "--firmware"])

@@ -13,7 +13,7 @@ use std::time::{Duration, Instant};
 mod cli;
 #[path = "common/scratch.rs"]
 mod scratch;
-use cli::{accomp, stderr};
+use cli::{accomp, accomp_ok, stderr};
 use scratch::Scratch;
 
 fn stdout(o: &Output) -> String {
@@ -42,18 +42,12 @@ fn accomp_in_1_gib(args: &[&str]) -> Output {
 }
 
 fn simulated_log(dir: &Path) -> String {
-    let log = dir.join("sim.csv");
-    let o = accomp(&[
-        "simulate",
+    let log = cli::simulated_log(
+        dir,
+        "sim.csv",
         "paper-0g",
-        "--days",
-        "2",
-        "--interval",
-        "60",
-        "-o",
-        log.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+        &["--days", "2", "--interval", "60"],
+    );
     log.to_str().unwrap().to_owned()
 }
 
@@ -242,15 +236,7 @@ fn outputs_are_checked_before_any_work_and_named() {
 
 #[test]
 fn a_full_disk_is_an_error_naming_the_output_never_exit_0() {
-    let mnt = Scratch::new("robust-full");
-    let mounted = Command::new("mount")
-        .args(["-t", "tmpfs", "-o", "size=64k", "tmpfs"])
-        .arg(&*mnt)
-        .status();
-    assert!(
-        mounted.is_ok_and(|s| s.success()),
-        "mounting a tmpfs is needed (root)"
-    );
+    let mnt = Scratch::tmpfs_64k("robust-full");
     // 2 days at 60 s is about 0.9 MB of log: the 64 KiB disk fills during the run.
     let out = mnt.join("sim.csv");
     let o = accomp(&[
@@ -275,7 +261,7 @@ fn a_full_disk_is_an_error_naming_the_output_never_exit_0() {
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .output()
         .unwrap();
-    let _ = Command::new("umount").arg(&*mnt).status();
+    mnt.unmount();
     let e = stderr(&o);
     assert!(
         !o.status.success(),
@@ -328,11 +314,7 @@ fn parameters_out_of_range_are_refused_with_the_name_and_the_range() {
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", stderr(&o));
-    assert!(
-        stderr(&o).contains("simulate paper-0g: 16384/86400 rows"),
-        "{}",
-        stderr(&o)
-    );
+    cli::assert_stderr_contains(&o, "simulate paper-0g: 16384/86400 rows");
     // Scenario fields.
     let preset = stdout(&accomp(&["simulate", "--print-preset", "paper-1g"]));
     let out = dir.path("s.csv");
@@ -381,18 +363,11 @@ fn parameters_out_of_range_are_refused_with_the_name_and_the_range() {
     let o = accomp(&["stability", big.to_str().unwrap()]);
     assert!(!o.status.success());
     assert!(!stdout(&o).contains("inf"), "{}", stdout(&o));
-    assert!(
-        stderr(&o).contains("\"output_v\"") && stderr(&o).contains("overflow"),
-        "{}",
-        stderr(&o)
-    );
+    let e = stderr(&o);
+    assert!(e.contains("\"output_v\"") && e.contains("overflow"), "{e}");
     let o = accomp(&["discover", big.to_str().unwrap()]);
     assert!(!o.status.success(), "discover printed {}", stdout(&o));
-    assert!(
-        stderr(&o).contains("values up to 1e308 overflow the fit"),
-        "{}",
-        stderr(&o)
-    );
+    cli::assert_stderr_contains(&o, "values up to 1e308 overflow the fit");
     let plots = dir.path("p");
     let o = accomp(&[
         "plot",
@@ -400,11 +375,7 @@ fn parameters_out_of_range_are_refused_with_the_name_and_the_range() {
         "--out-dir",
         plots.to_str().unwrap(),
     ]);
-    assert!(
-        stderr(&o).contains("is not finite (values so large"),
-        "{}",
-        stderr(&o)
-    );
+    cli::assert_stderr_contains(&o, "is not finite (values so large");
 }
 
 #[test]
@@ -424,20 +395,16 @@ fn a_constant_log_has_std_0_and_no_blank_allan_plot() {
         stdout(&o)
     );
     let plots = dir.path("plots");
-    let o = accomp(&[
-        "plot",
-        log.to_str().unwrap(),
-        "--out-dir",
-        plots.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    assert!(
-        stderr(&o).contains(
-            "skipped the Allan deviation plot: the Allan deviation of `output_v` is 0 (a constant column) at every τ"
-        ),
-        "{}",
-        stderr(&o)
+    let o = accomp_ok(
+        &[
+            "plot",
+            log.to_str().unwrap(),
+            "--out-dir",
+            plots.to_str().unwrap(),
+        ],
+        &[],
     );
+    cli::assert_stderr_contains(&o, "skipped the Allan deviation plot: the Allan deviation of `output_v` is 0 (a constant column) at every τ");
     assert!(!plots.join("c_adev.png").exists());
 }
 
@@ -455,11 +422,7 @@ fn utf16_text_and_a_reversed_tsf_are_named_for_what_they_are() {
         std::fs::write(&p, bytes).unwrap();
         let o = accomp(&["stability", p.to_str().unwrap()]);
         assert!(!o.status.success());
-        assert!(
-            stderr(&o).contains(&format!("UTF-16 text ({endian})")),
-            "{}",
-            stderr(&o)
-        );
+        cli::assert_stderr_contains(&o, &format!("UTF-16 text ({endian})"));
     }
     let tsf = dir.path("rev.tsf");
     let mut rows = String::new();
@@ -476,11 +439,7 @@ fn utf16_text_and_a_reversed_tsf_are_named_for_what_they_are() {
     std::fs::write(&tsf, rows).unwrap();
     let o = accomp(&["discover", tsf.to_str().unwrap()]);
     assert!(!o.status.success());
-    assert!(
-        stderr(&o).contains("the file looks reversed"),
-        "{}",
-        stderr(&o)
-    );
+    cli::assert_stderr_contains(&o, "the file looks reversed");
 }
 
 #[test]
@@ -510,8 +469,7 @@ fn a_ten_year_gap_in_a_record_does_not_stall_discover() {
     let gap = dir.path("gap.csv");
     std::fs::write(&gap, shifted.join("\n") + "\n").unwrap();
     let started = Instant::now();
-    let o = accomp(&["discover", gap.to_str().unwrap(), "--json"]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    let o = accomp_ok(&["discover", gap.to_str().unwrap(), "--json"], &[]);
     assert!(
         stdout(&o).contains("gap"),
         "the gap is not announced: {}",

@@ -11,7 +11,7 @@ mod cli;
 #[path = "common/scratch.rs"]
 mod scratch;
 
-use cli::accomp;
+use cli::{accomp, accomp_ok};
 use scratch::Scratch;
 
 fn table() -> CalibrationTable {
@@ -48,12 +48,7 @@ fn show_json_reports_the_tables_fields_in_lab_units() {
     let t = table();
     let dir = Scratch::new("table-cli");
     let p = write(&dir, "good.acal", &t.encode());
-    let out = accomp(&["table", "show", "--json", p.to_str().unwrap()]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = accomp_ok(&["table", "show", "--json", p.to_str().unwrap()], &[]);
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v["serial"], "SNJ-103");
     assert_eq!(v["id"], format!("{:08x}", t.id()));

@@ -263,6 +263,8 @@ impl AdsAcquisition {
     }
     /// Nothing to reprogram.
     pub fn request_rate(&mut self, _rate: DataRate) {}
+    /// Never called (the DRDY interrupt is not enabled on this board).
+    pub fn restart_pair(&mut self) {}
 }
 
 /// Stand-in for the AD7124 sequencer.

@@ -41,5 +41,6 @@ pub fn run(args: &CompensateArgs) -> anyhow::Result<()> {
         &args.calibration,
         &args.input,
         &args.output,
-    )
+    )?;
+    Ok(())
 }

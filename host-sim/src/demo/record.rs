@@ -42,7 +42,7 @@ pub(super) fn record_log(
             .map_or("", |(_, v)| v.as_str()),
     )?;
     log.set_meta("scale_factor_v_per_g", &format!("{k1_t0:.9}"))?;
-    log.set_meta("calibration_id", &format!("{:08x}", table.id()))?;
+    log.set_meta("calibration_id", &format!("{:#010x}", table.id()))?;
     log.set_meta("calibration_file", &table_path.display().to_string())?;
     log.set_meta("reference_c", &table.thermal.reference.0.to_string())?;
     log.set_meta("tilt_axis", if zero_g { "input" } else { "none" })?;

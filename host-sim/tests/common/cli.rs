@@ -1,7 +1,7 @@
 //! The `accomp` binary as the CLI tests run it (`#[path = "common/cli.rs"] mod cli;`).
 #![allow(dead_code)]
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 /// Runs `accomp` with `args` and waits for it.
@@ -29,7 +29,26 @@ pub fn accomp_ok(args: &[&str], env: &[(&str, &Path)]) -> Output {
     out
 }
 
+/// Asserts that stderr holds `needle`, showing stderr when it does not.
+pub fn assert_stderr_contains(o: &Output, needle: &str) {
+    let e = stderr(o);
+    assert!(e.contains(needle), "{e}");
+}
+
 /// What it wrote to stderr, as text.
 pub fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// `accomp simulate <preset> <extra…> -o <dir>/<file>`, asserted to succeed; the log's path.
+pub fn simulated_log(dir: &Path, file: &str, preset: &str, extra: &[&str]) -> PathBuf {
+    let log = dir.join(file);
+    let out = log.to_str().expect("a UTF-8 path");
+    let args: Vec<&str> = ["simulate", preset]
+        .into_iter()
+        .chain(extra.iter().copied())
+        .chain(["-o", out])
+        .collect();
+    accomp_ok(&args, &[]);
+    log
 }

@@ -29,6 +29,7 @@ use accomp_host::discover::{self as disc, Discovery};
 use accomp_host::log::Log;
 use accomp_host::sim::noise::AllanParams;
 use accomp_host::sim::scenario::Scenario;
+use accomp_host::sim::{Sample, Simulator};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
@@ -39,6 +40,26 @@ pub fn quiet_station(sc: &mut Scenario) {
     sc.tide.enabled = false;
     sc.thermostat.proof_mass_lag_s = 1.0e-3;
     sc.adc.ads1262.vref_tempco_ppm_per_c = 0.0;
+}
+
+/// Runs the simulator to its end: every sample, in order.
+pub fn run(sim: &mut Simulator) -> Vec<Sample> {
+    (0..sim.samples())
+        .map(|_| sim.step().expect("step"))
+        .collect()
+}
+
+/// One field of every sample.
+pub fn column(samples: &[Sample], field: impl FnMut(&Sample) -> f64) -> Vec<f64> {
+    samples.iter().map(field).collect()
+}
+
+/// The record's start (Unix seconds) from the simulator's metadata (`start_utc`).
+pub fn start_unix_s(meta: &[(String, String)]) -> f64 {
+    meta.iter()
+        .find(|(k, _)| k == "start_utc")
+        .and_then(|(_, v)| accomp_host::discover::import::parse_utc(v))
+        .expect("start_utc")
 }
 
 /// The value of an accepted effect's parameter (NaN when it has no such key).
@@ -252,6 +273,20 @@ pub fn false_discoveries(
     }
     eprintln!("{label} FALSE-DISCOVERY RATE {count}/{draws}");
     count
+}
+
+/// The null test: `draws` logs with nothing hidden (their seeds drawn from `seed`), at most
+/// `percent` % of them with an accepted effect.
+pub fn assert_null_rate_at_most(
+    label: &str,
+    seed: u64,
+    draws: usize,
+    percent: usize,
+    accepted_on: impl FnMut(u64) -> Vec<String>,
+) {
+    let count = false_discoveries(label, seed, draws, accepted_on);
+    let what = format!("false discoveries on {label} null logs");
+    assert_at_most_percent(count, draws, percent, &what);
 }
 
 /// The noise of the simulated sensor as a state-space model sampled every `interval_s`.

@@ -26,6 +26,26 @@ impl Scratch {
         Scratch { dir }
     }
 
+    /// A fresh folder with a 64 KiB tmpfs mounted on it, for the tests of a full disk (needs
+    /// root: the test fails, never skips, without it). Unmount with [`Scratch::unmount`].
+    pub fn tmpfs_64k(name: &str) -> Self {
+        let s = Scratch::new(name);
+        let mounted = std::process::Command::new("mount")
+            .args(["-t", "tmpfs", "-o", "size=64k", "tmpfs"])
+            .arg(&s.dir)
+            .status();
+        assert!(
+            mounted.is_ok_and(|st| st.success()),
+            "mounting a tmpfs is needed for this test (root)"
+        );
+        s
+    }
+
+    /// Unmounts what [`Scratch::tmpfs_64k`] mounted.
+    pub fn unmount(&self) {
+        let _ = std::process::Command::new("umount").arg(&self.dir).status();
+    }
+
     /// A file name inside the folder.
     pub fn path(&self, file: &str) -> PathBuf {
         self.dir.join(file)

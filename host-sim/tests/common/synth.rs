@@ -3,7 +3,7 @@
 //!
 //! Written without the station simulator and without the detector's assumptions:
 //! - flicker noise is **1/f by spectral synthesis** (Gaussian Fourier coefficients of a one-sided
-//!   PSD h/f on a grid twice the record, one FFT; written here, not `sim/noise.rs`'s sum of
+//!   PSD h/f on a grid twice the record, one inverse real FFT; written here, not `sim/noise.rs`'s sum of
 //!   AR(1) terms, which is also the detector's noise family);
 //! - white noise and a random walk from a Box–Muller Gaussian of our own;
 //! - the channels a real station logs, each with its own reading noise: an RTD reading the
@@ -28,42 +28,6 @@ pub fn gauss(rng: &mut ChaCha8Rng) -> f64 {
     (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
 }
 
-/// In-place radix-2 complex FFT (forward, e^{−2πi kn/N}); `re.len()` a power of two.
-pub fn fft(re: &mut [f64], im: &mut [f64]) {
-    let n = re.len();
-    assert!(n.is_power_of_two() && im.len() == n);
-    let mut j = 0usize;
-    for i in 1..n {
-        let mut bit = n >> 1;
-        while j & bit != 0 {
-            j ^= bit;
-            bit >>= 1;
-        }
-        j |= bit;
-        if i < j {
-            re.swap(i, j);
-            im.swap(i, j);
-        }
-    }
-    let mut len = 2;
-    while len <= n {
-        let ang = -std::f64::consts::TAU / len as f64;
-        for start in (0..n).step_by(len) {
-            for k in 0..len / 2 {
-                let (s, c) = (ang * k as f64).sin_cos();
-                let (a, b) = (start + k, start + k + len / 2);
-                let tr = re[b] * c - im[b] * s;
-                let ti = re[b] * s + im[b] * c;
-                re[b] = re[a] - tr;
-                im[b] = im[a] - ti;
-                re[a] += tr;
-                im[a] += ti;
-            }
-        }
-        len <<= 1;
-    }
-}
-
 /// Gaussian noise with one-sided PSD `psd(f)` (unit²/Hz), `n` samples every `dt_s`, by spectral
 /// synthesis on a grid of N ≥ 2n (so the record is not periodic): x_j = Σ_k √(S(f_k)Δf)·
 /// (a_k cos 2πf_k t_j + b_k sin 2πf_k t_j), a, b standard normal, f_k = k/(N·dt), k = 1…N/2.
@@ -75,20 +39,22 @@ pub fn spectral_noise(
 ) -> Vec<f64> {
     let big = (2 * n).next_power_of_two();
     let df = 1.0 / (big as f64 * dt_s);
-    let mut re = vec![0.0; big];
-    let mut im = vec![0.0; big];
-    for k in 1..=big / 2 {
+    // x_j = Re Σ_k c_k e^{+2πi kj/N} with c_k = amp (a_k − i b_k): the inverse real FFT of the
+    // half spectrum c_k / 2 (the Hermitian extension supplies the conjugate half), except the
+    // Nyquist bin, which enters once and only by its real part.
+    let mut half = vec![(0.0, 0.0); big / 2 + 1];
+    for (k, bin) in half.iter_mut().enumerate().skip(1) {
         let amp = (psd(k as f64 * df) * df).sqrt();
-        re[k] = amp * gauss(rng);
-        im[k] = -amp * gauss(rng);
+        let (a, b) = (amp * gauss(rng), amp * gauss(rng));
+        *bin = if k == big / 2 {
+            (a, 0.0)
+        } else {
+            (a / 2.0, -b / 2.0)
+        };
     }
-    // Real part of Σ c_k e^{+2πi kj/N} = forward FFT of the conjugate, conjugated.
-    for v in im.iter_mut() {
-        *v = -*v;
-    }
-    fft(&mut re, &mut im);
-    re.truncate(n);
-    re
+    let mut x = accomp_numerics::fft::real_from_half_spectrum(&half);
+    x.truncate(n);
+    x
 }
 
 /// 1/f (flicker) noise of Allan-deviation floor `floor`: S(f) = h/f with h = floor²/(2 ln 2).
@@ -454,6 +420,38 @@ pub fn binomial_upper(k: usize, n: usize, alpha: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn spectral_noise_is_the_sum_of_cosines_it_is_documented_as() {
+        let (n, dt_s) = (50, 2.0);
+        let psd = |f: f64| 1e-6 / f;
+        let x = spectral_noise(n, dt_s, psd, &mut rng(9));
+        // The same draws, summed directly: x_j = Σ_k √(S(f_k)Δf)(a_k cos + b_k sin)(2πf_k t_j).
+        let big = (2 * n).next_power_of_two();
+        let df = 1.0 / (big as f64 * dt_s);
+        let mut r = rng(9);
+        let terms: Vec<(f64, f64, f64)> = (1..=big / 2)
+            .map(|k| {
+                let f = k as f64 * df;
+                let amp = (psd(f) * df).sqrt();
+                (f, amp * gauss(&mut r), amp * gauss(&mut r))
+            })
+            .collect();
+        for (j, &xj) in x.iter().enumerate() {
+            let t = j as f64 * dt_s;
+            let direct: f64 = terms
+                .iter()
+                .map(|&(f, a, b)| {
+                    let th = std::f64::consts::TAU * f * t;
+                    a * th.cos() + b * th.sin()
+                })
+                .sum();
+            assert!(
+                (xj - direct).abs() <= 1e-12 * (1.0 + direct.abs()),
+                "j={j}: {xj} vs {direct}"
+            );
+        }
+    }
 
     #[test]
     fn spectral_flicker_has_a_flat_allan_deviation_at_its_floor() {

@@ -387,35 +387,20 @@ fn sci(v: f64) -> String {
 }
 
 fn temperature_figure(log: &Log, resets: &[usize]) -> Result<Figure, PlotError> {
-    const FIG: &str = "Fig. 2 (temperature)";
-    let axis = time_axis(log, resets);
-    let t = need(log, FIG, TEMPERATURE)?;
-    let mut traces = Vec::new();
     let label = |name: &str, y: &[f64]| match mean_std(y) {
         Some((m, s, _)) => format!("{name}: mean {m:.4} °C, σ {s:.4} °C"),
         None => name.to_owned(),
     };
-    traces.push(trace(&axis, t, label(TEMPERATURE, t), RED));
-    let truth = format!("{TRUTH_PREFIX}{TEMPERATURE}");
-    if let Some(tt) = log.column(&truth) {
-        traces.push(trace(&axis, tt, label(&truth, tt), GREY));
-    }
-    Ok(axis.figure(TimeFigure {
-        title: titled(log, "Instrument temperature"),
-        x_desc: axis.desc.clone(),
-        x_range: axis.range,
-        panels: vec![Panel {
-            y_desc: "temperature (°C)".into(),
-            traces,
-        }],
-        shared_y: false,
-    }))
+    channel_figure(
+        log,
+        resets,
+        ("Fig. 2 (temperature)", "Instrument temperature"),
+        (TEMPERATURE, "temperature (°C)"),
+        label,
+    )
 }
 
 fn tilt_figure(log: &Log, resets: &[usize]) -> Result<Figure, PlotError> {
-    const FIG: &str = "Fig. 4 (tilt)";
-    let axis = time_axis(log, resets);
-    let tilt = need(log, FIG, TILT)?;
     let t = log.time_s();
     let label = |name: &str, y: &[f64]| {
         let ms = mean_std(y);
@@ -427,17 +412,38 @@ fn tilt_figure(log: &Log, resets: &[usize]) -> Result<Figure, PlotError> {
             _ => name.to_owned(),
         }
     };
-    let mut traces = vec![trace(&axis, tilt, label(TILT, tilt), RED)];
-    let truth = format!("{TRUTH_PREFIX}{TILT}");
+    channel_figure(
+        log,
+        resets,
+        ("Fig. 4 (tilt)", "Foundation tilt"),
+        (TILT, "tilt (arcsec)"),
+        label,
+    )
+}
+
+/// One channel against time, with its `truth_` twin in grey when the log has one, each trace
+/// labelled by `label(name, values)`. `fig` is (the figure named in errors, its title); `column`
+/// is (the column, the y axis's description); `resets` the first rows of a record's segments.
+fn channel_figure(
+    log: &Log,
+    resets: &[usize],
+    (fig, title): (&'static str, &str),
+    (column, y_desc): (&str, &str),
+    label: impl Fn(&str, &[f64]) -> String,
+) -> Result<Figure, PlotError> {
+    let axis = time_axis(log, resets);
+    let y = need(log, fig, column)?;
+    let mut traces = vec![trace(&axis, y, label(column, y), RED)];
+    let truth = format!("{TRUTH_PREFIX}{column}");
     if let Some(tt) = log.column(&truth) {
         traces.push(trace(&axis, tt, label(&truth, tt), GREY));
     }
     Ok(axis.figure(TimeFigure {
-        title: titled(log, "Foundation tilt"),
+        title: titled(log, title),
         x_desc: axis.desc.clone(),
         x_range: axis.range,
         panels: vec![Panel {
-            y_desc: "tilt (arcsec)".into(),
+            y_desc: y_desc.into(),
             traces,
         }],
         shared_y: false,

@@ -98,6 +98,20 @@ pub struct Grid {
     pub len: usize,
 }
 
+/// The median time step of `t` (at least 3 stamps, strictly increasing): the grid's τ0,
+/// refused when the grid it spans would hold more than four points a sample.
+fn median_step(t: &[f64]) -> Result<f64, GridError> {
+    let n = t.len();
+    let mut d: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
+    let mid = d.len() / 2;
+    let (_, &mut tau0, _) = d.select_nth_unstable_by(mid, f64::total_cmp);
+    let grid = ((t[n - 1] - t[0]) / tau0).round() as usize + 1;
+    if grid > 4 * n {
+        return Err(GridError::TooSparse { grid, samples: n });
+    }
+    Ok(tau0)
+}
+
 impl Grid {
     /// Works out the grid from `time_s` (strictly increasing, as the log reader guarantees).
     pub fn from_time(t: &[f64]) -> Result<Self, GridError> {
@@ -119,13 +133,7 @@ impl Grid {
                 len: n,
             });
         }
-        let mut d: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
-        let mid = d.len() / 2;
-        let (_, &mut tau0, _) = d.select_nth_unstable_by(mid, f64::total_cmp);
-        let grid = ((last - first) / tau0).round() as usize + 1;
-        if grid > 4 * n {
-            return Err(GridError::TooSparse { grid, samples: n });
-        }
+        let tau0 = median_step(t)?;
         let mut index = Vec::with_capacity(n);
         let mut prev: Option<usize> = None;
         for (i, &ti) in t.iter().enumerate() {
@@ -162,14 +170,8 @@ impl Grid {
         if n < 3 {
             return Err(GridError::TooShort);
         }
-        let (first, last) = (t[0], t[n - 1]);
-        let mut d: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
-        let mid = d.len() / 2;
-        let (_, &mut tau0, _) = d.select_nth_unstable_by(mid, f64::total_cmp);
-        let grid = ((last - first) / tau0).round() as usize + 1;
-        if grid > 4 * n {
-            return Err(GridError::TooSparse { grid, samples: n });
-        }
+        let first = t[0];
+        let tau0 = median_step(t)?;
         let mut index = Vec::with_capacity(n);
         let mut starts = Vec::new();
         let mut prev: Option<usize> = None;

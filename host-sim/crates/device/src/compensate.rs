@@ -10,7 +10,7 @@ use accomp::table::CalibrationTable;
 use accomp::units::{Celsius, TiltArcsec, Volts};
 
 use super::samples_csv::SampleRow;
-use super::{client::DEFAULT_WINDOW, Connection, Target};
+use super::{client::DEFAULT_WINDOW, Connection, DeviceError, Target};
 
 /// One channel's code for a physical value: a value the ADC could not represent becomes the
 /// rail code (what the chip would deliver, flagged saturated by the pipeline); a missing value
@@ -64,7 +64,7 @@ pub fn compensate(
     table_bytes: &[u8],
     rows: &[SampleRow],
     mut progress: impl FnMut(&str, usize, usize),
-) -> anyhow::Result<Vec<(f64, Frame)>> {
+) -> Result<Vec<(f64, Frame)>, DeviceError> {
     let mut out = Vec::with_capacity(rows.len());
     let total = rows.len();
     let progress = std::cell::RefCell::new(&mut progress);
@@ -91,10 +91,9 @@ pub fn compensate_streaming(
     table_bytes: &[u8],
     rows: &[SampleRow],
     mut progress: impl FnMut(&str, usize, usize),
-    mut on_row: impl FnMut(f64, &Frame) -> anyhow::Result<()>,
-) -> anyhow::Result<()> {
-    let table = CalibrationTable::decode(table_bytes)
-        .map_err(|e| anyhow::anyhow!("calibration refused locally: {e:?}"))?;
+    mut on_row: impl FnMut(f64, &Frame) -> Result<(), DeviceError>,
+) -> Result<(), DeviceError> {
+    let table = CalibrationTable::decode(table_bytes).map_err(DeviceError::TableRefused)?;
     let raws: Vec<RawSample> = rows.iter().map(|r| raw_for_row(&table, r)).collect();
     match target {
         Target::Host => {
@@ -149,21 +148,33 @@ pub fn run_to_file(
     calibration: &Path,
     input: &Path,
     output: &Path,
-) -> anyhow::Result<()> {
-    use anyhow::Context as _;
+) -> Result<(), DeviceError> {
     use std::io::Write as _;
+    let write_error = |source| DeviceError::Write {
+        path: output.to_path_buf(),
+        source,
+    };
     accomp_log::outputs::check_file(output)?;
     let table = accomp_log::calibration_file::read_table_bytes(calibration)?;
     let (_, max_bytes) = accomp_log::reader::limits();
-    let text = accomp_log::reader::read_text_limited(input, max_bytes)
-        .with_context(|| format!("reading {}", input.display()))?;
-    let file =
-        super::samples_csv::parse(&text).with_context(|| format!("reading {}", input.display()))?;
-    let out =
-        std::fs::File::create(output).with_context(|| format!("creating {}", output.display()))?;
+    let text = accomp_log::reader::read_text_limited(input, max_bytes).map_err(|source| {
+        DeviceError::Read {
+            path: input.to_path_buf(),
+            source,
+        }
+    })?;
+    let file = super::samples_csv::parse(&text).map_err(|error| DeviceError::Samples {
+        path: input.to_path_buf(),
+        error,
+    })?;
+    let out = std::fs::File::create(output).map_err(|source| DeviceError::Create {
+        path: output.to_path_buf(),
+        source,
+    })?;
     let mut out = std::io::BufWriter::new(out);
-    out.write_all(super::samples_csv::output_header(&file.metadata).as_bytes())?;
-    out.flush()?;
+    out.write_all(super::samples_csv::output_header(&file.metadata).as_bytes())
+        .and_then(|()| out.flush())
+        .map_err(write_error)?;
     let total = file.rows.len() as u64;
     let bar = indicatif::ProgressBar::new(total);
     bar.set_style(
@@ -195,7 +206,7 @@ pub fn run_to_file(
         },
         |t, f| {
             out.write_all(super::samples_csv::output_row(t, f).as_bytes())
-                .with_context(|| format!("writing {}", output.display()))?;
+                .map_err(write_error)?;
             written += 1;
             if written == 1 {
                 bar.set_message("samples");
@@ -203,8 +214,7 @@ pub fn run_to_file(
             bar.set_position(written);
             lines.set(written as usize);
             if last_flush.elapsed() >= std::time::Duration::from_millis(200) {
-                out.flush()
-                    .with_context(|| format!("writing {}", output.display()))?;
+                out.flush().map_err(write_error)?;
                 last_flush = std::time::Instant::now();
             }
             Ok(())

@@ -4,12 +4,14 @@
 pub mod board_sim;
 pub mod client;
 pub mod compensate;
+mod error;
 pub mod qemu;
 pub mod record;
 pub mod samples_csv;
 pub mod transport;
 
 pub use client::{Client, ClientError};
+pub use error::DeviceError;
 pub use qemu::{Qemu, QemuError};
 pub use transport::Transport;
 
@@ -69,6 +71,9 @@ impl std::str::FromStr for Target {
     }
 }
 
+/// The (active, previous) calibration table ids of a flash image.
+pub type TableIds = (Option<u32>, Option<u32>);
+
 /// A connection to a device, keeping QEMU alive as long as the client is used.
 pub struct Connection {
     /// The protocol client.
@@ -85,7 +90,7 @@ impl Connection {
     /// waits for the device to answer. The QEMU board's state is taken as
     /// [`qemu::StateOptions::for_process`] says (by default: waits for another command using
     /// it, refuses a damaged image).
-    pub fn open(target: &Target, firmware: Option<&Path>) -> anyhow::Result<Connection> {
+    pub fn open(target: &Target, firmware: Option<&Path>) -> Result<Connection, DeviceError> {
         Self::open_with(target, firmware, qemu::StateOptions::for_process())
     }
 
@@ -94,9 +99,9 @@ impl Connection {
         target: &Target,
         firmware: Option<&Path>,
         state: qemu::StateOptions,
-    ) -> anyhow::Result<Connection> {
+    ) -> Result<Connection, DeviceError> {
         match target {
-            Target::Host => anyhow::bail!("the host target has no device to connect to"),
+            Target::Host => Err(DeviceError::HostTarget),
             Target::Qemu => {
                 let elf = firmware_path(firmware);
                 if !elf.is_file() {
@@ -117,7 +122,8 @@ impl Connection {
                 })
             }
             Target::Serial(port) => {
-                let t = transport::SerialTransport::open(port, 115_200)?;
+                let t =
+                    transport::SerialTransport::open(port, 115_200).map_err(DeviceError::Serial)?;
                 let mut client = Client::new(Box::new(t));
                 // A board that is already running sent READY long ago: ask instead.
                 client.ping()?;
@@ -134,11 +140,11 @@ impl Connection {
     /// left (synced, renamed, read back), then releases the board. Returns the (active,
     /// previous) table ids of the image now on disk, None for a real board (its flash is its
     /// own).
-    pub fn close(mut self) -> anyhow::Result<Option<(Option<u32>, Option<u32>)>> {
+    pub fn close(mut self) -> Result<Option<TableIds>, DeviceError> {
         self.persist()
     }
 
-    fn persist(&mut self) -> anyhow::Result<Option<(Option<u32>, Option<u32>)>> {
+    fn persist(&mut self) -> Result<Option<TableIds>, DeviceError> {
         let Some(board) = self.board.take() else {
             if let Some(q) = self.qemu.take() {
                 q.shutdown();
@@ -146,24 +152,18 @@ impl Connection {
             return Ok(None);
         };
         let Some(q) = self.qemu.take() else {
-            anyhow::bail!(
-                "the board's QEMU was stopped before its image was saved: {} left as it was",
-                board.image_path().display()
-            );
+            return Err(DeviceError::QemuStopped {
+                image: board.image_path(),
+            });
         };
         let (_, image) = q.power_off();
-        let image = image.map_err(|e| {
-            anyhow::anyhow!(
-                "the board left no readable flash image ({e}): {} left as it was",
-                board.image_path().display()
-            )
+        let image = image.map_err(|cause| DeviceError::NoImage {
+            image: board.image_path(),
+            cause,
         })?;
         let back = board.persist(&image)?;
-        let tables = qemu::image_tables(&back).ok_or_else(|| {
-            anyhow::anyhow!(
-                "{}: the persisted image does not scan as a flash image",
-                board.image_path().display()
-            )
+        let tables = qemu::image_tables(&back).ok_or_else(|| DeviceError::NotAnImage {
+            image: board.image_path(),
         })?;
         Ok(Some(tables))
     }

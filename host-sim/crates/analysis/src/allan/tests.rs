@@ -1,21 +1,8 @@
 use super::*;
 use crate::log::Log;
 
-/// The fixture's generator (see tests/data/make_allantools_xcheck.py).
-struct Lcg(u64);
-impl Lcg {
-    fn uniform(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6_364_136_223_846_793_005)
-            .wrapping_add(1_442_695_040_888_963_407);
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
-    /// Sum of 12 uniforms minus 6: mean 0, variance exactly 1.
-    fn normal(&mut self) -> f64 {
-        (0..12).map(|_| self.uniform()).sum::<f64>() - 6.0
-    }
-}
+// The fixture's generator (see tests/data/make_allantools_xcheck.py).
+use crate::numerics::lcg::Lcg;
 
 fn rel(a: f64, b: f64) -> f64 {
     ((a - b) / b).abs()

@@ -7,8 +7,9 @@ use super::baseline::gls;
 use super::current_model::Current;
 use super::effects::{self, Effect, Param};
 use super::fitters::Scored;
-use super::import::Dataset;
+use super::import::{ChannelKind, Dataset};
 use super::noise::NoiseModel;
+use super::residual;
 use super::select::{Config, RESCORE};
 use super::validation::{cross_validate, forward_validate, CvScore};
 
@@ -90,6 +91,14 @@ pub(super) fn implausible(
                 )
             })
         }
+        Effect::Periodic => driver_harmonic(ds, s.theta).map(|(channel, k, p0)| {
+            format!(
+                "its period {:.0} s is harmonic {k} of the {channel} programme's period \
+                 {p0:.0} s: a line of that driver's coupling (its transfer function), not a \
+                 free periodic term",
+                s.theta
+            )
+        }),
         ref e if super::plausibility::is_flexible(e) => {
             let k = s.cols.len();
             let contribution: Vec<f64> = (0..target.len())
@@ -246,7 +255,7 @@ pub(super) fn simpler_wins(
     scored: &[Scored],
     after: CvScore,
 ) -> Option<String> {
-    super::plausibility::simpler_than(&s.effect)
+    super::plausibility::simpler_than(&s.effect, cur.ds)
         .into_iter()
         .filter_map(|e| scored.iter().find(|c| c.effect == e))
         .find_map(|alt| {
@@ -262,6 +271,42 @@ pub(super) fn simpler_wins(
                     after.prediction_z
                 )
             })
+        })
+}
+
+/// Least share of a channel's variance in its strongest line for the channel to be a periodic
+/// programme (a triangle or square programme holds 80–100 % there; weather and wander far less).
+pub const PROGRAMME_VARIANCE_SHARE: f64 = 0.25;
+/// Harmonics of a driver's period a line is attributed to.
+pub const DRIVER_HARMONICS: usize = 12;
+
+/// The driver (temperature, pressure or auxiliary channel) whose periodic programme has a line
+/// at `period_s` or one of its first [`DRIVER_HARMONICS`] harmonics, within 1.5 resolution
+/// elements (1/span): the channel, the harmonic number and the programme's period.
+pub(super) fn driver_harmonic(ds: &Dataset, period_s: f64) -> Option<(String, usize, f64)> {
+    let res_f = 1.0 / ds.span_s().max(ds.dt_s);
+    let f = 1.0 / period_s;
+    ds.channels
+        .iter()
+        .filter(|c| {
+            matches!(
+                c.kind,
+                ChannelKind::Temperature | ChannelKind::Pressure | ChannelKind::Other
+            )
+        })
+        .find_map(|c| {
+            let var = super::baseline::std(&c.values).powi(2);
+            if var <= 0.0 {
+                return None;
+            }
+            let spec = residual::periodogram(&ds.t_s, &c.values, 4096);
+            let top = spec.lines.iter().find(|l| l.fap < 1e-3)?;
+            if 0.5 * top.amplitude * top.amplitude < PROGRAMME_VARIANCE_SHARE * var {
+                return None;
+            }
+            (1..=DRIVER_HARMONICS)
+                .find(|&k| (k as f64 * top.frequency_hz - f).abs() < 1.5 * res_f)
+                .map(|k| (c.name.clone(), k, top.period_s))
         })
 }
 

@@ -261,6 +261,13 @@ pub(super) fn score_all(
         if !e.repeatable() && done.contains(e) {
             continue;
         }
+        // One transfer function per channel: its order (gain, lag, rate, second-order lag) is
+        // the candidate the criterion chose first.
+        if let Some(ch) = e.coupled_channel(cur.ds) {
+            if done.iter().any(|d| d.coupled_channel(cur.ds) == Some(ch)) {
+                continue;
+            }
+        }
         let mut preisach = None;
         // A step's transition duration is fitted here (the candidate carries 0).
         let mut effect = e.clone();

@@ -263,6 +263,7 @@ impl Twin {
         let mut twin = Twin {
             noise: scaled(&inst_noise, out_scale),
             noise_model: noise.cloned(),
+            family: None,
             out_scale,
             unit_per_g: rec_per_g,
             dt_s: ds.dt_s,

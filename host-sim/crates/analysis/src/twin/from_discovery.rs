@@ -15,20 +15,81 @@ pub fn scenario_effects_from_discovery(
 ) -> (Vec<ScenarioEffect>, Vec<(String, String)>) {
     let mut out = Vec::new();
     let mut refused = Vec::new();
-    let t0 = d.dataset.t_s.first().copied().unwrap_or(0.0);
     for a in &d.selection.accepted {
         let name = a.effect.name();
+        let e = scenario_effect(a.effect.kind(), a.effect.channel(), &a.params, d, None);
+        match e.and_then(|e| {
+            let i = out.len();
+            e.validate(i).map(|()| e).map_err(|x| x.to_string())
+        }) {
+            Ok(e) => out.push(e),
+            Err(why) => refused.push((name.to_owned(), why)),
+        }
+    }
+    (out, refused)
+}
+
+/// One ensemble member's version of [`scenario_effects_from_discovery`]: every parameter drawn
+/// from its fitted value and σ (Gaussian; a draw the scenario refuses, such as a negative time
+/// constant, falls back to the fitted value), and for an effect the discovery called ambiguous
+/// ("A or B"), odd members take the other cause with its own fitted parameters, so the
+/// ensemble draws from both. Effects the scenario cannot express are left out, as there.
+pub fn scenario_effects_drawn(
+    d: &crate::discover::Discovery,
+    rng: &mut crate::sim::noise::SimRng,
+    member: u64,
+) -> Vec<ScenarioEffect> {
+    let mut out = Vec::new();
+    for a in &d.selection.accepted {
+        let other = a.ambiguous_with.as_ref().and_then(|amb| {
+            EffectKind::from_name(&amb.other).map(|k| (k, amb.other_parameters.as_slice()))
+        });
+        let (kind, params) = match other {
+            Some(o) if member % 2 == 1 => o,
+            _ => (a.effect.kind(), a.params.as_slice()),
+        };
+        let drawn = scenario_effect(kind, a.effect.channel(), params, d, Some(rng));
+        let i = out.len();
+        let ok = |e: Result<ScenarioEffect, String>| e.ok().filter(|e| e.validate(i).is_ok());
+        if let Some(e) =
+            ok(drawn).or_else(|| ok(scenario_effect(kind, a.effect.channel(), params, d, None)))
+        {
+            out.push(e);
+        }
+    }
+    out
+}
+
+/// One effect as a scenario entry from its kind, channel and fitted parameters; with `draw`,
+/// each parameter is drawn as value + σ·N(0, 1).
+fn scenario_effect(
+    kind: EffectKind,
+    channel: Option<&str>,
+    params: &[(String, crate::discover::effects::Param)],
+    d: &crate::discover::Discovery,
+    draw: Option<&mut crate::sim::noise::SimRng>,
+) -> Result<ScenarioEffect, String> {
+    let t0 = d.dataset.t_s.first().copied().unwrap_or(0.0);
+    let draw = std::cell::RefCell::new(draw);
+    let drawn = |v: &crate::discover::effects::Param| -> f64 {
+        match draw.borrow_mut().as_mut() {
+            Some(rng) if v.sigma.is_finite() && v.sigma > 0.0 => v.value + v.sigma * gauss(rng),
+            _ => v.value,
+        }
+    };
+    {
+        let a = Accepted { params, channel };
         let p = |key: &str| -> Option<f64> {
             a.params
                 .iter()
                 .find(|(k, _)| k == key)
-                .map(|(_, v)| v.value)
+                .map(|(_, v)| drawn(v))
                 .filter(|v| v.is_finite())
         };
         let need =
             |key: &str| p(key).ok_or_else(|| format!("parameter {key} missing or not finite"));
         let e: Result<ScenarioEffect, String> = (|| {
-            Ok(match a.effect.kind() {
+            Ok(match kind {
                 EffectKind::ThermalLag => ScenarioEffect::ThermalLag {
                     tau_s: need("tau_s")?,
                     coefficient: need("coefficient")?,
@@ -70,8 +131,8 @@ pub fn scenario_effects_from_discovery(
                             })
                             .map(|g| crate::sim::effects::TideGroupTerm {
                                 name: g.name.clone(),
-                                factor: g.amplitude_factor_vs_elastic_model.value,
-                                phase_deg: g.phase_vs_elastic_model_deg.value,
+                                factor: drawn(&g.amplitude_factor_vs_elastic_model),
+                                phase_deg: drawn(&g.phase_vs_elastic_model_deg),
                             })
                             .collect(),
                     },
@@ -93,7 +154,7 @@ pub fn scenario_effects_from_discovery(
                     gain: need("gain")?,
                 },
                 EffectKind::AmbientCoupling => {
-                    let channel = a.effect.channel().unwrap_or_default().to_owned();
+                    let channel = a.channel.unwrap_or_default().to_owned();
                     let in_record = d.dataset.channels.iter().any(|c| c.name == channel);
                     if !in_record && !SIMULATED_AMBIENT.contains(&channel.as_str()) {
                         return Err(format!(
@@ -114,8 +175,42 @@ pub fn scenario_effects_from_discovery(
                     amplitude: need("amplitude")?,
                     phase_rad: need("phase_rad")?,
                 },
+                EffectKind::RateCoupling | EffectKind::Lag2Coupling => {
+                    let channel = a.channel.unwrap_or_default().to_owned();
+                    let drives = channel == "temperature_c"
+                        || channel.starts_with("pressure")
+                        || d.dataset.channels.iter().any(|c| c.name == channel)
+                        || SIMULATED_AMBIENT.contains(&channel.as_str());
+                    if !drives {
+                        return Err(format!("channel {channel:?} is not a driver of the twin"));
+                    }
+                    if kind == EffectKind::RateCoupling {
+                        ScenarioEffect::RateCoupling {
+                            channel,
+                            coefficient: need("coefficient")?,
+                        }
+                    } else {
+                        ScenarioEffect::Lag2Coupling {
+                            channel,
+                            tau_s: need("tau_s")?,
+                            coefficient: need("coefficient")?,
+                        }
+                    }
+                }
+                // The discovery's creep starts at the record's first instant, the scenario's at
+                // t = 0: the same curve only when they coincide.
+                EffectKind::CreepDrift if t0.abs() > d.dataset.dt_s => {
+                    return Err(format!(
+                        "the record starts at t = {t0:.0} s and a power law cannot be moved to \
+                         t = 0 exactly"
+                    ))
+                }
+                EffectKind::CreepDrift => ScenarioEffect::CreepDrift {
+                    exponent: need("exponent")?,
+                    amplitude: need("amplitude")?,
+                },
                 EffectKind::ChannelNoise => {
-                    let channel = a.effect.channel().unwrap_or_default().to_owned();
+                    let channel = a.channel.unwrap_or_default().to_owned();
                     ScenarioEffect::ChannelNoise {
                         channel,
                         noise: p("noise")
@@ -125,15 +220,14 @@ pub fn scenario_effects_from_discovery(
                 }
             })
         })();
-        match e.and_then(|e| {
-            let i = out.len();
-            e.validate(i).map(|()| e).map_err(|x| x.to_string())
-        }) {
-            Ok(e) => out.push(e),
-            Err(why) => refused.push((name.to_owned(), why)),
-        }
+        e
     }
-    (out, refused)
+}
+
+/// What [`scenario_effect`] reads of an accepted effect.
+struct Accepted<'a> {
+    params: &'a [(String, crate::discover::effects::Param)],
+    channel: Option<&'a str>,
 }
 
 #[cfg(test)]

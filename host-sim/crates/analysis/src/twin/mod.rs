@@ -13,13 +13,14 @@
 
 mod build;
 mod error;
+pub mod family;
 mod from_discovery;
 mod noise;
 #[cfg(test)]
 mod tests;
 
 pub use error::TwinError;
-pub use from_discovery::scenario_effects_from_discovery;
+pub use from_discovery::{scenario_effects_drawn, scenario_effects_from_discovery};
 
 use build::*;
 use noise::*;
@@ -107,6 +108,19 @@ pub struct Twin {
     /// The record's fitted noise model, when given: the members draw from it exactly (its
     /// flicker slope included, which the scenario's three Allan levels cannot hold).
     noise_model: Option<NoiseModel>,
+    /// The noise family fitted to the record, when given ([`Twin::with_family`]): members draw
+    /// from it instead (each its own parameters, then the noise on the record's grid).
+    family: Option<GridNoise>,
+}
+
+/// The noise family with where the record's points fall on its grid.
+#[derive(Debug, Clone)]
+struct GridNoise {
+    family: family::NoiseFamily,
+    /// Grid cell of each record point.
+    cells: Vec<usize>,
+    /// Cells in the grid.
+    len: usize,
 }
 
 /// The scenario with every random process silenced: the deterministic part.
@@ -159,11 +173,38 @@ impl Twin {
             _ => self.det.clone(),
         };
         match (seed, &self.noise_model) {
+            (Some(seed), _) if self.family.is_some() => {
+                if let Some(g) = &self.family {
+                    let mut rng = stream(seed, TWIN_NOISE_STREAM);
+                    let f = g.family.drawn(&mut rng);
+                    let x = f.synthesise(g.len, &mut rng);
+                    for (y, &c) in out.iter_mut().zip(&g.cells) {
+                        *y += x.get(c).copied().unwrap_or(f64::NAN);
+                    }
+                }
+            }
             (Some(seed), Some(m)) => add_model_noise(&mut out, &self.t_s, m, seed),
             (Some(seed), None) => add_noise(&mut out, &self.t_s, self.dt_s, &self.noise, seed),
             (None, _) => {}
         }
         Ok(out)
+    }
+
+    /// The same twin whose members draw their noise from `family`, laid on a regular grid of
+    /// `len` cells where record point i falls in cell `cells[i]`.
+    pub fn with_family(&self, family: &family::NoiseFamily, cells: &[usize], len: usize) -> Twin {
+        let mut t = self.clone();
+        t.family = Some(GridNoise {
+            family: family.clone(),
+            cells: cells.to_vec(),
+            len,
+        });
+        t
+    }
+
+    /// The noise family the members draw from, if any.
+    pub fn family(&self) -> Option<&family::NoiseFamily> {
+        self.family.as_ref().map(|g| &g.family)
     }
 
     /// The same twin with the scenario's effects extended (appended) by `effects`.

@@ -315,19 +315,7 @@ impl RecordFile {
             return Err(RecordFileError::Exists(path));
         }
         let f = File::create(&path).map_err(io_err(&path))?;
-        let mut r = RecordFile {
-            layout,
-            meta,
-            start_unix_s,
-            path,
-            day,
-            w: BufWriter::with_capacity(1 << 16, f),
-            line: Vec::with_capacity(256),
-            last_sync: Instant::now(),
-            bytes: 0,
-            compress: false,
-            compressing: None,
-        };
+        let mut r = RecordFile::writing(layout, meta, start_unix_s, path, day, f);
         r.write_header()?;
         Ok(r)
     }
@@ -347,7 +335,26 @@ impl RecordFile {
             .file_stem()
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or_default();
-        Ok(RecordFile {
+        Ok(RecordFile::writing(
+            layout,
+            meta,
+            start_unix_s,
+            path,
+            day,
+            f,
+        ))
+    }
+
+    /// A record writing to `f` (the file of `day` at `path`), nothing written yet.
+    fn writing(
+        layout: Layout,
+        meta: Vec<(String, String)>,
+        start_unix_s: f64,
+        path: PathBuf,
+        day: String,
+        f: File,
+    ) -> Self {
+        RecordFile {
             layout,
             meta,
             start_unix_s,
@@ -359,7 +366,7 @@ impl RecordFile {
             bytes: 0,
             compress: false,
             compressing: None,
-        })
+        }
     }
 
     /// Compress finished days from now on (daily layout; see the module docs).
@@ -595,6 +602,26 @@ mod tests {
         );
     }
 
+    /// A daily record started at `start_utc` in a fresh folder `accomp-rec-<name>-<pid>`.
+    fn daily_record(name: &str, start_utc: &str) -> (PathBuf, f64, RecordFile) {
+        let dir = std::env::temp_dir().join(format!("accomp-rec-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let start = Utc::parse(start_utc).unwrap().0;
+        let meta = vec![("start_utc".to_string(), Utc(start).to_string())];
+        let f = RecordFile::create(Layout::Daily(dir.clone()), meta, start, false).unwrap();
+        (dir, start, f)
+    }
+
+    /// The file names in `dir`, sorted.
+    fn names_in(dir: &Path) -> Vec<String> {
+        let mut names: Vec<String> = std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        names.sort();
+        names
+    }
+
     fn frame(seq: u32) -> Frame {
         Frame {
             seq,
@@ -612,12 +639,8 @@ mod tests {
 
     #[test]
     fn daily_files_split_at_utc_midnight_and_read_back_as_one_record() {
-        let dir = std::env::temp_dir().join(format!("accomp-rec-daily-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
         // 23:59:58 UTC: rows at +0, +1, +2 (midnight), +3 s.
-        let start = Utc::parse("2026-03-01T23:59:58Z").unwrap().0;
-        let meta = vec![("start_utc".to_string(), Utc(start).to_string())];
-        let mut f = RecordFile::create(Layout::Daily(dir.clone()), meta, start, false).unwrap();
+        let (dir, start, mut f) = daily_record("daily", "2026-03-01T23:59:58Z");
         for k in 0..4u32 {
             f.row(f64::from(k), &frame(k)).unwrap();
             if k == 1 {
@@ -626,12 +649,7 @@ mod tests {
             }
         }
         f.sync().unwrap();
-        let mut names: Vec<String> = std::fs::read_dir(&dir)
-            .unwrap()
-            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-            .collect();
-        names.sort();
-        assert_eq!(names, ["2026-03-01.csv", "2026-03-02.csv"]);
+        assert_eq!(names_in(&dir), ["2026-03-01.csv", "2026-03-02.csv"]);
         let day2 = std::fs::read_to_string(dir.join("2026-03-02.csv")).unwrap();
         assert!(day2.starts_with("# start_utc: 2026-03-01T23:59:58Z\n"));
         let log = accomp_log::Log::read_path(&dir).unwrap();
@@ -644,11 +662,7 @@ mod tests {
 
     #[test]
     fn days_before_yesterday_are_compressed_and_still_read_as_one_record() {
-        let dir = std::env::temp_dir().join(format!("accomp-rec-gz-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        let start = Utc::parse("2026-03-01T23:59:59Z").unwrap().0;
-        let meta = vec![("start_utc".to_string(), Utc(start).to_string())];
-        let mut f = RecordFile::create(Layout::Daily(dir.clone()), meta, start, false).unwrap();
+        let (dir, _, mut f) = daily_record("gz", "2026-03-01T23:59:59Z");
         f.compress_finished_days(true);
         // Rows on 03-01, 03-02 and 03-03: entering 03-03 compresses 03-01 (older than yesterday).
         for (k, t) in [0.0, 1.0, 86_401.0].into_iter().enumerate() {
@@ -658,13 +672,8 @@ mod tests {
         assert_eq!(done.len(), 1, "{done:?}");
         assert_eq!(done[0].0, "compressed", "{done:?}");
         f.sync().unwrap();
-        let mut names: Vec<String> = std::fs::read_dir(&dir)
-            .unwrap()
-            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-            .collect();
-        names.sort();
         assert_eq!(
-            names,
+            names_in(&dir),
             ["2026-03-01.csv.gz", "2026-03-02.csv", "2026-03-03.csv"]
         );
         let log = accomp_log::Log::read_path(&dir).unwrap();

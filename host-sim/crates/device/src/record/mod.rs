@@ -22,7 +22,7 @@ use accomp::table::CalibrationTable;
 
 use crate::samples_csv::status_names;
 use crate::transport::SerialTransport;
-use crate::{Client, ClientError};
+use crate::{Client, ClientError, DeviceError};
 use accomp_log::time::Utc;
 use clock::{ClockEvent, ClockModel, Last};
 use file::{Layout, RecordFile, RecordFileError};
@@ -301,7 +301,7 @@ impl Recorder<'_> {
     }
 
     /// Opens the file at the first frame (its UTC is the record's start).
-    fn open_file(&mut self, dev: &Device, pc_s: f64) -> anyhow::Result<()> {
+    fn open_file(&mut self, dev: &Device, pc_s: f64) -> Result<(), DeviceError> {
         let layout = if self.opts.daily {
             Layout::Daily(self.opts.output.clone())
         } else {
@@ -310,8 +310,7 @@ impl Recorder<'_> {
         let file = match self.existing.take() {
             Some(e) => {
                 let path = if self.opts.daily {
-                    file::newest_daily(&self.opts.output)
-                        .ok_or_else(|| anyhow::anyhow!("no daily file to append to"))?
+                    file::newest_daily(&self.opts.output).ok_or(DeviceError::NoDailyFile)?
                 } else {
                     self.opts.output.clone()
                 };
@@ -337,7 +336,7 @@ impl Recorder<'_> {
         Ok(())
     }
 
-    fn frame(&mut self, dev: &Device, frame: &Frame, arrived_now: bool) -> anyhow::Result<()> {
+    fn frame(&mut self, dev: &Device, frame: &Frame, arrived_now: bool) -> Result<(), DeviceError> {
         let pc = (self.pc)();
         if self.file.is_none() {
             self.open_file(dev, pc)?;
@@ -488,7 +487,7 @@ impl Recorder<'_> {
 
 /// Prepares the output: refuses to overwrite without `force`, checks and trims a record to
 /// append to.
-fn prepare_output(opts: &Options) -> anyhow::Result<Option<file::Existing>> {
+fn prepare_output(opts: &Options) -> Result<Option<file::Existing>, DeviceError> {
     let target = if opts.daily {
         file::newest_daily(&opts.output)
     } else {
@@ -496,10 +495,9 @@ fn prepare_output(opts: &Options) -> anyhow::Result<Option<file::Existing>> {
     };
     match (target, opts.append) {
         (Some(p), true) => Ok(Some(file::open_existing(&p)?)),
-        (None, true) => anyhow::bail!(
-            "--append: {} holds no record to continue",
-            opts.output.display()
-        ),
+        (None, true) => Err(DeviceError::NothingToAppend {
+            output: opts.output.clone(),
+        }),
         (Some(p), false) if !opts.force => Err(RecordFileError::Exists(p).into()),
         _ => Ok(None),
     }
@@ -512,7 +510,7 @@ pub fn record(
     pc: &dyn Fn() -> f64,
     stop: &AtomicBool,
     progress: &mut dyn FnMut(&Progress),
-) -> anyhow::Result<Summary> {
+) -> Result<Summary, DeviceError> {
     let existing = prepare_output(opts)?;
     let last = existing.as_ref().and_then(|e| {
         e.last.map(|(t, _, b)| Last {
@@ -680,7 +678,10 @@ pub fn record(
                 Err(e) => {
                     if first_connect && down_since.is_none() {
                         // Nothing recorded yet: a wrong port is an error, not a wait.
-                        return Err(anyhow::anyhow!("{}: {e}", opts.port));
+                        return Err(DeviceError::Port {
+                            port: opts.port.clone(),
+                            cause: e,
+                        });
                     }
                     if let Some(f) = &mut r.file {
                         f.sync_if_due()?;

@@ -31,6 +31,7 @@ pub use error::SimulateError;
 use super::import::Dataset;
 use super::noise::NoiseModel;
 use super::{select, Discovery};
+use crate::twin::family::NoiseFamily;
 use ensemble::Yardstick;
 use mismatch::Comparison;
 
@@ -74,8 +75,13 @@ pub trait TwinModel: Sync + Sized {
     /// The accepted effects of a discovery as the twin's effects (name, effect), with the
     /// effects it cannot express (name, why).
     fn effects_from(&self, d: &Discovery) -> (Vec<(String, Self::Effect)>, Refused);
+    /// One member's draw of the accepted effects: parameters drawn from their uncertainty, the
+    /// other cause of an ambiguous pair in odd members (same order as `effects_from`'s).
+    fn effects_drawn(&self, d: &Discovery, member: u64) -> Vec<Self::Effect>;
     /// The twin extended by effects.
     fn extended(&self, effects: &[Self::Effect]) -> Self;
+    /// The twin whose members draw their noise from the fitted family on the record's grid.
+    fn with_family(&self, family: &NoiseFamily, grid: &spectra::RegularGrid) -> Self;
     /// What came from the record and what from defaults.
     fn provenance(&self) -> Vec<String>;
     /// The scenario as TOML (`accomp simulate` runs it), if the twin has one.
@@ -133,6 +139,8 @@ pub struct Simulation {
     pub warnings: Vec<String>,
     /// Whether the twin is the station simulator.
     pub simulator: bool,
+    /// The noise family the members draw from (None: the likelihood noise model, announced).
+    pub family: Option<NoiseFamily>,
     /// Wall time of each stage (name, s): for docs/benchmarks.md.
     pub timing_s: Vec<(&'static str, f64)>,
 }
@@ -256,21 +264,65 @@ where
     };
     spin.finish_and_clear();
     lap("extension and noise fit");
-    // 4. Ensembles and comparisons, before and after.
-    let twin = build(Some(&noise)).map_err(SimulateError::twin)?;
+    // The members' noise: the family (white, flicker, random walk, drift-rate walk, output
+    // filter) fitted by Whittle likelihood to what the extended twin leaves, the drift kept —
+    // the comparison keeps it, so the members must carry it.
+    let family = match NoiseFamily::fit(&yard.grid.place(&r_after), yard.grid.dt_s) {
+        Ok(f) => Some(f),
+        Err(e) => {
+            warnings.push(format!(
+                "the noise family could not be fitted ({e}): the members draw from the \
+                 likelihood noise model instead"
+            ));
+            None
+        }
+    };
+    lap("noise family");
+    // 4. Ensembles and comparisons, before and after. Members of the extended twin draw the
+    //    accepted effects' parameters (and the other cause of an ambiguous pair) as well as the
+    //    noise's.
+    let mut twin = build(Some(&noise)).map_err(SimulateError::twin)?;
+    if let Some(f) = &family {
+        twin = twin.with_family(f, &yard.grid);
+    }
     let ext = twin.extended(&effects.iter().map(|e| e.1.clone()).collect::<Vec<_>>());
     let mut provenance = ext.provenance();
     provenance.push(noise_source);
+    if family.is_some() {
+        provenance.push(
+            "ensemble members: the noise family fitted to the extended twin's residual (Whittle \
+             likelihood, drift kept), each member with its own draw of the family's parameters; \
+             members of the extended twin also draw every accepted effect's parameters from \
+             their uncertainty"
+                .to_owned(),
+        );
+    }
     let channels: Vec<String> = yard.channels.iter().map(|c| c.0.clone()).collect();
     let freqs = yard
         .welch
         .as_ref()
         .map(|w| w.frequencies())
         .unwrap_or_default();
-    let members = ensemble::run(&twin, &det, ensemble, &yard, "base")?;
+    let members = ensemble::run(
+        |k| twin.run(Some(k)).map_err(SimulateError::twin),
+        &det,
+        ensemble,
+        &yard,
+        "base",
+    )?;
     let before = mismatch::compare(yard.views(&r_before), &members, &freqs, &channels);
     let explained_by = cause::explained_by(&yard, &before, &r_before, &contrib);
-    let members_ext = ensemble::run(&ext, &det_ext, ensemble, &yard, "extended")?;
+    let members_ext = ensemble::run(
+        |k| {
+            twin.extended(&quiet.effects_drawn(&cause, k))
+                .run(Some(k))
+                .map_err(SimulateError::twin)
+        },
+        &det_ext,
+        ensemble,
+        &yard,
+        "extended",
+    )?;
     let after = mismatch::compare(yard.views(&r_after), &members_ext, &freqs, &channels);
     lap("ensembles and comparisons");
     // 5. Gain: forward chaining; the extension's contributions refitted on each training part.
@@ -315,6 +367,7 @@ where
         residual_after: r_after,
         warnings,
         simulator: quiet.is_simulator(),
+        family,
         timing_s,
     })
 }
