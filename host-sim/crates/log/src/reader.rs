@@ -1244,7 +1244,10 @@ mod tests {
             assert_eq!(parse_required_number(text.as_bytes()), want, "{text}");
         }
         for gap in ["", "NaN", "nan"] {
-            assert!(parse_number(gap.as_bytes()).is_ok_and(f64::is_nan), "{gap:?}");
+            assert!(
+                parse_number(gap.as_bytes()).is_ok_and(f64::is_nan),
+                "{gap:?}"
+            );
             assert_eq!(
                 parse_required_number(gap.as_bytes()),
                 Err(NumberError::Missing),
@@ -1253,7 +1256,14 @@ mod tests {
         }
         // Through a row: the line, the column and the text named.
         let mut r = Records::from_text("time_s,output_v\n0,1\n1,-inf\n").unwrap();
-        assert_eq!(r.next_row().unwrap().unwrap().number(1, "output_v").unwrap(), 1.0);
+        assert_eq!(
+            r.next_row()
+                .unwrap()
+                .unwrap()
+                .number(1, "output_v")
+                .unwrap(),
+            1.0
+        );
         let row = r.next_row().unwrap().unwrap();
         let e = row.number(1, "output_v").unwrap_err().to_string();
         assert!(
