@@ -246,16 +246,37 @@ pub(super) fn step_set(
 /// `scored`) is cross-validated in the candidate's place; one that predicts the held-out
 /// blocks at least as well (normalised prediction error) is the explanation the record
 /// supports.
+#[allow(clippy::too_many_arguments)]
 pub(super) fn simpler_wins(
     cur: &Current,
     cols: &[Vec<f64>],
     target: &[f64],
     cfg: &Config,
     s: &Scored,
+    rescored: &[Scored],
     scored: &[Scored],
     after: CvScore,
 ) -> Option<String> {
-    super::plausibility::simpler_than(&s.effect, cur.ds)
+    let simpler = super::plausibility::simpler_than(&s.effect, cur.ds);
+    // A second-order lag is a higher order of the same transfer function: when its channel's
+    // first-order lag explains the record as well by the criterion (ΔBIC within the ambiguity
+    // margin, both re-scored with the noise re-fitted), the lower order is named.
+    if matches!(s.effect, Effect::Lag2Coupling(_)) {
+        let close = rescored.iter().find(|c| {
+            simpler.contains(&c.effect)
+                && c.delta_bic - s.delta_bic < super::plausibility::AMBIGUOUS_DBIC
+        });
+        if let Some(alt) = close {
+            return Some(format!(
+                "the lower order {} explains the record as well (ΔBIC {:.1} against its {:.1}): \
+                 the second stage is not supported",
+                alt.effect.name(),
+                alt.delta_bic,
+                s.delta_bic
+            ));
+        }
+    }
+    simpler
         .into_iter()
         .filter_map(|e| scored.iter().find(|c| c.effect == e))
         .find_map(|alt| {
@@ -304,8 +325,16 @@ pub(super) fn driver_harmonic(ds: &Dataset, period_s: f64) -> Option<(String, us
             if 0.5 * top.amplitude * top.amplitude < PROGRAMME_VARIANCE_SHARE * var {
                 return None;
             }
+            // The driver itself has a line there (a harmonic of its programme's shape), not
+            // only a harmonic number near it: on a 2-day record the comb of a daily
+            // programme's first 12 harmonics would otherwise cover most of the band.
+            let own_line = |g: f64| {
+                spec.lines
+                    .iter()
+                    .any(|l| l.fap < 1e-3 && (l.frequency_hz - g).abs() < res_f)
+            };
             (1..=DRIVER_HARMONICS)
-                .find(|&k| (k as f64 * top.frequency_hz - f).abs() < 1.5 * res_f)
+                .find(|&k| (k as f64 * top.frequency_hz - f).abs() < 1.5 * res_f && own_line(f))
                 .map(|k| (c.name.clone(), k, top.period_s))
         })
 }
