@@ -261,15 +261,32 @@ pub(super) fn simpler_wins(
     // A second-order lag is a higher order of the same transfer function: when its channel's
     // first-order lag explains the record as well by the criterion (ΔBIC within the ambiguity
     // margin, both re-scored with the noise re-fitted), the lower order is named.
+    // So does a named cause of fixed shape (a solar-day building tilt, a tide) that explains the
+    // same part of the data (fitted shapes overlapping ≥ `AMBIGUOUS_OVERLAP`): a second-order lag
+    // of a channel with a daily cycle can put that cycle at any phase (measured: a hidden
+    // building tilt on a 3-day 0 g log was named `lag2_coupling`).
     if matches!(s.effect, Effect::Lag2Coupling(_)) {
+        use super::plausibility as pl;
+        let mine = pl::fitted_shape(&cur.projected(&s.cols), &cur.r_w);
         let close = rescored.iter().find(|c| {
-            simpler.contains(&c.effect)
-                && c.delta_bic - s.delta_bic < super::plausibility::AMBIGUOUS_DBIC
+            let fixed_shape = matches!(
+                c.effect,
+                Effect::BuildingTilt | Effect::TidalTilt | Effect::TidalGravity
+            );
+            c.delta_bic - s.delta_bic < pl::AMBIGUOUS_DBIC
+                && (simpler.contains(&c.effect)
+                    || (fixed_shape
+                        && pl::overlap(
+                            &mine,
+                            &pl::fitted_shape(&cur.projected(&c.cols), &cur.r_w),
+                        )
+                        .abs()
+                            >= pl::AMBIGUOUS_OVERLAP))
         });
         if let Some(alt) = close {
             return Some(format!(
-                "the lower order {} explains the record as well (ΔBIC {:.1} against its {:.1}): \
-                 the second stage is not supported",
+                "the lower order or fixed-shape cause {} explains the record as well (ΔBIC {:.1} \
+                 against its {:.1}): the second stage is not supported",
                 alt.effect.name(),
                 alt.delta_bic,
                 s.delta_bic
