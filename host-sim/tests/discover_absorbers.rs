@@ -187,8 +187,8 @@ fn a_lag_on_a_cycling_programme_is_named_a_lag_not_a_loop_and_an_ambiguity_is_re
     // first-order lag's error relaxes exponentially in the temperature moved, close to a
     // Preisach distribution of play widths — the loop must not take the lag's place, and when
     // the two are reported as "ambiguous: A or B" the report must carry the other's parameters
-    // and what would separate them (measured: a transfer function of the temperature in 3/3 —
-    // the first-order lag, two stages, a gain on the rate, one each — and no loop).
+    // and what would separate them (measured: the first-order lag in 3/3, twice said ambiguous
+    // with a second-order lag, and no loop).
     // The lag: 20–40 min on the true temperature, 5–10 µg/°C (2–6 µg of offset on the ramps).
     let mut rng = synth::rng(0x0A3B_1601);
     let mut said = 0;
@@ -230,8 +230,7 @@ fn a_lag_on_a_cycling_programme_is_named_a_lag_not_a_loop_and_an_ambiguity_is_re
             amb.map(|a| (&a.other, a.other_delta_bic, a.overlap))
         );
         // A transfer function of the temperature: on one ramp rate a first-order lag, two
-        // stages and a gain on the rate differ only at the corners (measured: the first-order
-        // lag 1/3, `lag2_coupling` 1/3, `rate_coupling` 1/3; docs/discovery-causes.md).
+        // stages and a gain on the rate differ only at the corners (docs/discovery-causes.md).
         named += usize::from(thermal.is_some_and(|a| a.effect.name() != "thermal_hysteresis"));
         loops += usize::from(
             d.selection

@@ -38,8 +38,8 @@ pub enum EffectKind {
     /// Any channel through a gain on its rate of change (a gradient across the sensor while the
     /// channel ramps): [`RateOfChange`].
     RateCoupling,
-    /// Any channel through a gain and a second-order lag (two equal first-order stages):
-    /// [`SecondOrderLag`].
+    /// The lag error of any channel through a second-order lag (two equal first-order stages),
+    /// L2_τ[c] − c: [`SecondOrderLag`].
     Lag2Coupling,
     /// A drift that is a power of the time since the start, [`creep`] (quadratic at exponent 2).
     CreepDrift,

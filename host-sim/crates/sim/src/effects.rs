@@ -164,8 +164,10 @@ pub enum ScenarioEffect {
         /// Output per (channel unit per s).
         coefficient: f64,
     },
-    /// `coefficient`·L2_τ[c]: a channel through a gain and two first-order stages of τ
-    /// ([`crate::catalogue::SecondOrderLag`]).
+    /// `coefficient`·(L2_τ[c] − c): the lag error of a channel through two first-order stages
+    /// of τ ([`crate::catalogue::SecondOrderLag`]), as `thermal_lag` is of one (the gain on the
+    /// channel itself is the baseline's for the temperature, `pressure_admittance` or
+    /// `ambient_coupling` for the others).
     Lag2Coupling {
         /// `temperature_c`, `pressure_hpa` (deviation, Pa) or an ambient channel.
         channel: String,
@@ -768,7 +770,10 @@ impl EffectChain {
                         tau_s, coefficient, ..
                     },
                     State::Coupling { source, lag2, .. },
-                ) => coefficient * lag2.step(t, source.value(d), *tau_s),
+                ) => {
+                    let v = source.value(d);
+                    coefficient * (lag2.step(t, v, *tau_s) - v)
+                }
                 (
                     ScenarioEffect::CreepDrift {
                         exponent,

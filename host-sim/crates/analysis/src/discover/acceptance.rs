@@ -246,16 +246,54 @@ pub(super) fn step_set(
 /// `scored`) is cross-validated in the candidate's place; one that predicts the held-out
 /// blocks at least as well (normalised prediction error) is the explanation the record
 /// supports.
+#[allow(clippy::too_many_arguments)]
 pub(super) fn simpler_wins(
     cur: &Current,
     cols: &[Vec<f64>],
     target: &[f64],
     cfg: &Config,
     s: &Scored,
+    rescored: &[Scored],
     scored: &[Scored],
     after: CvScore,
 ) -> Option<String> {
-    super::plausibility::simpler_than(&s.effect, cur.ds)
+    let simpler = super::plausibility::simpler_than(&s.effect, cur.ds);
+    // A second-order lag is a higher order of the same transfer function: when its channel's
+    // first-order lag explains the record as well by the criterion (ΔBIC within the ambiguity
+    // margin, both re-scored with the noise re-fitted), the lower order is named.
+    // So does a named cause of fixed shape (a solar-day building tilt, a tide) that explains the
+    // same part of the data (fitted shapes overlapping ≥ `AMBIGUOUS_OVERLAP`): a second-order lag
+    // of a channel with a daily cycle can put that cycle at any phase (measured: a hidden
+    // building tilt on a 3-day 0 g log was named `lag2_coupling`).
+    if matches!(s.effect, Effect::Lag2Coupling(_)) {
+        use super::plausibility as pl;
+        let mine = pl::fitted_shape(&cur.projected(&s.cols), &cur.r_w);
+        let close = rescored.iter().find(|c| {
+            let fixed_shape = matches!(
+                c.effect,
+                Effect::BuildingTilt | Effect::TidalTilt | Effect::TidalGravity
+            );
+            c.delta_bic - s.delta_bic < pl::AMBIGUOUS_DBIC
+                && (simpler.contains(&c.effect)
+                    || (fixed_shape
+                        && pl::overlap(
+                            &mine,
+                            &pl::fitted_shape(&cur.projected(&c.cols), &cur.r_w),
+                        )
+                        .abs()
+                            >= pl::AMBIGUOUS_OVERLAP))
+        });
+        if let Some(alt) = close {
+            return Some(format!(
+                "the lower order or fixed-shape cause {} explains the record as well (ΔBIC {:.1} \
+                 against its {:.1}): the second stage is not supported",
+                alt.effect.name(),
+                alt.delta_bic,
+                s.delta_bic
+            ));
+        }
+    }
+    simpler
         .into_iter()
         .filter_map(|e| scored.iter().find(|c| c.effect == e))
         .find_map(|alt| {
@@ -304,8 +342,16 @@ pub(super) fn driver_harmonic(ds: &Dataset, period_s: f64) -> Option<(String, us
             if 0.5 * top.amplitude * top.amplitude < PROGRAMME_VARIANCE_SHARE * var {
                 return None;
             }
+            // The driver itself has a line there (a harmonic of its programme's shape), not
+            // only a harmonic number near it: on a 2-day record the comb of a daily
+            // programme's first 12 harmonics would otherwise cover most of the band.
+            let own_line = |g: f64| {
+                spec.lines
+                    .iter()
+                    .any(|l| l.fap < 1e-3 && (l.frequency_hz - g).abs() < res_f)
+            };
             (1..=DRIVER_HARMONICS)
-                .find(|&k| (k as f64 * top.frequency_hz - f).abs() < 1.5 * res_f)
+                .find(|&k| (k as f64 * top.frequency_hz - f).abs() < 1.5 * res_f && own_line(f))
                 .map(|k| (c.name.clone(), k, top.period_s))
         })
 }

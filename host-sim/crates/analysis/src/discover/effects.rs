@@ -50,8 +50,8 @@ pub enum Effect {
     /// A channel through a gain on its rate of change: column dc/dt (centred), the catalogue's
     /// [`RateOfChange`] run over the channel (restarted per segment).
     RateCoupling(String),
-    /// A channel through a gain and a second-order lag of τ: column L2_τ[c] (centred), the
-    /// catalogue's [`SecondOrderLag`] run over the channel (restarted per segment).
+    /// The lag error of a channel through a second-order lag of τ: column L2_τ[c] − c (centred),
+    /// the catalogue's [`SecondOrderLag`] run over the channel (restarted per segment).
     Lag2Coupling(String),
     /// A power-law drift: column (t − t₀)^θ in days ([`creep`]), θ the exponent.
     CreepDrift,
@@ -529,7 +529,10 @@ pub fn columns(e: &Effect, ds: &Dataset, ctx: &Context, theta: f64) -> Vec<Vec<f
             })
             .unwrap_or_default(),
         Effect::Lag2Coupling(name) => channel_values(ds, name)
-            .map(|v| vec![transfer(v, t, seg, theta, false)])
+            .map(|v| {
+                let l2 = transfer(v, t, seg, theta, false);
+                vec![centred(l2.iter().zip(v).map(|(l, c)| l - c).collect())]
+            })
             .unwrap_or_default(),
         Effect::CreepDrift => vec![t.iter().map(|x| creep(x - t0, theta)).collect()],
     }

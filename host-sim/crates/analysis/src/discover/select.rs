@@ -305,7 +305,8 @@ pub fn select(
                 );
                 continue;
             }
-            if let Some(why) = simpler_wins(&cur, &cols, target, cfg, s, &scored, after) {
+            if let Some(why) = simpler_wins(&cur, &cols, target, cfg, s, &rescored, &scored, after)
+            {
                 refuse(
                     &mut refused,
                     s.effect.name(),
