@@ -41,6 +41,21 @@ fn accomp_in_1_gib(args: &[&str]) -> Output {
     c.output().expect("accomp runs")
 }
 
+/// `accomp compensate --target host` of `input` with the table `cal` into `output`.
+fn compensate_on_host<'a>(cal: &'a str, input: &'a str, output: &'a str) -> Vec<&'a str> {
+    vec![
+        "compensate",
+        "--target",
+        "host",
+        "--calibration",
+        cal,
+        "--input",
+        input,
+        "--output",
+        output,
+    ]
+}
+
 fn simulated_log(dir: &Path) -> String {
     let log = cli::simulated_log(
         dir,
@@ -84,17 +99,7 @@ fn dev_zero_and_a_10_gb_file_are_refused_within_seconds_under_1_gib_naming_the_l
             vec!["discover", input],
             vec!["fit", input],
             vec!["tumble", input],
-            vec![
-                "compensate",
-                "--target",
-                "host",
-                "--calibration",
-                &cal,
-                "--input",
-                input,
-                "--output",
-                "/dev/null",
-            ],
+            compensate_on_host(&cal, input, "/dev/null"),
         ];
         for args in commands {
             let started = Instant::now();
@@ -152,20 +157,7 @@ fn outputs_are_checked_before_any_work_and_named() {
         (vec!["tumble", &log, "-o", d], "is a directory"),
         (vec!["simulate-tumble", "-o", d], "is a directory"),
         (vec!["plot", &log, "--out-dir", f], "is a file"),
-        (
-            vec![
-                "compensate",
-                "--target",
-                "host",
-                "--calibration",
-                &cal,
-                "--input",
-                &log,
-                "--output",
-                d,
-            ],
-            "is a directory",
-        ),
+        (compensate_on_host(&cal, &log, d), "is a directory"),
         (
             vec!["table", "get", "--target", "qemu", "-o", d],
             "is a directory",
