@@ -306,6 +306,15 @@ where
         self.recovery == Recovery::Running
     }
 
+    /// The core may have served this DRDY late: a flash erase or program stalled it (RM0090
+    /// §3.5), so the conversion the DRDY announces may have ended at any time during the stall
+    /// and the handler's time stamp would not be its time. Its result is read and dropped and
+    /// the pair starts again from the accelerometer; the pairs this costs are the seq gap
+    /// (flagged STALL) of the next pair.
+    pub fn restart_pair(&mut self) {
+        self.converting = None;
+    }
+
     /// Change the data rate at the next channel switch (SetRate).
     pub fn request_rate(&mut self, rate: DataRate) {
         self.pending_rate = Some(rate);
@@ -407,7 +416,6 @@ where
                     ChannelFlags(ChannelFlags::DRDY_TIMEOUT),
                     now_us,
                 ));
-                self.switch_to(Channel::Accelerometer);
                 let reading = AdsReading {
                     accel,
                     accel_flags,
@@ -417,7 +425,12 @@ where
                     seq: 0,
                     lost: LossFlags(0),
                 };
-                Some(self.numbered(reading, true))
+                // Numbered before the switch: a rate change the switch applies restarts the pair
+                // clock after this pair, so the next pair (at the new rate) is not measured
+                // against this one's period and does not claim a stall.
+                let reading = self.numbered(reading, true);
+                self.switch_to(Channel::Accelerometer);
+                Some(reading)
             }
             None => {
                 // A conversion of an input we cannot name: start the pair again.

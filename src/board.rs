@@ -179,8 +179,17 @@ pub const ADS1262_MISO: Pin = pin('A', 6);
 pub const ADS1262_MOSI: Pin = pin('A', 7);
 /// ADS1262 chip select, push-pull, high when idle.
 pub const ADS1262_CS: Pin = pin('A', 4);
-/// ADS1262 DRDY, falling edge, pull-up; EXTI line = pin number (the firmware binds EXTI4).
-pub const ADS1262_DRDY: Pin = pin('C', 4);
+/// ADS1262 DRDY, falling edge, pull-up; EXTI line = pin number (the firmware binds EXTI1).
+/// PA1 in alternate function 1 is TIM2_CH2 (DS8626 Table 9, "Alternate function mapping"):
+/// TIM2, the time base, latches its count at the DRDY edge by input capture, so a reading is
+/// stamped with the time its conversion ended, not when the handler got to run. The pin's input
+/// path still feeds EXTI in alternate-function mode (RM0090 §8.3.11), which runs the handler.
+/// A plain EXTI pin such as PC4 has no timer function. Of the TIM2 channel pins (PA0–PA3, PA5,
+/// PA15, PB3, PB10, PB11), PA5 is SPI1's clock, PA15/PB3 are JTAG, PA0 is the wake-up pin,
+/// PA2/PA3 are USART2, and PB10/PB11 would share the EXTI15_10 vector; PA1 has EXTI1 alone.
+pub const ADS1262_DRDY: Pin = pin('A', 1);
+/// Alternate function of [`ADS1262_DRDY`] that connects it to TIM2_CH2.
+pub const ADS1262_DRDY_AF: u8 = 1;
 /// SPI2 SCK (AF5), AD7124-4.
 pub const AD7124_SCK: Pin = pin('B', 13);
 /// SPI2 MISO (AF5), AD7124-4 DOUT/RDY.

@@ -7,7 +7,7 @@
 //!
 //! | priority | task | may do |
 //! |---|---|---|
-//! | 3 | `drdy` (EXTI4) | timestamp, read one conversion, switch the mux: bounded SPI, no wait |
+//! | 3 | `drdy` (EXTI1) | timestamp, read one conversion, switch the mux: bounded SPI, no wait |
 //! | 2 | `uart_rx` (USART1) | drain the received bytes (front-end: the DMA ring) into the frame decoder |
 //! | 2 | `ads_supervisor`, `rtd_task` | one tick of a sequencer each: bounded SPI, no wait |
 //! | 1 | `worker`, `watchdog` | pipeline, protocol, flash; progress checks and IWDG feeding |
@@ -25,8 +25,8 @@ compile_error!("choose exactly one board: `board-qemu` (default) or `board-front
 #[cfg(target_os = "none")]
 mod bsp;
 
-// 1 kHz ticks: ms timestamps suffice, and faster ticks starved QEMU's UART (tried 20 kHz and
-// 100 kHz: requests went unanswered).
+// 1 kHz ticks for the tasks' delays (time stamps come from TIM2): faster ticks starved QEMU's
+// UART (tried 20 kHz and 100 kHz: requests went unanswered).
 #[cfg(target_os = "none")]
 rtic_monotonics::systick_monotonic!(Mono, 1_000);
 
@@ -42,7 +42,7 @@ mod app {
         encode_frame, DeviceMessage, FrameDecoder, FrameError, MAX_FRAME_LEN, PROTOCOL_VERSION,
     };
     use accomp::service::{BootTable, Service};
-    use accomp::timebase::Extended64;
+    use accomp::timebase::{drdy_edge_time, Extended64, StampSource};
     use heapless::Vec;
     use rtic_monotonics::fugit::ExtU64 as _;
     use rtic_monotonics::Timebase as _;
@@ -78,13 +78,18 @@ mod app {
 
     /// Frames lost because the inbound queue was full (added to the service's counter).
     static QUEUE_DROPS: AtomicU32 = AtomicU32::new(0);
-    /// Readings lost because the inbound queue was full: their seq numbers are the gap, the
-    /// next reading says QUEUE_FULL, Info counts them.
+    /// Readings lost because the inbound queue was full — accelerometer pairs, whose seq
+    /// numbers are the gap, and RTD readings (the next pairs join the previous RTD reading, at
+    /// most `RTD_MAX_AGE_US` old): the next pair says QUEUE_FULL, Info's `queue_full` counts
+    /// them.
     static READINGS_DROPPED: AtomicU32 = AtomicU32::new(0);
     /// Readings produced by the ADS1262 sequencer (DRDY or timeout): acquisition progress.
     static ACQ_PROGRESS: AtomicU32 = AtomicU32::new(0);
     /// Items the worker has processed: worker progress.
     static WORKER_PROGRESS: AtomicU32 = AtomicU32::new(0);
+    /// DRDY readings stamped with the handler's read of the time base because no capture of
+    /// the edge was pending (front-end: CC2IF clear): late by the interrupt latency.
+    static DRDY_HANDLER_STAMPS: AtomicU32 = AtomicU32::new(0);
     /// Data rate asked for by SetRate, for the supervisor to apply (0: nothing new).
     static REQUESTED_RATE: AtomicU32 = AtomicU32::new(0);
 
@@ -184,13 +189,33 @@ mod app {
 
     /// ADS1262 DRDY fell: timestamp it, read the conversion and switch the mux (a few SPI
     /// transactions at 5.25 MHz, no waiting), hand a finished pair to the worker. The QEMU board
-    /// never enables EXTI4.
-    #[task(binds = EXTI4, priority = 3, shared = [ads], local = [drdy_pin, drdy_to_worker])]
+    /// never enables EXTI1.
+    ///
+    /// The stamp is the edge's: the count the time base latched at the DRDY edge (front-end:
+    /// TIM2_CH2 input capture), read before the counter itself so that it is never the newer of
+    /// the two. Without a pending capture the handler's read stands in, later by the interrupt
+    /// latency; such readings are counted and logged by the watchdog task.
+    #[task(binds = EXTI1, priority = 3, shared = [ads], local = [drdy_pin, drdy_to_worker])]
     fn drdy(mut cx: drdy::Context) {
-        let now = now_us();
+        let captured = bsp::drdy_capture();
+        let read = now_us();
+        // The extended time's low 32 bits are the counter's count at that read.
+        let (now, source) = drdy_edge_time(read, read as u32, captured);
+        if source == StampSource::HandlerRead {
+            DRDY_HANDLER_STAMPS.fetch_add(1, Ordering::Relaxed);
+        }
         bsp::acknowledge_drdy(cx.local.drdy_pin);
         ACQ_PROGRESS.fetch_add(1, Ordering::Relaxed);
-        if let Some(reading) = cx.shared.ads.lock(|ads| ads.on_drdy(now)) {
+        // Served after a flash stall: the pair's other half was converted before the stall, and
+        // where no edge was captured (the QEMU board) the conversion's time is unknown. The pair
+        // starts again; the pairs lost are the next frame's seq gap, flagged STALL and counted.
+        let stalled = accomp::drivers::stm32f4_flash::OPERATION.load(Ordering::Relaxed);
+        if let Some(reading) = cx.shared.ads.lock(|ads| {
+            if stalled {
+                ads.restart_pair();
+            }
+            ads.on_drdy(now)
+        }) {
             // A full queue loses this reading: counted, and flagged on the next one.
             if cx
                 .local
@@ -241,7 +266,14 @@ mod app {
         loop {
             Mono::delay(period_us.micros()).await;
             if let Some(reading) = cx.local.rtd.on_tick(now_us()) {
-                let _ = cx.local.rtd_to_worker.try_send(Inbound::Rtd(reading));
+                if cx
+                    .local
+                    .rtd_to_worker
+                    .try_send(Inbound::Rtd(reading))
+                    .is_err()
+                {
+                    READINGS_DROPPED.fetch_add(1, Ordering::Relaxed);
+                }
             }
         }
     }
@@ -255,8 +287,20 @@ mod app {
         let mut acquisition = ACQ_PROGRESS.load(Ordering::Relaxed);
         let mut worker = WORKER_PROGRESS.load(Ordering::Relaxed);
         let mut heartbeat_sent = false;
+        let mut handler_stamps = 0;
         loop {
             Mono::delay(WATCHDOG_CHECK_MS.millis()).await;
+            // Reads the time base at least once per second on both boards, far more often than
+            // the 71.6 min its 32-bit count takes to wrap (the extension needs one read a wrap).
+            let _ = now_us();
+            let stamps = DRDY_HANDLER_STAMPS.load(Ordering::Relaxed);
+            if stamps != handler_stamps {
+                defmt::warn!(
+                    "{} DRDY readings stamped by the handler (no edge capture)",
+                    stamps.wrapping_sub(handler_stamps)
+                );
+                handler_stamps = stamps;
+            }
             let a = ACQ_PROGRESS.load(Ordering::Relaxed);
             let w = WORKER_PROGRESS.load(Ordering::Relaxed);
             let acquisition_alive = !bsp::HAS_ADCS || a != acquisition;
@@ -350,21 +394,23 @@ mod app {
         }
     }
 
-    /// The board's hardware time base extended to 64 bits.
-    static TIME_BASE: cortex_m::interrupt::Mutex<core::cell::RefCell<Extended64>> =
-        cortex_m::interrupt::Mutex::new(core::cell::RefCell::new(Extended64::new()));
+    /// The board's hardware time base extended to 64 bits. A `Cell`, not a `RefCell`: the
+    /// extension is copied out and back inside the critical section, so there is no borrow
+    /// that could fail (a `RefCell`'s "already borrowed" panic would bring `core::fmt` along).
+    static TIME_BASE: cortex_m::interrupt::Mutex<core::cell::Cell<Extended64>> =
+        cortex_m::interrupt::Mutex::new(core::cell::Cell::new(Extended64::new()));
 
-    /// Firmware time in µs: the board's hardware time base (front-end: TIM2 at 1 MHz, which
-    /// counts on through a flash-erase stall), or the SysTick monotonic where there is none.
+    /// Firmware time in µs: the board's TIM2 at 1 MHz extended to 64 bits (both boards; on the
+    /// front-end it counts on through a flash-erase stall). A few instructions with interrupts
+    /// masked, so that the count and the extension agree.
     fn now_us() -> u64 {
-        match bsp::time_base_count() {
-            // A few instructions with interrupts masked: the count and the extension agree.
-            Some(_) => cortex_m::interrupt::free(|cs| {
-                let count = bsp::time_base_count().unwrap_or(0);
-                TIME_BASE.borrow(cs).borrow_mut().extend(count)
-            }),
-            None => Mono::now().duration_since_epoch().as_micros(),
-        }
+        cortex_m::interrupt::free(|cs| {
+            let cell = TIME_BASE.borrow(cs);
+            let mut time = cell.get();
+            let us = time.extend(bsp::time_base_count());
+            cell.set(time);
+            us
+        })
     }
 
     fn send(tx: &mut bsp::UartTx, msg: &DeviceMessage) {

@@ -149,8 +149,8 @@ fn icount_commit(base: &accomp::table::CalibrationTable) {
         real.push(bracket(&mut c, Request::UploadCommit { upload_id }));
         c.ping().unwrap(); // lets the erase ahead run before the next round
     }
-    // The firmware clock ticks in 1 ms (SysTick at 1 kHz): each bracket is quantised, but the
-    // bracket's phase against the tick is random, so the difference of the means is unbiased.
+    // The firmware's time stamps come from its TIM2 time base at 1 MHz (1 instruction = 1 ns
+    // here): each bracket is quantised to 1 µs, and the difference of the means is unbiased.
     let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
     let sd = |v: &[f64]| {
         let m = mean(v);
@@ -160,7 +160,7 @@ fn icount_commit(base: &accomp::table::CalibrationTable) {
     let se = ((sd(&real).powi(2) + sd(&refused).powi(2)) / ROUNDS as f64).sqrt();
     println!(
         "icount: InjectSample→InjectSample around a real Commit {r:.0} µs, around a refused one \
-         {f:.0} µs (means of {ROUNDS}, 1 ms ticks) → Commit ≈ {:.0} ± {se:.0} µs of virtual time \
+         {f:.0} µs (means of {ROUNDS}, 1 µs ticks) → Commit ≈ {:.0} ± {se:.0} µs of virtual time \
          = {:.2} ± {:.2} M instructions",
         r - f,
         (r - f) / 1e3,

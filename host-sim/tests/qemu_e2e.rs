@@ -104,6 +104,14 @@ fn ten_thousand_samples_match_the_host_core_bit_for_bit_with_faults_flagged() {
     // Sequence numbers count every processed sample, in order.
     assert!(frames.windows(2).all(|w| w[1].seq == w[0].seq + 1));
     assert!(frames.windows(2).all(|w| w[1].time_us >= w[0].time_us));
+    // The stamps come from TIM2 at 1 MHz, which QEMU models (docs/architecture.md, "QEMU"), as
+    // on the front-end; the 1 kHz SysTick would give whole milliseconds only.
+    let sub_ms = frames.iter().filter(|f| f.time_us % 1_000 != 0).count();
+    assert!(
+        sub_ms > frames.len() / 2,
+        "only {sub_ms} of {} time stamps are not whole milliseconds: not the µs time base",
+        frames.len()
+    );
     drop(qemu);
 }
 

@@ -454,3 +454,101 @@ fn a_pc_clock_step_is_an_event_and_moves_no_row() {
         assert!(((w[1].0 - w[0].0) - board).abs() < 1e-3 * board + 2e-6);
     }
 }
+
+#[test]
+fn a_drdy_stall_is_flagged_in_rows_and_status_events_and_takes_no_number_from_seq() {
+    let dir = temp_dir("drdystall");
+    let mut board = BoardSim::start(&dir, 1000, 6);
+    load_table(&dir);
+    let out = dir.join("rec.csv");
+    let mut rec = Recorder::spawn(record_cmd(&dir, &out, &["--samples", "2500"]));
+    wait_rows(&out, 400);
+    // 300 ms of wall clock: 300 s of the board's, ≈ 375 pair periods without a conversion.
+    board.command("drdy-stall");
+    std::thread::sleep(Duration::from_millis(300));
+    board.command("drdy-stall=off");
+    assert!(rec.wait_success());
+    let r = read_rec(&out);
+    let k = kinds(&r);
+    assert!(!k.contains(&"seq_gap"), "{k:?}");
+    assert!(!k.contains(&"board_reset"), "{k:?}");
+    // The timeout readings keep coming at the pair rate and take the numbers: no gap in seq.
+    for w in r.rows.windows(2) {
+        assert_eq!(w[1].1, w[0].1 + 1, "seq {} then {}", w[0].1, w[1].1);
+    }
+    let flagged: Vec<_> = r
+        .rows
+        .iter()
+        .filter(|row| row.6.contains("DRDY_TIMEOUT"))
+        .collect();
+    assert!(flagged.len() > 100, "{} rows flagged", flagged.len());
+    // A timeout reading carries no conversion: no output value.
+    assert!(flagged.iter().all(|row| row.3.is_nan()));
+    let status: Vec<&str> = r
+        .events
+        .iter()
+        .filter(|(k, _)| k == "status")
+        .map(|(_, d)| d.as_str())
+        .collect();
+    assert!(
+        status
+            .first()
+            .is_some_and(|d| d.starts_with("OK -> ") && d.contains("DRDY_TIMEOUT")),
+        "{status:?}"
+    );
+    assert!(status.iter().any(|d| d.ends_with("-> OK")), "{status:?}");
+    assert_eq!(r.rows.last().unwrap().6, "OK");
+    assert_time_increases(&r);
+}
+
+/// Loads a copy of the paper's table dated `day` (a different table for each day).
+fn load_dated_table(dir: &Path, day: u8) {
+    let mut t = accomp_host::device::paper_table();
+    t.date.day = day;
+    let path = dir.join(format!("table{day}.acal"));
+    std::fs::write(&path, t.encode()).unwrap();
+    let ok = Command::new(BIN)
+        .args(["load", "--target", &port(dir)])
+        .arg(&path)
+        .stderr(Stdio::null())
+        .status()
+        .unwrap();
+    assert!(ok.success());
+}
+
+#[test]
+fn an_erase_stall_while_streaming_loses_pairs_that_info_counts_with_the_stall_length() {
+    let dir = temp_dir("erasestall");
+    // 100×: the 2 s stall is 20 ms of wall clock, the record's frames come 12.5 a second.
+    let mut board = BoardSim::start(&dir, 100, 8);
+    // Three tables fill the three slots; the erase ahead after the third empties the spare.
+    for day in 1..=3 {
+        load_dated_table(&dir, day);
+    }
+    // A recorder started and gone: the board streams on.
+    let out = dir.join("rec.csv");
+    let mut rec = Recorder::spawn(record_cmd(&dir, &out, &[]));
+    wait_rows(&out, 5);
+    rec.kill();
+    // Loaded while streaming: the first into the emptied spare (no erase, the next erase ahead
+    // waits for the stream to stop), the second onto a spare holding an old table: its commit
+    // erases, and the fault makes that erase stall the board 2 s.
+    load_dated_table(&dir, 4);
+    board.command("erase-stall=2000");
+    std::thread::sleep(Duration::from_millis(100));
+    load_dated_table(&dir, 5);
+    let info = Command::new(BIN)
+        .args(["device", "info", "--json", "--target", &port(&dir)])
+        .stderr(Stdio::null())
+        .output()
+        .unwrap();
+    assert!(info.status.success());
+    let info: serde_json::Value = serde_json::from_slice(&info.stdout).unwrap();
+    // Two erases: the erase ahead after the third load (not streaming, no fault: 0 µs) and
+    // the fifth load's.
+    assert_eq!(info["losses"]["erase_stalls"], 2, "{info}");
+    assert_eq!(info["losses"]["erase_stall_us"], 2_000_000, "{info}");
+    let lost = info["losses"]["conversions_lost"].as_u64().unwrap();
+    // 2 s of 0.8 s pairs: two pairs, or three with the conversion dropped after the stall.
+    assert!((2..=3).contains(&lost), "{info}");
+}

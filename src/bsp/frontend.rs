@@ -1,6 +1,7 @@
 //! The real front-end board: HSE 8 MHz → PLL 168 MHz (HSI fallback after a 100 ms crystal
 //! timeout), USART1 (PA9/PA10) to the lab PC, the ADS1262 alone on SPI1 in mode 1, the AD7124-4
-//! alone on SPI2 in mode 3, ADS1262 DRDY on PC4 (EXTI4), the independent watchdog, defmt over
+//! alone on SPI2 in mode 3, ADS1262 DRDY on PA1 (EXTI1, and TIM2_CH2 input capture for its time
+//! stamp), the independent watchdog, defmt over
 //! RTT, and a panic or HardFault that resets the MCU. Pin map in docs/drivers.md ("Front-end
 //! board wiring"); not verified on hardware.
 //!
@@ -14,7 +15,7 @@ use defmt_rtt as _;
 use embedded_hal::delay::DelayNs;
 use embedded_hal_bus::spi::ExclusiveDevice;
 use stm32f4xx_hal::{
-    gpio::{Edge, Input, Output, Pin, PinState, PushPull},
+    gpio::{Alternate, Edge, Output, Pin, PinState, PushPull},
     pac,
     prelude::*,
     rcc::Config,
@@ -39,13 +40,17 @@ pub const HAS_ADCS: bool = true;
 /// Core clock after the PLL (crystal or HSI); SysTick runs from it.
 pub const SYSTICK_HZ: u32 = 168_000_000;
 
+/// TIM2's kernel clock: APB1 (42 MHz) × 2, since the APB1 prescaler is not 1 (RM0090 §6.2,
+/// "the timer clock frequencies are twice the APB frequency").
+const TIM2_CLOCK_HZ: u32 = 2 * bus::APB1_HZ;
+
 /// How long the crystal gets to start (ST's HAL uses the same HSE_STARTUP_TIMEOUT, 100 ms).
 const HSE_TIMEOUT_MS: u32 = 100;
 
 /// Independent watchdog period, 16 s nominal (prescaler 128, reload 4000 at the LSI's nominal
 /// 32 kHz). Its shortest value, at the LSI's maximum 47 kHz (datasheet DS8626, "LSI oscillator
 /// characteristics"), is 16 s × 32/47 = 10.9 s, and half of that, 5.45 s, covers the longest
-/// stretch without a feed the firmware allows: 4.8 s (docs/drivers.md, "Faults, watchdog"),
+/// stretch without a feed the firmware allows: 4.85 s (docs/drivers.md, "Faults, watchdog"),
 /// mostly a 128 KiB sector erase that stalls the core (≤ 2 s at x32), which no code running
 /// from flash can feed through. At the LSI's minimum 17 kHz a hang resets after ≤ 30 s.
 pub const WATCHDOG_MS: u32 = 16_000;
@@ -80,10 +85,10 @@ pub type AdsAcquisition = AdsSequencer<AdsDevice, InterruptDrdy, CycleDelay>;
 /// The AD7124-4 sequencer (owned by the RTD task).
 pub type RtdAcquisition = RtdSequencer<RtdDevice, InterruptDrdy, CycleDelay>;
 
-/// The ADS1262 DRDY input (PC4, EXTI4, falling edge).
-pub type DrdyPin = board_pin!(ADS1262_DRDY, Input);
+/// The ADS1262 DRDY input (PA1: TIM2_CH2 input capture, and EXTI1 on the falling edge).
+pub type DrdyPin = board_pin!(ADS1262_DRDY, Alternate<ADS1262_DRDY_AF>);
 
-/// Clears the EXTI4 pending bit (first thing in the DRDY handler).
+/// Clears the EXTI1 pending bit (first thing in the DRDY handler).
 pub fn acknowledge_drdy(pin: &mut DrdyPin) {
     pin.clear_interrupt_pending_bit();
 }
@@ -121,10 +126,39 @@ fn start_crystal(rcc: &pac::RCC) -> bool {
     false
 }
 
+/// Whether the PLL locks from the crystal (`from_crystal`) or the HSI within [`CLOCK_POLLS`]
+/// polls of PLLRDY (DS8626 "Main PLL characteristics": t_LOCK ≤ 200 µs; 10,000 polls take
+/// ≥ 2.5 ms on the 16 MHz HSI the core runs on here). Factors 168 MHz from a 1 MHz VCO input
+/// (M = source / 1 MHz, N 336, P 2, Q 7), as the CSS handler's. The PLL is switched off again
+/// (wait bounded too): PLLCFGR may be written only while it is off (RM0090 §6.3.2), and the
+/// HAL's `freeze` writes its own factors, then finds the PLL locking as it just did.
+fn pll_locks(rcc: &pac::RCC, from_crystal: bool) -> bool {
+    // SAFETY: PLLCFGR field values within their ranges (RM0090 §6.3.2), PLL off.
+    rcc.pllcfgr()
+        .write(|w| unsafe { w.bits(pllcfgr(from_crystal)) });
+    rcc.cr().modify(|_, w| w.pllon().set_bit());
+    let locked = poll(|| rcc.cr().read().pllrdy().bit_is_set());
+    rcc.cr().modify(|_, w| w.pllon().clear_bit());
+    poll(|| rcc.cr().read().pllrdy().bit_is_clear());
+    locked
+}
+
+/// RCC_PLLCFGR for 168 MHz from a 1 MHz VCO input (RM0090 §6.3.2): M = 8 (the 8 MHz crystal,
+/// PLLSRC = 1) or 16 (the 16 MHz HSI), N 336, P 2 (PLLP 00), Q 7 (48 MHz).
+const fn pllcfgr(from_crystal: bool) -> u32 {
+    let (m, source) = if from_crystal { (8, 1 << 22) } else { (16, 0) };
+    m | (336 << 6) | source | (7 << 24)
+}
+
+/// Polls `done` at most [`CLOCK_POLLS`] times; true once it held.
+fn poll(mut done: impl FnMut() -> bool) -> bool {
+    (0..CLOCK_POLLS).any(|_| done())
+}
+
 /// Clocks (crystal or HSI fallback), USART1 115200 8N1, SPI1 (ADS1262, mode 1) and SPI2
 /// (AD7124, mode 3) at the frequencies of [`accomp::board`], the two sequencers
-/// (they initialise their converters from their first tick), DRDY falling edge on PC4, TIM2 as
-/// the time base; the watchdog is started first, before the clocks.
+/// (they initialise their converters from their first tick), DRDY falling edge on PA1 (EXTI1 and
+/// TIM2_CH2 capture), TIM2 as the time base; the watchdog is started first, before the clocks.
 pub fn init(mut dp: pac::Peripherals) -> Parts {
     let reset_cause = take_reset_cause(&dp.RCC);
     // The watchdog first: it runs on the LSI, independent of the clock setup below, so a hang
@@ -132,7 +166,18 @@ pub fn init(mut dp: pac::Peripherals) -> Parts {
     let mut watchdog = IndependentWatchdog::new(dp.IWDG);
     watchdog.stop_on_debug(&dp.DBGMCU, true);
     watchdog.start(WATCHDOG_MS.millis());
-    let crystal = start_crystal(&dp.RCC);
+    let mut crystal = start_crystal(&dp.RCC);
+    // The HAL's `freeze` waits for PLLRDY without a bound: lock the PLL once here first, with a
+    // bounded wait, from the source `freeze` will use.
+    if crystal && !pll_locks(&dp.RCC, true) {
+        dp.RCC.cr().modify(|_, w| w.hseon().clear_bit());
+        crystal = false;
+    }
+    if !crystal && !pll_locks(&dp.RCC, false) {
+        // A PLL that locks from neither source: the part is broken. Reset (and try again)
+        // rather than hang; the bus, UART and time-base prescalers all assume 168 MHz.
+        fatal(Fatal::Clock)
+    }
     let config = if crystal {
         Config::hse(8.MHz())
     } else {
@@ -226,12 +271,16 @@ pub fn init(mut dp: pac::Peripherals) -> Parts {
         ad7124_config(),
     ));
 
-    let mut drdy: DrdyPin = gpioc.pc4.into_pull_up_input();
+    let mut drdy: DrdyPin = gpioa
+        .pa1
+        .into_alternate::<ADS1262_DRDY_AF>()
+        .internal_pull_up(true);
     drdy.make_interrupt_source(&mut syscfg);
     drdy.trigger_on_edge(&mut dp.EXTI, Edge::Falling);
     drdy.enable_interrupt(&mut dp.EXTI);
 
-    start_time_base(&rcc, &dp.TIM2);
+    super::start_time_base(&rcc, &dp.TIM2, TIM2_CLOCK_HZ);
+    start_drdy_capture(&dp.TIM2);
 
     Parts {
         rx,
@@ -336,27 +385,54 @@ pub fn read_byte(rx: &mut UartRx) -> Option<u8> {
     })
 }
 
-/// TIM2's kernel clock: APB1 (42 MHz) × 2, since the APB1 prescaler is not 1 (RM0090 §6.2,
-/// "the timer clock frequencies are twice the APB frequency").
-const TIM2_CLOCK_HZ: u32 = 2 * bus::APB1_HZ;
-
-/// TIM2 as the time base: 32-bit up-counter at 1 MHz, free running over its whole range
-/// (RM0090 §18: PSC divides by PSC + 1, loaded at the update event UG forces).
-fn start_time_base(rcc: &pac::RCC, tim2: &pac::TIM2) {
-    // Through the HAL's Rcc (it derefs to the RCC registers): APB1ENR.TIM2EN.
-    rcc.apb1enr().modify(|_, w| w.tim2en().set_bit());
-    tim2.psc()
-        .write(|w| w.psc().set((TIM2_CLOCK_HZ / 1_000_000 - 1) as u16));
-    tim2.arr().write(|w| w.arr().set(u32::MAX));
-    tim2.egr().write(|w| w.ug().set_bit());
-    tim2.cr1().modify(|_, w| w.cen().set_bit());
+/// TIM2's channel 2 capturing the time base's count at each falling DRDY edge on PA1 (RM0090
+/// §18.3.5 "Input capture mode").
+fn start_drdy_capture(tim2: &pac::TIM2) {
+    // CC2 as an input from TI2 (TIMx_CCMR1 CC2S = 01, §18.4.7), no input prescaler (IC2PSC 00:
+    // every edge) and no filter (IC2F 0000: the ADS1262's DRDY is a push-pull CMOS output).
+    // CC2S is writable only while CC2E is 0, so before the capture is enabled.
+    // SAFETY: CCMR1 bits 15:8 are channel 2's; the value is a valid CC2S/IC2PSC/IC2F code.
+    tim2.ccmr1_input()
+        .modify(|r, w| unsafe { w.bits((r.bits() & !0xFF00) | (0b01 << 8)) });
+    // Falling edge: CC2P = 1, CC2NP = 0; capture enabled: CC2E = 1 (TIMx_CCER, §18.4.9).
+    // SAFETY: CCER bits 7:4 are channel 2's CC2NP, -, CC2P, CC2E.
+    tim2.ccer()
+        .modify(|r, w| unsafe { w.bits((r.bits() & !0xF0) | CCER_CC2P | CCER_CC2E) });
 }
 
-/// The time base's count in µs (wraps every 71.6 min; `accomp::timebase` extends it).
-pub fn time_base_count() -> Option<u32> {
-    // SAFETY: a read of the counter register of a timer this module configured and nothing
-    // else writes; reading CNT has no side effect.
-    Some(unsafe { (*pac::TIM2::ptr()).cnt().read().bits() })
+/// TIMx_CCER.CC2E: capture on channel 2 enabled (RM0090 §18.4.9).
+const CCER_CC2E: u32 = 1 << 4;
+/// TIMx_CCER.CC2P: with CC2NP = 0, capture on the falling edge of TI2 (RM0090 §18.4.9).
+const CCER_CC2P: u32 = 1 << 5;
+/// TIMx_SR.CC2IF: a capture happened since CCR2 was last read (RM0090 §18.4.5).
+const SR_CC2IF: u32 = 1 << 2;
+/// TIMx_SR.CC2OF: a capture happened while CC2IF was still set (RM0090 §18.4.5).
+const SR_CC2OF: u32 = 1 << 10;
+/// The TIMx_SR flags (UIF, CC1–4IF, TIF, CC1–4OF): all are cleared by writing 0 and kept by
+/// writing 1, so writing this mask without one flag clears that flag alone (rc_w0).
+const SR_FLAGS: u32 = 0x1E5F;
+
+/// The count TIM2 latched at the last falling DRDY edge, if there was one since the last call.
+/// Read in the DRDY handler *before* the counter itself ([`accomp::timebase::drdy_edge_time`]).
+/// CC2IF says a capture is there; reading CCR2 clears it (RM0090 §18.4.5). Several edges
+/// before the handler ran (a flash-erase stall) set CC2OF and leave the latest edge's count in
+/// CCR2 — the conversion the handler is about to read, which the ADS1262 keeps until the next
+/// one — so the overcapture is only cleared. None: no capture pending; the handler's own read
+/// of the counter is the stamp then.
+pub fn drdy_capture() -> Option<u32> {
+    // SAFETY: TIM2 is configured in `start_time_base` and otherwise only read; reading SR and
+    // CCR2 and clearing CC2OF touch only channel 2's capture state.
+    let tim2 = unsafe { &*pac::TIM2::ptr() };
+    let sr = tim2.sr().read().bits();
+    if sr & SR_CC2IF == 0 {
+        return None;
+    }
+    let capture = tim2.ccr2().read().bits();
+    if sr & SR_CC2OF != 0 {
+        // SAFETY: rc_w0 flags; every other flag is written 1 and so kept.
+        tim2.sr().write(|w| unsafe { w.bits(SR_FLAGS & !SR_CC2OF) });
+    }
+    Some(capture)
 }
 
 /// The Clock Security System saw the crystal fail (the NMI ran).
@@ -386,20 +462,12 @@ unsafe fn NonMaskableInt() {
     rcc.cir().modify(|_, w| w.cssc().set_bit());
     CLOCK_FAILED.store(true, Ordering::Relaxed);
     // SAFETY: PLLCFGR field values within their ranges (RM0090 §6.3.2): M 16, N 336, P /2,
-    // source HSI, Q 7.
-    rcc.pllcfgr()
-        .write(|w| unsafe { w.bits(16 | (336 << 6) | (7 << 24)) });
+    // source HSI, Q 7; the PLL is off (the CSS switched it off).
+    rcc.pllcfgr().write(|w| unsafe { w.bits(pllcfgr(false)) });
     rcc.cr().modify(|_, w| w.pllon().set_bit());
-    let mut polls = 0;
-    while rcc.cr().read().pllrdy().bit_is_clear() && polls < CLOCK_POLLS {
-        polls += 1;
-    }
-    if rcc.cr().read().pllrdy().bit_is_set() {
+    if poll(|| rcc.cr().read().pllrdy().bit_is_set()) {
         rcc.cfgr().modify(|_, w| w.sw().pll());
-        let mut polls = 0;
-        while !rcc.cfgr().read().sws().is_pll() && polls < CLOCK_POLLS {
-            polls += 1;
-        }
+        poll(|| rcc.cfgr().read().sws().is_pll());
     }
 }
 

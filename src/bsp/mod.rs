@@ -2,9 +2,10 @@
 //! netduinoplus2 and the real front-end (the front-end's description is `accomp::board`).
 //!
 //! Each board provides: `BOARD`, `SYSTICK_HZ`, `HAS_ADCS`, `UartRx`/`UartTx`, the acquisition
-//! types (`AdsAcquisition`, `RtdAcquisition`, `DrdyPin`, `acknowledge_drdy`), `Watchdog`, `init`
-//! (clocks, UART with the RX interrupt enabled, acquisition, watchdog), `fatal` (no way back),
-//! and the logger/panic plumbing (a panic never ends in a HardFault loop).
+//! types (`AdsAcquisition`, `RtdAcquisition`, `DrdyPin`, `acknowledge_drdy`, `drdy_capture`),
+//! `Watchdog`, `init` (clocks, UART with the RX interrupt enabled, the TIM2 time base,
+//! acquisition, watchdog), `fatal` (no way back), and the logger/panic plumbing (a panic never
+//! ends in a HardFault loop).
 //! The shared UART helpers are here because both boards use the HAL's USART1.
 
 use core::sync::atomic::AtomicU32;
@@ -56,6 +57,9 @@ pub enum Fatal {
     Uart = 3,
     /// The worker task could not be spawned.
     Spawn = 4,
+    /// The PLL locked neither from the crystal nor from the HSI (front-end).
+    #[cfg(feature = "board-frontend")]
+    Clock = 6,
     /// The calibration flash could not be set up (QEMU: its RAM flash singleton was taken).
     #[cfg(feature = "board-qemu")]
     Flash = 5,
@@ -86,6 +90,31 @@ pub(crate) fn log_panic(info: &core::panic::PanicInfo) {
     } else {
         defmt::error!("panic");
     }
+}
+
+/// TIM2 as the time base of both boards: a 32-bit up-counter at 1 MHz, free running over its
+/// whole range (RM0090 §18: PSC divides the kernel clock `kernel_hz` by PSC + 1, loaded at the
+/// update event UG forces, which also clears the count). `accomp::timebase` extends it to 64
+/// bits.
+pub(crate) fn start_time_base(
+    rcc: &stm32f4xx_hal::pac::RCC,
+    tim2: &stm32f4xx_hal::pac::TIM2,
+    kernel_hz: u32,
+) {
+    // APB1ENR.TIM2EN (the HAL's Rcc derefs to the RCC registers).
+    rcc.apb1enr().modify(|_, w| w.tim2en().set_bit());
+    tim2.psc()
+        .write(|w| w.psc().set((kernel_hz / 1_000_000 - 1) as u16));
+    tim2.arr().write(|w| w.arr().set(u32::MAX));
+    tim2.egr().write(|w| w.ug().set_bit());
+    tim2.cr1().modify(|_, w| w.cen().set_bit());
+}
+
+/// The time base's count in µs (wraps every 71.6 min; `accomp::timebase` extends it).
+pub fn time_base_count() -> u32 {
+    // SAFETY: a read of the counter register of the timer `start_time_base` configured, which
+    // nothing else writes; reading CNT has no side effect.
+    unsafe { (*stm32f4xx_hal::pac::TIM2::ptr()).cnt().read().bits() }
 }
 
 /// UART receiver overruns (SR.ORE) since boot.

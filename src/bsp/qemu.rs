@@ -27,11 +27,11 @@ pub fn clock_failed() -> bool {
     false
 }
 
-/// No hardware time base under QEMU (its STM32 timer model is not verified): the firmware's
-/// time is the SysTick monotonic, which nothing stalls there.
-pub fn time_base_count() -> Option<u32> {
-    None
-}
+/// The kernel clock of QEMU's TIM2 model (`stm32f2xx-timer`): its `clock-frequency` property,
+/// which the netduinoplus2 machine leaves at the model's default of 1 GHz (`info qtree` in the
+/// QEMU monitor); the model counts QEMU's virtual nanoseconds × that clock / (PSC + 1), so
+/// PSC = 999 gives the front-end's 1 MHz (docs/architecture.md, "QEMU").
+const TIM2_CLOCK_HZ: u32 = 1_000_000_000;
 
 /// QEMU clocks SysTick at 168 MHz whatever RCC says (docs/architecture.md), so that is the figure the
 /// monotonic needs to count milliseconds.
@@ -155,14 +155,25 @@ impl PersistentFlash {
         let Some(bytes) = self.ram.as_bytes().get(from as usize..to as usize) else {
             return;
         };
-        let written = file
-            .seek(SeekFrom::Start(u64::from(from)))
-            .and_then(|_| file.write_all(bytes));
-        if written.is_err() {
+        let written = file.seek(SeekFrom::Start(u64::from(from))).is_ok() && write_all(file, bytes);
+        if !written {
             defmt::warn!("host flash file write failed: tables kept in RAM only");
             self.file = None;
         }
     }
+}
+
+/// Writes all of `bytes`; false if the host refused some. `Write::write_all` does the same
+/// with a slice index (`&buf[n..]`) whose bounds check would bring `core::fmt`'s integer
+/// formatting into the firmware for a panic the host's byte counts never cause.
+fn write_all(file: &mut semihosting::fs::File, mut bytes: &[u8]) -> bool {
+    while !bytes.is_empty() {
+        match file.write(bytes) {
+            Ok(n) if n > 0 => bytes = bytes.get(n..).unwrap_or(&[]),
+            _ => return false,
+        }
+    }
+    true
 }
 
 /// The power-cut hook's operation number and persisted quarters, if the test asked for one.
@@ -211,6 +222,7 @@ pub fn init(dp: pac::Peripherals) -> Parts {
     let mut rcc = dp.RCC.freeze(Config::hsi());
     let gpioa = dp.GPIOA.split(&mut rcc);
     let (tx, rx) = super::uart1(dp.USART1, (gpioa.pa9, gpioa.pa10), &mut rcc);
+    super::start_time_base(&rcc, &dp.TIM2, TIM2_CLOCK_HZ);
     // Taken once, in init: None would mean init ran twice.
     let ram = match cortex_m::singleton!(: RamCalibrationFlash = RamCalibrationFlash::new()) {
         Some(f) => f,
@@ -233,7 +245,7 @@ pub fn init(dp: pac::Peripherals) -> Parts {
     }
 }
 
-/// No ADCs in QEMU: samples arrive as InjectSample frames; EXTI4 is never enabled and the
+/// No ADCs in QEMU: samples arrive as InjectSample frames; EXTI1 is never enabled and the
 /// acquisition tasks are not spawned.
 pub const HAS_ADCS: bool = false;
 
@@ -241,7 +253,7 @@ pub const HAS_ADCS: bool = false;
 pub struct AdsAcquisition;
 
 impl AdsAcquisition {
-    /// Never called (EXTI4 is not enabled).
+    /// Never called (EXTI1 is not enabled).
     pub fn on_drdy(&mut self, _now_us: u64) -> Option<AdsReading> {
         None
     }
@@ -251,6 +263,8 @@ impl AdsAcquisition {
     }
     /// Nothing to reprogram.
     pub fn request_rate(&mut self, _rate: DataRate) {}
+    /// Never called (the DRDY interrupt is not enabled on this board).
+    pub fn restart_pair(&mut self) {}
 }
 
 /// Stand-in for the AD7124 sequencer.
@@ -272,6 +286,11 @@ pub struct DrdyPin;
 
 /// Nothing to acknowledge.
 pub fn acknowledge_drdy(_pin: &mut DrdyPin) {}
+
+/// No DRDY edge to capture.
+pub fn drdy_capture() -> Option<u32> {
+    None
+}
 
 /// QEMU's netduinoplus2 has no IWDG model: feeding is a no-op (the watchdog task still checks
 /// worker progress the same way).

@@ -13,6 +13,8 @@
 //! flags, (3) runs, (4) reads the flags it caused and names them, and (5) leaves PG/SER cleared
 //! and FLASH_CR locked, also on failure.
 
+use core::sync::atomic::{compiler_fence, AtomicBool, Ordering};
+
 use embedded_storage::nor_flash::{
     check_erase, check_read, check_write, ErrorType, NorFlash, NorFlashError, NorFlashErrorKind,
     ReadNorFlash,
@@ -94,6 +96,11 @@ pub const fn sector_of(offset: u32) -> (u8, u32) {
         ((4 + offset / (128 * K)) as u8, 128 * K)
     }
 }
+
+/// True from the start of an erase or program until the controller is idle again. An interrupt
+/// that finds it set may have waited for the flash (the core stalls on every flash read
+/// meanwhile, RM0090 §3.5): the DRDY handler drops the conversion it would have stamped late.
+pub static OPERATION: AtomicBool = AtomicBool::new(false);
 
 /// Access to the controller's registers and to the flash memory bus.
 pub trait FlashRegisters {
@@ -233,12 +240,17 @@ impl<R: FlashRegisters> Stm32f4Flash<R> {
 
     /// Steps 1–2 of every operation: not busy, sticky flags cleared, FLASH_CR unlocked.
     fn begin(&mut self) -> Result<(), FlashError> {
+        OPERATION.store(true, Ordering::Relaxed);
+        // Set before the controller is touched (no instruction emitted: the DRDY handler runs
+        // on this core and sees program order).
+        compiler_fence(Ordering::SeqCst);
         self.wait_ready();
         self.regs.clear_sr(sr::EOP | sr::ERRORS);
         if self.regs.cr() & cr::LOCK != 0 {
             self.regs.key(KEY1);
             self.regs.key(KEY2);
             if self.regs.cr() & cr::LOCK != 0 {
+                OPERATION.store(false, Ordering::Relaxed);
                 return Err(FlashError::Locked);
             }
         }
@@ -248,6 +260,8 @@ impl<R: FlashRegisters> Stm32f4Flash<R> {
     /// Steps 4–5: the flags this operation raised, PG/SER/SNB cleared, FLASH_CR locked.
     fn end(&mut self) -> Result<(), FlashError> {
         let s = self.wait_ready();
+        compiler_fence(Ordering::SeqCst);
+        OPERATION.store(false, Ordering::Relaxed);
         let c = self.regs.cr() & !(cr::PG | cr::SER | cr::MER | cr::SNB_MASK | cr::STRT);
         self.regs.set_cr(c | cr::LOCK);
         match FlashError::from_sr(s) {

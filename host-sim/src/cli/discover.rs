@@ -48,6 +48,10 @@ pub struct DiscoverArgs {
     /// Write the extended scenario (TOML that `accomp simulate` runs) here.
     #[arg(long, requires = "simulate")]
     pub write_scenario: Option<PathBuf>,
+    /// Write the calibration table with the errors of its temperature models corrected (needs
+    /// `--calibration`; refused when none was found or the core's validator refuses the result).
+    #[arg(long, requires = "calibration")]
+    pub write_table: Option<PathBuf>,
     /// Read a log above the reader's limits (20 million data lines, 4 GiB).
     #[arg(long)]
     pub allow_large: bool,
@@ -62,6 +66,9 @@ pub fn run(args: &DiscoverArgs) -> anyhow::Result<()> {
     }
     if let Some(d) = &args.report {
         crate::outputs::check_dir(d)?;
+    }
+    if let Some(p) = &args.write_table {
+        crate::outputs::check_file(p)?;
     }
     if args.simulate {
         return run_simulate(args);
@@ -91,10 +98,27 @@ pub fn run(args: &DiscoverArgs) -> anyhow::Result<()> {
     if let Some(dir) = &args.report {
         report::write_report(&d, dir, args.report_format.0)?;
     }
+    // The report is printed first, so that a refusal to write the table can be read in it.
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report::json(&d))?);
     } else {
         print!("{}", report::text(&d));
+    }
+    if let Some(p) = &args.write_table {
+        let check = d.table_check.as_ref();
+        match (check.and_then(|c| c.corrected.as_ref()), check) {
+            (Some(t), _) => crate::outputs::write_file(p, &t.encode())?,
+            (None, Some(c)) if c.refused.is_some() => anyhow::bail!(
+                "--write-table {}: the corrected table is refused by the validator: {}",
+                p.display(),
+                c.refused.as_deref().unwrap_or_default()
+            ),
+            _ => anyhow::bail!(
+                "--write-table {}: no error of the table's temperature models was found; \
+                 nothing written",
+                p.display()
+            ),
+        }
     }
     Ok(())
 }

@@ -70,6 +70,9 @@ pub struct Ads1262Model {
     pub refusals: u32,
     /// Conversions completed (DRDY falling edges).
     pub drdy_edges: u64,
+    /// The result in the output register: the time its conversion ended (its DRDY edge) and
+    /// the INPMUX it converted. What a test compares the firmware's time stamps with.
+    pub latched: Option<(u64, u8)>,
 }
 
 impl Ads1262Model {
@@ -90,6 +93,7 @@ impl Ads1262Model {
             corrupt_reads: 0,
             refusals: 0,
             drdy_edges: 0,
+            latched: None,
         }
     }
 
@@ -141,6 +145,7 @@ impl Ads1262Model {
                 break;
             }
             self.convert();
+            self.latched = Some((t, self.regs[INPMUX]));
             self.drdy_edges += 1;
             self.next_conversion_us = Some(t + self.period_us() as u64);
         }

@@ -4,12 +4,19 @@
 //! lets a chip refuse a transaction in the wrong mode or too fast).
 //!
 //! The real drivers and the real acquisition code of the `accomp` core run against these
-//! models: in this crate's integration test (`tests/board_sim.rs`) and in the virtual board.
+//! models on one [`Board`] ([`board`]: the firmware's interrupts and tasks in time order): in
+//! this crate's integration test (`tests/board_sim.rs`) and in the virtual board.
 
 pub mod ad7124;
 pub mod ads1262;
+pub mod board;
 pub mod bus;
+pub mod flash;
+pub mod usart;
 
 pub use ad7124::Ad7124Model;
 pub use ads1262::Ads1262Model;
+pub use board::{Acquired, Board, Inputs};
 pub use bus::{BusRefusal, Chip, Clock, SimDelay, SimSpi};
+pub use flash::{FlashTiming, TimedFlash};
+pub use usart::UsartRx;

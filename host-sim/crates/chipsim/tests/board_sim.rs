@@ -9,15 +9,12 @@
 //! The station is generated here from the core (the chip models and this test need nothing
 //! above it). Run: `cargo test -p accomp-chipsim --test board_sim`.
 
-use std::cell::RefCell;
 use std::rc::Rc;
 
-use accomp::acquisition::{
-    AdsReading, AdsSequencer, InterruptDrdy, RtdSequencer, SampleAssembler, SpiSettings,
-};
+use accomp::acquisition::SpiSettings;
 use accomp::board;
-use accomp::drivers::ad7124::{self, Ad7124};
-use accomp::drivers::ads1262::{self, Ads1262, DataRate};
+use accomp::drivers::ad7124;
+use accomp::drivers::ads1262::{self, DataRate};
 use accomp::model::StaticCoefficients;
 use accomp::pipeline::{process_prepared, Frame, Status};
 use accomp::prepared::PreparedCalibration;
@@ -26,15 +23,10 @@ use accomp::table::CalibrationTable;
 use accomp::units::{Celsius, Gs, RAD_PER_ARCSEC};
 use embedded_hal::spi::{MODE_1, MODE_3};
 
-use accomp_chipsim::{Ad7124Model, Ads1262Model, BusRefusal, Clock, SimDelay, SimSpi};
-
-type AdsSeq = AdsSequencer<SimSpi<Ads1262Model>, InterruptDrdy, SimDelay>;
-type RtdSeq = RtdSequencer<SimSpi<Ad7124Model>, InterruptDrdy, SimDelay>;
+use accomp_chipsim::{Acquired, Ad7124Model, Ads1262Model, Board, BusRefusal, Clock};
 
 const S: u64 = 1_000_000;
 const H: u64 = 3600 * S;
-/// Supervisor tick of the ADS1262 sequencer in the firmware (bsp/frontend.rs).
-const ADS_TICK_US: u64 = 20_000;
 
 /// The thermostat, the foundation and the accelerometer: physical values at time t.
 struct Station {
@@ -79,19 +71,13 @@ impl Station {
     }
 }
 
-/// The board on the bench: two chip models, the sequencers, the assembler and the pipeline.
+/// The board on the bench: the chip models, sequencers and assembler ([`Board`]), the station
+/// on their inputs, and the pipeline.
 struct Bench {
-    clock: Clock,
-    ads: Rc<RefCell<Ads1262Model>>,
-    rtd: Rc<RefCell<Ad7124Model>>,
-    ads_seq: AdsSeq,
-    rtd_seq: RtdSeq,
-    assembler: SampleAssembler,
+    board: Board,
     prepared: PreparedCalibration,
     station: Station,
     frames: Vec<Frame>,
-    next_ads_tick: u64,
-    next_rtd_tick: u64,
     /// Physics overrides while a fault is on.
     accel_override_v: Option<f64>,
     rtd_override_ohms: Option<f64>,
@@ -101,45 +87,16 @@ impl Bench {
     fn with_buses(ads_bus: SpiSettings, rtd_bus: SpiSettings) -> Self {
         let clock = Clock::default();
         clock.set(1_000);
-        let ads = Rc::new(RefCell::new(Ads1262Model::new(clock.clone())));
-        let rtd = Rc::new(RefCell::new(Ad7124Model::new(clock.clone())));
-        let ads_driver = Ads1262::new(
-            SimSpi {
-                chip: ads.clone(),
-                bus: ads_bus,
-            },
-            InterruptDrdy,
-            SimDelay(clock.clone()),
-            board::ads1262_config(),
-        );
-        let rtd_driver = Ad7124::new(
-            SimSpi {
-                chip: rtd.clone(),
-                bus: rtd_bus,
-            },
-            InterruptDrdy,
-            SimDelay(clock.clone()),
-            board::ad7124_config(),
-        );
         let table = paper_order2_table();
         let prepared = PreparedCalibration::new(&table).expect("the paper table prepares");
-        let mut b = Bench {
-            clock,
-            ads,
-            rtd,
-            ads_seq: AdsSequencer::new(ads_driver),
-            rtd_seq: RtdSequencer::new(rtd_driver),
-            assembler: SampleAssembler::new(S),
+        Bench {
+            board: Board::with_buses(clock, ads_bus, rtd_bus),
             prepared,
             station: Station { table },
             frames: Vec::new(),
-            next_ads_tick: 0,
-            next_rtd_tick: 0,
             accel_override_v: None,
             rtd_override_ohms: None,
-        };
-        b.apply_physics();
-        b
+        }
     }
 
     fn new() -> Self {
@@ -147,97 +104,64 @@ impl Bench {
     }
 
     fn now(&self) -> u64 {
-        self.clock.now()
+        self.board.now()
     }
 
     /// Power-up as the firmware does it: no blocking init, the sequencers bring their chips up
     /// in steps from their first ticks. Runs 1.5 s and says whether both are running.
     fn boot(&mut self) -> (bool, bool) {
-        let now = self.now();
-        self.next_ads_tick = now + ADS_TICK_US;
-        self.next_rtd_tick = now + self.rtd_seq.period_us();
-        self.run_until(now + 1_500_000);
+        self.run_until(self.now() + 1_500_000);
         (
-            self.ads_seq.is_running(),
-            self.rtd_seq.counters().reinits == 1,
+            self.board.ads_seq.is_running(),
+            self.board.rtd_seq.counters().reinits == 1,
         )
     }
 
-    fn apply_physics(&mut self) {
-        let t = self.now();
-        let accel = self
-            .accel_override_v
-            .unwrap_or_else(|| self.station.output_v(t));
-        let tilt = self.station.tilt_arcsec(t) / self.station.table.tilt.scale_arcsec_per_v;
-        let ohms = self
-            .rtd_override_ohms
-            .unwrap_or_else(|| self.station.rtd_ohms(t));
-        {
-            let mut a = self.ads.borrow_mut();
-            a.advance();
-            a.accel_v = accel;
-            a.tilt_v = tilt;
-        }
-        let mut r = self.rtd.borrow_mut();
-        r.advance();
-        r.rtd_ohms = ohms;
-    }
-
-    fn emit(&mut self, reading: AdsReading) {
-        let raw = self.assembler.assemble(&reading);
-        let mut frame = process_prepared(reading.seq, reading.time_us, &raw, Some(&self.prepared));
-        frame.lost = reading.lost;
-        self.frames.push(frame);
+    /// Runs `f` on the board with the station (and the fault overrides) on its inputs and the
+    /// pipeline behind it.
+    fn drive(
+        &mut self,
+        f: impl FnOnce(
+            &mut Board,
+            &mut dyn FnMut(u64, &mut Ads1262Model, &mut Ad7124Model),
+            &mut dyn FnMut(Acquired),
+        ),
+    ) {
+        let Bench {
+            board,
+            prepared,
+            station,
+            frames,
+            accel_override_v,
+            rtd_override_ohms,
+        } = self;
+        let mut inputs = |t: u64, a: &mut Ads1262Model, r: &mut Ad7124Model| {
+            a.accel_v = accel_override_v.unwrap_or_else(|| station.output_v(t));
+            a.tilt_v = station.tilt_arcsec(t) / station.table.tilt.scale_arcsec_per_v;
+            r.rtd_ohms = rtd_override_ohms.unwrap_or_else(|| station.rtd_ohms(t));
+        };
+        let mut out = |acq: Acquired| {
+            let mut frame = process_prepared(
+                acq.reading.seq,
+                acq.reading.time_us,
+                &acq.raw,
+                Some(prepared),
+            );
+            frame.lost = acq.reading.lost;
+            frames.push(frame);
+        };
+        f(board, &mut inputs, &mut out);
     }
 
     /// The core stalls for `duration_us` (a flash erase: no instruction fetch, no handler runs)
-    /// while the converters go on converting. Then the DRDY interrupt that became pending during
-    /// the stall runs first (EXTI4 has the highest priority), then the overdue ticks.
+    /// while the converters go on converting ([`Board::stall`]).
     fn stall(&mut self, duration_us: u64) {
-        let edges = self.ads.borrow().drdy_edges;
-        let end = self.now() + duration_us;
-        self.clock.set(end);
-        self.apply_physics();
-        if self.ads.borrow().drdy_edges != edges {
-            if let Some(r) = self.ads_seq.on_drdy(end) {
-                self.emit(r);
-            }
-        }
-        self.next_ads_tick = self.next_ads_tick.max(end);
-        self.next_rtd_tick = self.next_rtd_tick.max(end);
+        self.drive(|b, i, o| b.stall(duration_us, &mut &mut *i, &mut &mut *o));
     }
 
-    /// Event-driven run: DRDY edges of the ADS1262 model (the EXTI interrupt), the ADS1262
-    /// supervisor tick, and the RTD task's tick, in time order.
+    /// Event-driven run to `end_us` ([`Board::run_until`]).
     fn run_until(&mut self, end_us: u64) {
-        loop {
-            let drdy = self.ads.borrow().next_drdy().unwrap_or(u64::MAX);
-            let t = drdy.min(self.next_ads_tick).min(self.next_rtd_tick);
-            if t > end_us {
-                self.clock.set(end_us);
-                self.apply_physics();
-                return;
-            }
-            self.clock.set(t);
-            self.apply_physics();
-            if t == drdy {
-                if let Some(r) = self.ads_seq.on_drdy(t) {
-                    self.emit(r);
-                }
-            }
-            if t == self.next_rtd_tick {
-                if let Some(r) = self.rtd_seq.on_tick(t) {
-                    self.assembler.rtd(r);
-                }
-                self.next_rtd_tick = t + self.rtd_seq.period_us();
-            }
-            if t == self.next_ads_tick {
-                if let Some(r) = self.ads_seq.on_tick(t) {
-                    self.emit(r);
-                }
-                self.next_ads_tick = t + ADS_TICK_US;
-            }
-        }
+        self.drive(|b, i, o| b.run_until(end_us, &mut &mut *i, &mut &mut *o));
     }
 }
 
@@ -277,7 +201,10 @@ fn both_chips_come_up_on_the_board_buses_in_their_own_modes() {
     assert_eq!(board::AD7124_BUS.mode, MODE_3);
     let at_boot = b.frames.len();
     b.run_until(b.now() + 10 * S);
-    assert_eq!(b.ads.borrow().refusals + b.rtd.borrow().refusals, 0);
+    assert_eq!(
+        b.board.ads.borrow().refusals + b.board.rtd.borrow().refusals,
+        0
+    );
     // sinc4 at 10 SPS: each channel settles in 4 periods, a pair every 0.8 s.
     let n = b.frames.len() - at_boot;
     assert!((12..=13).contains(&n), "{n} frames in 10 s");
@@ -298,13 +225,13 @@ fn a_wrong_spi_mode_or_clock_is_refused_and_every_frame_says_so() {
     let mut b = Bench::with_buses(board::ADS1262_BUS, old);
     let boot_result = {
         let now = b.now();
-        b.rtd_seq.boot(now)
+        b.board.rtd_seq.boot(now)
     };
     assert_eq!(
         boot_result.err(),
         Some(ad7124::Error::Spi(BusRefusal::WrongMode))
     );
-    assert!(b.rtd.borrow().refusals > 0);
+    assert!(b.board.rtd.borrow().refusals > 0);
     // The right mode, but faster than the AD7124's 100 ns SCLK pulse widths allow.
     let fast = SpiSettings {
         mode: MODE_3,
@@ -313,14 +240,14 @@ fn a_wrong_spi_mode_or_clock_is_refused_and_every_frame_says_so() {
     let mut c = Bench::with_buses(board::ADS1262_BUS, fast);
     let now = c.now();
     assert_eq!(
-        c.rtd_seq.boot(now).err(),
+        c.board.rtd_seq.boot(now).err(),
         Some(ad7124::Error::Spi(BusRefusal::ClockTooFast))
     );
     // The ADS1262 in mode 3.
     let mut d = Bench::with_buses(old_with(MODE_3), board::AD7124_BUS);
     let now = d.now();
     assert_eq!(
-        d.ads_seq.boot(now).err(),
+        d.board.ads_seq.boot(now).err(),
         Some(ads1262::Error::Spi(BusRefusal::WrongMode))
     );
 
@@ -343,11 +270,17 @@ fn old_with(mode: embedded_hal::spi::Mode) -> SpiSettings {
 }
 
 #[test]
-fn set_rate_reprograms_the_ads1262_data_rate() {
+fn set_rate_reprograms_the_ads1262_data_rate_and_claims_no_stall() {
     let mut b = Bench::new();
     b.boot();
     b.run_until(b.now() + 5 * S);
-    b.ads_seq.request_rate(DataRate::Sps50);
+    // Requested while the tilt input converts, so the rate is applied at the switch back to the
+    // accelerometer, between two pairs: the last pair's accelerometer DRDY was at `t`, the
+    // next one comes at t + 2 latencies and its tilt half at t + 3.
+    let latency = b.board.ads_seq.channel_latency_us();
+    let t = b.frames.last().unwrap().time_us;
+    b.run_until(t + 2 * latency + latency / 2);
+    b.board.ads_seq.request_rate(DataRate::Sps50);
     let from = b.now() + 2 * S;
     b.run_until(b.now() + 12 * S);
     // sinc4 at 50 SPS: 4 × 20 ms per channel, a pair every 160 ms.
@@ -363,6 +296,16 @@ fn set_rate_reprograms_the_ads1262_data_rate() {
         assert!((155_000..=165_000).contains(&g), "pair interval {g} µs");
     }
     assert!(b.frames.iter().all(|f| f.status == Status::default()));
+    // The change of rate loses no reading and claims no stall: the pair clock starts again.
+    for w in b.frames.windows(2) {
+        assert_eq!(w[1].seq, w[0].seq + 1);
+        assert_eq!(
+            w[1].lost,
+            accomp::pipeline::LossFlags(0),
+            "frame {}",
+            w[1].seq
+        );
+    }
 }
 
 /// A fault switched on for a while; frames between `on` and `off + RECOVERY` must show `bit`.
@@ -392,14 +335,14 @@ fn a_multi_day_stability_run_names_every_fault_and_recovers() {
             2 * H,
             5 * S,
             Status::DRDY_TIMEOUT,
-            |b, on| b.ads.borrow_mut().stuck_drdy = on,
+            |b, on| b.board.ads.borrow_mut().stuck_drdy = on,
         ),
         (
             "ADS1262 MISO 0xFF",
             4 * H,
             4 * S,
             Status::ADC_NOT_RESPONDING,
-            |b, on| b.ads.borrow_mut().miso_high = on,
+            |b, on| b.board.ads.borrow_mut().miso_high = on,
         ),
         (
             "ADS1262 checksum error",
@@ -408,7 +351,7 @@ fn a_multi_day_stability_run_names_every_fault_and_recovers() {
             Status::ADC_CHECKSUM,
             |b, on| {
                 if on {
-                    b.ads.borrow_mut().corrupt_reads = 1
+                    b.board.ads.borrow_mut().corrupt_reads = 1
                 }
             },
         ),
@@ -419,7 +362,7 @@ fn a_multi_day_stability_run_names_every_fault_and_recovers() {
             Status::ADC_RESET,
             |b, on| {
                 if on {
-                    b.ads.borrow_mut().power_glitch()
+                    b.board.ads.borrow_mut().power_glitch()
                 }
             },
         ),
@@ -441,7 +384,7 @@ fn a_multi_day_stability_run_names_every_fault_and_recovers() {
             16 * H,
             4 * S,
             Status::ADC_NOT_RESPONDING,
-            |b, on| b.rtd.borrow_mut().miso_high = on,
+            |b, on| b.board.rtd.borrow_mut().miso_high = on,
         ),
         (
             "AD7124 CRC error",
@@ -450,7 +393,7 @@ fn a_multi_day_stability_run_names_every_fault_and_recovers() {
             Status::ADC_CHECKSUM,
             |b, on| {
                 if on {
-                    b.rtd.borrow_mut().corrupt_reads = 1
+                    b.board.rtd.borrow_mut().corrupt_reads = 1
                 }
             },
         ),
@@ -461,7 +404,7 @@ fn a_multi_day_stability_run_names_every_fault_and_recovers() {
             Status::ADC_RESET,
             |b, on| {
                 if on {
-                    b.rtd.borrow_mut().power_glitch()
+                    b.board.rtd.borrow_mut().power_glitch()
                 }
             },
         ),
@@ -470,7 +413,7 @@ fn a_multi_day_stability_run_names_every_fault_and_recovers() {
             22 * H,
             4 * S,
             Status::DRDY_TIMEOUT,
-            |b, on| b.rtd.borrow_mut().stuck = on,
+            |b, on| b.board.rtd.borrow_mut().stuck = on,
         ),
         // The second day again at a faster ADS1262 rate (SetRate 20 SPS), with a DRDY stall.
         (
@@ -478,7 +421,7 @@ fn a_multi_day_stability_run_names_every_fault_and_recovers() {
             30 * H,
             3 * S,
             Status::DRDY_TIMEOUT,
-            |b, on| b.ads.borrow_mut().stuck_drdy = on,
+            |b, on| b.board.ads.borrow_mut().stuck_drdy = on,
         ),
     ];
     let rate_change_at = start + 26 * H;
@@ -487,7 +430,7 @@ fn a_multi_day_stability_run_names_every_fault_and_recovers() {
         let on = start + at;
         if !rate_changed && on > rate_change_at {
             b.run_until(rate_change_at);
-            b.ads_seq.request_rate(DataRate::Sps20);
+            b.board.ads_seq.request_rate(DataRate::Sps20);
             rate_changed = true;
         }
         b.run_until(on);
@@ -513,7 +456,10 @@ fn a_multi_day_stability_run_names_every_fault_and_recovers() {
         "{} frames, expected ≈ {expected:.0}",
         frames.len()
     );
-    assert_eq!(b.ads.borrow().refusals + b.rtd.borrow().refusals, 0);
+    assert_eq!(
+        b.board.ads.borrow().refusals + b.board.rtd.borrow().refusals,
+        0
+    );
 
     // 1. Never a silent number: every frame without a status bit is right.
     let mut clean = 0;
@@ -570,7 +516,7 @@ fn a_multi_day_stability_run_names_every_fault_and_recovers() {
         .unwrap_or(0);
     assert!(max_gap <= 2 * S, "longest gap {max_gap} µs");
     assert!(clean as f64 > 0.999 * frames.len() as f64);
-    let c = b.ads_seq.counters();
+    let c = b.board.ads_seq.counters();
     assert!(c.reinits >= 4 && c.timeouts >= 4, "{c:?}");
 }
 
@@ -584,7 +530,7 @@ fn a_core_stall_longer_than_a_pair_leaves_a_seq_gap_flagged_stall_and_nothing_el
     let mut b = Bench::new();
     assert_eq!(b.boot(), (true, true));
     b.run_until(b.now() + 20 * S);
-    let pair_us = b.ads_seq.pair_period_us();
+    let pair_us = b.board.ads_seq.pair_period_us();
     let first = b.frames.len();
     b.stall(2 * S);
     b.run_until(b.now() + 20 * S);
@@ -623,63 +569,40 @@ fn a_core_stall_longer_than_a_pair_leaves_a_seq_gap_flagged_stall_and_nothing_el
     }
 }
 
-/// The calibration flash of the service under test, counting its sector erases: each one stalls
-/// the simulated core for the worst-case 128 KiB erase (2 s at x32, DS8626).
-struct ErasingFlash {
-    ram: accomp::storage::RamFlash<3072, 1024, 4>,
-    erases: Rc<std::cell::Cell<u32>>,
-}
-
-mod erasing_flash {
-    use super::ErasingFlash;
-    use accomp::storage::RamFlashError;
-    use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
-
-    impl ErrorType for ErasingFlash {
-        type Error = RamFlashError;
-    }
-    impl ReadNorFlash for ErasingFlash {
-        const READ_SIZE: usize = 1;
-        fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), RamFlashError> {
-            self.ram.read(offset, bytes)
-        }
-        fn capacity(&self) -> usize {
-            self.ram.capacity()
-        }
-    }
-    impl NorFlash for ErasingFlash {
-        const WRITE_SIZE: usize = 4;
-        const ERASE_SIZE: usize = 1024;
-        fn erase(&mut self, from: u32, to: u32) -> Result<(), RamFlashError> {
-            self.erases.set(self.erases.get() + 1);
-            self.ram.erase(from, to)
-        }
-        fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), RamFlashError> {
-            self.ram.write(offset, bytes)
-        }
-    }
-}
+/// Only the erases stall here (2 s each, DS8626 worst case at x32); the whole front-end test
+/// below adds the programming time.
+const ERASES_ONLY: accomp_chipsim::FlashTiming = accomp_chipsim::FlashTiming {
+    sector_erase_us: 2 * S,
+    byte_program_us: 0,
+};
 
 /// The device side around the simulated board: the real `Service` on a flash whose erases
 /// stall the simulated core, called as the firmware's worker calls it.
 struct Device {
-    service: accomp::service::Service<ErasingFlash>,
-    erases: Rc<std::cell::Cell<u32>>,
+    service: accomp::service::Service<BoardFlash>,
+    busy_us: Rc<std::cell::Cell<u64>>,
     next_id: u32,
 }
 
 /// Worst-case sector erase (128 KiB at x32, DS8626 "Flash memory programming").
-const ERASE_STALL_US: u64 = 2 * S;
+const ERASE_STALL_US: u64 = ERASES_ONLY.sector_erase_us;
 
 impl Device {
+    /// The device's clock during a flash operation: the core stalls for it.
+    fn clock(&self, b: &Bench) -> impl Fn() -> u64 {
+        let (clock, busy, before) = (
+            b.board.clock.clone(),
+            self.busy_us.clone(),
+            self.busy_us.get(),
+        );
+        move || clock.now() + (busy.get() - before)
+    }
+
     fn request(&mut self, b: &mut Bench, request: accomp::protocol::Request) {
         use accomp::protocol::{DeviceMessage, HostFrame};
         self.next_id += 1;
-        let before = self.erases.get();
-        let clock = b.clock.clone();
-        let erases = self.erases.clone();
-        // The device's clock during the call: an erase stalls it ERASE_STALL_US.
-        let now = move || clock.now() + u64::from(erases.get() - before) * ERASE_STALL_US;
+        let before = self.busy_us.get();
+        let now = self.clock(b);
         let answer = self.service.handle(
             HostFrame {
                 id: self.next_id,
@@ -691,26 +614,24 @@ impl Device {
             matches!(answer, DeviceMessage::Response { .. }),
             "{answer:?}"
         );
-        self.stall_for_erases(b, before);
+        self.stall_for_flash(b, before);
         // The worker's erase ahead once the answer is out.
         self.erase_ahead(b);
     }
 
     /// The worker's erase ahead; true when it erased.
     fn erase_ahead(&mut self, b: &mut Bench) -> bool {
-        let before = self.erases.get();
-        let clock = b.clock.clone();
-        let erases = self.erases.clone();
-        let now = move || clock.now() + u64::from(erases.get() - before) * ERASE_STALL_US;
+        let before = self.busy_us.get();
+        let now = self.clock(b);
         let erased = self.service.erase_ahead(&now) == Ok(true);
-        self.stall_for_erases(b, before);
+        self.stall_for_flash(b, before);
         erased
     }
 
-    fn stall_for_erases(&self, b: &mut Bench, before: u32) {
-        let n = self.erases.get() - before;
-        if n > 0 {
-            b.stall(u64::from(n) * ERASE_STALL_US);
+    fn stall_for_flash(&self, b: &mut Bench, before: u64) {
+        let us = self.busy_us.get() - before;
+        if us > 0 {
+            b.stall(us);
         }
     }
 
@@ -749,16 +670,13 @@ impl Device {
 fn tables_changed_while_streaming_lose_readings_only_to_counted_flagged_erase_stalls() {
     use accomp::pipeline::LossFlags;
     use accomp::protocol::{Board, Request};
-    let erases = Rc::new(std::cell::Cell::new(0));
-    let flash = ErasingFlash {
-        ram: accomp::storage::RamFlash::new(),
-        erases: erases.clone(),
-    };
+    let flash = accomp_chipsim::TimedFlash::new(accomp::storage::RamFlash::new(), ERASES_ONLY);
+    let erases = flash.erases.clone();
     let layout = accomp::storage::SlotLayout::consecutive(1024);
     let mut b = Bench::new();
     let mut dev = Device {
+        busy_us: flash.busy_us.clone(),
         service: accomp::service::Service::new(Board::Frontend, flash, layout),
-        erases: erases.clone(),
         next_id: 0,
     };
     let tables: Vec<CalibrationTable> = (1..=5u8)
@@ -793,7 +711,7 @@ fn tables_changed_while_streaming_lose_readings_only_to_counted_flagged_erase_st
     b.run_until(b.now() + 10 * S);
 
     let frames = b.frames[first..].to_vec();
-    let pair_us = b.ads_seq.pair_period_us();
+    let pair_us = b.board.ads_seq.pair_period_us();
     let mut lost = 0u64;
     let mut stalls = 0;
     for w in frames.windows(2) {
@@ -838,5 +756,665 @@ fn tables_changed_while_streaming_lose_readings_only_to_counted_flagged_erase_st
     assert_eq!(erases.get(), before + 1);
     for f in &frames {
         check_clean_frame(&b.station, f).unwrap();
+    }
+}
+
+/// The firmware's UART receive ring (`RX_RING_LEN` in src/bsp/frontend.rs).
+const RX_RING_LEN: usize = 2048;
+/// The firmware's inbound queue (`INBOUND_CAPACITY` in src/main.rs).
+const INBOUND_CAPACITY: usize = 16;
+
+/// What the interrupts hand the worker (src/main.rs `Inbound`; RTD readings go straight to the
+/// assembler inside [`Board`]).
+enum Inbound {
+    Frame(Result<Vec<u8>, accomp::protocol::FrameError>),
+    Ads(Acquired),
+}
+
+/// A message on its way to the host: when its last byte is out, and for a sample the model's
+/// true DRDY time of its accelerometer conversion.
+struct ToHost {
+    at_us: u64,
+    msg: accomp::protocol::DeviceMessage,
+    true_drdy_us: Option<u64>,
+}
+
+/// A flash stall of the core: when, how long, and whether the stream was on.
+#[derive(Debug, Clone, Copy)]
+struct Stall {
+    at_us: u64,
+    us: u64,
+    streaming: bool,
+    /// Caused by a request (a commit), not by the worker's erase ahead.
+    by_request: bool,
+}
+
+type BoardFlash = accomp_chipsim::TimedFlash<accomp::storage::RamFlash<3072, 1024, 4>>;
+
+/// The whole front-end in time: the [`Board`] on the chip models, USART1 with its DMA ring
+/// (RM0090 §30, §10) receiving the host's bytes at 115,200 Bd, the firmware's receive path (the
+/// core's `RxRing` and `FrameDecoder`, read as `bsp::frontend::read_byte` does), the worker's
+/// `Service` on a flash whose erases and programs take their datasheet time and stall the core
+/// meanwhile, the transmit line back to the host, and the host.
+struct Rig {
+    board: Board,
+    station: Station,
+    usart: accomp_chipsim::UsartRx<RX_RING_LEN>,
+    ring: accomp::rx_ring::RxRing<RX_RING_LEN>,
+    /// Ring position when a line error was last counted (as in `read_byte`).
+    error_head: usize,
+    uart_overruns: u32,
+    decoder: accomp::protocol::FrameDecoder<{ accomp::protocol::MAX_FRAME_LEN }>,
+    /// Host → device bytes with the time each one's stop bit is sampled.
+    line: std::collections::VecDeque<(u64, u8)>,
+    line_free_us: u64,
+    bytes_sent: u64,
+    /// Bytes the firmware's reader took out of the ring.
+    bytes_read: u64,
+    inbound: std::collections::VecDeque<Inbound>,
+    readings_dropped: u32,
+    service: accomp::service::Service<BoardFlash>,
+    busy_us: Rc<std::cell::Cell<u64>>,
+    tx_free_us: u64,
+    to_host: Vec<ToHost>,
+    stalls: Vec<Stall>,
+    next_id: u32,
+    /// The rate last handed to the sequencer (None: the board's default).
+    rate: Option<DataRate>,
+}
+
+impl Rig {
+    /// Powers the board up on `flash` (its clock from 1 ms).
+    fn boot(flash: BoardFlash) -> Rig {
+        let clock = Clock::default();
+        clock.set(1_000);
+        let busy_us = flash.busy_us.clone();
+        let mut usart = accomp_chipsim::UsartRx::new();
+        // start_rx_dma: the circular stream enabled, then USART_CR3.DMAR.
+        usart.dmar = true;
+        let service = accomp::service::Service::new(
+            accomp::protocol::Board::Frontend,
+            flash,
+            accomp::storage::SlotLayout::consecutive(1024),
+        );
+        Rig {
+            board: Board::new(clock),
+            station: Station {
+                table: paper_order2_table(),
+            },
+            usart,
+            ring: accomp::rx_ring::RxRing::new(),
+            error_head: 0,
+            uart_overruns: 0,
+            decoder: accomp::protocol::FrameDecoder::new(),
+            line: Default::default(),
+            line_free_us: 0,
+            bytes_sent: 0,
+            bytes_read: 0,
+            inbound: Default::default(),
+            readings_dropped: 0,
+            service,
+            busy_us,
+            tx_free_us: 0,
+            to_host: Vec::new(),
+            stalls: Vec::new(),
+            next_id: 0,
+            rate: None,
+        }
+    }
+
+    fn now(&self) -> u64 {
+        self.board.now()
+    }
+
+    /// The chips up to `t_us`: handlers run, finished pairs queue for the worker.
+    fn chips_until(&mut self, t_us: u64) {
+        let Rig {
+            board,
+            station,
+            inbound,
+            readings_dropped,
+            ..
+        } = self;
+        board.run_until(
+            t_us,
+            &mut |t: u64, a: &mut Ads1262Model, r: &mut Ad7124Model| {
+                station_inputs(station, t, a, r)
+            },
+            &mut |acq: Acquired| push_reading(inbound, readings_dropped, acq),
+        );
+    }
+
+    /// Runs everything until `end_us`, the worker after every event.
+    fn run_until(&mut self, end_us: u64) {
+        loop {
+            let byte_at = self.line.front().map_or(u64::MAX, |b| b.0);
+            let t = self.board.next_event_us().min(byte_at).min(end_us);
+            self.chips_until(t);
+            self.worker();
+            if t < byte_at {
+                if t >= end_us {
+                    return;
+                }
+                continue;
+            }
+            let (_, b) = self.line.pop_front().unwrap();
+            self.usart.byte_received(b);
+            // The USART1 interrupt (priority 2) runs: the core is not stalled here.
+            self.uart_rx();
+            self.worker();
+        }
+    }
+
+    /// The firmware's `uart_rx` task: drains the DMA ring into the frame decoder (what
+    /// `bsp::frontend::read_byte` does with the registers, on the models').
+    fn uart_rx(&mut self) {
+        use accomp::rx_ring::RxRing;
+        use accomp_chipsim::usart::sr;
+        loop {
+            let status = self.usart.read_sr();
+            let ndtr = self.usart.ndtr();
+            let head = RxRing::<RX_RING_LEN>::head(ndtr);
+            if status & sr::ORE != 0 && head != self.error_head {
+                self.error_head = head;
+                self.uart_overruns += 1;
+            }
+            let ring = &self.usart.ring;
+            let Some(byte) = self.ring.next(ndtr, |i| ring[i]) else {
+                return;
+            };
+            self.bytes_read += 1;
+            if let Some(frame) = self.decoder.push(byte) {
+                if self.inbound.len() < INBOUND_CAPACITY {
+                    self.inbound
+                        .push_back(Inbound::Frame(frame.map(<[u8]>::to_vec)));
+                } else {
+                    self.service.count_dropped();
+                }
+            }
+        }
+    }
+
+    /// The core stalls `us` for the flash: the chips convert, the USART and its DMA receive,
+    /// no handler or task runs. Afterwards the pending interrupts run.
+    fn stall(&mut self, us: u64, by_request: bool) {
+        let at_us = self.now();
+        self.stalls.push(Stall {
+            at_us,
+            us,
+            streaming: self.service.streaming(),
+            by_request,
+        });
+        let end = at_us + us;
+        while self.line.front().is_some_and(|b| b.0 <= end) {
+            let (_, b) = self.line.pop_front().unwrap();
+            self.usart.byte_received(b);
+        }
+        let Rig {
+            board,
+            station,
+            inbound,
+            readings_dropped,
+            ..
+        } = self;
+        board.stall(
+            us,
+            &mut |t: u64, a: &mut Ads1262Model, r: &mut Ad7124Model| {
+                station_inputs(station, t, a, r)
+            },
+            &mut |acq: Acquired| push_reading(inbound, readings_dropped, acq),
+        );
+        self.uart_rx();
+    }
+
+    /// The worker: every queued item in order, the answer sent after any flash stall, then the
+    /// erase ahead when nothing waits (src/main.rs `worker`).
+    fn worker(&mut self) {
+        use accomp::pipeline::LossFlags;
+        use accomp::protocol::{decode_message, HostFrame, Request};
+        while let Some(item) = self.inbound.pop_front() {
+            self.service.losses_mut().uart_rx_overrun = self.uart_overruns;
+            let busy_before = self.busy_us.get();
+            let (clock, busy) = (self.board.clock.clone(), self.busy_us.clone());
+            let now = move || clock.now() + (busy.get() - busy_before);
+            let (reply, true_drdy_us) = match item {
+                Inbound::Frame(frame) => {
+                    let is_commit = frame.as_ref().is_ok_and(|body| {
+                        matches!(
+                            decode_message::<HostFrame>(body).map(|f| f.request),
+                            Ok(Request::UploadCommit { .. }
+                                | Request::Rollback
+                                | Request::Activate { .. })
+                        )
+                    });
+                    let reply = self
+                        .service
+                        .handle_frame(frame.as_deref().map_err(|e| *e), &now);
+                    let stalled = self.busy_us.get() - busy_before;
+                    if stalled > 0 {
+                        assert!(is_commit, "only a commit touches the flash");
+                        self.stall(stalled, true);
+                    }
+                    (reply, None)
+                }
+                Inbound::Ads(acq) => {
+                    let mut lost = acq.reading.lost;
+                    let dropped = std::mem::take(&mut self.readings_dropped);
+                    if dropped > 0 {
+                        lost.0 |= LossFlags::QUEUE_FULL;
+                        let l = self.service.losses_mut();
+                        l.queue_full = l.queue_full.wrapping_add(dropped);
+                    }
+                    let r = acq.reading;
+                    (
+                        self.service.acquired(r.seq, lost, &acq.raw, r.time_us),
+                        acq.true_accel_drdy_us,
+                    )
+                }
+            };
+            if let Some(msg) = reply {
+                self.transmit(msg, true_drdy_us);
+            }
+            // SetRate: the worker hands the rate to the supervisor, which requests it.
+            if let Some(rate) = DataRate::from_sps(self.service.rate_hz()) {
+                if Some(rate) != self.rate {
+                    self.rate = Some(rate);
+                    self.board.ads_seq.request_rate(rate);
+                }
+            }
+            if self.service.erase_pending() && self.inbound.is_empty() {
+                let busy_before = self.busy_us.get();
+                let (clock, busy) = (self.board.clock.clone(), self.busy_us.clone());
+                let now = move || clock.now() + (busy.get() - busy_before);
+                let _ = self.service.erase_ahead(&now);
+                let stalled = self.busy_us.get() - busy_before;
+                if stalled > 0 {
+                    self.stall(stalled, false);
+                }
+            }
+        }
+    }
+
+    /// The transmitter (blocking, byte after byte at the baud rate).
+    fn transmit(&mut self, msg: accomp::protocol::DeviceMessage, true_drdy_us: Option<u64>) {
+        let mut buf = [0u8; accomp::protocol::MAX_FRAME_LEN];
+        let n = accomp::protocol::encode_frame(&msg, &mut buf).expect("every message encodes");
+        let start = self.tx_free_us.max(self.now());
+        self.tx_free_us = accomp_chipsim::usart::byte_done_us(start, n as u64 - 1);
+        self.to_host.push(ToHost {
+            at_us: self.tx_free_us,
+            msg,
+            true_drdy_us,
+        });
+    }
+
+    /// The host sends a request: its bytes go on the line back to back after what is already
+    /// on it.
+    fn send(&mut self, request: accomp::protocol::Request) -> u32 {
+        use accomp::protocol::{encode_frame, HostFrame, MAX_FRAME_LEN};
+        self.next_id += 1;
+        let id = self.next_id;
+        let mut buf = [0u8; MAX_FRAME_LEN];
+        let n = encode_frame(&HostFrame { id, request }, &mut buf).unwrap();
+        let start = self.line_free_us.max(self.now());
+        for (k, &b) in buf[..n].iter().enumerate() {
+            self.line
+                .push_back((accomp_chipsim::usart::byte_done_us(start, k as u64), b));
+        }
+        self.line_free_us = self.line.back().map_or(start, |b| b.0);
+        self.bytes_sent += n as u64;
+        id
+    }
+
+    /// Sends a request and runs until its answer has reached the host.
+    fn call(&mut self, request: accomp::protocol::Request) -> accomp::protocol::Response {
+        use accomp::protocol::DeviceMessage;
+        let id = self.send(request.clone());
+        let deadline = self.now() + 10 * S;
+        loop {
+            let now = self.now();
+            if let Some(m) = self.to_host.iter().find(|m| {
+                m.at_us <= now
+                    && matches!(m.msg, DeviceMessage::Response { id: i, .. }
+                        | DeviceMessage::Error { id: i, .. } if i == id)
+            }) {
+                match &m.msg {
+                    DeviceMessage::Response { body, .. } => return body.clone(),
+                    other => panic!("{request:?}: {other:?}"),
+                }
+            }
+            assert!(now < deadline, "{request:?} unanswered");
+            self.run_until(now + 500);
+        }
+    }
+
+    /// The answer to request `id` that has reached the host (panics if none has).
+    fn answer(&self, id: u32) -> Result<accomp::protocol::Response, accomp::protocol::ErrorReply> {
+        use accomp::protocol::DeviceMessage;
+        let now = self.now();
+        let m = self.to_host.iter().filter(|m| m.at_us <= now);
+        match m.map(|m| &m.msg).find(|msg| {
+            matches!(msg, DeviceMessage::Response { id: i, .. }
+                | DeviceMessage::Error { id: i, .. } if *i == id)
+        }) {
+            Some(DeviceMessage::Response { body, .. }) => Ok(body.clone()),
+            Some(DeviceMessage::Error { error, .. }) => Err(*error),
+            _ => panic!("request {id} unanswered"),
+        }
+    }
+
+    fn info(&mut self) -> accomp::protocol::DeviceInfo {
+        match self.call(accomp::protocol::Request::Info) {
+            accomp::protocol::Response::Info(i) => i,
+            other => panic!("{other:?}"),
+        }
+    }
+
+    /// Uploads `table` over the line as the host client does, chunk by chunk, and commits.
+    fn upload(&mut self, table: &CalibrationTable) {
+        use accomp::protocol::{upload_body_crc32, Request, Response, CHUNK_LEN};
+        let bytes = table.encode();
+        let upload_id = 7000 + self.next_id;
+        self.call(Request::UploadBegin {
+            upload_id,
+            total_len: bytes.len() as u32,
+            body_crc32: upload_body_crc32(&bytes),
+        });
+        for (k, chunk) in bytes.chunks(CHUNK_LEN).enumerate() {
+            self.call(Request::UploadChunk {
+                upload_id,
+                offset: (k * CHUNK_LEN) as u32,
+                data: heapless::Vec::from_slice(chunk).unwrap(),
+            });
+        }
+        assert_eq!(
+            self.call(Request::UploadCommit { upload_id }),
+            Response::Committed {
+                table_id: table.id()
+            }
+        );
+    }
+
+    /// The sample frames sent after the first `from` messages that reached the host so far,
+    /// with their true DRDY times.
+    fn delivered(&self, from: usize) -> Vec<(Frame, Option<u64>)> {
+        let now = self.now();
+        self.to_host[from..]
+            .iter()
+            .filter(|m| m.at_us <= now)
+            .filter_map(|m| match &m.msg {
+                accomp::protocol::DeviceMessage::Sample { id: 0, frame } => {
+                    Some((*frame, m.true_drdy_us))
+                }
+                _ => None,
+            })
+            .collect()
+    }
+}
+
+fn station_inputs(station: &Station, t: u64, a: &mut Ads1262Model, r: &mut Ad7124Model) {
+    a.accel_v = station.output_v(t);
+    a.tilt_v = station.tilt_arcsec(t) / station.table.tilt.scale_arcsec_per_v;
+    r.rtd_ohms = station.rtd_ohms(t);
+}
+
+/// The DRDY interrupt's `try_send`: a full queue loses the reading, counted for the next one.
+fn push_reading(
+    inbound: &mut std::collections::VecDeque<Inbound>,
+    dropped: &mut u32,
+    acq: Acquired,
+) {
+    if inbound.len() < INBOUND_CAPACITY {
+        inbound.push_back(Inbound::Ads(acq));
+    } else {
+        *dropped += 1;
+    }
+}
+
+/// Checks one stream as the host received it: every pair slot of the ADC's conversion clock is
+/// a delivered frame or a number skipped in `seq`, each gap is flagged on the frame after it,
+/// the gaps add up to the device's `conversions_lost`, and every time stamp is within 50 µs of
+/// the model's true DRDY time. Returns the number of gaps.
+fn check_stream(
+    name: &str,
+    frames: &[(Frame, Option<u64>)],
+    pair_us: u64,
+    conversions_lost: u32,
+    station: &Station,
+) -> usize {
+    use accomp::pipeline::LossFlags;
+    assert!(frames.len() > 100, "{name}: {} frames", frames.len());
+    let mut lost = 0u64;
+    let mut gaps = 0;
+    // The first pair of a stream may still be of the rate before SetRate: slots from the second.
+    for (k, w) in frames.windows(2).enumerate() {
+        let (a, b) = (&w[0].0, &w[1].0);
+        assert!(b.seq > a.seq, "{name}: seq runs forward");
+        let gap = u64::from(b.seq - a.seq - 1);
+        let flagged = b.lost.0 & (LossFlags::STALL | LossFlags::QUEUE_FULL) != 0;
+        if gap > 0 {
+            eprintln!(
+                "{name}: gap {gap} before {} at {} {:?} (prev at {})",
+                b.seq, b.time_us, b.lost, a.time_us
+            );
+        }
+        assert_eq!(
+            gap > 0,
+            flagged,
+            "{name}: frame {} gap {gap} lost {:?}",
+            b.seq,
+            b.lost
+        );
+        if k > 0 {
+            let slots = (b.time_us - a.time_us + pair_us / 2) / pair_us;
+            assert_eq!(
+                gap + 1,
+                slots,
+                "{name}: frame {}: every pair slot accounted",
+                b.seq
+            );
+        }
+        lost += gap;
+        gaps += usize::from(gap > 0);
+    }
+    assert_eq!(
+        lost,
+        u64::from(conversions_lost),
+        "{name}: gaps = conversions_lost"
+    );
+    let mut worst = 0;
+    for (f, true_us) in frames {
+        let t = true_us.unwrap_or_else(|| panic!("{name}: frame {} carries no conversion", f.seq));
+        worst = worst.max(f.time_us.abs_diff(t));
+        // Before the first upload of a factory-blank board the frames say NO_CALIBRATION.
+        if f.status == Status::default() {
+            check_clean_frame(station, f).unwrap();
+        } else {
+            assert_eq!(
+                f.status,
+                Status(Status::NO_CALIBRATION),
+                "{name}: frame {}",
+                f.seq
+            );
+        }
+    }
+    eprintln!(
+        "{name}: {} frames, {gaps} gaps, {lost} pairs lost, worst stamp {worst} µs off",
+        frames.len()
+    );
+    assert!(
+        worst <= 50,
+        "{name}: a time stamp {worst} µs off the true DRDY time"
+    );
+    gaps
+}
+
+/// The timed simulation of the whole front-end: streaming at the highest data rate the firmware
+/// configures (400 SPS: a pair every 20 ms), tables uploaded over the modelled UART (USART1 →
+/// circular DMA → the firmware's ring, bytes every 86.8 µs at 115,200 Bd, ORE when a byte is not
+/// taken in time) and committed and rolled back in the middle, a reboot with an old table in the
+/// spare slot and the host starting its stream at once, and every flash erase (2 s) and program
+/// (100 µs a byte) stalling the core meanwhile (RM0090 §3.5, DS8626 worst case).
+///
+/// Asserted: no UART byte lost (ORE never set, every byte sent received); every conversion pair
+/// delivered or accounted for by a seq gap, a flag and `conversions_lost`; time stamps within
+/// 50 µs of the model's true DRDY times across every stall; the only stalls while streaming are
+/// the commits the host asked for (the erase ahead waits for the stream to stop), each counted in
+/// Info when it erased.
+#[test]
+fn a_400_sps_stream_through_uploads_rollback_and_reboot_loses_no_byte_and_accounts_for_every_conversion(
+) {
+    use accomp::protocol::{Request, Response, CHUNK_LEN, MAX_RATE_HZ};
+    let tables: Vec<CalibrationTable> = (1..=5u8)
+        .map(|d| {
+            let mut t = paper_order2_table();
+            t.date.day = d;
+            t
+        })
+        .collect();
+    let flash = accomp_chipsim::TimedFlash::new(
+        accomp::storage::RamFlash::new(),
+        accomp_chipsim::FlashTiming::MAX,
+    );
+    let erases = flash.erases.clone();
+
+    // First boot, a factory-blank flash: three uploads (each into a blank slot: programming
+    // only) and a rollback (into the slot of table 1: an erase) while streaming.
+    let mut rig = Rig::boot(flash);
+    rig.run_until(rig.now() + 1_500_000);
+    assert_eq!(rig.call(Request::SetRate { hz: MAX_RATE_HZ }), Response::Ok);
+    assert_eq!(rig.call(Request::StreamStart), Response::Ok);
+    let before = rig.info().losses;
+    let from = rig.to_host.len();
+    rig.run_until(rig.now() + S);
+    for t in &tables[..3] {
+        rig.upload(t);
+        rig.run_until(rig.now() + S);
+    }
+    // The rollback, and behind it a host's window of 8 requests in flight (`accomp compensate`
+    // keeps 8): 8 full-size chunk frames (of no upload: each is refused with NoUpload and
+    // changes nothing) arrive during the rollback's 2 s erase stall and wait in the DMA ring.
+    let rollback = rig.send(Request::Rollback);
+    let window: Vec<u32> = (0..8)
+        .map(|_| {
+            rig.send(Request::UploadChunk {
+                upload_id: 1,
+                offset: 0,
+                data: heapless::Vec::from_slice(&[0x55; CHUNK_LEN]).unwrap(),
+            })
+        })
+        .collect();
+    rig.run_until(rig.now() + 3 * S);
+    assert_eq!(rig.answer(rollback), Ok(Response::Ok));
+    for id in window {
+        let code = rig.answer(id).unwrap_err().code;
+        assert_eq!(code, accomp::protocol::ErrorCode::NoUpload as u16);
+    }
+    let info = rig.info();
+    assert_eq!(info.active_table, Some(tables[1].id()));
+    let pair_us = rig.board.ads_seq.pair_period_us();
+    assert_eq!(pair_us, 20_000, "400 SPS, sinc4: 4 × 2.5 ms per input");
+    let frames = rig.delivered(from);
+    let gaps = check_stream(
+        "first boot",
+        &frames,
+        pair_us,
+        info.losses.conversions_lost - before.conversions_lost,
+        &rig.station,
+    );
+    assert_eq!(
+        gaps, 4,
+        "one gap per commit (the programming alone is > half a pair)"
+    );
+    assert_eq!(
+        info.losses.erase_stalls - before.erase_stalls,
+        1,
+        "the rollback's erase"
+    );
+    assert!(info.losses.erase_stall_us - before.erase_stall_us >= 2 * S);
+    let uart = (rig.usart.received, rig.usart.overrun_bytes, rig.bytes_read);
+    let sent = rig.bytes_sent;
+    assert_eq!(
+        uart,
+        (sent, 0, sent),
+        "received, overrun, read from the ring"
+    );
+    assert_eq!((info.losses.uart_rx_overrun, info.frames_dropped), (0, 0));
+    let stalls = rig.stalls.clone();
+
+    // Power cut while streaming: the erase ahead after the rollback never ran, the spare holds
+    // table 2's old copy. The host starts its stream as soon as the board is up.
+    let flash = rig.service.into_flash().unwrap();
+    let mut rig = Rig::boot(flash);
+    rig.send(Request::StreamStart);
+    rig.send(Request::SetRate { hz: MAX_RATE_HZ });
+    rig.run_until(rig.now() + 1_500_000);
+    let before = rig.info();
+    let from = rig.to_host.len();
+    assert_eq!(
+        (before.active_table, before.previous_table),
+        (Some(tables[1].id()), Some(tables[2].id()))
+    );
+    rig.run_until(rig.now() + 3 * S);
+    rig.upload(&tables[3]); // the spare still holds an old table: this commit erases
+    rig.run_until(rig.now() + 2 * S);
+    let info = rig.info();
+    let frames = rig.delivered(from);
+    let gaps = check_stream(
+        "after the reboot",
+        &frames,
+        pair_us,
+        info.losses.conversions_lost - before.losses.conversions_lost,
+        &rig.station,
+    );
+    assert_eq!(gaps, 1, "one gap: the commit's");
+    assert_eq!(info.losses.erase_stalls - before.losses.erase_stalls, 1);
+    // Stopped, the erase ahead runs; the next stream's upload only programs.
+    let erased = erases.get();
+    assert_eq!(rig.call(Request::StreamStop), Response::Ok);
+    rig.run_until(rig.now() + 3 * S);
+    assert_eq!(
+        erases.get(),
+        erased + 1,
+        "the erase ahead once the stream stopped"
+    );
+    let before = rig.info();
+    assert_eq!(rig.call(Request::StreamStart), Response::Ok);
+    let from = rig.to_host.len();
+    rig.run_until(rig.now() + S);
+    rig.upload(&tables[4]);
+    rig.run_until(rig.now() + 2 * S);
+    let info = rig.info();
+    let frames = rig.delivered(from);
+    let gaps = check_stream(
+        "upload into the erased spare",
+        &frames,
+        pair_us,
+        info.losses.conversions_lost - before.losses.conversions_lost,
+        &rig.station,
+    );
+    assert_eq!(gaps, 1, "the programming's gap");
+    assert_eq!(
+        info.losses.erase_stalls, before.losses.erase_stalls,
+        "no erase"
+    );
+    assert_eq!(info.active_table, Some(tables[4].id()));
+    let uart = (rig.usart.received, rig.usart.overrun_bytes, rig.bytes_read);
+    let sent = rig.bytes_sent;
+    assert_eq!(
+        uart,
+        (sent, 0, sent),
+        "received, overrun, read from the ring"
+    );
+    assert_eq!((info.losses.uart_rx_overrun, info.frames_dropped), (0, 0));
+
+    // Every stall during a stream was a commit the host asked for.
+    for s in stalls.iter().chain(&rig.stalls) {
+        assert!(
+            !s.streaming || s.by_request,
+            "the erase ahead stalled the core {} µs at {} µs while streaming",
+            s.us,
+            s.at_us
+        );
     }
 }

@@ -15,6 +15,9 @@ use super::transport::Transport;
 
 /// How long one request may take before the client gives up.
 pub const DEFAULT_TIMEOUT: Duration = Duration::from_secs(5);
+/// How often an unanswered request that is safe to repeat is sent again before the client
+/// gives up (so at most 1 + this many sends).
+pub const DEFAULT_RETRIES: u32 = 2;
 /// Injected samples in flight at once. The firmware queues 16 inbound frames; 8 keeps the
 /// line busy in both directions without ever filling that queue.
 pub const DEFAULT_WINDOW: usize = 8;
@@ -92,6 +95,14 @@ pub struct Client {
     pub bad_frames: u64,
     /// Request timeout.
     pub timeout: Duration,
+    /// Repeats of an unanswered request that is safe to repeat (Ping, Info, ReadTable,
+    /// UploadBegin, UploadChunk) before giving up.
+    pub retries: u32,
+    /// Requests sent again: their ids, whose late or repeated answers are dropped when they
+    /// come.
+    repeated: std::collections::HashSet<u32>,
+    /// Requests sent again since this client was made (diagnostics and tests).
+    pub resent: u64,
 }
 
 impl Client {
@@ -105,6 +116,9 @@ impl Client {
             inbox: VecDeque::new(),
             bad_frames: 0,
             timeout: DEFAULT_TIMEOUT,
+            retries: DEFAULT_RETRIES,
+            repeated: Default::default(),
+            resent: 0,
         }
     }
 
@@ -118,6 +132,11 @@ impl Client {
         let id = self.next_id;
         // 0 is reserved for unsolicited messages.
         self.next_id = self.next_id.wrapping_add(1).max(1);
+        self.send_as(id, request)?;
+        Ok(id)
+    }
+
+    fn send_as(&mut self, id: u32, request: Request) -> Result<u32, ClientError> {
         let mut buf = [0u8; MAX_FRAME_LEN];
         let n = encode_frame(&HostFrame { id, request }, &mut buf)
             .map_err(|e| ClientError::Unexpected(format!("cannot encode request: {e:?}")))?;
@@ -215,6 +234,28 @@ impl Client {
         self.wait_for(id)
     }
 
+    /// [`Self::call`] for a request the device may get twice without harm (it answers the same
+    /// or, for a chunk it already has, says which offset it expects): unanswered within the
+    /// timeout, it is sent again under the same id, up to [`Self::retries`] times. The request
+    /// or its answer may have been lost on the line (noise, a frame dropped on a full queue);
+    /// an answer that comes late is taken whichever send it answers, and the other one's
+    /// answer is dropped when it comes.
+    fn call_repeatable(&mut self, request: Request) -> Result<Response, ClientError> {
+        let id = self.send(request.clone())?;
+        let mut left = self.retries;
+        loop {
+            match self.wait_for(id) {
+                Err(ClientError::Timeout(..)) if left > 0 => {
+                    left -= 1;
+                    self.resent += 1;
+                    self.repeated.insert(id);
+                    self.send_as(id, request.clone())?;
+                }
+                other => return other,
+            }
+        }
+    }
+
     fn wait_for(&mut self, id: u32) -> Result<Response, ClientError> {
         let deadline = Instant::now() + self.timeout;
         let mut skipped = Vec::new();
@@ -231,6 +272,9 @@ impl Client {
                 DeviceMessage::Sample { id: got, .. } if got == id => {
                     break Err(ClientError::Unexpected("a sample for a request".into()))
                 }
+                // The second answer to a request that was sent again.
+                DeviceMessage::Response { id: got, .. } | DeviceMessage::Error { id: got, .. }
+                    if self.repeated.contains(&got) => {}
                 other => skipped.push(other),
             }
         };
@@ -243,7 +287,7 @@ impl Client {
 
     /// Liveness check.
     pub fn ping(&mut self) -> Result<(), ClientError> {
-        match self.call(Request::Ping)? {
+        match self.call_repeatable(Request::Ping)? {
             Response::Pong => Ok(()),
             other => Err(ClientError::Unexpected(format!("{other:?}"))),
         }
@@ -251,7 +295,7 @@ impl Client {
 
     /// Firmware version, board, tables, uptime.
     pub fn info(&mut self) -> Result<DeviceInfo, ClientError> {
-        match self.call(Request::Info)? {
+        match self.call_repeatable(Request::Info)? {
             Response::Info(i) => Ok(i),
             other => Err(ClientError::Unexpected(format!("{other:?}"))),
         }
@@ -273,9 +317,19 @@ impl Client {
     ) -> Result<u32, ClientError> {
         let upload_id = self.begin_upload(bytes)?;
         self.send_chunks(upload_id, bytes, progress)?;
-        match self.call(Request::UploadCommit { upload_id })? {
-            Response::Committed { table_id } => Ok(table_id),
-            other => Err(ClientError::Unexpected(format!("{other:?}"))),
+        // A commit is not repeated (a second one would find the upload finished). Unanswered,
+        // Info says whether it took: the table's id is its body CRC.
+        match self.call(Request::UploadCommit { upload_id }) {
+            Ok(Response::Committed { table_id }) => Ok(table_id),
+            Ok(other) => Err(ClientError::Unexpected(format!("{other:?}"))),
+            Err(e @ ClientError::Timeout(..)) => {
+                let table_id = upload_body_crc32(bytes);
+                match self.info() {
+                    Ok(info) if info.active_table == Some(table_id) => Ok(table_id),
+                    _ => Err(e),
+                }
+            }
+            Err(e) => Err(e),
         }
     }
 
@@ -283,31 +337,53 @@ impl Client {
     /// upload id, which it returns.
     pub fn begin_upload(&mut self, bytes: &[u8]) -> Result<u32, ClientError> {
         let upload_id = self.new_upload_id();
-        self.expect_ok(Request::UploadBegin {
+        // Repeatable: a second Begin of the same upload restarts it at offset 0, before any
+        // chunk is sent.
+        let begin = Request::UploadBegin {
             upload_id,
             total_len: bytes.len() as u32,
             body_crc32: upload_body_crc32(bytes),
-        })?;
-        Ok(upload_id)
+        };
+        match self.call_repeatable(begin)? {
+            Response::Ok => Ok(upload_id),
+            other => Err(ClientError::Unexpected(format!("{other:?}"))),
+        }
     }
 
     /// The second step of [`Client::upload`]: sends `bytes` in chunks (not committed);
-    /// `progress(sent, total)` after each chunk.
+    /// `progress(sent, total)` after each chunk. A chunk whose answer was lost is sent again;
+    /// if the device had it, it answers ChunkOutOfOrder with the offset it expects, and the
+    /// upload resumes there (protocol: "UploadChunk").
     pub fn send_chunks(
         &mut self,
         upload_id: u32,
         bytes: &[u8],
         mut progress: impl FnMut(usize, usize),
     ) -> Result<(), ClientError> {
-        for (i, chunk) in bytes.chunks(CHUNK_LEN).enumerate() {
+        let mut offset = 0;
+        while offset < bytes.len() {
+            let chunk = &bytes[offset..(offset + CHUNK_LEN).min(bytes.len())];
             let data = heapless::Vec::from_slice(chunk)
                 .map_err(|_| ClientError::Unexpected("chunk too long".into()))?;
-            self.expect_ok(Request::UploadChunk {
+            let request = Request::UploadChunk {
                 upload_id,
-                offset: (i * CHUNK_LEN) as u32,
+                offset: offset as u32,
                 data,
-            })?;
-            progress((i * CHUNK_LEN + chunk.len()).min(bytes.len()), bytes.len());
+            };
+            let resent = self.resent;
+            offset = match self.call_repeatable(request) {
+                Ok(Response::Ok) => offset + chunk.len(),
+                Ok(other) => return Err(ClientError::Unexpected(format!("{other:?}"))),
+                Err(ClientError::Device(e))
+                    if ErrorCode::from_u16(e.code) == Some(ErrorCode::ChunkOutOfOrder)
+                        && self.resent > resent
+                        && (e.detail as usize) <= bytes.len() =>
+                {
+                    e.detail as usize
+                }
+                Err(e) => return Err(e),
+            };
+            progress(offset, bytes.len());
         }
         Ok(())
     }
@@ -330,7 +406,7 @@ impl Client {
     pub fn read_table(&mut self) -> Result<Vec<u8>, ClientError> {
         let mut out = Vec::new();
         loop {
-            match self.call(Request::ReadTable {
+            match self.call_repeatable(Request::ReadTable {
                 offset: out.len() as u32,
             })? {
                 Response::TableChunk {
@@ -345,13 +421,6 @@ impl Client {
                 }
                 other => return Err(ClientError::Unexpected(format!("{other:?}"))),
             }
-        }
-    }
-
-    fn expect_ok(&mut self, request: Request) -> Result<(), ClientError> {
-        match self.call(request)? {
-            Response::Ok => Ok(()),
-            other => Err(ClientError::Unexpected(format!("{other:?}"))),
         }
     }
 
@@ -494,5 +563,145 @@ mod tests {
             matches!(e, ClientError::ProtocolMismatch { device: 3, .. }),
             "{e}"
         );
+    }
+
+    /// Which frame of the line is lost: the request the host sent as its k-th frame, or the
+    /// board's answer to it.
+    #[derive(Clone, Copy, PartialEq)]
+    enum Lose {
+        Request,
+        Answer,
+    }
+
+    /// The host end of a line to the virtual board (`accomp board-sim`'s board: the firmware's
+    /// service and acquisition on the chip models) that loses the frames in `lose`. The board
+    /// runs in its own thread (its chip models are not `Send`); it returns the requests it got.
+    struct LossyLine {
+        to_board: std::sync::mpsc::Sender<Vec<u8>>,
+        from_board: std::sync::mpsc::Receiver<Vec<u8>>,
+        pending: Vec<u8>,
+    }
+
+    impl Transport for LossyLine {
+        fn send(&mut self, bytes: &[u8]) -> io::Result<()> {
+            self.to_board.send(bytes.to_vec()).map_err(io::Error::other)
+        }
+        fn recv(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+            if self.pending.is_empty() {
+                use std::sync::mpsc::RecvTimeoutError;
+                match self.from_board.recv_timeout(Duration::from_millis(5)) {
+                    Ok(b) => self.pending = b,
+                    Err(RecvTimeoutError::Timeout) => return Ok(0),
+                    Err(RecvTimeoutError::Disconnected) => {
+                        return Err(io::Error::other("board gone"))
+                    }
+                }
+            }
+            let n = self.pending.len().min(buf.len());
+            buf[..n].copy_from_slice(&self.pending[..n]);
+            self.pending.drain(..n);
+            Ok(n)
+        }
+    }
+
+    fn board_on_lossy_line(
+        lose: HashMap<usize, Lose>,
+    ) -> (LossyLine, std::thread::JoinHandle<Vec<Request>>) {
+        use crate::board_sim::{flash::BoardFlash, VirtualBoard};
+        let (to_board, requests) = std::sync::mpsc::channel::<Vec<u8>>();
+        let (answers, from_board) = std::sync::mpsc::channel();
+        let board = std::thread::spawn(move || {
+            let mut board = VirtualBoard::boot(BoardFlash::open(None).unwrap(), 0, 0);
+            board.tx.clear();
+            let mut got = Vec::new();
+            for (k, bytes) in requests.iter().enumerate() {
+                if lose.get(&k) == Some(&Lose::Request) {
+                    continue;
+                }
+                let mut d = FrameDecoder::<MAX_FRAME_LEN>::new();
+                for &b in &bytes {
+                    if let Some(Ok(body)) = d.push(b) {
+                        got.push(decode_message::<HostFrame>(body).unwrap().request);
+                    }
+                }
+                board.receive(&bytes);
+                board.idle();
+                let answer = std::mem::take(&mut board.tx);
+                if lose.get(&k) != Some(&Lose::Answer) {
+                    let _ = answers.send(answer);
+                }
+            }
+            got
+        });
+        let line = LossyLine {
+            to_board,
+            from_board,
+            pending: Vec::new(),
+        };
+        (line, board)
+    }
+
+    #[test]
+    fn lost_requests_and_answers_are_retried_where_safe_and_an_upload_resumes_at_the_devices_offset(
+    ) {
+        let table = accomp::reference::paper_order2_table().encode();
+        // The host's frames in order, repeats included: 0–1 Ping, 2–3 Info, 4 Begin, 5–13 the
+        // chunks, 14 the commit, 15 Info, 16– the read-back.
+        let lose = HashMap::from([
+            (0, Lose::Request), // Ping never arrives: sent again (1)
+            (2, Lose::Answer),  // Info answered, the answer lost: sent again (3)
+            (6, Lose::Answer),  // chunk 64 taken, its Ok lost: sent again (7), refused
+            // with ChunkOutOfOrder(128): resumed at 128 (8)
+            (8, Lose::Request), // chunk 128 lost: sent again (9)
+            (14, Lose::Answer), // the commit's answer lost: Info (15) confirms it
+            (17, Lose::Answer), // ReadTable 64's answer lost: sent again (18)
+        ]);
+        let (line, board) = board_on_lossy_line(lose);
+        let mut c = Client::new(Box::new(line));
+        c.timeout = Duration::from_millis(200);
+        c.ping().unwrap();
+        assert_eq!(c.info().unwrap().active_table, None);
+        let id = c.load(&table, |_, _| {}).unwrap();
+        assert_eq!(id, upload_body_crc32(&table));
+        assert_eq!(c.resent, 5, "Ping, Info, two chunks, one ReadTable");
+        assert_eq!(c.info().unwrap().active_table, Some(id));
+        drop(c);
+        let got = board.join().unwrap();
+        // What the board received: the upload resumed where the device was, never restarted,
+        // and the commit went once.
+        let chunks: Vec<u32> = got
+            .iter()
+            .filter_map(|r| match r {
+                Request::UploadChunk { offset, .. } => Some(*offset),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(chunks, [0, 64, 64, 128, 192, 256, 320, 384]);
+        let begins = got
+            .iter()
+            .filter(|r| matches!(r, Request::UploadBegin { .. }))
+            .count();
+        let commits = got
+            .iter()
+            .filter(|r| matches!(r, Request::UploadCommit { .. }))
+            .count();
+        assert_eq!((begins, commits), (1, 1));
+    }
+
+    #[test]
+    fn an_unanswered_commit_is_not_sent_again_and_fails_when_info_does_not_show_the_table() {
+        let table = accomp::reference::paper_order2_table().encode();
+        // 0 Begin, 1–7 chunks, 8 the commit: lost on its way. Info (9) shows no table.
+        let (line, board) = board_on_lossy_line(HashMap::from([(8, Lose::Request)]));
+        let mut c = Client::new(Box::new(line));
+        c.timeout = Duration::from_millis(200);
+        let e = c.upload(&table, |_, _| {}).unwrap_err();
+        assert!(matches!(e, ClientError::Timeout(..)), "{e}");
+        drop(c);
+        let got = board.join().unwrap();
+        assert!(!got
+            .iter()
+            .any(|r| matches!(r, Request::UploadCommit { .. })));
+        assert!(matches!(got.last(), Some(Request::Info)));
     }
 }

@@ -35,6 +35,14 @@ pub enum EffectKind {
     PressureAdmittance,
     /// A line at a period matching no known cause.
     Periodic,
+    /// Any channel through a gain on its rate of change (a gradient across the sensor while the
+    /// channel ramps): [`RateOfChange`].
+    RateCoupling,
+    /// Any channel through a gain and a second-order lag (two equal first-order stages):
+    /// [`SecondOrderLag`].
+    Lag2Coupling,
+    /// A drift that is a power of the time since the start, [`creep`] (quadratic at exponent 2).
+    CreepDrift,
     /// White reading noise on a measured channel: simulated, not a discovery candidate (the
     /// discovery reports a channel's noise with its channels, not as an effect).
     ChannelNoise,
@@ -51,7 +59,7 @@ pub struct ParamSpec {
 
 impl EffectKind {
     /// Every entry, in the catalogue's order.
-    pub const ALL: [EffectKind; 14] = [
+    pub const ALL: [EffectKind; 17] = [
         EffectKind::ThermalLag,
         EffectKind::ThermalHysteresis,
         EffectKind::SelfHeating,
@@ -65,6 +73,9 @@ impl EffectKind {
         EffectKind::AmbientCoupling,
         EffectKind::PressureAdmittance,
         EffectKind::Periodic,
+        EffectKind::RateCoupling,
+        EffectKind::Lag2Coupling,
+        EffectKind::CreepDrift,
         EffectKind::ChannelNoise,
     ];
 
@@ -84,6 +95,9 @@ impl EffectKind {
             EffectKind::AmbientCoupling => "ambient_coupling",
             EffectKind::PressureAdmittance => "pressure_admittance",
             EffectKind::Periodic => "periodic",
+            EffectKind::RateCoupling => "rate_coupling",
+            EffectKind::Lag2Coupling => "lag2_coupling",
+            EffectKind::CreepDrift => "creep_drift",
             EffectKind::ChannelNoise => "channel_noise",
         }
     }
@@ -104,7 +118,8 @@ impl EffectKind {
     }
 
     /// The parameters, in the order the discovery reports them. The scenario takes the same
-    /// keys; a few entries bind a channel (`ambient_coupling`, `channel_noise`: `channel`) and
+    /// keys; a few entries bind a channel (`ambient_coupling`, `rate_coupling`, `lag2_coupling`,
+    /// `channel_noise`: `channel`) and
     /// `tidal_gravity` also takes the tidal analysis's `delay_s` and wave `groups`.
     pub fn parameters(self) -> &'static [ParamSpec] {
         match self {
@@ -218,6 +233,30 @@ impl EffectKind {
                     unit: "rad",
                 },
             ],
+            EffectKind::RateCoupling => &[ParamSpec {
+                name: "coefficient",
+                unit: "output·s/channel unit",
+            }],
+            EffectKind::Lag2Coupling => &[
+                ParamSpec {
+                    name: "tau_s",
+                    unit: "s",
+                },
+                ParamSpec {
+                    name: "coefficient",
+                    unit: "output/channel unit",
+                },
+            ],
+            EffectKind::CreepDrift => &[
+                ParamSpec {
+                    name: "exponent",
+                    unit: "1",
+                },
+                ParamSpec {
+                    name: "amplitude",
+                    unit: "output",
+                },
+            ],
             EffectKind::ChannelNoise => &[ParamSpec {
                 name: "noise",
                 unit: "channel unit (°C, rad, Pa)",
@@ -242,6 +281,64 @@ pub fn step_fraction(t: f64, time_s: f64, duration_s: f64) -> f64 {
     } else {
         f64::from(t >= time_s)
     }
+}
+
+/// The transfer functions of the channel couplings, stepped one instant at a time: the
+/// simulator steps them with the true channel, the discovery runs them over the measured one
+/// (restarted per segment) to make its column — one definition for both.
+///
+/// Gain on the rate of change: (u − u_prev)/(t − t_prev), 0 at the first instant.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct RateOfChange {
+    prev: Option<(f64, f64)>,
+}
+
+impl RateOfChange {
+    /// The channel's rate of change at `t` (channel unit per s).
+    pub fn step(&mut self, t: f64, u: f64) -> f64 {
+        let r = match self.prev {
+            Some((t0, u0)) if t > t0 => (u - u0) / (t - t0),
+            _ => 0.0,
+        };
+        self.prev = Some((t, u));
+        r
+    }
+}
+
+/// Second-order lag: two first-order stages of time constant τ in series (critically damped),
+/// each exact for the interval since the previous instant; settled at the first input.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct SecondOrderLag {
+    state: Option<(f64, f64, f64)>,
+}
+
+impl SecondOrderLag {
+    /// The lagged channel at `t` (channel unit).
+    pub fn step(&mut self, t: f64, u: f64, tau_s: f64) -> f64 {
+        let (x1, x2) = match self.state {
+            Some((t0, x1, x2)) if tau_s > 0.0 => {
+                // Exact for an input held over the interval: x₁ relaxes to u as e^{−s/τ}, and
+                // x₂ follows it, x₂(h) = a·x₂ + (1 − a)·u + (x₁ − u)·(h/τ)·a.
+                let h = (t - t0).max(0.0);
+                let a = (-h / tau_s).exp();
+                let x1n = a * x1 + (1.0 - a) * u;
+                (x1n, a * x2 + (1.0 - a) * u + (x1 - u) * (h / tau_s) * a)
+            }
+            _ => (u, u),
+        };
+        self.state = Some((t, x1, x2));
+        x2
+    }
+}
+
+/// Seconds of the time unit of [`creep`]: its amplitude is the drift after one day.
+pub const CREEP_TIME_UNIT_S: f64 = 86_400.0;
+
+/// A power-law drift's shape `since_start_s` after the start: (t / 1 day)^exponent (0 before
+/// the start).
+#[inline]
+pub fn creep(since_start_s: f64, exponent: f64) -> f64 {
+    (since_start_s.max(0.0) / CREEP_TIME_UNIT_S).powf(exponent)
 }
 
 #[cfg(test)]
@@ -311,6 +408,19 @@ mod tests {
                 amplitude: 1.0,
                 phase_rad: 1.0,
             },
+            S::RateCoupling {
+                channel: "temperature_c".into(),
+                coefficient: 1.0,
+            },
+            S::Lag2Coupling {
+                channel: "temperature_c".into(),
+                tau_s: 1.0,
+                coefficient: 1.0,
+            },
+            S::CreepDrift {
+                exponent: 1.0,
+                amplitude: 1.0,
+            },
             S::ChannelNoise {
                 channel: "temperature_c".into(),
                 noise: 1.0,
@@ -341,6 +451,23 @@ mod tests {
             expected.sort_unstable();
             assert_eq!(keys, expected, "{}", e.name());
         }
+    }
+
+    #[test]
+    fn the_second_order_lag_of_a_step_rises_as_two_stages_and_the_rate_is_the_slope() {
+        // Unit step at t = 0+, τ = 10 s, 1 s steps: 1 − e^{−t/τ}(1 + t/τ) at t = τ is 0.2642.
+        let mut l = SecondOrderLag::default();
+        let mut y = l.step(0.0, 0.0, 10.0);
+        for k in 1..=10 {
+            y = l.step(f64::from(k), 1.0, 10.0);
+        }
+        // Each input is held over the interval before it: exact for a step.
+        assert!((y - (1.0 - (-1.0_f64).exp() * 2.0)).abs() < 1e-12, "{y}");
+        let mut r = RateOfChange::default();
+        assert_eq!(r.step(0.0, 1.0), 0.0);
+        assert_eq!(r.step(2.0, 5.0), 2.0);
+        assert_eq!(creep(2.0 * CREEP_TIME_UNIT_S, 2.0), 4.0);
+        assert_eq!(creep(-1.0, 2.0), 0.0);
     }
 
     #[test]

@@ -155,6 +155,33 @@ pub enum ScenarioEffect {
         /// Phase, rad.
         phase_rad: f64,
     },
+    /// `coefficient`·dc/dt: a channel through a gain on its rate of change
+    /// ([`crate::catalogue::RateOfChange`]): the bias of a gradient across the sensor while the
+    /// channel ramps.
+    RateCoupling {
+        /// `temperature_c` (the mount's), `pressure_hpa` (deviation, Pa) or an ambient channel.
+        channel: String,
+        /// Output per (channel unit per s).
+        coefficient: f64,
+    },
+    /// `coefficient`·L2_τ[c]: a channel through a gain and two first-order stages of τ
+    /// ([`crate::catalogue::SecondOrderLag`]).
+    Lag2Coupling {
+        /// `temperature_c`, `pressure_hpa` (deviation, Pa) or an ambient channel.
+        channel: String,
+        /// Time constant of each stage, s.
+        tau_s: f64,
+        /// Output per channel unit.
+        coefficient: f64,
+    },
+    /// `amplitude`·(t / 1 day)^`exponent` ([`crate::catalogue::creep`]), t from the start of the
+    /// run: creep that accelerates (exponent > 1) or settles as a power law (< 1).
+    CreepDrift {
+        /// Exponent.
+        exponent: f64,
+        /// Drift after one day, unit.
+        amplitude: f64,
+    },
     /// White reading noise on a measured channel (`temperature_c` °C, `tilt_arcsec` in rad,
     /// `pressure_hpa` in Pa: the units the discovery stores them in).
     ChannelNoise {
@@ -200,6 +227,9 @@ impl ScenarioEffect {
             ScenarioEffect::AmbientCoupling { .. } => EffectKind::AmbientCoupling,
             ScenarioEffect::PressureAdmittance { .. } => EffectKind::PressureAdmittance,
             ScenarioEffect::Periodic { .. } => EffectKind::Periodic,
+            ScenarioEffect::RateCoupling { .. } => EffectKind::RateCoupling,
+            ScenarioEffect::Lag2Coupling { .. } => EffectKind::Lag2Coupling,
+            ScenarioEffect::CreepDrift { .. } => EffectKind::CreepDrift,
             ScenarioEffect::ChannelNoise { .. } => EffectKind::ChannelNoise,
         }
     }
@@ -351,6 +381,43 @@ impl ScenarioEffect {
                     return at("amplitude and phase_rad", "must be finite");
                 }
             }
+            ScenarioEffect::RateCoupling {
+                channel,
+                coefficient,
+            } => {
+                if channel.trim().is_empty() {
+                    return at("channel", "must name a channel");
+                }
+                if !finite(*coefficient) {
+                    return at("coefficient", "must be finite");
+                }
+            }
+            ScenarioEffect::Lag2Coupling {
+                channel,
+                tau_s,
+                coefficient,
+            } => {
+                if channel.trim().is_empty() {
+                    return at("channel", "must name a channel");
+                }
+                if !positive(*tau_s) {
+                    return at("tau_s", "must be > 0");
+                }
+                if !finite(*coefficient) {
+                    return at("coefficient", "must be finite");
+                }
+            }
+            ScenarioEffect::CreepDrift {
+                exponent,
+                amplitude,
+            } => {
+                if !positive(*exponent) {
+                    return at("exponent", "must be > 0");
+                }
+                if !finite(*amplitude) {
+                    return at("amplitude", "must be finite");
+                }
+            }
             ScenarioEffect::ChannelNoise { channel, noise } => {
                 if !NOISY_CHANNELS.contains(&channel.as_str()) {
                     return at(
@@ -437,7 +504,31 @@ enum State {
         index: usize,
         x: Option<(f64, f64)>,
     },
+    /// A channel coupling's source and transfer-function states.
+    Coupling {
+        source: Source,
+        rate: crate::catalogue::RateOfChange,
+        lag2: crate::catalogue::SecondOrderLag,
+    },
     None,
+}
+
+/// Which drive a channel coupling reads.
+#[derive(Debug, Clone, Copy)]
+enum Source {
+    Temperature,
+    Pressure,
+    Ambient(usize),
+}
+
+impl Source {
+    fn value(self, d: &Drive) -> f64 {
+        match self {
+            Source::Temperature => d.temperature_c,
+            Source::Pressure => d.pressure_dev_pa,
+            Source::Ambient(i) => d.ambient.get(i).copied().unwrap_or(0.0),
+        }
+    }
 }
 
 /// The effects of a scenario, evaluated sample by sample.
@@ -505,6 +596,27 @@ impl EffectChain {
                             have: setup.ambient.join(", "),
                         })?;
                     State::Ambient { index: i, x: None }
+                }
+                ScenarioEffect::RateCoupling { channel, .. }
+                | ScenarioEffect::Lag2Coupling { channel, .. } => {
+                    let source = match channel.as_str() {
+                        "temperature_c" => Source::Temperature,
+                        c if c.starts_with("pressure") => Source::Pressure,
+                        c => {
+                            Source::Ambient(setup.ambient.iter().position(|a| a == c).ok_or_else(
+                                || EffectError::Channel {
+                                    index,
+                                    channel: channel.clone(),
+                                    have: setup.ambient.join(", "),
+                                },
+                            )?)
+                        }
+                    };
+                    State::Coupling {
+                        source,
+                        rate: Default::default(),
+                        lag2: Default::default(),
+                    }
                 }
                 ScenarioEffect::TidalGravity {
                     amplitude_factor,
@@ -647,6 +759,23 @@ impl EffectChain {
                 (ScenarioEffect::PressureAdmittance { coefficient }, _) => {
                     coefficient * d.pressure_dev_pa
                 }
+                (
+                    ScenarioEffect::RateCoupling { coefficient, .. },
+                    State::Coupling { source, rate, .. },
+                ) => coefficient * rate.step(t, source.value(d)),
+                (
+                    ScenarioEffect::Lag2Coupling {
+                        tau_s, coefficient, ..
+                    },
+                    State::Coupling { source, lag2, .. },
+                ) => coefficient * lag2.step(t, source.value(d), *tau_s),
+                (
+                    ScenarioEffect::CreepDrift {
+                        exponent,
+                        amplitude,
+                    },
+                    _,
+                ) => amplitude * crate::catalogue::creep(t, *exponent),
                 (
                     ScenarioEffect::Periodic {
                         period_s,

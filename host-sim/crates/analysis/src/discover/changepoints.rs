@@ -130,14 +130,14 @@ pub(super) struct StepSet {
 /// then the full likelihood with the noise re-fitted. `None` with fewer than two points left
 /// (one step is the greedy selection's own candidate).
 pub(super) fn propose(
-    cur: &super::select::Current,
+    cur: &super::current_model::Current,
     cols: &[Vec<f64>],
     target: &[f64],
     cur_raw: &[f64],
     is_step: impl Fn(f64, f64) -> bool,
 ) -> Option<StepSet> {
     use super::baseline::{gls, Rows};
-    use super::select::{fit_state, NoiseChoice};
+    use super::current_model::{fit_state, NoiseChoice};
     let ds = cur.ds;
     let n = target.len() as f64;
     let per_step = n.ln() + n.ln().max(2.0 * n.ln());

@@ -4,7 +4,7 @@
 //! by a golden-section refinement. Physics and magnitudes: `docs/discovery.md`.
 
 use super::import::{ChannelKind, Dataset};
-use crate::sim::catalogue::{step_fraction, EffectKind};
+use crate::sim::catalogue::{creep, step_fraction, EffectKind, RateOfChange, SecondOrderLag};
 use accomp::tide::Station;
 
 /// One effect of the catalogue, bound to a channel where it needs one.
@@ -47,6 +47,14 @@ pub enum Effect {
     PressureAdmittance,
     /// A line at a period matching no known cause: sin/cos columns.
     Periodic,
+    /// A channel through a gain on its rate of change: column dc/dt (centred), the catalogue's
+    /// [`RateOfChange`] run over the channel (restarted per segment).
+    RateCoupling(String),
+    /// A channel through a gain and a second-order lag of τ: column L2_τ[c] (centred), the
+    /// catalogue's [`SecondOrderLag`] run over the channel (restarted per segment).
+    Lag2Coupling(String),
+    /// A power-law drift: column (t − t₀)^θ in days ([`creep`]), θ the exponent.
+    CreepDrift,
 }
 
 impl Effect {
@@ -67,6 +75,9 @@ impl Effect {
             Effect::AmbientCoupling(_) => EffectKind::AmbientCoupling,
             Effect::PressureAdmittance => EffectKind::PressureAdmittance,
             Effect::Periodic => EffectKind::Periodic,
+            Effect::RateCoupling(_) => EffectKind::RateCoupling,
+            Effect::Lag2Coupling(_) => EffectKind::Lag2Coupling,
+            Effect::CreepDrift => EffectKind::CreepDrift,
         }
     }
 
@@ -78,7 +89,34 @@ impl Effect {
     /// The channel it is bound to, if any.
     pub fn channel(&self) -> Option<&str> {
         match self {
-            Effect::AmbientCoupling(c) => Some(c),
+            Effect::AmbientCoupling(c) | Effect::RateCoupling(c) | Effect::Lag2Coupling(c) => {
+                Some(c)
+            }
+            _ => None,
+        }
+    }
+
+    /// The channel whose transfer function it is, if it is one (a lag on the temperature, the
+    /// pressure admittance, a coupling): one transfer function per channel is fitted, its order
+    /// chosen by the criterion among these.
+    pub fn coupled_channel<'a>(&'a self, ds: &'a Dataset) -> Option<&'a str> {
+        match self {
+            Effect::ThermalLag => ds
+                .channel(ChannelKind::Temperature)
+                .map(|c| c.name.as_str()),
+            Effect::PressureAdmittance => {
+                ds.channel(ChannelKind::Pressure).map(|c| c.name.as_str())
+            }
+            _ => self.channel(),
+        }
+    }
+
+    /// A drift's family, if it is one (the linear drift is in the baseline).
+    pub fn drift_family(&self) -> Option<&'static str> {
+        match self {
+            Effect::Warmup => Some("exponential"),
+            Effect::AgingDrift => Some("logarithmic"),
+            Effect::CreepDrift => Some("power law"),
             _ => None,
         }
     }
@@ -132,6 +170,38 @@ pub fn tide_series(ds: &Dataset) -> Option<(Vec<f64>, Vec<f64>, Vec<f64>)> {
         te.push(lerp(a.tilt_east_mas, b.tilt_east_mas) / mas);
     }
     Some((g, tn, te))
+}
+
+/// A catalogue transfer function (`RateOfChange`, `SecondOrderLag`) run over a channel,
+/// restarted at each segment, centred.
+fn transfer(u: &[f64], t: &[f64], seg_start: &[bool], tau_s: f64, rate: bool) -> Vec<f64> {
+    let mut r = RateOfChange::default();
+    let mut l = SecondOrderLag::default();
+    let out = u
+        .iter()
+        .zip(t)
+        .zip(seg_start)
+        .map(|((&u, &t), &s)| {
+            if s {
+                r = RateOfChange::default();
+                l = SecondOrderLag::default();
+            }
+            if rate {
+                r.step(t, u)
+            } else {
+                l.step(t, u, tau_s)
+            }
+        })
+        .collect();
+    centred(out)
+}
+
+/// The values of the channel a coupling names.
+fn channel_values<'a>(ds: &'a Dataset, name: &str) -> Option<&'a [f64]> {
+    ds.channels
+        .iter()
+        .find(|c| c.name == name)
+        .map(|c| c.values.as_slice())
 }
 
 /// First-order low-pass `τ dx/dt = u − x` (exact discretisation for the actual spacing),
@@ -201,6 +271,14 @@ pub fn step_durations(ds: &Dataset) -> Vec<f64> {
 /// +0.36). A gain error acts on the slow tilt (building and tide tilt, hours): averaging over
 /// ±15 min keeps it and cuts the reading noise by √(30 min/Δt).
 pub const TILT_COUPLING_SMOOTHING_S: f64 = 900.0;
+
+/// Half-width of the centred moving average the channel is taken through before its rate is
+/// differenced for `rate_coupling`, seconds. Differencing multiplies a channel's reading noise
+/// by 1/Δt, and the GLS whitening of a flicker/random-walk residual weights exactly those fast
+/// changes: on the raw channel a rate coupling came out at 0.18 × its true gain (errors in
+/// variables, the column's correlation with the true rate 0.90). A gradient across the sensor
+/// builds up over the housing's minutes, so ±15 min keeps it.
+pub const RATE_COUPLING_SMOOTHING_S: f64 = 900.0;
 
 /// Centred moving average over ±`half_window_s` inside each segment (the window shrinks at the
 /// segment's ends): the baseline's running mean, the same that smooths the tilt term.
@@ -292,6 +370,32 @@ pub fn candidates(
         None => say("pressure_admittance", "no pressure channel"),
     }
     yes.push(Effect::Periodic);
+    // Every channel that moves is a driver: the transfer functions the fixed entries above do
+    // not hold (a gain on its rate, a second-order lag), one per channel, the order chosen by
+    // the criterion against the entries above. The tilt acts through eq. (5) (`tilt_coupling`).
+    let mut drivers = false;
+    for c in &ds.channels {
+        let driver = matches!(
+            c.kind,
+            ChannelKind::Temperature | ChannelKind::Pressure | ChannelKind::Other
+        );
+        if driver && super::baseline::std(&c.values) > 1e-9 {
+            yes.push(Effect::RateCoupling(c.name.clone()));
+            yes.push(Effect::Lag2Coupling(c.name.clone()));
+            drivers = true;
+        }
+    }
+    if !drivers {
+        say(
+            "rate_coupling",
+            "no temperature, pressure or auxiliary channel that moves",
+        );
+        say(
+            "lag2_coupling",
+            "no temperature, pressure or auxiliary channel that moves",
+        );
+    }
+    yes.push(Effect::CreepDrift);
     (yes, no)
 }
 
@@ -313,6 +417,9 @@ pub fn grid(e: &Effect, ds: &Dataset) -> Vec<f64> {
             .map_or_else(Vec::new, |(lo, hi)| log_grid(lo, hi, 24)),
         Effect::Warmup => log_grid(3.0 * dt, span / 3.0, 24),
         Effect::AgingDrift => log_grid(span / 1000.0, span * 3.0, 24),
+        Effect::Lag2Coupling(_) => log_grid(2.0 * dt, span / 10.0, 20),
+        // Exponents from a settling t^0.2 to a t^5 acceleration; 1 is the baseline's drift.
+        Effect::CreepDrift => log_grid(0.2, 5.0, 24),
         Effect::AmbientCoupling(_) => {
             let mut g = vec![0.0];
             g.extend(log_grid(2.0 * dt, span / 10.0, 16));
@@ -415,6 +522,16 @@ pub fn columns(e: &Effect, ds: &Dataset, ctx: &Context, theta: f64) -> Vec<Vec<f
                 t.iter().map(|x| (w * x).cos()).collect(),
             ]
         }
+        Effect::RateCoupling(name) => channel_values(ds, name)
+            .map(|v| {
+                let smooth = moving_average(v, t, seg, RATE_COUPLING_SMOOTHING_S);
+                vec![transfer(&smooth, t, seg, f64::NAN, true)]
+            })
+            .unwrap_or_default(),
+        Effect::Lag2Coupling(name) => channel_values(ds, name)
+            .map(|v| vec![transfer(v, t, seg, theta, false)])
+            .unwrap_or_default(),
+        Effect::CreepDrift => vec![t.iter().map(|x| creep(x - t0, theta)).collect()],
     }
 }
 
@@ -488,6 +605,9 @@ pub fn parameters(
             vec![("coefficient".into(), p(b0, s0)), ("lag_s".into(), theta)]
         }
         Effect::PressureAdmittance => vec![("coefficient".into(), p(b0, s0))],
+        Effect::RateCoupling(_) => vec![("coefficient".into(), p(b0, s0))],
+        Effect::Lag2Coupling(_) => vec![("tau_s".into(), theta), ("coefficient".into(), p(b0, s0))],
+        Effect::CreepDrift => vec![("exponent".into(), theta), ("amplitude".into(), p(b0, s0))],
     };
     // Output-unit amplitudes also in g when the unit is known.
     if let Some(u) = ds.unit_per_g {
@@ -529,6 +649,9 @@ mod tests {
             Effect::AmbientCoupling("room_c".into()),
             Effect::PressureAdmittance,
             Effect::Periodic,
+            Effect::RateCoupling("room_c".into()),
+            Effect::Lag2Coupling("room_c".into()),
+            Effect::CreepDrift,
         ];
         let discovered: Vec<EffectKind> = EffectKind::ALL
             .into_iter()

@@ -322,27 +322,15 @@ mod tests {
 
     fn dataset(values: Vec<f64>, dt: f64) -> Dataset {
         let n = values.len();
-        let mut seg = vec![false; n];
-        seg[0] = true;
+        let t_s = (0..n).map(|i| i as f64 * dt).collect();
         Dataset {
-            t_s: (0..n).map(|i| i as f64 * dt).collect(),
-            y: vec![0.0; n],
-            segment_start: seg,
             channels: vec![Channel {
                 name: "temperature_c".into(),
                 kind: ChannelKind::Temperature,
                 values,
             }],
-            output_name: "output_g".into(),
-            output_unit: "g".into(),
-            unit_per_g: Some(1.0),
             input_g: None,
-            start_unix_s: None,
-            site: None,
-            dt_s: dt,
-            samples_per_point: Vec::new(),
-            notes: Vec::new(),
-            warnings: Vec::new(),
+            ..Dataset::test_g(t_s, vec![0.0; n], dt)
         }
     }
 

@@ -32,9 +32,9 @@ pub enum DiscoverError {
         /// Cause.
         source: crate::sim::scenario::ScenarioError,
     },
-    /// The simulation in the loop failed (the message names the stage).
-    #[error("{0}")]
-    Simulate(String),
+    /// The simulation in the loop failed (the error names the stage).
+    #[error(transparent)]
+    Simulate(#[from] super::simulate::SimulateError),
     /// `--write-scenario <file>` on a twin that has no scenario to write.
     #[error("--write-scenario {}: this twin has no scenario to write ({why})", path.display())]
     NoScenario {

@@ -490,7 +490,17 @@ impl Default for DatasetOptions {
 /// Reduces a log to a dataset: picks the output and channels, drops rows with gaps (counted),
 /// bins to at most `max_points`, marks segments.
 pub fn dataset_from_log(log: &Log, opts: &DatasetOptions) -> Result<Dataset, ImportError> {
-    if !(MIN_MAX_POINTS..=MAX_MAX_POINTS).contains(&opts.max_points) {
+    reduce(log, opts, true)
+}
+
+/// The same rows as [`dataset_from_log`] (same output, channels, dropped rows and segments),
+/// never binned: what the full-rate stage (`fullrate`) fits the fast terms on.
+pub fn full_rate_from_log(log: &Log, opts: &DatasetOptions) -> Result<Dataset, ImportError> {
+    reduce(log, opts, false)
+}
+
+fn reduce(log: &Log, opts: &DatasetOptions, binning: bool) -> Result<Dataset, ImportError> {
+    if binning && !(MIN_MAX_POINTS..=MAX_MAX_POINTS).contains(&opts.max_points) {
         return Err(ImportError::Shape(format!(
             "--max-points {} is outside {MIN_MAX_POINTS}..={MAX_MAX_POINTS} (the fit keeps \
              ≈ {BYTES_PER_POINT} bytes per point: {} MB at {}; fewer than {MIN_MAX_POINTS} \
@@ -621,7 +631,7 @@ pub fn dataset_from_log(log: &Log, opts: &DatasetOptions) -> Result<Dataset, Imp
             covered / 86_400.0
         ));
     }
-    let bin = if keep.len() > opts.max_points {
+    let bin = if binning && keep.len() > opts.max_points {
         (covered / opts.max_points as f64).max(median_dt)
     } else {
         0.0
@@ -775,6 +785,25 @@ impl Dataset {
 }
 
 impl Dataset {
+    /// The unit a channel's values are stored in (Pa for pressure, rad for tilt, °C for a
+    /// `_c` column, else its column suffix), as a coupling's coefficient is per it.
+    pub fn channel_unit(&self, name: &str) -> String {
+        match self
+            .channels
+            .iter()
+            .find(|c| c.name == name)
+            .map(|c| c.kind)
+        {
+            Some(ChannelKind::Pressure) => "Pa".into(),
+            Some(ChannelKind::Tilt) => "rad".into(),
+            _ => match suffix_of(name).as_str() {
+                "c" => "°C".into(),
+                "" => "channel unit".into(),
+                s => s.to_owned(),
+            },
+        }
+    }
+
     /// The first channel of a kind.
     pub fn channel(&self, kind: ChannelKind) -> Option<&Channel> {
         self.channels.iter().find(|c| c.kind == kind)

@@ -7,22 +7,32 @@
 //! - [`eiv`]: errors in variables: each regressor channel's reading noise, fitted and smoothed.
 //! - [`effects`]: the catalogue of named effects as design-matrix extensions.
 //! - [`hysteresis`]: play / Preisach operators of the thermal hysteresis.
+//! - [`fullrate`]: lags faster than the bins, fitted on the full-rate rows in the frequency domain.
 //! - [`changepoints`]: many steps at once: a noise-model MOSUM scan, the set validated together.
 //! - [`plausibility`]: a flexible effect must stand above the noise and beat the simpler cause.
+//! - [`table_error`]: with a calibration, errors of the table's temperature models, corrected.
 //! - [`shape`]: whether an accepted effect's shape describes the data (poor-fit check).
-//! - [`select`]: greedy selection with BIC (effective sample size) and blocked cross-validation.
+//! - [`select`]: greedy selection with BIC (effective sample size) and blocked cross-validation;
+//!   its parts: [`current_model`] (the model under its fitted noise model), [`fitters`] (each
+//!   candidate's best fit and ΔBIC), [`acceptance`] (the checks after the BIC), [`validation`]
+//!   (cross-validation, forward chaining), [`joint`] (the final joint fit).
 //! - [`report`]: text, JSON and the Markdown report with figures.
 //!
 //! The command's arguments and output: `accomp_host::cli::discover`. Method, catalogue, rates and
 //! measured-data findings: `docs/discovery.md`.
 
+pub mod acceptance;
 pub mod baseline;
 pub mod changepoints;
+pub mod current_model;
 pub mod effects;
 pub mod eiv;
 mod error;
+pub mod fitters;
+pub mod fullrate;
 pub mod hysteresis;
 pub mod import;
+pub mod joint;
 pub mod noise;
 pub mod plausibility;
 pub mod report;
@@ -30,7 +40,9 @@ pub mod residual;
 pub mod select;
 pub mod shape;
 pub mod simulate;
+pub mod table_error;
 pub mod tidal;
+pub mod validation;
 
 pub use error::DiscoverError;
 
@@ -78,6 +90,12 @@ pub struct Discovery {
     pub shape_checks: Vec<shape::ShapeCheck>,
     /// Wave-group tidal analysis of a gravity record, or why it was not run.
     pub tidal: Result<tidal::TidalAnalysis, tidal::NotRun>,
+    /// The fast terms fitted on the full-rate rows ([`fullrate`]) when the selection ran on bins
+    /// of at least [`fullrate::MIN_ROWS_PER_BIN`] rows; `Err` says why it could not run; `None`
+    /// when the record was not binned that coarsely.
+    pub full_rate: Option<Result<fullrate::FullRate, String>>,
+    /// With a calibration table: the test of its temperature models ([`table_error`]).
+    pub table_check: Option<table_error::TableCheck>,
 }
 
 /// The shared series of the candidates.
@@ -115,9 +133,15 @@ pub fn discover(
     // Errors in variables: each channel's reading noise and smoother are fitted and reported;
     // see FIT_ON_SMOOTHED_CHANNELS for whether the effects are fitted on the smoothed states.
     let (ds, channel_noise) = eiv::denoise(&ds, FIT_ON_SMOOTHED_CHANNELS);
-    let base = match table {
-        Some(t) => baseline::calibrated_baseline(&ds, t)?,
-        None => baseline::static_baseline(&ds),
+    // With a table, its temperature models are tested first: an error found there enters the
+    // baseline, so the catalogue is searched on what the table does not explain.
+    let (base, table_check) = match table {
+        Some(t) => {
+            let b = baseline::calibrated_baseline(&ds, t)?;
+            let (check, extended) = table_error::check(&ds, t, &b, cfg);
+            (extended, Some(check))
+        }
+        None => (baseline::static_baseline(&ds), None),
     };
     let ctx = context(&ds, &base);
     let (cands, not_candidates) = effects::candidates(&ds, &ctx, base.tilt_subtracted);
@@ -177,6 +201,8 @@ pub fn discover(
         channel_noise,
         measured_channels,
         tidal,
+        full_rate: None,
+        table_check,
         dataset: ds,
     })
 }
@@ -190,6 +216,20 @@ pub fn discover_path(
     cfg: &select::Config,
 ) -> Result<(Discovery, Vec<import::BadRow>), DiscoverError> {
     let (log, bad) = import::load_for_dataset(path, format, opts.output.as_deref())?;
+    let d = discover_log(log, &bad, opts, table, cfg)?;
+    Ok((d, bad))
+}
+
+/// [`discover_path`] on a log already read (`bad`: the rows its reader refused): the dataset,
+/// the selection on it and, when the dataset is binned, the full-rate stage on the rows. The log
+/// is consumed: it is dropped before the fit.
+pub fn discover_log(
+    log: crate::log::Log,
+    bad: &[import::BadRow],
+    opts: &DatasetOptions,
+    table: Option<&accomp::table::CalibrationTable>,
+    cfg: &select::Config,
+) -> Result<Discovery, DiscoverError> {
     let mut opts = opts.clone();
     if let Some(t) = table {
         opts.unit_per_g_from_calibration = t
@@ -199,9 +239,19 @@ pub fn discover_path(
             .map(|(k, _)| k.scale_factor_v_per_g);
     }
     let mut ds = import::dataset_from_log(&log, &opts)?;
-    note_bad_rows(&mut ds, &bad);
-    let d = discover(ds, table, cfg)?;
-    Ok((d, bad))
+    note_bad_rows(&mut ds, bad);
+    // Bins of several rows hide what is faster than two of them: the full-rate rows are kept
+    // for the fast terms (the log itself is dropped first: it holds every column read).
+    let rows_per_bin = ds.samples_per_point.iter().sum::<f64>() / ds.len().max(1) as f64;
+    let full = if rows_per_bin >= fullrate::MIN_ROWS_PER_BIN {
+        Some(import::full_rate_from_log(&log, &opts)?)
+    } else {
+        None
+    };
+    drop(log);
+    let mut d = discover(ds, table, cfg)?;
+    d.full_rate = full.map(|f| fullrate::analyse(&f, &d.dataset, &d.selection.accepted));
+    Ok(d)
 }
 
 /// Says in the dataset's notes how many rows the reader skipped and why (the first ten).

@@ -47,10 +47,24 @@ pub fn is_flexible(e: &Effect) -> bool {
     matches!(e, Effect::ThermalHysteresis)
 }
 
-/// The simpler physical explanations a flexible effect must beat out of sample.
-pub fn simpler_than(e: &Effect) -> Vec<Effect> {
+/// The simpler physical explanations a flexible effect, or a higher-order transfer function,
+/// must beat out of sample: a loop the first-order lag; a second-order lag of a channel that
+/// channel's first-order lag (measured: a first-order lag of 24 min on a one-rate programme was
+/// named `lag2_coupling` with τ 1253 s and a coefficient 0.58 × the true one without it).
+pub fn simpler_than(e: &Effect, ds: &super::import::Dataset) -> Vec<Effect> {
     match e {
         Effect::ThermalHysteresis => vec![Effect::ThermalLag],
+        Effect::Lag2Coupling(c) => {
+            use super::import::ChannelKind;
+            let is = |k: ChannelKind| ds.channel(k).is_some_and(|ch| &ch.name == c);
+            if is(ChannelKind::Temperature) {
+                vec![Effect::ThermalLag]
+            } else if is(ChannelKind::Pressure) {
+                vec![Effect::PressureAdmittance]
+            } else {
+                vec![Effect::AmbientCoupling(c.clone())]
+            }
+        }
         _ => Vec::new(),
     }
 }
@@ -168,8 +182,33 @@ pub fn separating_measurement(a: &Effect, b: &Effect) -> String {
         "temperature ramps of different rates (a lag's offset scales with the rate, a loop's \
          does not) or a hold after a ramp (a lag settles, a loop stays on its branch)"
             .into()
-    } else if pair(&Warmup, &AgingDrift) {
-        "a longer record (an exponential settles, a logarithm keeps growing)".into()
+    } else if pair(&ThermalLag, &RateCoupling(String::new()))
+        || pair(
+            &AmbientCoupling(String::new()),
+            &RateCoupling(String::new()),
+        )
+        || pair(&Lag2Coupling(String::new()), &RateCoupling(String::new()))
+    {
+        "a change of the channel's rate held for longer than the lag (a step in the ramp rate, or \
+         a ramp that stops and holds): a rate coupling follows the new rate at once and vanishes \
+         on the hold, a lag settles over its τ"
+            .into()
+    } else if pair(&ThermalLag, &Lag2Coupling(String::new()))
+        || pair(
+            &AmbientCoupling(String::new()),
+            &Lag2Coupling(String::new()),
+        )
+    {
+        "a step of the channel (a first-order lag responds at once, a second-order one starts \
+         with zero slope)"
+            .into()
+    } else if pair(&Warmup, &AgingDrift)
+        || pair(&Warmup, &CreepDrift)
+        || pair(&AgingDrift, &CreepDrift)
+    {
+        "a longer record (an exponential settles, a logarithm keeps growing, a power law \
+         accelerates or settles as t^p)"
+            .into()
     } else if pair(&TiltCoupling, &BuildingTilt) || pair(&TiltCoupling, &TidalTilt) {
         "a tilt excursion off the solar day (a deliberate tilt of the pier or the mount)".into()
     } else if pair(&Step { duration_s: 0.0 }, &Warmup)

@@ -61,6 +61,10 @@ pub fn json(d: &Discovery) -> Value {
             });
             if let Some(c) = a.effect.channel() {
                 o["channel"] = json!(c);
+                o["channel_unit"] = json!(d.dataset.channel_unit(c));
+            }
+            if let Some(f) = a.effect.drift_family() {
+                o["drift_family"] = json!(f);
             }
             // "ambiguous: A or B": the other cause, its parameters and what would separate them.
             if let Some(amb) = &a.ambiguous_with {
@@ -125,6 +129,8 @@ pub fn json(d: &Discovery) -> Value {
             "adev_after": d.adev_after,
         },
         "tidal_analysis": super::tidal::json_of(&d.tidal),
+        "full_rate": super::fullrate::json_of(&d.full_rate),
+        "calibration_table": d.table_check.as_ref().map(super::table_error::json_of),
     })
 }
 
@@ -251,7 +257,11 @@ pub fn text(d: &Discovery) -> String {
             "  {}. {}{}: {}\n     ΔBIC {:.1}; std {:.4e} → {:.4e} {unit}; out of sample {:.4e} → {:.4e}; gain {:.1} %; forward gain {:.1} %",
             i + 1,
             a.effect.name(),
-            a.effect.channel().map(|c| format!(" ({c})")).unwrap_or_default(),
+            a.effect
+                .channel()
+                .map(|c| format!(" ({c}, {})", d.dataset.channel_unit(c)))
+                .or_else(|| a.effect.drift_family().map(|f| format!(" (drift, {f})")))
+                .unwrap_or_default(),
             ps.join(", "),
             a.delta_bic,
             a.std_before,
@@ -329,6 +339,10 @@ pub fn text(d: &Discovery) -> String {
     let _ = writeln!(o, "  noise: {}", noise_text(&s.final_noise, unit));
     for ((t, a), (_, b)) in d.adev_before.iter().zip(&d.adev_after).step_by(3) {
         let _ = writeln!(o, "  ADEV({t:.0} s): {a:.3e} → {b:.3e} {unit}");
+    }
+    o.push_str(&super::fullrate::text_of(&d.full_rate, unit));
+    if let Some(c) = &d.table_check {
+        o.push_str(&super::table_error::text_of(c, unit));
     }
     o.push_str(&super::tidal::text_of(&d.tidal));
     o

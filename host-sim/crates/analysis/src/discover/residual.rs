@@ -395,27 +395,13 @@ mod tests {
     #[test]
     fn cusum_places_a_step_where_it_is() {
         let t: Vec<f64> = (0..1000).map(f64::from).collect();
-        let mut seg = vec![false; 1000];
-        seg[0] = true;
         let r: Vec<f64> = t
             .iter()
             .map(|&x| if x >= 700.0 { 1.0 } else { 0.0 })
             .collect();
         let ds = Dataset {
-            t_s: t,
-            y: r.clone(),
-            segment_start: seg,
-            channels: Vec::new(),
-            output_name: "output_g".into(),
-            output_unit: "g".into(),
-            unit_per_g: Some(1.0),
             input_g: None,
-            start_unix_s: None,
-            site: None,
-            dt_s: 1.0,
-            samples_per_point: Vec::new(),
-            notes: Vec::new(),
-            warnings: Vec::new(),
+            ..Dataset::test_g(t, r.clone(), 1.0)
         };
         let tr = trend(&ds, &r);
         assert_eq!(tr.step_time_s, 700.0);

@@ -2,12 +2,11 @@
 //! refuses what real NOR refuses) mirrored to a file after every erase and program, so a
 //! restarted `board-sim` boots with the tables it had — as the board does after a power cut.
 //! An erase can be made to stall the board for a while (the STM32F405 stalls its CPU for a
-//! sector erase, up to seconds).
+//! sector erase, up to seconds): the time is counted here and lived through by the board.
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
-use std::time::Duration;
 
 use accomp::storage::{RamFlash, RamFlashError, SlotLayout};
 use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
@@ -28,6 +27,8 @@ pub struct BoardFlash {
     file: Option<PathBuf>,
     /// Milliseconds the next erase stalls (0: none); shared with the fault control.
     pub erase_stall_ms: Arc<AtomicU64>,
+    /// Total time erases stalled the board, µs: the board's clock goes on by it.
+    pub stalled_us: Arc<AtomicU64>,
 }
 
 impl BoardFlash {
@@ -58,6 +59,7 @@ impl BoardFlash {
             ram,
             file,
             erase_stall_ms: Arc::new(AtomicU64::new(0)),
+            stalled_us: Arc::new(AtomicU64::new(0)),
         })
     }
 
@@ -92,8 +94,9 @@ impl NorFlash for BoardFlash {
     fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
         let stall = self.erase_stall_ms.swap(0, Ordering::Relaxed);
         if stall > 0 {
-            // The CPU is stalled: nothing else of the board runs meanwhile.
-            std::thread::sleep(Duration::from_millis(stall));
+            // The CPU is stalled: the board (`VirtualBoard`) lives through it on its own clock
+            // before anything else of it runs.
+            self.stalled_us.fetch_add(stall * 1000, Ordering::Relaxed);
         }
         self.ram.erase(from, to)?;
         self.persist();

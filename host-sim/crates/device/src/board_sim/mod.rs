@@ -9,36 +9,22 @@
 //! (the scenario) keeps running across board resets. The simulator steps at the scenario's
 //! interval and the inputs are interpolated linearly between its steps.
 //!
-//! What the firmware's `main.rs` does with RTIC tasks is done here in one event loop, in time
-//! order: ADS1262 DRDY edges, the supervisor tick, the RTD task's tick; requests are handled
-//! between events, as the worker does.
+//! What the firmware's `main.rs` does with RTIC tasks is done by the chip simulator's
+//! [`Board`] in one event loop, in time order: ADS1262 DRDY edges, the supervisor tick, the RTD
+//! task's tick; requests are handled between events, as the worker does.
 
 pub mod flash;
 pub mod pty;
 
-use std::cell::RefCell;
-use std::rc::Rc;
-
-use accomp::acquisition::{AdsSequencer, InterruptDrdy, RtdSequencer, SampleAssembler};
-use accomp::board;
-use accomp::drivers::ad7124::Ad7124;
-use accomp::drivers::ads1262::{Ads1262, DataRate};
+use accomp::drivers::ads1262::DataRate;
 use accomp::protocol::{
     encode_frame, Board, BootReport, DeviceMessage, FrameDecoder, MAX_FRAME_LEN, PROTOCOL_VERSION,
 };
 use accomp::service::Service;
 
-use accomp_chipsim::{Ad7124Model, Ads1262Model, Clock, SimDelay, SimSpi};
+use accomp_chipsim::{Acquired, Ad7124Model, Ads1262Model, Clock};
 use accomp_sim::{scenario::Scenario, Sample, SimError, Simulator};
 use flash::BoardFlash;
-
-type AdsSeq = AdsSequencer<SimSpi<Ads1262Model>, InterruptDrdy, SimDelay>;
-type RtdSeq = RtdSequencer<SimSpi<Ad7124Model>, InterruptDrdy, SimDelay>;
-
-/// Supervisor tick of the ADS1262 sequencer (the firmware's `ADS_TICK_MS`).
-const ADS_TICK_US: u64 = 20_000;
-/// An RTD reading further than this from a pair is not joined to it (the firmware's value).
-const RTD_MAX_AGE_US: u64 = 1_000_000;
 
 /// The physical inputs at a moment of the world's time.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -112,16 +98,9 @@ pub struct Faults {
 
 /// One board: chips, sequencers, the service, and the bytes it has to send.
 pub struct VirtualBoard {
-    clock: Clock,
-    ads: Rc<RefCell<Ads1262Model>>,
-    rtd: Rc<RefCell<Ad7124Model>>,
-    ads_seq: AdsSeq,
-    rtd_seq: RtdSeq,
-    assembler: SampleAssembler,
+    board: accomp_chipsim::Board,
     service: Service<BoardFlash>,
     decoder: FrameDecoder<MAX_FRAME_LEN>,
-    next_ads_tick: u64,
-    next_rtd_tick: u64,
     rate_hz: u32,
     /// World time at this board's boot, µs.
     boot_world_us: u64,
@@ -131,6 +110,14 @@ pub struct VirtualBoard {
     pub faults: Faults,
     /// Frames streamed since boot.
     pub frames_sent: u64,
+    /// The flash's count of erase-stall time, µs.
+    stalled_us: std::sync::Arc<std::sync::atomic::AtomicU64>,
+    /// Stall time of erases run by the service that the chips have not lived through yet.
+    pending_stall_us: u64,
+    /// The time the board was last run to ([`Self::run_until`]).
+    run_end_us: u64,
+    /// Received bytes not handled yet (held during a stall).
+    held: Vec<u8>,
 }
 
 impl VirtualBoard {
@@ -139,62 +126,42 @@ impl VirtualBoard {
         let clock = Clock::default();
         // The board's clock starts at its power-up; 1 ms for the reset sequence.
         clock.set(1_000);
-        let ads = Rc::new(RefCell::new(Ads1262Model::new(clock.clone())));
-        let rtd = Rc::new(RefCell::new(Ad7124Model::new(clock.clone())));
-        let ads_driver = Ads1262::new(
-            SimSpi {
-                chip: ads.clone(),
-                bus: board::ADS1262_BUS,
-            },
-            InterruptDrdy,
-            SimDelay(clock.clone()),
-            board::ads1262_config(),
-        );
-        let rtd_driver = Ad7124::new(
-            SimSpi {
-                chip: rtd.clone(),
-                bus: board::AD7124_BUS,
-            },
-            InterruptDrdy,
-            SimDelay(clock.clone()),
-            board::ad7124_config(),
-        );
+        let run_end_us = clock.now();
         let layout = flash::SLOT_LAYOUT;
+        let stalled_us = flash.stalled_us.clone();
         let mut service = Service::new(Board::Frontend, flash, layout);
         service.set_boot_report(BootReport {
             reset_cause,
             clock_fallback: false,
         });
-        let rtd_seq = RtdSequencer::new(rtd_driver);
-        let now = clock.now();
         let mut b = VirtualBoard {
-            next_ads_tick: now + ADS_TICK_US,
-            next_rtd_tick: now + rtd_seq.period_us(),
+            board: accomp_chipsim::Board::new(clock),
             rate_hz: service.rate_hz(),
-            clock,
-            ads,
-            rtd,
-            ads_seq: AdsSequencer::new(ads_driver),
-            rtd_seq,
-            assembler: SampleAssembler::new(RTD_MAX_AGE_US),
             service,
             decoder: FrameDecoder::new(),
             boot_world_us: world_us,
             tx: Vec::new(),
             faults: Faults::default(),
             frames_sent: 0,
+            stalled_us,
+            pending_stall_us: 0,
+            run_end_us,
+            held: Vec::new(),
         };
         // READY once the receiver is live.
-        b.send(&DeviceMessage::Ready {
-            board: Board::Frontend,
-            protocol: PROTOCOL_VERSION,
-        });
+        send(
+            &mut b.tx,
+            &DeviceMessage::Ready {
+                board: Board::Frontend,
+                protocol: PROTOCOL_VERSION,
+            },
+        );
         b
     }
 
     /// The board's own time, µs since boot.
     pub fn now_us(&self) -> u64 {
-        self.clock.now()
+        self.board.now()
     }
 
     /// World time at the board's boot, µs.
@@ -215,110 +182,264 @@ impl VirtualBoard {
         Ok(b)
     }
 
-    fn send(&mut self, msg: &DeviceMessage) {
-        let mut out = [0u8; MAX_FRAME_LEN];
-        if let Ok(n) = encode_frame(msg, &mut out) {
-            self.tx.extend_from_slice(&out[..n]);
-        }
+    /// Bytes from the PC: requests are answered in order (the worker's part). While the core
+    /// is stalled by a flash erase the bytes wait (the UART's DMA ring keeps them) and are
+    /// answered once the board has run past the stall.
+    pub fn receive(&mut self, bytes: &[u8]) {
+        self.held.extend_from_slice(bytes);
+        self.take_held();
     }
 
-    /// Bytes from the PC: requests are answered in order (the worker's part).
-    pub fn receive(&mut self, bytes: &[u8]) {
-        for &b in bytes {
+    /// True while a flash erase stalls the core: one ran and the chips have not lived through
+    /// it yet, or the board's clock is still ahead of the time it was last run to.
+    fn stalled(&self) -> bool {
+        self.pending_stall_us > 0 || self.board.now() > self.run_end_us
+    }
+
+    fn take_held(&mut self) {
+        let mut used = 0;
+        while used < self.held.len() && !self.stalled() {
+            let b = self.held[used];
+            used += 1;
             let Some(frame) = self.decoder.push(b) else {
                 continue;
             };
             let frame = frame.map(<[u8]>::to_vec);
-            let now = self.clock.now();
+            let clock = self.flash_clock();
             if let Some(reply) = self
                 .service
-                .handle_frame(frame.as_deref().map_err(|e| *e), &|| now)
+                .handle_frame(frame.as_deref().map_err(|e| *e), &|| clock.now())
             {
-                self.send(&reply);
+                send(&mut self.tx, &reply);
             }
+            self.pending_stall_us += clock.stalled();
         }
+        self.held.drain(..used);
         if self.service.rate_hz() != self.rate_hz {
             self.rate_hz = self.service.rate_hz();
             if let Some(r) = DataRate::from_sps(self.rate_hz) {
-                self.ads_seq.request_rate(r);
+                self.board.ads_seq.request_rate(r);
             }
         }
     }
 
     /// Erases the spare slot when the firmware would (after an answer, no request waiting).
     pub fn idle(&mut self) {
-        if self.service.erase_pending() {
-            // The board's clock stands still during the call (the stall of an `erase-stall`
-            // fault is wall time: the board's clock jumps after it, the sequencer sees the
-            // missed conversions), so the erase-stall time counted here is 0 µs.
-            let now = self.clock.now();
-            let _ = self.service.erase_ahead(&|| now);
+        if self.service.erase_pending() && self.held.is_empty() && !self.stalled() {
+            let clock = self.flash_clock();
+            let _ = self.service.erase_ahead(&|| clock.now());
+            self.pending_stall_us += clock.stalled();
         }
     }
 
-    fn apply_physics(&mut self, station: &mut Station) {
-        let t = self.clock.now();
-        let p = station.at((self.boot_world_us + t) as f64 * 1e-6);
-        {
-            let mut a = self.ads.borrow_mut();
-            a.advance();
-            a.accel_v = p.accel_v;
-            a.tilt_v = p.tilt_v;
-            a.stuck_drdy = self.faults.drdy_stall;
-        }
-        let mut r = self.rtd.borrow_mut();
-        r.advance();
-        r.rtd_ohms = if self.faults.rtd_open {
-            f64::INFINITY
-        } else {
-            p.rtd_ohms
-        };
-    }
-
-    fn emit(&mut self, reading: accomp::acquisition::AdsReading) {
-        let raw = self.assembler.assemble(&reading);
-        // The firmware's worker: seq and STALL losses from the sequencer.
-        if let Some(msg) = self
-            .service
-            .acquired(reading.seq, reading.lost, &raw, reading.time_us)
-        {
-            self.send(&msg);
-            self.frames_sent += 1;
+    /// The board's clock as the service sees it during a flash operation: an erase stall of
+    /// the `erase-stall` fault moves it on (the time base counts through the stall), so Info
+    /// counts the stall's length.
+    fn flash_clock(&self) -> FlashClock {
+        FlashClock {
+            now_us: self.board.now(),
+            stalled_us: self.stalled_us.clone(),
+            before_us: self.stalled_us.load(std::sync::atomic::Ordering::Relaxed),
         }
     }
 
     /// Runs the board until its clock reads `end_us`: DRDY edges, supervisor and RTD ticks in
-    /// time order, each seeing the physics of its moment.
+    /// time order, each seeing the physics of its moment; finished pairs go through the
+    /// service (seq, losses, pipeline) and out on the UART while streaming.
     pub fn run_until(&mut self, end_us: u64, station: &mut Station) {
-        loop {
-            let drdy = self.ads.borrow().next_drdy().unwrap_or(u64::MAX);
-            let t = drdy.min(self.next_ads_tick).min(self.next_rtd_tick);
-            if t > end_us {
-                if end_us > self.clock.now() {
-                    self.clock.set(end_us);
-                }
-                self.apply_physics(station);
-                return;
+        let stall_us = std::mem::take(&mut self.pending_stall_us);
+        let VirtualBoard {
+            board,
+            service,
+            boot_world_us,
+            tx,
+            faults,
+            frames_sent,
+            ..
+        } = self;
+        let mut inputs = |t: u64, a: &mut Ads1262Model, r: &mut Ad7124Model| {
+            let p = station.at((*boot_world_us + t) as f64 * 1e-6);
+            a.accel_v = p.accel_v;
+            a.tilt_v = p.tilt_v;
+            a.stuck_drdy = faults.drdy_stall;
+            r.rtd_ohms = if faults.rtd_open {
+                f64::INFINITY
+            } else {
+                p.rtd_ohms
+            };
+        };
+        // The firmware's worker: seq and STALL losses from the sequencer.
+        let mut out = |acq: Acquired| {
+            let r = acq.reading;
+            if let Some(msg) = service.acquired(r.seq, r.lost, &acq.raw, r.time_us) {
+                send(tx, &msg);
+                *frames_sent += 1;
             }
-            self.clock.set(t.max(self.clock.now()));
-            self.apply_physics(station);
-            if t == drdy {
-                if let Some(r) = self.ads_seq.on_drdy(t) {
-                    self.emit(r);
-                }
-            }
-            if t == self.next_rtd_tick {
-                if let Some(r) = self.rtd_seq.on_tick(t) {
-                    self.assembler.rtd(r);
-                }
-                self.next_rtd_tick = t + self.rtd_seq.period_us();
-            }
-            if t == self.next_ads_tick {
-                if let Some(r) = self.ads_seq.on_tick(t) {
-                    self.emit(r);
-                }
-                self.next_ads_tick = t + ADS_TICK_US;
-            }
+        };
+        // An erase stalled the core: the chips converted meanwhile, no handler ran; the DRDY
+        // served after it finds the sequencer's pair clock behind (a STALL gap in seq).
+        if stall_us > 0 {
+            board.stall(stall_us, &mut inputs, &mut out);
         }
+        board.run_until(end_us, &mut inputs, &mut out);
+        self.run_end_us = end_us;
+        self.take_held();
+    }
+}
+
+/// The service's clock during a flash operation ([`VirtualBoard::flash_clock`]).
+struct FlashClock {
+    now_us: u64,
+    stalled_us: std::sync::Arc<std::sync::atomic::AtomicU64>,
+    before_us: u64,
+}
+
+impl FlashClock {
+    /// Stall time since the clock was taken, µs.
+    fn stalled(&self) -> u64 {
+        self.stalled_us.load(std::sync::atomic::Ordering::Relaxed) - self.before_us
+    }
+
+    fn now(&self) -> u64 {
+        self.now_us + self.stalled()
+    }
+}
+
+/// Appends `msg` as a frame to the UART's outgoing bytes.
+fn send(tx: &mut Vec<u8>, msg: &DeviceMessage) {
+    let mut out = [0u8; MAX_FRAME_LEN];
+    if let Ok(n) = encode_frame(msg, &mut out) {
+        tx.extend_from_slice(&out[..n]);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::atomic::Ordering;
+
+    use accomp::pipeline::{Frame, LossFlags};
+    use accomp::protocol::{
+        decode_message, upload_body_crc32, HostFrame, Request, Response, CHUNK_LEN,
+    };
+
+    use super::*;
+
+    /// A host on the board's line: requests in, every message out decoded.
+    struct Host {
+        board: VirtualBoard,
+        station: Station,
+        decoder: FrameDecoder<MAX_FRAME_LEN>,
+        frames: Vec<Frame>,
+        next_id: u32,
+    }
+
+    impl Host {
+        /// Sends a request and runs the board in 10 ms steps until its answer is out.
+        fn call(&mut self, request: Request) -> Response {
+            self.next_id += 1;
+            let id = self.next_id;
+            let mut buf = [0u8; MAX_FRAME_LEN];
+            let n = encode_frame(&HostFrame { id, request }, &mut buf).unwrap();
+            self.board.receive(&buf[..n]);
+            self.board.idle();
+            for _ in 0..1000 {
+                let tx = std::mem::take(&mut self.board.tx);
+                let mut answer = None;
+                for b in tx {
+                    if let Some(Ok(body)) = self.decoder.push(b) {
+                        match decode_message::<DeviceMessage>(body).unwrap() {
+                            DeviceMessage::Sample { frame, .. } => self.frames.push(frame),
+                            DeviceMessage::Response { id: i, body } if i == id => {
+                                answer = Some(body)
+                            }
+                            other => panic!("{other:?}"),
+                        }
+                    }
+                }
+                if let Some(a) = answer {
+                    return a;
+                }
+                self.run(10_000);
+            }
+            panic!("request {id} unanswered");
+        }
+
+        fn run(&mut self, us: u64) {
+            let end = self.board.now_us() + us;
+            self.board.run_until(end, &mut self.station);
+            self.board.idle();
+        }
+
+        fn upload(&mut self, day: u8) {
+            let mut t = crate::paper_table();
+            t.date.day = day;
+            let bytes = t.encode();
+            let upload_id = 100 + u32::from(day);
+            self.call(Request::UploadBegin {
+                upload_id,
+                total_len: bytes.len() as u32,
+                body_crc32: upload_body_crc32(&bytes),
+            });
+            for (k, c) in bytes.chunks(CHUNK_LEN).enumerate() {
+                self.call(Request::UploadChunk {
+                    upload_id,
+                    offset: (k * CHUNK_LEN) as u32,
+                    data: heapless::Vec::from_slice(c).unwrap(),
+                });
+            }
+            assert_eq!(
+                self.call(Request::UploadCommit { upload_id }),
+                Response::Committed { table_id: t.id() }
+            );
+        }
+    }
+
+    /// `erase-stall=2000` and a table loaded while streaming onto a spare that holds an old
+    /// table: the commit's erase stalls the board 2 s of its clock — the pairs it missed are a
+    /// seq gap flagged STALL, and Info counts the stall with its 2,000,000 µs.
+    #[test]
+    fn an_erase_stall_fault_stalls_the_board_clock_and_info_counts_its_length() {
+        let scenario = accomp_sim::scenario::Scenario::preset("paper-1g").unwrap();
+        let flash = BoardFlash::open(None).unwrap();
+        // The fault control's switch, as `board-sim`'s `erase-stall=2000` sets it.
+        let flash_stall = flash.erase_stall_ms.clone();
+        let mut host = Host {
+            board: VirtualBoard::boot(flash, 0, 0),
+            station: Station::new(&scenario, 1).unwrap(),
+            decoder: FrameDecoder::new(),
+            frames: Vec::new(),
+            next_id: 0,
+        };
+        host.board.tx.clear();
+        host.run(2_000_000);
+        assert_eq!(host.call(Request::StreamStart), Response::Ok);
+        for day in 1..=3 {
+            host.upload(day); // blank slots: no erase
+        }
+        host.run(5_000_000);
+        let stall = host.board.stalled_us.clone();
+        flash_stall.store(2000, Ordering::Relaxed);
+        host.upload(4); // the spare holds table 1: this commit erases
+        host.run(5_000_000);
+        assert_eq!(stall.load(Ordering::Relaxed), 2_000_000);
+        let Response::Info(info) = host.call(Request::Info) else {
+            panic!("Info")
+        };
+        assert_eq!(info.losses.erase_stalls, 1);
+        assert_eq!(info.losses.erase_stall_us, 2_000_000);
+        let gaps: Vec<(u32, LossFlags)> = host
+            .frames
+            .windows(2)
+            .filter(|w| w[1].seq != w[0].seq + 1)
+            .map(|w| (w[1].seq - w[0].seq - 1, w[1].lost))
+            .collect();
+        // 2 s at 10 SPS (0.8 s pairs): two pairs missed, or three with the dropped one.
+        assert_eq!(gaps.len(), 1, "{gaps:?}");
+        assert!((2..=3).contains(&gaps[0].0), "{gaps:?}");
+        assert!(gaps[0].1.has(LossFlags::STALL));
+        assert_eq!(
+            u64::from(gaps[0].0),
+            u64::from(info.losses.conversions_lost)
+        );
     }
 }

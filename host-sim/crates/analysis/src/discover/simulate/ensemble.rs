@@ -4,7 +4,7 @@
 //! on all cores (std threads), with a progress bar on stderr.
 
 use super::spectra::{ChannelSpectra, RegularGrid, Views, Welch};
-use super::TwinModel;
+use super::SimulateError;
 use crate::discover::import::Dataset;
 
 /// What every residual of one comparison is measured against: the record's grid, the Welch
@@ -84,14 +84,17 @@ impl<'a> Yardstick<'a> {
     }
 }
 
-/// The members' views.
-pub fn run<T: TwinModel>(
-    twin: &T,
+/// The members' views; `member(k)` is member k's output (k = 1..=n).
+pub fn run<M>(
+    member: M,
     det: &[f64],
     n: usize,
     yard: &Yardstick,
     label: &str,
-) -> Result<Vec<Views>, String> {
+) -> Result<Vec<Views>, SimulateError>
+where
+    M: Fn(u64) -> Result<Vec<f64>, SimulateError> + Sync,
+{
     let bar = indicatif::ProgressBar::new(n as u64);
     bar.set_style(
         indicatif::ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} members ({elapsed})")
@@ -111,7 +114,7 @@ pub fn run<T: TwinModel>(
         n,
         "members",
     );
-    let mut out: Vec<Option<Result<Views, String>>> = vec![None; n];
+    let mut out: Vec<Option<Result<Views, SimulateError>>> = (0..n).map(|_| None).collect();
     std::thread::scope(|s| {
         let handles: Vec<_> = (0..threads)
             .map(|_| {
@@ -122,7 +125,7 @@ pub fn run<T: TwinModel>(
                         if k >= n {
                             break;
                         }
-                        let v = twin.run(Some(k as u64 + 1)).map(|m| {
+                        let v = member(k as u64 + 1).map(|m| {
                             let r: Vec<f64> = m.iter().zip(det).map(|(a, b)| a - b).collect();
                             yard.views(&yard.detrend(&r))
                         });
@@ -145,6 +148,6 @@ pub fn run<T: TwinModel>(
     bar.finish_and_clear();
     out.into_iter()
         .enumerate()
-        .map(|(k, r)| r.unwrap_or_else(|| Err(format!("ensemble member {} did not finish", k + 1))))
+        .map(|(k, r)| r.unwrap_or(Err(SimulateError::MemberLost(k + 1))))
         .collect()
 }

@@ -32,7 +32,7 @@ pub fn simulate_dataset(
     };
     super::simulate(
         ds,
-        |noise| crate::twin::Twin::new(ds, base.clone(), noise).map_err(|e| e.to_string()),
+        |noise| crate::twin::Twin::new(ds, base.clone(), noise),
         label,
         ensemble,
         cfg,

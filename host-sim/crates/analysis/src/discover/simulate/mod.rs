@@ -18,6 +18,7 @@
 pub mod cause;
 pub mod ensemble;
 mod entry;
+mod error;
 pub mod gain;
 pub mod mismatch;
 pub mod output;
@@ -25,10 +26,12 @@ pub mod spectra;
 pub mod twin;
 
 pub use entry::{simulate_dataset, write_report, write_scenario};
+pub use error::SimulateError;
 
 use super::import::Dataset;
 use super::noise::NoiseModel;
 use super::{select, Discovery};
+use crate::twin::family::NoiseFamily;
 use ensemble::Yardstick;
 use mismatch::Comparison;
 
@@ -64,14 +67,21 @@ pub type Refused = Vec<(String, String)>;
 pub trait TwinModel: Sync + Sized {
     /// One effect the twin can be extended by (a scenario `[[effects]]` entry).
     type Effect: Clone;
+    /// Why the twin cannot run.
+    type Error: std::error::Error + Send + Sync + 'static;
     /// The output at the record's time stamps: `None` the deterministic part, `Some(seed)` one
     /// ensemble member with the simulator's noise.
-    fn run(&self, seed: Option<u64>) -> Result<Vec<f64>, String>;
+    fn run(&self, seed: Option<u64>) -> Result<Vec<f64>, Self::Error>;
     /// The accepted effects of a discovery as the twin's effects (name, effect), with the
     /// effects it cannot express (name, why).
     fn effects_from(&self, d: &Discovery) -> (Vec<(String, Self::Effect)>, Refused);
+    /// One member's draw of the accepted effects: parameters drawn from their uncertainty, the
+    /// other cause of an ambiguous pair in odd members (same order as `effects_from`'s).
+    fn effects_drawn(&self, d: &Discovery, member: u64) -> Vec<Self::Effect>;
     /// The twin extended by effects.
     fn extended(&self, effects: &[Self::Effect]) -> Self;
+    /// The twin whose members draw their noise from the fitted family on the record's grid.
+    fn with_family(&self, family: &NoiseFamily, grid: &spectra::RegularGrid) -> Self;
     /// What came from the record and what from defaults.
     fn provenance(&self) -> Vec<String>;
     /// The scenario as TOML (`accomp simulate` runs it), if the twin has one.
@@ -129,6 +139,8 @@ pub struct Simulation {
     pub warnings: Vec<String>,
     /// Whether the twin is the station simulator.
     pub simulator: bool,
+    /// The noise family the members draw from (None: the likelihood noise model, announced).
+    pub family: Option<NoiseFamily>,
     /// Wall time of each stage (name, s): for docs/benchmarks.md.
     pub timing_s: Vec<(&'static str, f64)>,
 }
@@ -140,17 +152,13 @@ pub fn simulate<T, F>(
     scenario: String,
     ensemble: usize,
     cfg: &select::Config,
-) -> Result<Simulation, String>
+) -> Result<Simulation, SimulateError>
 where
     T: TwinModel,
-    F: Fn(Option<&NoiseModel>) -> Result<T, String>,
+    F: Fn(Option<&NoiseModel>) -> Result<T, T::Error>,
 {
     if !ENSEMBLE_RANGE.contains(&ensemble) {
-        return Err(format!(
-            "ensemble of {ensemble} members: {}..={} are taken",
-            ENSEMBLE_RANGE.start(),
-            ENSEMBLE_RANGE.end()
-        ));
+        return Err(SimulateError::EnsembleSize { members: ensemble });
     }
     let mut warnings = Vec::new();
     let mut timing_s = Vec::new();
@@ -160,11 +168,11 @@ where
         clock = std::time::Instant::now();
     };
     // 1. The prediction and the residual's catalogue search (the cause).
-    let quiet = build(None)?;
+    let quiet = build(None).map_err(SimulateError::twin)?;
     if !quiet.is_simulator() {
         warnings.push("the twin is not the station simulator (a test stand-in)".to_owned());
     }
-    let det = quiet.run(None)?;
+    let det = quiet.run(None).map_err(SimulateError::twin)?;
     check_len(&det, ds)?;
     let mut resid_ds = ds.clone();
     for (y, p) in resid_ds.y.iter_mut().zip(&det) {
@@ -174,18 +182,21 @@ where
     let spin = stage_spinner("catalogue search on the measured − twin residual");
     let cause = super::discover(resid_ds, None, cfg);
     spin.finish_and_clear();
-    let cause = cause.map_err(|e| e.to_string())?;
+    let cause = cause?;
     lap("catalogue search");
     let spin = stage_spinner("extension and the twin's noise model");
     // 2. The extension: the accepted effects as the twin's effects; each one's contribution is
     //    what it adds to the twin's prediction (the simulator's own rendering of it).
     let (effects, refused) = quiet.effects_from(&cause);
     let ext_quiet = quiet.extended(&effects.iter().map(|e| e.1.clone()).collect::<Vec<_>>());
-    let det_ext = ext_quiet.run(None)?;
+    let det_ext = ext_quiet.run(None).map_err(SimulateError::twin)?;
     check_len(&det_ext, ds)?;
     let mut contrib = Vec::new();
     for (name, e) in &effects {
-        let p = quiet.extended(std::slice::from_ref(e)).run(None)?;
+        let p = quiet
+            .extended(std::slice::from_ref(e))
+            .run(None)
+            .map_err(SimulateError::twin)?;
         check_len(&p, ds)?;
         contrib.push((name.clone(), sub(&p, &det)));
     }
@@ -253,21 +264,65 @@ where
     };
     spin.finish_and_clear();
     lap("extension and noise fit");
-    // 4. Ensembles and comparisons, before and after.
-    let twin = build(Some(&noise))?;
+    // The members' noise: the family (white, flicker, random walk, drift-rate walk, output
+    // filter) fitted by Whittle likelihood to what the extended twin leaves, the drift kept —
+    // the comparison keeps it, so the members must carry it.
+    let family = match NoiseFamily::fit(&yard.grid.place(&r_after), yard.grid.dt_s) {
+        Ok(f) => Some(f),
+        Err(e) => {
+            warnings.push(format!(
+                "the noise family could not be fitted ({e}): the members draw from the \
+                 likelihood noise model instead"
+            ));
+            None
+        }
+    };
+    lap("noise family");
+    // 4. Ensembles and comparisons, before and after. Members of the extended twin draw the
+    //    accepted effects' parameters (and the other cause of an ambiguous pair) as well as the
+    //    noise's.
+    let mut twin = build(Some(&noise)).map_err(SimulateError::twin)?;
+    if let Some(f) = &family {
+        twin = twin.with_family(f, &yard.grid);
+    }
     let ext = twin.extended(&effects.iter().map(|e| e.1.clone()).collect::<Vec<_>>());
     let mut provenance = ext.provenance();
     provenance.push(noise_source);
+    if family.is_some() {
+        provenance.push(
+            "ensemble members: the noise family fitted to the extended twin's residual (Whittle \
+             likelihood, drift kept), each member with its own draw of the family's parameters; \
+             members of the extended twin also draw every accepted effect's parameters from \
+             their uncertainty"
+                .to_owned(),
+        );
+    }
     let channels: Vec<String> = yard.channels.iter().map(|c| c.0.clone()).collect();
     let freqs = yard
         .welch
         .as_ref()
         .map(|w| w.frequencies())
         .unwrap_or_default();
-    let members = ensemble::run(&twin, &det, ensemble, &yard, "base")?;
+    let members = ensemble::run(
+        |k| twin.run(Some(k)).map_err(SimulateError::twin),
+        &det,
+        ensemble,
+        &yard,
+        "base",
+    )?;
     let before = mismatch::compare(yard.views(&r_before), &members, &freqs, &channels);
     let explained_by = cause::explained_by(&yard, &before, &r_before, &contrib);
-    let members_ext = ensemble::run(&ext, &det_ext, ensemble, &yard, "extended")?;
+    let members_ext = ensemble::run(
+        |k| {
+            twin.extended(&quiet.effects_drawn(&cause, k))
+                .run(Some(k))
+                .map_err(SimulateError::twin)
+        },
+        &det_ext,
+        ensemble,
+        &yard,
+        "extended",
+    )?;
     let after = mismatch::compare(yard.views(&r_after), &members_ext, &freqs, &channels);
     lap("ensembles and comparisons");
     // 5. Gain: forward chaining; the extension's contributions refitted on each training part.
@@ -312,6 +367,7 @@ where
         residual_after: r_after,
         warnings,
         simulator: quiet.is_simulator(),
+        family,
         timing_s,
     })
 }
@@ -355,19 +411,18 @@ fn sub(a: &[f64], b: &[f64]) -> Vec<f64> {
     a.iter().zip(b).map(|(x, y)| x - y).collect()
 }
 
-fn check_len(p: &[f64], ds: &Dataset) -> Result<(), String> {
+fn check_len(p: &[f64], ds: &Dataset) -> Result<(), SimulateError> {
     if p.len() != ds.len() {
-        return Err(format!(
-            "the twin returned {} values for a record of {} points",
-            p.len(),
-            ds.len()
-        ));
+        return Err(SimulateError::Length {
+            got: p.len(),
+            points: ds.len(),
+        });
     }
     if let Some(i) = p.iter().position(|v| !v.is_finite()) {
-        return Err(format!(
-            "the twin's prediction is not finite at point {i} (t = {} s)",
-            ds.t_s[i]
-        ));
+        return Err(SimulateError::NotFinite {
+            index: i,
+            t_s: ds.t_s[i],
+        });
     }
     Ok(())
 }

@@ -63,6 +63,20 @@ pub fn json(s: &Simulation) -> Value {
             "adev_outside_fraction": {"before": finite(s.before.adev_outside_fraction), "after": finite(s.after.adev_outside_fraction)},
             "psd_outside_fraction": {"before": finite(s.before.psd_outside_fraction), "after": finite(s.after.psd_outside_fraction)},
         },
+        "noise_family": s.family.as_ref().map(|f| json!({
+            "method": "Whittle likelihood on the periodogram of the extended twin's residual (first differences, Hann taper), drift kept",
+            "psd": "S(f) = [h0 + h_1/f + h_2/f^2 + h_4/f^4] / (1 + (f/fc)^2), one-sided, unit^2/Hz",
+            "periodogram_bins": f.bins,
+            "components": f.components(&s.cause.dataset.output_unit).iter().map(|c| json!({
+                "name": c.name,
+                "coefficient": finite(c.coefficient),
+                "sigma": finite(c.sigma),
+                "level": finite(c.level),
+                "level_sigma": finite(c.level_sigma),
+                "level_unit": c.level_unit,
+                "resolved": c.resolved,
+            })).collect::<Vec<_>>(),
+        })),
         "explained_by": Value::Object(ex),
         "refused": s.refused.iter().map(|(n, w)| json!({"effect": n, "why": w})).collect::<Vec<_>>(),
         "extended_scenario": s.extended_path.as_ref().map(|p| p.display().to_string()),
@@ -86,6 +100,24 @@ pub fn text(s: &Simulation, unit: &str) -> String {
     );
     for p in &s.provenance {
         let _ = writeln!(o, "  twin: {p}");
+    }
+    if let Some(f) = &s.family {
+        let _ = writeln!(
+            o,
+            "  noise family (Whittle likelihood on the extended twin's residual, {} bins):",
+            f.bins
+        );
+        for c in f.components(unit) {
+            let _ = writeln!(
+                o,
+                "    {:<24} {:.3e} ± {:.1e} {}{}",
+                c.name,
+                c.level,
+                c.level_sigma,
+                c.level_unit,
+                if c.resolved { "" } else { " (not resolved)" }
+            );
+        }
     }
     let _ = writeln!(
         o,

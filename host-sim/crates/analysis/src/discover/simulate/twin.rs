@@ -8,10 +8,16 @@
 //! `pressure_admittance (tidal analysis)` — the catalogue search alone leaves the barometric
 //! signal in the residual when the tide's errors dominate its likelihood.
 
+use super::spectra::RegularGrid;
 use super::{Refused, TwinModel};
 use crate::discover::Discovery;
 use crate::sim::effects::ScenarioEffect;
-use crate::twin::{scenario_effects_from_discovery, Twin};
+use crate::sim::noise::{gauss, stream};
+use crate::twin::family::NoiseFamily;
+use crate::twin::{scenario_effects_drawn, scenario_effects_from_discovery, Twin, TwinError};
+
+/// Random stream of a member's draw of the effects' parameters (not the noise's stream).
+const EFFECT_DRAW_STREAM: u64 = 5;
 
 /// Significance a wave-group analysis admittance needs to be added.
 pub const ADMITTANCE_SIGMAS: f64 = 3.0;
@@ -21,9 +27,10 @@ const PA_PER_HPA: f64 = 100.0;
 
 impl TwinModel for Twin {
     type Effect = ScenarioEffect;
+    type Error = TwinError;
 
-    fn run(&self, seed: Option<u64>) -> Result<Vec<f64>, String> {
-        Twin::run(self, seed).map_err(|e| e.to_string())
+    fn run(&self, seed: Option<u64>) -> Result<Vec<f64>, TwinError> {
+        Twin::run(self, seed)
     }
 
     fn effects_from(&self, d: &Discovery) -> (Vec<(String, ScenarioEffect)>, Refused) {
@@ -58,8 +65,31 @@ impl TwinModel for Twin {
         (named, refused)
     }
 
+    fn effects_drawn(&self, d: &Discovery, member: u64) -> Vec<ScenarioEffect> {
+        let mut rng = stream(member, EFFECT_DRAW_STREAM);
+        let mut effects = scenario_effects_drawn(d, &mut rng, member);
+        // The wave-group admittance, drawn like the rest, when `effects_from` adds it.
+        let (nominal, _) = self.effects_from(d);
+        if nominal
+            .iter()
+            .any(|(n, _)| n == "pressure_admittance (tidal analysis)")
+        {
+            if let Ok(Some(a)) = d.tidal.as_ref().map(|t| t.pressure_admittance.as_ref()) {
+                let p = &a.per_hpa;
+                effects.push(ScenarioEffect::PressureAdmittance {
+                    coefficient: (p.value + p.sigma * gauss(&mut rng)) / PA_PER_HPA,
+                });
+            }
+        }
+        effects
+    }
+
     fn extended(&self, effects: &[ScenarioEffect]) -> Self {
         Twin::extended(self, effects)
+    }
+
+    fn with_family(&self, family: &NoiseFamily, grid: &RegularGrid) -> Self {
+        Twin::with_family(self, family, &grid.cell, grid.len)
     }
 
     fn provenance(&self) -> Vec<String> {

@@ -1,0 +1,522 @@
+//! Fast terms at the rate they live at.
+//!
+//! The selection works on block means (`import`: a 41-day 1 Hz record becomes 71 s bins), where a
+//! lag of a minute is only its low-frequency limit −τ·dT/dt: its coefficient × τ is seen, τ is
+//! not. Here the lags faster than a few bins are fitted on the full-rate rows, in the frequency
+//! domain: the record is cut into gap-free segments of L rows (detrended, Hann window), and the
+//! transfer function from each channel to the output is estimated as the averaged cross-spectrum
+//! over the channel's spectrum, H_k = S_yx/S_xx. A lag term of the catalogue, c·(L_τ[x] − x),
+//! with the static coupling a beside it, is H(f) = a + c·(G_τ(f) − 1), G_τ the discrete
+//! first-order lag of [`effects::lag_filter`] (x_k = α x_{k−1} + (1 − α) u_k, α = e^{−Δt/τ}):
+//! its roll-over at f ≈ 1/(2πτ) is what fixes τ.
+//!
+//! Why this is the right likelihood: with y = H·x + n and the noise n independent of the
+//! channel, each segment's Fourier coefficients give Y = H·X + N with N complex Gaussian of the
+//! output's residual spectrum P(f); summed over K segments, up to a constant,
+//! −2 ln L = Σ_k 2K·S_xx|Ĥ_k − H_k|²/P_k. P is the output's spectrum less what the channel explains, so flicker and random walk
+//! are weighted as they are at each frequency; the slow terms (tide, drift, the binned model)
+//! are below the band or removed by each segment's detrending. Neighbouring bins of a Hann window
+//! are correlated: χ² is divided by its equivalent noise bandwidth (1.5 bins). The channel's
+//! white reading noise (the floor of S_xx) attenuates Ĥ: it is subtracted from S_xx and the band
+//! stops where the channel's spectrum falls below [`FLOOR_FACTOR`] × that floor.
+
+use super::effects::{log_grid, Effect, Param};
+use super::import::{ChannelKind, Dataset};
+use super::select::Accepted;
+use crate::numerics::linalg::least_squares;
+use crate::numerics::optimize::golden_section_min as golden;
+
+/// The full-rate stage runs when a bin holds at least this many rows: below that the binned
+/// selection's lag grid (from two bins) already reaches the fast terms.
+pub const MIN_ROWS_PER_BIN: f64 = 4.0;
+/// A segment spans at least this many bins (its lowest frequencies overlap the binned model's
+/// resolution, so a lag near the upper end of the grid still shows its roll-over).
+pub const SEGMENT_BINS: f64 = 32.0;
+/// At least this many segments (the residual spectrum P is estimated from them).
+pub const MIN_SEGMENTS: usize = 8;
+/// The band ends where the channel's spectrum falls below this factor × its white floor
+/// (reading noise), so the floor's subtraction changes Ĥ by at most 1/FLOOR_FACTOR.
+pub const FLOOR_FACTOR: f64 = 10.0;
+/// τ grid: log-spaced from two rows to this many bins.
+pub const TAU_MAX_BINS: f64 = 4.0;
+/// Points of the τ grid (charged as a 24-point search, like the binned grids).
+pub const TAU_GRID: usize = 24;
+/// Equivalent noise bandwidth of the Hann window, bins.
+pub const HANN_ENBW: f64 = 1.5;
+
+/// A fast term found at the full rate.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct FastTerm {
+    /// Catalogue name (`thermal_lag`, `ambient_coupling`).
+    pub name: &'static str,
+    /// The channel it acts through.
+    pub channel: String,
+    /// Parameters in the catalogue's order, with 1-σ uncertainties.
+    pub params: Vec<(String, f64, f64)>,
+    /// The static coupling fitted beside it (output per channel unit).
+    pub static_coefficient: (f64, f64),
+    /// ΔBIC against the static coupling alone (with the charge for the lag and its τ search).
+    pub delta_bic: f64,
+    /// χ² per degree of freedom of the transfer-function fit with the term (≈ 1 when the
+    /// model describes the band).
+    pub chi2_per_dof: f64,
+    /// Frequency band of the fit, Hz.
+    pub band_hz: (f64, f64),
+    /// Frequency bins in the band.
+    pub bins: usize,
+}
+
+/// The full-rate stage's result.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct FullRate {
+    /// Spacing of the rows, s.
+    pub row_spacing_s: f64,
+    /// Width of the selection's bins, s.
+    pub bin_s: f64,
+    /// Rows per segment.
+    pub segment_rows: usize,
+    /// Segments averaged.
+    pub segments: usize,
+    /// Rows used.
+    pub rows: usize,
+    /// Terms found.
+    pub terms: Vec<FastTerm>,
+    /// Terms tried and refused, with why.
+    pub refused: Vec<(String, String)>,
+}
+
+/// Cross-spectra of the output with one channel, averaged over segments.
+struct Spectra {
+    /// Channel auto-spectrum.
+    sxx: Vec<f64>,
+    /// Output auto-spectrum.
+    syy: Vec<f64>,
+    /// Cross-spectrum Y·conj(X) (re, im).
+    syx: Vec<(f64, f64)>,
+    segments: usize,
+}
+
+/// Gap-free runs of uniformly spaced rows (spacing within 1 % of `dt`), as index ranges.
+fn uniform_runs(ds: &Dataset, dt: f64) -> Vec<(usize, usize)> {
+    let mut runs = Vec::new();
+    let mut start = 0;
+    for i in 1..=ds.t_s.len() {
+        let brk = i == ds.t_s.len()
+            || ds.segment_start[i]
+            || ((ds.t_s[i] - ds.t_s[i - 1]) - dt).abs() > 0.01 * dt;
+        if brk {
+            runs.push((start, i));
+            start = i;
+        }
+    }
+    runs
+}
+
+/// Removes the least-squares line and applies the Hann window.
+fn detrend_window(x: &[f64], hann: &[f64]) -> Vec<f64> {
+    let n = x.len() as f64;
+    let mk = (n - 1.0) / 2.0;
+    let mean = x.iter().sum::<f64>() / n;
+    let (mut sxy, mut sxx) = (0.0, 0.0);
+    for (k, v) in x.iter().enumerate() {
+        let d = k as f64 - mk;
+        sxy += d * (v - mean);
+        sxx += d * d;
+    }
+    let b = sxy / sxx;
+    x.iter()
+        .enumerate()
+        .map(|(k, v)| (v - mean - b * (k as f64 - mk)) * hann[k])
+        .collect()
+}
+
+fn spectra(y: &[f64], x: &[f64], segs: &[usize], len: usize) -> Spectra {
+    let hann: Vec<f64> = (0..len)
+        .map(|k| (std::f64::consts::PI * k as f64 / len as f64).sin().powi(2))
+        .collect();
+    let m = len / 2;
+    let mut s = Spectra {
+        sxx: vec![0.0; m],
+        syy: vec![0.0; m],
+        syx: vec![(0.0, 0.0); m],
+        segments: segs.len(),
+    };
+    for &a in segs {
+        let mut yw = detrend_window(&y[a..a + len], &hann);
+        let mut xw = detrend_window(&x[a..a + len], &hann);
+        let fy = super::simulate::spectra::half_spectrum(&mut yw);
+        let fx = super::simulate::spectra::half_spectrum(&mut xw);
+        for k in 0..m {
+            let (yr, yi) = fy[k];
+            let (xr, xi) = fx[k];
+            s.sxx[k] += xr * xr + xi * xi;
+            s.syy[k] += yr * yr + yi * yi;
+            s.syx[k].0 += yr * xr + yi * xi;
+            s.syx[k].1 += yi * xr - yr * xi;
+        }
+    }
+    let kf = segs.len() as f64;
+    for k in 0..m {
+        s.sxx[k] /= kf;
+        s.syy[k] /= kf;
+        s.syx[k].0 /= kf;
+        s.syx[k].1 /= kf;
+    }
+    s
+}
+
+/// The discrete first-order lag's transfer function at bin k of an L-point DFT: (1 − α) /
+/// (1 − α e^{−iω}), ω = 2πk/L, α = e^{−Δt/τ}.
+fn lag_response(k: usize, len: usize, dt: f64, tau: f64) -> (f64, f64) {
+    let a = (-dt / tau).exp();
+    let w = 2.0 * std::f64::consts::PI * k as f64 / len as f64;
+    let (dr, di) = (1.0 - a * w.cos(), a * w.sin());
+    let d2 = dr * dr + di * di;
+    ((1.0 - a) * dr / d2, -(1.0 - a) * di / d2)
+}
+
+/// The band's estimated transfer function and weights.
+struct Band {
+    k: Vec<usize>,
+    h: Vec<(f64, f64)>,
+    w: Vec<f64>,
+}
+
+fn band(s: &Spectra) -> Option<Band> {
+    let m = s.sxx.len();
+    let floor = s.sxx[1..].iter().copied().fold(f64::INFINITY, f64::min);
+    if !(floor.is_finite() && floor >= 0.0) {
+        return None;
+    }
+    let kf = s.segments as f64;
+    let mut b = Band {
+        k: Vec::new(),
+        h: Vec::new(),
+        w: Vec::new(),
+    };
+    // Bin 1 carries the detrending's leakage; the band starts at bin 2.
+    for k in 2..m {
+        if s.sxx[k] <= FLOOR_FACTOR * floor {
+            break;
+        }
+        let sig = s.sxx[k] - floor;
+        let (cr, ci) = s.syx[k];
+        let p = (s.syy[k] - (cr * cr + ci * ci) / s.sxx[k]) * kf / (kf - 1.0);
+        if !(p > 0.0 && sig > 0.0) {
+            continue;
+        }
+        b.k.push(k);
+        b.h.push((cr / sig, ci / sig));
+        b.w.push(2.0 * kf * sig * sig / (s.sxx[k] * p * HANN_ENBW));
+    }
+    (b.k.len() >= 8).then_some(b)
+}
+
+/// Weighted fit of H_k = Σ β_j g_j(k) (β real) to the band: (χ², β, covariance).
+fn fit(b: &Band, shapes: &[Vec<(f64, f64)>]) -> Option<(f64, Vec<f64>, Vec<Vec<f64>>)> {
+    let mut rows = Vec::with_capacity(2 * b.k.len());
+    let mut rhs = Vec::with_capacity(2 * b.k.len());
+    for (i, &w) in b.w.iter().enumerate() {
+        let sw = w.sqrt();
+        rows.push(shapes.iter().map(|g| g[i].0 * sw).collect::<Vec<f64>>());
+        rhs.push(b.h[i].0 * sw);
+        rows.push(shapes.iter().map(|g| g[i].1 * sw).collect::<Vec<f64>>());
+        rhs.push(b.h[i].1 * sw);
+    }
+    let ls = least_squares(&rows, &rhs).ok()?;
+    Some((ls.rss, ls.coeffs.clone(), ls.unscaled_covariance()))
+}
+
+/// Runs the stage on the full-rate dataset `full` for the selection on `binned` (whose accepted
+/// lags on a channel are kept in that channel's model at their τ). `Err` says why it did not run.
+pub fn analyse(
+    full: &Dataset,
+    binned: &Dataset,
+    accepted: &[Accepted],
+) -> Result<FullRate, String> {
+    let mut dts: Vec<f64> = full.t_s.windows(2).map(|w| w[1] - w[0]).collect();
+    if dts.is_empty() {
+        return Err("no rows".into());
+    }
+    let mid = dts.len() / 2;
+    let dt = *dts.select_nth_unstable_by(mid, f64::total_cmp).1;
+    let bin = binned.dt_s;
+    let len = ((SEGMENT_BINS * bin / dt).ceil() as usize).next_power_of_two();
+    let mut segs = Vec::new();
+    for (a, b) in uniform_runs(full, dt) {
+        let mut s = a;
+        while s + len <= b {
+            segs.push(s);
+            s += len;
+        }
+    }
+    if segs.len() < MIN_SEGMENTS {
+        return Err(format!(
+            "fewer than {MIN_SEGMENTS} gap-free segments of {len} rows ({:.0} s): {}",
+            len as f64 * dt,
+            segs.len()
+        ));
+    }
+    let mut out = FullRate {
+        row_spacing_s: dt,
+        bin_s: bin,
+        segment_rows: len,
+        segments: segs.len(),
+        rows: segs.len() * len,
+        terms: Vec::new(),
+        refused: Vec::new(),
+    };
+    let rows_used = (segs.len() * len) as f64;
+    let taus = log_grid(2.0 * dt, TAU_MAX_BINS * bin, TAU_GRID);
+    let charge = rows_used.ln() + rows_used.ln().max(2.0 * (TAU_GRID as f64).ln());
+    for ch in &full.channels {
+        let name = match ch.kind {
+            ChannelKind::Temperature => Effect::ThermalLag.name(),
+            ChannelKind::Other => "ambient_coupling",
+            _ => continue,
+        };
+        let s = spectra(&full.y, &ch.values, &segs, len);
+        let Some(b) = band(&s) else {
+            out.refused.push((
+                format!("{name} ({})", ch.name),
+                "the channel's spectrum is at its reading-noise floor over the whole band".into(),
+            ));
+            continue;
+        };
+        let shape = |tau: f64| -> Vec<(f64, f64)> {
+            b.k.iter()
+                .map(|&k| {
+                    let (r, i) = lag_response(k, len, dt, tau);
+                    (r - 1.0, i)
+                })
+                .collect()
+        };
+        // The static coupling, and the lags the binned selection accepted on this channel.
+        let mut base: Vec<Vec<(f64, f64)>> = vec![vec![(1.0, 0.0); b.k.len()]];
+        for a in accepted {
+            let on_channel = match &a.effect {
+                Effect::ThermalLag => ch.kind == ChannelKind::Temperature,
+                Effect::AmbientCoupling(c) => *c == ch.name,
+                _ => false,
+            };
+            if on_channel && a.theta.value.is_finite() && a.theta.value > 0.0 {
+                base.push(shape(a.theta.value));
+            }
+        }
+        let Some((chi0, _, _)) = fit(&b, &base) else {
+            continue;
+        };
+        let chi_at = |tau: f64| -> f64 {
+            let mut sh = base.clone();
+            sh.push(shape(tau));
+            fit(&b, &sh).map_or(f64::INFINITY, |f| f.0)
+        };
+        let grid: Vec<f64> = taus.iter().map(|&t| chi_at(t)).collect();
+        let ib = (0..grid.len())
+            .min_by(|&i, &j| grid[i].total_cmp(&grid[j]))
+            .unwrap_or(0);
+        let delta_bic = grid[ib] - chi0 + charge;
+        let label = format!("{name} ({})", ch.name);
+        if delta_bic >= 0.0 {
+            out.refused.push((
+                label,
+                format!("ΔBIC {delta_bic:.1} ≥ 0 (no lag shows in the band)"),
+            ));
+            continue;
+        }
+        if ib == 0 || ib + 1 == grid.len() {
+            out.refused.push((
+                label,
+                format!(
+                    "τ at the {} edge of its grid ({:.1} s; grid {:.1}–{:.0} s): {}",
+                    if ib == 0 { "lower" } else { "upper" },
+                    taus[ib],
+                    taus[0],
+                    taus[taus.len() - 1],
+                    if ib == 0 {
+                        "faster than two rows"
+                    } else {
+                        "slower than the full-rate band: the binned selection's range"
+                    }
+                ),
+            ));
+            continue;
+        }
+        let lt = golden(
+            |l| chi_at(l.exp()),
+            taus[ib - 1].ln(),
+            taus[ib + 1].ln(),
+            40,
+        );
+        let tau = lt.exp();
+        let Some((chi, beta, cov)) = fit(&b, &{
+            let mut sh = base.clone();
+            sh.push(shape(tau));
+            sh
+        }) else {
+            continue;
+        };
+        let dof = (2 * b.k.len()).saturating_sub(beta.len() + 1).max(1) as f64;
+        // Scale the uncertainties by the fit's χ²/dof when the model leaves more than noise.
+        let scale = (chi / dof).max(1.0);
+        // σ_τ from the curvature of χ² in ln τ: Δχ² = 1 at ±σ.
+        let h = 0.05;
+        let curv = (chi_at((lt + h).exp()) - 2.0 * chi + chi_at((lt - h).exp())) / (h * h);
+        let sigma_tau = if curv > 0.0 {
+            tau * (2.0 * scale / curv).sqrt()
+        } else {
+            f64::INFINITY
+        };
+        let last = beta.len() - 1;
+        let sd = |j: usize| (cov[j][j] * scale).sqrt();
+        if sigma_tau.is_nan() || sigma_tau >= tau {
+            out.refused.push((
+                label,
+                format!(
+                    "τ = {tau:.1} s is not determined by the band (σ {sigma_tau:.1} s): the \
+                     channel has too little power near 1/(2πτ)"
+                ),
+            ));
+            continue;
+        }
+        let params = if name == "thermal_lag" {
+            vec![
+                ("tau_s".to_owned(), tau, sigma_tau),
+                ("coefficient".to_owned(), beta[last], sd(last)),
+            ]
+        } else {
+            vec![
+                ("coefficient".to_owned(), beta[last], sd(last)),
+                ("lag_s".to_owned(), tau, sigma_tau),
+            ]
+        };
+        out.terms.push(FastTerm {
+            name,
+            channel: ch.name.clone(),
+            params,
+            static_coefficient: (beta[0], sd(0)),
+            delta_bic: chi - chi0 + charge,
+            chi2_per_dof: chi / dof,
+            band_hz: (
+                b.k[0] as f64 / (len as f64 * dt),
+                b.k[b.k.len() - 1] as f64 / (len as f64 * dt),
+            ),
+            bins: b.k.len(),
+        });
+    }
+    Ok(out)
+}
+
+/// The named parameters of a fast term as the report prints them.
+pub fn param(t: &FastTerm, key: &str) -> Option<Param> {
+    t.params.iter().find(|p| p.0 == key).map(|p| Param {
+        value: p.1,
+        sigma: p.2,
+    })
+}
+
+/// The text report's section (empty when the stage did not apply).
+pub fn text_of(r: &Option<Result<FullRate, String>>, unit: &str) -> String {
+    use std::fmt::Write as _;
+    let mut o = String::new();
+    match r {
+        None => {}
+        Some(Err(why)) => {
+            let _ = writeln!(o, "full rate: not run ({why})");
+        }
+        Some(Ok(f)) => {
+            let _ = writeln!(
+                o,
+                "full rate: lags faster than the {:.1} s bins, fitted on {} rows at {} s in the \
+                 frequency domain ({} segments of {:.0} s)",
+                f.bin_s,
+                f.rows,
+                f.row_spacing_s,
+                f.segments,
+                f.segment_rows as f64 * f.row_spacing_s
+            );
+            if f.terms.is_empty() {
+                let _ = writeln!(o, "  none");
+            }
+            for t in &f.terms {
+                let ps: Vec<String> = t
+                    .params
+                    .iter()
+                    .map(|(k, v, s)| format!("{k} = {v:.5e} ± {s:.2e}"))
+                    .collect();
+                let _ = writeln!(
+                    o,
+                    "  {} ({}): {}\n     static coupling {:.4e} ± {:.2e} {unit}/channel unit; \
+                     ΔBIC {:.1}; χ²/dof {:.2} over {} bins, {:.3e}–{:.3e} Hz",
+                    t.name,
+                    t.channel,
+                    ps.join(", "),
+                    t.static_coefficient.0,
+                    t.static_coefficient.1,
+                    t.delta_bic,
+                    t.chi2_per_dof,
+                    t.bins,
+                    t.band_hz.0,
+                    t.band_hz.1
+                );
+            }
+            for (n, why) in &f.refused {
+                let _ = writeln!(o, "  refused: {n}: {why}");
+            }
+        }
+    }
+    o
+}
+
+/// The JSON `full_rate` value: null when the stage did not apply, `{"not_run": why}` when it
+/// could not run.
+pub fn json_of(r: &Option<Result<FullRate, String>>) -> serde_json::Value {
+    match r {
+        None => serde_json::Value::Null,
+        Some(Err(why)) => serde_json::json!({ "not_run": why }),
+        Some(Ok(f)) => serde_json::json!({
+            "row_spacing_s": f.row_spacing_s,
+            "bin_s": f.bin_s,
+            "segment_rows": f.segment_rows,
+            "segments": f.segments,
+            "rows": f.rows,
+            "terms": f.terms.iter().map(|t| serde_json::json!({
+                "name": t.name,
+                "channel": t.channel,
+                "parameters": t.params.iter().map(|p| (p.0.clone(), serde_json::json!(p.1))).collect::<serde_json::Map<_, _>>(),
+                "uncertainties": t.params.iter().map(|p| (p.0.clone(), serde_json::json!(p.2))).collect::<serde_json::Map<_, _>>(),
+                "static_coefficient": t.static_coefficient.0,
+                "static_coefficient_sigma": t.static_coefficient.1,
+                "delta_bic": t.delta_bic,
+                "chi2_per_dof": t.chi2_per_dof,
+                "band_hz": [t.band_hz.0, t.band_hz.1],
+                "bins": t.bins,
+            })).collect::<Vec<_>>(),
+            "refused": f.refused.iter().map(|(n, w)| serde_json::json!({"name": n, "why": w})).collect::<Vec<_>>(),
+        }),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The discrete lag's response is the lag filter's: a unit sinusoid through
+    /// `effects::lag_filter` comes out with the gain and phase `lag_response` says.
+    #[test]
+    fn lag_response_is_the_lag_filters_transfer_function() {
+        let (len, dt, tau, k) = (256usize, 1.0, 20.0, 5usize);
+        let w = 2.0 * std::f64::consts::PI * k as f64 / len as f64;
+        let n = 20 * len;
+        let t: Vec<f64> = (0..n).map(|i| i as f64 * dt).collect();
+        let u: Vec<f64> = (0..n).map(|i| (w * i as f64).cos()).collect();
+        let seg: Vec<bool> = (0..n).map(|i| i == 0).collect();
+        let x = super::super::effects::lag_filter(&u, &t, &seg, tau);
+        let (hr, hi) = lag_response(k, len, dt, tau);
+        // After the transient: x_i = Re(H e^{iωi}) = hr cos − hi sin.
+        for (i, xi) in x.iter().enumerate().skip(n - 50) {
+            let want = hr * (w * i as f64).cos() - hi * (w * i as f64).sin();
+            assert!((xi - want).abs() < 1e-9, "{xi} vs {want}");
+        }
+    }
+}

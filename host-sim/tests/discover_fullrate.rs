@@ -1,0 +1,102 @@
+//! Fast physics at the rate it lives at: a lag of a minute in a record binned to 86 s is found
+//! on the full-rate rows (`discover::fullrate`), and nothing is found where there is no lag.
+//!
+//! The records are short (one day at 1 Hz) and binned coarsely by `max_points` so that the bins
+//! hide the lag as the 41-day preset's 71 s bins do (docs/benchmarks.md measures that one).
+
+#[path = "common/synth.rs"]
+mod synth;
+
+use accomp_host::discover::import::DatasetOptions;
+use accomp_host::discover::{self as disc, select, Discovery};
+use accomp_host::log::Log;
+use accomp_host::sim::scenario::Scenario;
+use accomp_host::sim::Simulator;
+
+/// One day at 1 Hz.
+const ROWS: usize = 86_400;
+/// Binned to 86.4 s: the binned lag grid starts at two bins (173 s).
+const MAX_POINTS: usize = 1_000;
+
+fn run(log: Log) -> Discovery {
+    let opts = DatasetOptions {
+        max_points: MAX_POINTS,
+        ..DatasetOptions::default()
+    };
+    disc::discover_log(log, &[], &opts, None, &select::Config::default()).expect("discover")
+}
+
+fn lag_of(d: &Discovery) -> Option<f64> {
+    let f = d.full_rate.as_ref()?.as_ref().ok()?;
+    f.terms
+        .iter()
+        .find(|t| t.name == "thermal_lag")
+        .and_then(|t| disc::fullrate::param(t, "tau_s"))
+        .map(|p| p.value)
+}
+
+/// The paper-1g station as simulated (its proof mass lags the RTD's mounting block by 60 s,
+/// its tide, tilt and reference tempco on), one day at 1 Hz.
+#[test]
+fn a_one_minute_proof_mass_lag_is_found_at_the_full_rate() {
+    let mut sc = Scenario::preset("paper-1g").expect("preset");
+    sc.run.duration_s = ROWS as f64;
+    sc.run.interval_s = 1.0;
+    let seed = 7;
+    let mut sim = Simulator::new(&sc, seed).expect("simulator");
+    let n = sim.samples() as usize;
+    let mut cols: [Vec<f64>; 5] = Default::default();
+    for _ in 0..n {
+        let s = sim.step().expect("step");
+        for (c, v) in cols.iter_mut().zip([
+            s.time_s,
+            s.output_v,
+            s.temperature_c,
+            s.tilt_arcsec,
+            s.pressure_hpa,
+        ]) {
+            c.push(v);
+        }
+    }
+    let [t, out, temp, tilt, p] = cols;
+    let mut log = Log::with_time(t).expect("time");
+    for (k, v) in sim.metadata(seed) {
+        log.set_meta(&k, &v).expect("meta");
+    }
+    for (name, v) in [
+        ("output_v", out),
+        ("temperature_c", temp),
+        ("tilt_arcsec", tilt),
+        ("pressure_hpa", p),
+    ] {
+        log.push_column(name, v).expect("column");
+    }
+    let d = run(log);
+    print!("{}", disc::fullrate::text_of(&d.full_rate, "v"));
+    assert!(d.dataset.dt_s > 80.0, "bins of {} s", d.dataset.dt_s);
+    // The bins alone cannot resolve it: no binned lag within 25 % of a minute.
+    assert!(!d.selection.accepted.iter().any(|a| {
+        a.effect.name() == "thermal_lag" && (a.theta.value / 60.0 - 1.0).abs() < 0.25
+    }));
+    let tau = lag_of(&d).expect("a thermal_lag at the full rate");
+    assert!((tau / 60.0 - 1.0).abs() < 0.25, "τ = {tau} s");
+}
+
+/// A regulated station whose output follows its temperature without a lag (independent of the
+/// simulator: `synth.rs`), white + flicker + random-walk noise: nothing is found at the full rate.
+#[test]
+fn no_lag_is_found_where_the_output_follows_the_temperature_at_once() {
+    let mut rng = synth::rng(11);
+    let st = synth::station(ROWS, 1.0, synth::Thermal::Regulated, &mut rng);
+    let noise = synth::draw_noise(&mut rng);
+    let y = synth::output_g(&st, &noise, &vec![0.0; ROWS], &mut rng);
+    let d = run(synth::log_of(&st, y));
+    print!("{}", disc::fullrate::text_of(&d.full_rate, "g"));
+    let f = d
+        .full_rate
+        .as_ref()
+        .expect("binned, so the full-rate stage applies")
+        .as_ref()
+        .expect("the full-rate stage runs");
+    assert!(f.terms.is_empty(), "{:?}", f.terms);
+}
