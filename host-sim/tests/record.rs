@@ -56,6 +56,13 @@ impl BoardSim {
         self.stdin.flush().unwrap();
     }
 
+    /// Raises the fault `name` for `ms` of wall clock, then clears it.
+    fn fault_for(&mut self, name: &str, ms: u64) {
+        self.command(name);
+        std::thread::sleep(Duration::from_millis(ms));
+        self.command(&format!("{name}=off"));
+    }
+
     fn kill(mut self) {
         let _ = self.child.kill();
         let _ = self.child.wait();
@@ -121,6 +128,13 @@ fn board_with_table(name: &str, speed: u32, seed: u64) -> (PathBuf, BoardSim, Pa
     load_table(&dir);
     let out = dir.join("rec.csv");
     (dir, board, out)
+}
+
+/// A recorder process writing `samples` rows to `out`, once it has written `rows` of them.
+fn recording(dir: &Path, out: &Path, samples: &str, rows: usize) -> Recorder {
+    let rec = Recorder::spawn(record_cmd(dir, out, &["--samples", samples]));
+    wait_rows(out, rows);
+    rec
 }
 
 fn record_cmd(dir: &Path, out: &Path, extra: &[&str]) -> Command {
@@ -308,8 +322,7 @@ fn recorded_samples_are_the_scenarios_physics_in_seq_and_board_time() {
 #[test]
 fn the_record_goes_on_when_the_board_is_killed_and_restarted_on_the_same_link() {
     let (dir, board, out) = board_with_table("restart", 1000, 1);
-    let mut rec = Recorder::spawn(record_cmd(&dir, &out, &["--samples", "3000"]));
-    wait_rows(&out, 800);
+    let mut rec = recording(&dir, &out, "3000", 800);
     board.kill();
     std::thread::sleep(Duration::from_millis(800));
     let _board = BoardSim::start(&dir, 1000, 1);
@@ -359,8 +372,7 @@ fn a_killed_recorder_is_continued_with_append() {
 #[test]
 fn a_board_reset_and_garbage_on_the_line_are_events_and_lose_nothing_else() {
     let (dir, mut board, out) = board_with_table("reset", 1000, 3);
-    let mut rec = Recorder::spawn(record_cmd(&dir, &out, &["--samples", "2500"]));
-    wait_rows(&out, 500);
+    let mut rec = recording(&dir, &out, "2500", 500);
     board.command("garbage=300");
     wait_rows(&out, 1000);
     board.command("reset");
@@ -376,13 +388,10 @@ fn a_board_reset_and_garbage_on_the_line_are_events_and_lose_nothing_else() {
 #[test]
 fn an_unplugged_link_keeps_the_boot_and_flag_changes_are_events() {
     let (dir, mut board, out) = board_with_table("unplug", 1000, 5);
-    let mut rec = Recorder::spawn(record_cmd(&dir, &out, &["--samples", "3000"]));
-    wait_rows(&out, 400);
+    let mut rec = recording(&dir, &out, "3000", 400);
     // ≈ 375 frames with the loop open (the file shows rows half a second late: waiting for
     // a row count would not separate the two commands).
-    board.command("rtd-open");
-    std::thread::sleep(Duration::from_millis(300));
-    board.command("rtd-open=off");
+    board.fault_for("rtd-open", 300);
     std::thread::sleep(Duration::from_millis(300));
     board.command("unplug=1");
     assert!(rec.wait_success());
@@ -466,12 +475,9 @@ fn a_pc_clock_step_is_an_event_and_moves_no_row() {
 #[test]
 fn a_drdy_stall_is_flagged_in_rows_and_status_events_and_takes_no_number_from_seq() {
     let (dir, mut board, out) = board_with_table("drdystall", 1000, 6);
-    let mut rec = Recorder::spawn(record_cmd(&dir, &out, &["--samples", "2500"]));
-    wait_rows(&out, 400);
+    let mut rec = recording(&dir, &out, "2500", 400);
     // 300 ms of wall clock: 300 s of the board's, ≈ 375 pair periods without a conversion.
-    board.command("drdy-stall");
-    std::thread::sleep(Duration::from_millis(300));
-    board.command("drdy-stall=off");
+    board.fault_for("drdy-stall", 300);
     assert!(rec.wait_success());
     let r = read_rec(&out);
     let k = kinds(&r);
