@@ -990,6 +990,59 @@ mod tests {
     }
 
     #[test]
+    fn each_range_rule_names_its_field_and_what_it_must_be() {
+        let cases = [
+            (
+                ScenarioEffect::ThermalLag {
+                    tau_s: 0.0,
+                    coefficient: 1.0,
+                },
+                "effects[1] (thermal_lag): tau_s must be > 0",
+            ),
+            (
+                ScenarioEffect::SelfHeating {
+                    tau_s: 1.0,
+                    coefficient: f64::NAN,
+                },
+                "effects[1] (self_heating): coefficient must be finite",
+            ),
+            (
+                ScenarioEffect::Step {
+                    time_s: 0.0,
+                    size: 1.0,
+                    duration_s: -1.0,
+                },
+                "effects[1] (step): duration_s must be ≥ 0",
+            ),
+            (
+                ScenarioEffect::TidalGravity {
+                    amplitude_factor: 1.0,
+                    delay_s: 7201.0,
+                    groups: vec![],
+                },
+                "effects[1] (tidal_gravity): delay_s must be within ±7200 s",
+            ),
+            (
+                ScenarioEffect::BuildingTilt {
+                    amplitude: 1.0,
+                    phase_rad: f64::INFINITY,
+                },
+                "effects[1] (building_tilt): amplitude and phase_rad must be finite",
+            ),
+            (
+                ScenarioEffect::RateCoupling {
+                    channel: " ".into(),
+                    coefficient: 1.0,
+                },
+                "effects[1] (rate_coupling): channel must name a channel",
+            ),
+        ];
+        for (e, want) in cases {
+            assert_eq!(e.validate(1).unwrap_err().to_string(), want);
+        }
+    }
+
+    #[test]
     fn lag_hysteresis_and_step_follow_their_definitions() {
         let mut c = EffectChain::new(
             &[
