@@ -83,3 +83,41 @@ fn one_kind_as_svg_and_a_missing_column_named_on_stderr() {
     let err = String::from_utf8_lossy(&bad.stderr);
     assert!(err.contains("`temperature_c`"), "{err}");
 }
+
+#[test]
+fn a_record_over_a_board_reset_is_plotted_and_the_reset_said() {
+    // As `accomp record` writes one over a reset: the new boot samples 0.4 s off the old grid,
+    // after the reset's event line.
+    let dir = Scratch::new("plot-cli-reset");
+    let log = dir.join("rec.csv");
+    let mut text = String::from(
+        "# recorder: accomp record 0.1.0\n# start_utc: 2026-01-01T00:00:00Z\n# input_g: 1\n\
+         time_s,seq,output_v,temperature_c,status\n",
+    );
+    for k in 0..300u32 {
+        let t = if k < 150 {
+            f64::from(k)
+        } else {
+            f64::from(k) + 0.4
+        };
+        let seq = if k < 150 { k } else { k - 150 };
+        text += &format!("{t},{seq},{},60,OK\n", 1.0 + 1e-6 * f64::from(k % 7));
+        if k == 149 {
+            text += "# event: 2026-01-01T00:02:30Z board_reset seq restarted at 0 after 149\n";
+        }
+    }
+    std::fs::write(&log, text).unwrap();
+    let figs = dir.join("figs");
+    let out = accomp(&["plot", s(&log), "--out-dir", s(&figs), "--format", "svg"]);
+    let err = cli::stderr(&out);
+    assert!(out.status.success(), "{err}");
+    assert!(
+        err.contains("note: 2 continuous segments: the sampling phase changes at time_s = 150.4")
+            && err.contains("dashed line"),
+        "{err}"
+    );
+    let adev = std::fs::read_to_string(figs.join("rec_adev.svg")).unwrap();
+    assert!(adev.contains("pooled within 2 continuous segments"));
+    let fig3 = std::fs::read_to_string(figs.join("rec_fig3_output_1g.svg")).unwrap();
+    assert!(fig3.contains("board reset (dashed)"));
+}

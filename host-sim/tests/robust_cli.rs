@@ -474,3 +474,166 @@ fn a_ten_year_gap_in_a_record_does_not_stall_discover() {
         started.elapsed()
     );
 }
+
+#[test]
+fn fit_compensate_and_tumble_take_allow_large_and_their_limits_name_it() {
+    let dir = Scratch::new("robust-allow-large");
+    // 5 GiB of zero bytes, sparse: above the byte limit of every reader (64 MiB for tables and
+    // tumble logs, 4 GiB for sample files) by its size alone.
+    let huge = dir.path("huge.csv");
+    std::fs::File::create(&huge)
+        .unwrap()
+        .set_len(5 << 30)
+        .unwrap();
+    let h = huge.to_str().unwrap();
+    let cal = table_file(&dir);
+    let commands: Vec<Vec<&str>> = vec![
+        vec!["fit", h],
+        vec!["tumble", h],
+        vec![
+            "compensate",
+            "--target",
+            "host",
+            "--calibration",
+            &cal,
+            "--input",
+            h,
+            "--output",
+            "/dev/null",
+        ],
+    ];
+    for args in commands {
+        let o = accomp(&args);
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(1), "{args:?}: {e}");
+        assert!(
+            e.contains("5368709120 bytes") && e.contains("refused (--allow-large lifts it)"),
+            "{args:?}: {e}"
+        );
+        // With the flag the size is no refusal: the zeros are, as a line longer than any.
+        let mut large = args.clone();
+        large.push("--allow-large");
+        let o = accomp(&large);
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(1), "{large:?}: {e}");
+        assert!(
+            e.contains("1048576 bytes, the limit of one line") && !e.contains("5368709120"),
+            "{large:?}: {e}"
+        );
+    }
+}
+
+#[test]
+fn infinities_are_refused_by_every_reader_with_file_line_and_column() {
+    let dir = Scratch::new("robust-inf");
+    let cal = table_file(&dir);
+    let write = |name: &str, text: &str| {
+        let p = dir.path(name);
+        std::fs::write(&p, text).unwrap();
+        p.to_str().unwrap().to_owned()
+    };
+    let mut log = String::from("time_s,output_v,temperature_c,tilt_arcsec\n");
+    for i in 0..50 {
+        let v = if i == 20 { "-inf" } else { "1.25" };
+        log += &format!("{},{v},60,0.1\n", i * 60);
+    }
+    let log = write("log.csv", &log);
+    // 1e400 is beyond an f64 and parses as +inf: the same refusal.
+    let huge = write(
+        "huge.csv",
+        "time_s,output_v,temperature_c\n0,1.25,60\n60,1e400,60\n120,1.25,60\n",
+    );
+    let table = write(
+        "table1.csv",
+        "temperature_c,K0_g,K1_v_per_g\n20,1e-4,1.3\n40,inf,1.3\n60,1e-4,1.3\n",
+    );
+    let tumble = write(
+        "tumble.csv",
+        "angle_deg,output_v\n0,1.3\n90,Infinity\n180,-1.3\n270,0\n",
+    );
+    let no_time = write(
+        "no_time.csv",
+        "time_s,output_v,temperature_c\n0,1.25,60\nNaN,1.25,60\n",
+    );
+    let plots = dir.path("plots");
+    let compensate = |input: &str| -> Vec<String> {
+        [
+            "compensate",
+            "--target",
+            "host",
+            "--calibration",
+            &cal,
+            "--input",
+            input,
+            "--output",
+            dir.path("out.csv").to_str().unwrap(),
+        ]
+        .map(str::to_owned)
+        .to_vec()
+    };
+    let own = |v: &[&str]| v.iter().map(|s| (*s).to_owned()).collect::<Vec<_>>();
+    let cases: Vec<(Vec<String>, &str, &str, &str)> = vec![
+        (own(&["stability", &log]), &log, "line 22", "output_v"),
+        (
+            own(&["plot", &log, "--out-dir", plots.to_str().unwrap()]),
+            &log,
+            "line 22",
+            "output_v",
+        ),
+        (own(&["discover", &log]), &log, "line 22", "output_v"),
+        (own(&["stability", &huge]), &huge, "line 3", "output_v"),
+        (own(&["fit", &table]), &table, "line 3", "K0_g"),
+        (own(&["tumble", &tumble]), &tumble, "line 3", "output_v"),
+        (compensate(&log), &log, "line 22", "output_v"),
+        (compensate(&huge), &huge, "line 3", "output_v"),
+        // A time stamp is required: NaN is refused there, not taken as a missing reading.
+        (compensate(&no_time), &no_time, "line 3", "time_s"),
+    ];
+    for (args, file, line, column) in cases {
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let o = accomp(&args);
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(1), "{args:?}: {e}");
+        assert!(
+            e.contains(file) && e.contains(line) && e.contains(column),
+            "{args:?}: file, line or column not named: {e}"
+        );
+        assert!(!stdout(&o).contains("inf"), "{args:?}: {}", stdout(&o));
+    }
+    assert!(
+        !dir.path("out.csv").exists() || std::fs::read(dir.path("out.csv")).unwrap().is_empty()
+    );
+}
+
+#[test]
+fn compensate_prints_progress_lines_when_not_on_a_terminal() {
+    let dir = Scratch::new("robust-compensate-progress");
+    let cal = table_file(&dir);
+    let mut text = String::from("time_s,output_v,temperature_c\n");
+    for i in 0..200 {
+        text += &format!("{i},1.3,60\n");
+    }
+    let input = dir.path("in.csv");
+    std::fs::write(&input, text).unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_accomp"))
+        .args([
+            "compensate",
+            "--target",
+            "host",
+            "--calibration",
+            &cal,
+            "--input",
+        ])
+        .arg(&input)
+        .arg("--output")
+        .arg(dir.path("out.csv"))
+        .env("ACCOMP_PROGRESS_EVERY_S", "0")
+        .output()
+        .unwrap();
+    let e = stderr(&o);
+    assert!(o.status.success(), "{e}");
+    assert!(
+        e.contains(&format!("compensate {}: 200/200 samples", input.display())),
+        "{e}"
+    );
+}

@@ -26,11 +26,15 @@ pub struct CompensateArgs {
     pub firmware: Option<PathBuf>,
     #[command(flatten)]
     pub state: super::load::BoardStateArgs,
+    /// Read a samples file above the reader's limits (20 million data lines, 4 GiB).
+    #[arg(long)]
+    pub allow_large: bool,
 }
 
 /// Runs `accomp compensate` (streams its output: docs/protocol.md).
 pub fn run(args: &CompensateArgs) -> anyhow::Result<()> {
     args.state.apply();
+    crate::log::reader::set_allow_large(args.allow_large);
     compensate::run_to_file(
         &args.target,
         args.firmware.as_deref(),

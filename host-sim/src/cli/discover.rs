@@ -94,7 +94,11 @@ pub fn run(args: &DiscoverArgs) -> anyhow::Result<()> {
         &opts,
         table.as_ref(),
         &select::Config::default(),
-    )?;
+    )
+    .map_err(|e| match e {
+        crate::discover::DiscoverError::Import(e) => in_file(&args.log, e),
+        other => other.into(),
+    })?;
     if let Some(dir) = &args.report {
         report::write_report(&d, dir, args.report_format.0)?;
     }
@@ -123,9 +127,18 @@ pub fn run(args: &DiscoverArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// A log's refusal said of its file (the reader names the line and the column).
+fn in_file(path: &std::path::Path, e: import::ImportError) -> anyhow::Error {
+    match e {
+        import::ImportError::Log(e) => e.in_file(path).into(),
+        other => other.into(),
+    }
+}
+
 /// Loads the record as the discovery does (same binning and notes).
 pub fn load(args: &DiscoverArgs) -> anyhow::Result<import::Dataset> {
-    let (log, bad) = import::load_for_dataset(&args.log, args.format.0, args.output.as_deref())?;
+    let (log, bad) = import::load_for_dataset(&args.log, args.format.0, args.output.as_deref())
+        .map_err(|e| in_file(&args.log, e))?;
     let opts = DatasetOptions {
         output: args.output.clone(),
         max_points: args.max_points,

@@ -41,6 +41,9 @@ pub struct FitArgs {
     /// horizontal, gravity on the pendulum axis) or a_i,a_p,a_o in g.
     #[arg(long, default_value = "1g")]
     pub orientation: String,
+    /// Read a table above the reader's limits (20 million data lines, 64 MiB).
+    #[arg(long)]
+    pub allow_large: bool,
 }
 
 fn read(path: &Path) -> Result<String, FitError> {
@@ -54,6 +57,7 @@ fn read(path: &Path) -> Result<String, FitError> {
 
 /// `accomp fit`.
 pub fn run(args: &FitArgs) -> anyhow::Result<()> {
+    crate::log::reader::set_allow_large(args.allow_large);
     if let Some(p) = &args.output {
         crate::outputs::check_file(p)?;
     }

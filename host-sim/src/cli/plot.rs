@@ -37,7 +37,7 @@ pub struct PlotArgs {
 pub fn run(args: &PlotArgs) -> anyhow::Result<()> {
     crate::log::reader::set_allow_large(args.allow_large);
     crate::outputs::check_dir(&args.out_dir)?;
-    let log = Log::read_path(&args.log)?;
+    let log = Log::read_path(&args.log).map_err(|e| e.in_file(&args.log))?;
     let stem = args
         .log
         .file_stem()
@@ -53,6 +53,9 @@ pub fn run(args: &PlotArgs) -> anyhow::Result<()> {
     let out = plot_log(&log, &opts)?;
     for s in &out.skipped {
         eprintln!("skipped {s}");
+    }
+    for n in &out.notes {
+        eprintln!("note: {n}");
     }
     for p in &out.written {
         println!("{}", p.display());

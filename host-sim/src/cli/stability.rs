@@ -38,7 +38,7 @@ pub enum TausArg {
 /// Runs the subcommand, printing to stdout.
 pub fn run(args: &StabilityArgs) -> Result<(), StabilityError> {
     crate::log::reader::set_allow_large(args.allow_large);
-    let log = Log::read_path(&args.log)?;
+    let log = Log::read_path(&args.log).map_err(|e| e.in_file(&args.log))?;
     let opts = Options {
         columns: args.columns.clone(),
         taus: match args.taus {

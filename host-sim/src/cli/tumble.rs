@@ -37,10 +37,14 @@ pub struct TumbleArgs {
     /// Gap in time_s that starts a new test when the log has no `test` column (s).
     #[arg(long)]
     pub gap_s: Option<f64>,
+    /// Read a log above the reader's limits (20 million data lines, 64 MiB).
+    #[arg(long)]
+    pub allow_large: bool,
 }
 
 /// Runs `accomp tumble`.
 pub fn run(args: TumbleArgs) -> anyhow::Result<()> {
+    crate::log::reader::set_allow_large(args.allow_large);
     if let Some(p) = &args.output {
         crate::outputs::check_file(p)?;
     }
@@ -53,6 +57,7 @@ pub fn run(args: TumbleArgs) -> anyhow::Result<()> {
         index_error_arcsec,
         rotation_axis,
         gap_s,
+        allow_large: _,
     } = args;
     let mut parsed = Vec::new();
     for path in &logs {

@@ -20,6 +20,12 @@
 //! the same sample standard deviation ([`crate::stability::mean_std`]), so the figures and the
 //! stability report agree.
 //!
+//! A recorder's log that crosses a board reset (the new boot samples at another phase) is split
+//! into its continuous segments exactly as `accomp stability` splits it
+//! ([`crate::stability::LogGrid`]): the time figures draw each segment as its own line with the
+//! reset marked by a dashed vertical line, the Allan deviation pools the terms within the
+//! segments, and the outcome carries the same note `stability` prints.
+//!
 //! Time series are decimated per pixel column ([`decimate`]) before drawing: the line is the
 //! column mean, the light shading its min..max envelope, so a 41-day 1 Hz log plots in about a
 //! second, slow effects show through the noise and every spike stays visible.
@@ -33,9 +39,9 @@ use plotters::style::RGBColor;
 
 use crate::allan::{AllanError, Phase, Statistic, TauSet};
 use crate::log::{Log, LogError, TIME_COLUMN};
-use crate::stability::{column_unit, mean_std, Grid, GridError, StabilityError};
-use decimate::buckets;
-use draw::{AdevCurve, AdevFigure, DrawError, Figure, Panel, TimeFigure, Trace};
+use crate::stability::{column_unit, mean_std, segment_note, GridError, LogGrid, StabilityError};
+use decimate::buckets_broken;
+use draw::{AdevCurve, AdevFigure, DrawError, Figure, Marker, Panel, TimeFigure, Trace};
 
 /// Compensated output columns looked for when `--compensated` is not given, in this order.
 pub const DEFAULT_COMPENSATED: [&str; 3] =
@@ -205,11 +211,18 @@ pub struct PlotOutcome {
     pub written: Vec<PathBuf>,
     /// Figures `--kind all` skipped, with the reason.
     pub skipped: Vec<String>,
+    /// What the reader of the figures must know (a record split at board resets).
+    pub notes: Vec<String>,
 }
 
 /// Writes the figures `opts` asks for.
 pub fn plot_log(log: &Log, opts: &PlotOptions) -> Result<PlotOutcome, PlotError> {
     let mut out = PlotOutcome::default();
+    let grid = LogGrid::of(log);
+    out.notes.extend(
+        segment_note(log.time_s(), &grid.segment_starts)
+            .map(|n| format!("{n} (the time figures mark each reset with a dashed line)")),
+    );
     let mut figures = Vec::new();
     if opts.kind == Kind::All {
         let output_kind = if is_zero_g(log)? {
@@ -218,7 +231,7 @@ pub fn plot_log(log: &Log, opts: &PlotOptions) -> Result<PlotOutcome, PlotError>
             Kind::Output
         };
         for kind in [Kind::Temperature, output_kind, Kind::Tilt, Kind::Adev] {
-            match build(log, opts, kind) {
+            match build_on(log, opts, kind, &grid) {
                 Ok(f) => figures.push((kind, f)),
                 Err(e @ (PlotError::MissingColumn { .. } | PlotError::ZeroDeviation(..))) => {
                     out.skipped.push(format!("{}: {e}", kind.names().1));
@@ -230,7 +243,7 @@ pub fn plot_log(log: &Log, opts: &PlotOptions) -> Result<PlotOutcome, PlotError>
             return Err(PlotError::NothingToPlot(out.skipped.join("; ")));
         }
     } else {
-        figures.push((opts.kind, build(log, opts, opts.kind)?));
+        figures.push((opts.kind, build_on(log, opts, opts.kind, &grid)?));
     }
     std::fs::create_dir_all(&opts.out_dir).map_err(|source| PlotError::OutDir {
         path: opts.out_dir.clone(),
@@ -254,15 +267,26 @@ pub fn plot_log(log: &Log, opts: &PlotOptions) -> Result<PlotOutcome, PlotError>
 
 /// Describes one figure without drawing it.
 pub fn build(log: &Log, opts: &PlotOptions, kind: Kind) -> Result<Figure, PlotError> {
+    build_on(log, opts, kind, &LogGrid::of(log))
+}
+
+/// [`build`] with the log's grid worked out once for every figure.
+fn build_on(
+    log: &Log,
+    opts: &PlotOptions,
+    kind: Kind,
+    grid: &LogGrid,
+) -> Result<Figure, PlotError> {
+    let resets = &grid.segment_starts;
     match kind {
         Kind::All => Err(PlotError::NothingToPlot(
             "`all` is not a single figure".into(),
         )),
-        Kind::Temperature => temperature_figure(log),
-        Kind::Tilt => tilt_figure(log),
-        Kind::Output => output_figure(log, opts, false),
-        Kind::ZeroG => output_figure(log, opts, true),
-        Kind::Adev => adev_figure(log, opts),
+        Kind::Temperature => temperature_figure(log, resets),
+        Kind::Tilt => tilt_figure(log, resets),
+        Kind::Output => output_figure(log, opts, false, resets),
+        Kind::ZeroG => output_figure(log, opts, true, resets),
+        Kind::Adev => adev_figure(log, opts, grid),
     }
 }
 
@@ -295,9 +319,29 @@ struct TimeAxis {
     x: Vec<f64>,
     desc: String,
     range: (f64, f64),
+    /// First rows of the continuous segments after the first (board resets).
+    breaks: Vec<usize>,
 }
 
-fn time_axis(log: &Log) -> TimeAxis {
+impl TimeAxis {
+    /// The figure, with a dashed line at each board reset.
+    fn figure(&self, fig: TimeFigure) -> Figure {
+        if self.breaks.is_empty() {
+            return Figure::Time(fig);
+        }
+        let markers = self
+            .breaks
+            .iter()
+            .map(|&i| Marker {
+                at: self.x[i],
+                label: "board reset".into(),
+            })
+            .collect();
+        Figure::TimeMarked(fig, markers)
+    }
+}
+
+fn time_axis(log: &Log, resets: &[usize]) -> TimeAxis {
     let t = log.time_s();
     let (first, last) = (
         t.first().copied().unwrap_or(0.0),
@@ -317,13 +361,14 @@ fn time_axis(log: &Log) -> TimeAxis {
         x: t.iter().map(|v| v / div).collect(),
         desc,
         range: if b > a { (a, b) } else { (a, a + 1.0) },
+        breaks: resets.to_vec(),
     }
 }
 
 fn trace(axis: &TimeAxis, y: &[f64], label: String, color: RGBColor) -> Trace {
     Trace {
         label,
-        runs: buckets(&axis.x, y, draw::WIDTH_PX as usize),
+        runs: buckets_broken(&axis.x, y, draw::WIDTH_PX as usize, &axis.breaks),
         color,
     }
 }
@@ -341,20 +386,21 @@ fn sci(v: f64) -> String {
     format!("{v:.2e}")
 }
 
-fn temperature_figure(log: &Log) -> Result<Figure, PlotError> {
+fn temperature_figure(log: &Log, resets: &[usize]) -> Result<Figure, PlotError> {
     let label = |name: &str, y: &[f64]| match mean_std(y) {
         Some((m, s, _)) => format!("{name}: mean {m:.4} °C, σ {s:.4} °C"),
         None => name.to_owned(),
     };
     channel_figure(
         log,
+        resets,
         ("Fig. 2 (temperature)", "Instrument temperature"),
         (TEMPERATURE, "temperature (°C)"),
         label,
     )
 }
 
-fn tilt_figure(log: &Log) -> Result<Figure, PlotError> {
+fn tilt_figure(log: &Log, resets: &[usize]) -> Result<Figure, PlotError> {
     let t = log.time_s();
     let label = |name: &str, y: &[f64]| {
         let ms = mean_std(y);
@@ -368,6 +414,7 @@ fn tilt_figure(log: &Log) -> Result<Figure, PlotError> {
     };
     channel_figure(
         log,
+        resets,
         ("Fig. 4 (tilt)", "Foundation tilt"),
         (TILT, "tilt (arcsec)"),
         label,
@@ -376,21 +423,22 @@ fn tilt_figure(log: &Log) -> Result<Figure, PlotError> {
 
 /// One channel against time, with its `truth_` twin in grey when the log has one, each trace
 /// labelled by `label(name, values)`. `fig` is (the figure named in errors, its title); `column`
-/// is (the column, the y axis's description).
+/// is (the column, the y axis's description); `resets` the first rows of a record's segments.
 fn channel_figure(
     log: &Log,
+    resets: &[usize],
     (fig, title): (&'static str, &str),
     (column, y_desc): (&str, &str),
     label: impl Fn(&str, &[f64]) -> String,
 ) -> Result<Figure, PlotError> {
-    let axis = time_axis(log);
+    let axis = time_axis(log, resets);
     let y = need(log, fig, column)?;
     let mut traces = vec![trace(&axis, y, label(column, y), RED)];
     let truth = format!("{TRUTH_PREFIX}{column}");
     if let Some(tt) = log.column(&truth) {
         traces.push(trace(&axis, tt, label(&truth, tt), GREY));
     }
-    Ok(Figure::Time(TimeFigure {
+    Ok(axis.figure(TimeFigure {
         title: titled(log, title),
         x_desc: axis.desc.clone(),
         x_range: axis.range,
@@ -482,14 +530,19 @@ fn output_selection(
     Ok((raw, comp))
 }
 
-fn output_figure(log: &Log, opts: &PlotOptions, zero_g: bool) -> Result<Figure, PlotError> {
+fn output_figure(
+    log: &Log,
+    opts: &PlotOptions,
+    zero_g: bool,
+    resets: &[usize],
+) -> Result<Figure, PlotError> {
     let figure = if zero_g {
         Kind::ZeroG.names().1
     } else {
         Kind::Output.names().1
     };
     let (raw, comp) = output_selection(log, opts, figure)?;
-    let axis = time_axis(log);
+    let axis = time_axis(log, resets);
     let what = if zero_g {
         "tilt compensation"
     } else {
@@ -551,18 +604,19 @@ fn output_figure(log: &Log, opts: &PlotOptions, zero_g: bool) -> Result<Figure, 
     };
     // A shared y range only makes sense when every panel is in the same unit.
     let same_unit = units.windows(2).all(|w| w[0] == w[1]);
-    Ok(Figure::Time(TimeFigure {
+    Ok(axis.figure(TimeFigure {
         title: titled(log, title),
-        x_desc: axis.desc,
+        x_desc: axis.desc.clone(),
         x_range: axis.range,
         panels,
         shared_y: same_unit,
     }))
 }
 
-fn adev_figure(log: &Log, opts: &PlotOptions) -> Result<Figure, PlotError> {
+fn adev_figure(log: &Log, opts: &PlotOptions, grid: &LogGrid) -> Result<Figure, PlotError> {
     let (raw, comp) = output_selection(log, opts, Kind::Adev.names().1)?;
-    let grid = Grid::from_time(log.time_s())?;
+    let segments = grid.segment_starts.len() + 1;
+    let grid = grid.grid.clone()?;
     let mut curves = Vec::new();
     let mut units = Vec::new();
     // Whether any deviation was not finite (values that overflow), for the message when none
@@ -614,7 +668,14 @@ fn adev_figure(log: &Log, opts: &PlotOptions) -> Result<Figure, PlotError> {
     Ok(Figure::Adev(AdevFigure {
         title: titled(
             log,
-            "Overlapping Allan deviation, shaded: 68 % confidence interval",
+            &if segments > 1 {
+                format!(
+                    "Overlapping Allan deviation pooled within {segments} continuous segments \
+                     (board resets), shaded: 68 % confidence interval"
+                )
+            } else {
+                "Overlapping Allan deviation, shaded: 68 % confidence interval".to_owned()
+            },
         ),
         y_desc: format!("σ_y(τ) ({unit})"),
         curves,

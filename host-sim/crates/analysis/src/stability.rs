@@ -426,6 +426,70 @@ pub const RECORDER_KEY: &str = "recorder";
 /// Above this many grid points `TauSet::All` is refused (O(N^2)).
 pub const MAX_ALL_TAUS_LEN: usize = 200_000;
 
+/// The sampling grid of a log for its Allan deviations, as `stability` and `plot` use it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LogGrid {
+    /// The grid, or why the time base is none.
+    pub grid: Result<Grid, GridError>,
+    /// First row of every continuous segment after the first (empty unless a recorder's log
+    /// crosses a board reset).
+    pub segment_starts: Vec<usize>,
+}
+
+impl LogGrid {
+    /// The grid of `log`: a recorder's log over a board reset is split into its continuous
+    /// segments ([`Grid::from_time_segmented`]); any other log off the grid has none.
+    pub fn of(log: &Log) -> Self {
+        let t = log.time_s();
+        let recorder_log = log
+            .meta(RECORDER_KEY)
+            .is_some_and(|r| r.starts_with("accomp record"));
+        match Grid::from_time(t) {
+            Err(e @ GridError::OffGrid { .. }) if recorder_log => {
+                match Grid::from_time_segmented(t) {
+                    Ok((g, segment_starts)) => LogGrid {
+                        grid: Ok(g),
+                        segment_starts,
+                    },
+                    Err(_) => LogGrid {
+                        grid: Err(e),
+                        segment_starts: Vec::new(),
+                    },
+                }
+            }
+            grid => LogGrid {
+                grid,
+                segment_starts: Vec::new(),
+            },
+        }
+    }
+}
+
+/// What a log split into continuous segments means for its Allan deviation, in words (`None`
+/// for one segment): the times of the first five changes of phase.
+pub fn segment_note(t: &[f64], segment_starts: &[usize]) -> Option<String> {
+    if segment_starts.is_empty() {
+        return None;
+    }
+    let shown: Vec<String> = segment_starts
+        .iter()
+        .take(5)
+        .map(|&i| format!("{}", t[i]))
+        .collect();
+    Some(format!(
+        "{} continuous segments: the sampling phase changes at time_s = {}{} (board resets in a \
+         recorder's log); the Allan deviation pools the terms within each segment, none spans \
+         two, nothing is resampled",
+        segment_starts.len() + 1,
+        shown.join(", "),
+        if segment_starts.len() > 5 {
+            ", …"
+        } else {
+            ""
+        }
+    ))
+}
+
 /// Analyses a log.
 pub fn analyse(log: &Log, opts: &Options) -> Result<Report, StabilityError> {
     let names = if opts.columns.is_empty() {
@@ -438,34 +502,11 @@ pub fn analyse(log: &Log, opts: &Options) -> Result<Report, StabilityError> {
         opts.columns.clone()
     };
     let t = log.time_s();
-    let recorder_log = log
-        .meta(RECORDER_KEY)
-        .is_some_and(|r| r.starts_with("accomp record"));
-    // A recorder's log over a board reset is split into its continuous segments (announced in
-    // the Allan note); any other log off the grid gets no Allan curve, as before.
-    let (grid, segment_starts) = match Grid::from_time(t) {
-        Err(e @ GridError::OffGrid { .. }) if recorder_log => match Grid::from_time_segmented(t) {
-            Ok((g, starts)) => (Ok(g), starts),
-            Err(_) => (Err(e), Vec::new()),
-        },
-        other => (other, Vec::new()),
-    };
-    let segment_note =
-        (!segment_starts.is_empty()).then(|| {
-            let shown: Vec<String> = segment_starts
-                .iter()
-                .take(5)
-                .map(|&i| format!("{}", t[i]))
-                .collect();
-            format!(
-            "{} continuous segments: the sampling phase changes at time_s = {}{} (board resets \
-             in a recorder's log); the Allan deviation pools the terms within each segment, none \
-             spans two, nothing is resampled",
-            segment_starts.len() + 1,
-            shown.join(", "),
-            if segment_starts.len() > 5 { ", …" } else { "" }
-        )
-        });
+    let LogGrid {
+        grid,
+        segment_starts,
+    } = LogGrid::of(log);
+    let segment_note = segment_note(t, &segment_starts);
     if let (Ok(g), TauSet::All, true) = (&grid, opts.taus, opts.allan) {
         if g.len > MAX_ALL_TAUS_LEN {
             return Err(StabilityError::TooLongForAllTaus(g.len));

@@ -141,7 +141,7 @@ pub fn compensate_streaming(
 
 /// `accomp compensate` end to end: reads the table and the samples CSV, streams the output CSV
 /// to `output` (rows flushed at least every 200 ms while they arrive) and shows a progress bar
-/// with samples/s on stderr.
+/// with samples/s on stderr (off a terminal, a plain line a minute).
 pub fn run_to_file(
     target: &Target,
     firmware: Option<&Path>,
@@ -163,7 +163,10 @@ pub fn run_to_file(
             source,
         }
     })?;
-    let file = super::samples_csv::parse(&text)?;
+    let file = super::samples_csv::parse(&text).map_err(|error| DeviceError::Samples {
+        path: input.to_path_buf(),
+        error,
+    })?;
     let out = std::fs::File::create(output).map_err(|source| DeviceError::Create {
         path: output.to_path_buf(),
         source,
@@ -182,6 +185,12 @@ pub fn run_to_file(
         .progress_chars("=> "),
     );
     bar.set_message("samples");
+    // Off a terminal the bar is not drawn: a line a minute instead (as `simulate`, `discover`).
+    let lines = accomp_numerics::parallel::ProgressLines::new(
+        format!("compensate {}", input.display()),
+        file.rows.len(),
+        "samples",
+    );
     let started = std::time::Instant::now();
     let mut last_flush = started;
     let mut written = 0u64;
@@ -203,6 +212,7 @@ pub fn run_to_file(
                 bar.set_message("samples");
             }
             bar.set_position(written);
+            lines.set(written as usize);
             if last_flush.elapsed() >= std::time::Duration::from_millis(200) {
                 out.flush().map_err(write_error)?;
                 last_flush = std::time::Instant::now();

@@ -77,6 +77,15 @@ pub enum DeviceError {
     /// The samples file is malformed (the error names the line).
     #[error(transparent)]
     Csv(#[from] CsvError),
+    /// A samples file is malformed: the file, and the line the error names.
+    // `error`, not `source`: the message holds it already, no "Caused by" repeating it.
+    #[error("{}: {error}", path.display())]
+    Samples {
+        /// The samples file.
+        path: PathBuf,
+        /// What is wrong, with its line.
+        error: CsvError,
+    },
     /// An output file could not be created or written.
     #[error(transparent)]
     Output(#[from] OutputError),

@@ -1,7 +1,8 @@
 //! Sample CSVs for `compensate` (read through the project's CSV reader, `log::reader`), and the
 //! writer of its output. Format: `# key: value` metadata lines, one header row, then rows;
 //! required columns `time_s, output_v, temperature_c`, optional `tilt_arcsec`. Empty or NaN
-//! cells are missing values (NaN, which the pipeline flags).
+//! cells are missing values (NaN, which the pipeline flags), except in `time_s`; ±inf is refused
+//! (`log::reader::parse_number`, the rule of every reader).
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -41,18 +42,8 @@ pub enum CsvError {
     /// A required column is missing.
     #[error("missing column `{0}`")]
     MissingColumn(&'static str),
-    /// A cell is not a number.
-    #[error("line {line}: `{cell}` in column {column} is not a number")]
-    BadNumber {
-        /// Line number.
-        line: usize,
-        /// Column name.
-        column: String,
-        /// The cell.
-        cell: String,
-    },
     /// The file breaks a rule of the project's CSV reader (field count, repeated metadata key,
-    /// comment after the header, not UTF-8, I/O).
+    /// comment after the header, not UTF-8, a field that is no number or infinite, I/O).
     #[error("line {line}: {reason}")]
     Format {
         /// Line number (0 when the error is not about a line).
@@ -86,20 +77,11 @@ pub fn parse(text: &str) -> Result<SampleFile, CsvError> {
         rows: Vec::new(),
     };
     while let Some(row) = records.next_row()? {
-        let num = |c: usize| -> Result<f64, CsvError> {
-            let cell = row.text(c)?;
-            // Empty or NaN cells are missing values: NaN, which the injection flags.
-            if cell.is_empty() || cell.eq_ignore_ascii_case("nan") {
-                return Ok(f64::NAN);
-            }
-            cell.parse().map_err(|_| CsvError::BadNumber {
-                line: row.line,
-                column: header[c].clone(),
-                cell: cell.to_string(),
-            })
-        };
+        // Empty or NaN cells are missing values: NaN, which the injection flags; an infinity is
+        // refused (the reader's rule), and a row without a time stamp too.
+        let num = |c: usize| row.number(c, &header[c]);
         file.rows.push(SampleRow {
-            time_s: num(cols[0])?,
+            time_s: row.required_number(cols[0], &header[cols[0]])?,
             output_v: num(cols[1])?,
             temperature_c: num(cols[2])?,
             tilt_arcsec: tilt_col.map(num).transpose()?,
@@ -181,10 +163,32 @@ mod tests {
             parse("time_s,output_v\n0,1\n").unwrap_err(),
             CsvError::MissingColumn("temperature_c")
         );
-        assert!(matches!(
-            parse("time_s,output_v,temperature_c\n0,x,1\n").unwrap_err(),
-            CsvError::BadNumber { line: 2, .. }
-        ));
+        let refused = |text: &str| match parse(text).unwrap_err() {
+            CsvError::Format { line, reason } => format!("line {line}: {reason}"),
+            other => panic!("expected a refused field, got {other:?}"),
+        };
+        let e = refused("time_s,output_v,temperature_c\n0,x,1\n");
+        assert!(
+            e.starts_with("line 2: column \"output_v\"") && e.contains("\"x\""),
+            "{e}"
+        );
+        // ±inf (or beyond an f64) is no missing value: refused with line and column.
+        for (text, column) in [("-inf", "temperature_c"), ("1e400", "temperature_c")] {
+            let e = refused(&format!(
+                "time_s,output_v,temperature_c\n0,1,60\n1,1,{text}\n"
+            ));
+            assert!(
+                e.starts_with(&format!("line 3: column \"{column}\"")) && e.contains("infinite"),
+                "{e}"
+            );
+        }
+        // A missing value is fine in a reading, not in the time stamp.
+        assert!(parse("time_s,output_v,temperature_c\n0,NaN,\n").is_ok());
+        let e = refused("time_s,output_v,temperature_c\n0,1,60\nNaN,1,60\n");
+        assert!(
+            e.starts_with("line 3: column \"time_s\"") && e.contains("required"),
+            "{e}"
+        );
         assert_eq!(parse("# only: meta\n").unwrap_err(), CsvError::NoHeader);
         // A short row is refused with its line (it was read as missing values before).
         assert!(matches!(

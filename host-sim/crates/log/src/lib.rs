@@ -206,6 +206,25 @@ pub enum LogError {
     /// A log being built has columns of different lengths or a bad name.
     #[error("log construction: {0}")]
     Shape(String),
+    /// One of the errors above, in the file named (what the commands print).
+    // `error`, not `source`: the message holds it already, no "Caused by" repeating it.
+    #[error("{}: {error}", path.display())]
+    InFile {
+        /// The file (or directory of daily files).
+        path: std::path::PathBuf,
+        /// What is wrong in it.
+        error: Box<LogError>,
+    },
+}
+
+impl LogError {
+    /// The error as said of the file `path`.
+    pub fn in_file(self, path: &Path) -> Self {
+        LogError::InFile {
+            path: path.to_owned(),
+            error: Box::new(self),
+        }
+    }
 }
 
 impl From<ReadError> for LogError {
@@ -797,16 +816,15 @@ impl RowLayout<'_> {
                     continue;
                 }
                 let field = row.bytes(col);
-                let Some(v) = parse_field(field) else {
-                    fault = Some(bad(
-                        col,
-                        format!(
-                            "column {:?}: non-numeric field {:?}",
-                            self.names[col],
-                            String::from_utf8_lossy(field)
-                        ),
-                    ));
-                    break;
+                let v = match reader::parse_number(field) {
+                    Ok(v) => v,
+                    Err(e) => {
+                        fault = Some(bad(
+                            col,
+                            e.in_column(&self.names[col], &String::from_utf8_lossy(field)),
+                        ));
+                        break;
+                    }
                 };
                 if col == self.time_idx {
                     if !v.is_finite() {
@@ -836,66 +854,6 @@ impl RowLayout<'_> {
         }
         part
     }
-}
-
-/// Parses one numeric field: empty or NaN → NaN (a gap); infinities and junk → `None`.
-///
-/// std's `f64::from_str` is an Eisel–Lemire implementation (correctly rounded, ~20 ns per field),
-/// which is why no float-parsing crate is pulled in; the bytes are ASCII-checked by it.
-fn parse_field(field: &[u8]) -> Option<f64> {
-    if field.is_empty() {
-        return Some(f64::NAN);
-    }
-    if let Some(v) = parse_plain_decimal(field) {
-        return Some(v);
-    }
-    // Safe to view as str only if UTF-8; numbers are ASCII, anything else is junk anyway.
-    let s = std::str::from_utf8(field).ok()?;
-    match s.parse::<f64>() {
-        Ok(v) if v.is_nan() => Some(f64::NAN),
-        Ok(v) if v.is_infinite() => None,
-        Ok(v) => Some(v),
-        Err(_) => None,
-    }
-}
-
-/// Powers of ten an f64 holds exactly.
-const EXACT_POWERS_OF_TEN: [f64; 23] = [
-    1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16,
-    1e17, 1e18, 1e19, 1e20, 1e21, 1e22,
-];
-
-/// The value of a plain decimal (`[+-]digits[.digits]`, what logs hold) whose digits make an
-/// integer m ≤ 2⁵³ with at most 22 after the point — `None` for anything else (std's parser
-/// takes it). m and 10^k are then exact f64s and one IEEE division rounds m/10^k correctly:
-/// bit for bit what `f64::from_str` returns (Clinger's fast path, which std takes too after
-/// its general scan; here without the UTF-8 check and the scan, about 4× faster).
-fn parse_plain_decimal(field: &[u8]) -> Option<f64> {
-    let (negative, digits) = match field.split_first() {
-        Some((b'-', rest)) => (true, rest),
-        Some((b'+', rest)) => (false, rest),
-        _ => (false, field),
-    };
-    let (mut m, mut after_point, mut any, mut point) = (0u64, 0usize, false, false);
-    for &c in digits {
-        match c {
-            b'0'..=b'9' => {
-                m = m * 10 + u64::from(c - b'0');
-                if m > 1 << 53 {
-                    return None;
-                }
-                any = true;
-                after_point += usize::from(point);
-            }
-            b'.' if !point => point = true,
-            _ => return None,
-        }
-    }
-    if !any {
-        return None;
-    }
-    let v = m as f64 / *EXACT_POWERS_OF_TEN.get(after_point)?;
-    Some(if negative { -v } else { v })
 }
 
 /// Shortest round-trip text for a float; NaN → empty (a gap). Plain notation where it is short,
@@ -1210,7 +1168,7 @@ mod tests {
         ];
         for f in fields {
             let std = f.parse::<f64>().ok();
-            match parse_plain_decimal(f.as_bytes()) {
+            match reader::parse_plain_decimal(f.as_bytes()) {
                 Some(v) => assert_eq!(Some(v.to_bits()), std.map(f64::to_bits), "{f}"),
                 // Left to std: only what the fast path cannot do exactly, or not a decimal.
                 None => assert!(
@@ -1226,7 +1184,7 @@ mod tests {
         for _ in 0..2000 {
             x = (x * 7.3 + 0.61).fract() * 1e4;
             let text = format!("{x}");
-            let fast = parse_plain_decimal(text.as_bytes());
+            let fast = reader::parse_plain_decimal(text.as_bytes());
             assert!(fast.is_none_or(|v| v.to_bits() == x.to_bits()), "{text}");
         }
     }

@@ -11,6 +11,7 @@
 //! - [`changepoints`]: many steps at once: a noise-model MOSUM scan, the set validated together.
 //! - [`plausibility`]: a flexible effect must stand above the noise and beat the simpler cause.
 //! - [`table_error`]: with a calibration, errors of the table's temperature models, corrected.
+//! - [`unexplained`]: structure left that no cause explains (Allan excess, a spectral line).
 //! - [`shape`]: whether an accepted effect's shape describes the data (poor-fit check).
 //! - [`select`]: greedy selection with BIC (effective sample size) and blocked cross-validation;
 //!   its parts: [`current_model`] (the model under its fitted noise model), [`fitters`] (each
@@ -42,6 +43,7 @@ pub mod shape;
 pub mod simulate;
 pub mod table_error;
 pub mod tidal;
+pub mod unexplained;
 pub mod validation;
 
 pub use error::DiscoverError;
@@ -96,6 +98,8 @@ pub struct Discovery {
     pub full_rate: Option<Result<fullrate::FullRate, String>>,
     /// With a calibration table: the test of its temperature models ([`table_error`]).
     pub table_check: Option<table_error::TableCheck>,
+    /// Structure the final model leaves that no cause explains ([`unexplained`]).
+    pub unexplained: Vec<unexplained::Structure>,
 }
 
 /// The shared series of the candidates.
@@ -157,6 +161,7 @@ pub fn discover(
     let trend = residual::trend(&ds, &sel.baseline_residual);
     let adev_before = residual::adev(&ds, &sel.baseline_residual);
     let adev_after = residual::adev(&ds, &sel.final_residual);
+    let unexplained = unexplained::find(&ds, &sel.final_residual, &sel.final_noise.model);
     // The shape check whitens with the Allan fit of the final residual; where that fit is not
     // possible it uses white noise, which changes what it calls poor: said, never silent.
     let mut warnings = ds.warnings.clone();
@@ -203,6 +208,7 @@ pub fn discover(
         tidal,
         full_rate: None,
         table_check,
+        unexplained,
         dataset: ds,
     })
 }

@@ -130,6 +130,7 @@ pub fn json(d: &Discovery) -> Value {
         },
         "tidal_analysis": super::tidal::json_of(&d.tidal),
         "full_rate": super::fullrate::json_of(&d.full_rate),
+        "unexplained_structure": d.unexplained,
         "calibration_table": d.table_check.as_ref().map(super::table_error::json_of),
     })
 }
@@ -340,6 +341,7 @@ pub fn text(d: &Discovery) -> String {
     for ((t, a), (_, b)) in d.adev_before.iter().zip(&d.adev_after).step_by(3) {
         let _ = writeln!(o, "  ADEV({t:.0} s): {a:.3e} → {b:.3e} {unit}");
     }
+    o.push_str(&super::unexplained::text_of(&d.unexplained, unit));
     o.push_str(&super::fullrate::text_of(&d.full_rate, unit));
     if let Some(c) = &d.table_check {
         o.push_str(&super::table_error::text_of(c, unit));

@@ -2,6 +2,7 @@
 //! models, through the project's one CSV reader.
 
 use super::*;
+use crate::log::reader::NumberError;
 
 /// Name of the temperature column of the input table.
 pub const TEMPERATURE_COLUMN: &str = "temperature_c";
@@ -188,24 +189,23 @@ impl From<ReadError> for CsvError {
     }
 }
 
+/// A table entry: the reader's rule for numbers (`log::reader::parse_number`), a value required.
 fn parse_number(column: &str, text: &str) -> Result<f64, RowError> {
     if text.is_empty() {
         return Err(RowError::Empty {
             column: column.to_owned(),
         });
     }
-    let v: f64 = text.parse().map_err(|_| RowError::NotANumber {
-        column: column.to_owned(),
-        text: text.to_owned(),
-    })?;
-    if v.is_finite() {
-        Ok(v)
-    } else {
-        Err(RowError::NonFinite {
+    crate::log::reader::parse_required_number(text.as_bytes()).map_err(|e| match e {
+        NumberError::NotANumber => RowError::NotANumber {
             column: column.to_owned(),
             text: text.to_owned(),
-        })
-    }
+        },
+        NumberError::Infinite | NumberError::Missing => RowError::NonFinite {
+            column: column.to_owned(),
+            text: text.to_owned(),
+        },
+    })
 }
 
 /// The index of a required column, or the named error.

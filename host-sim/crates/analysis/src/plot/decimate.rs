@@ -91,6 +91,12 @@ impl Acc {
 /// `2 * buckets` points are not decimated: each reading is its own bucket (min = max = mean), and
 /// only split at gaps.
 pub fn buckets(x: &[f64], y: &[f64], buckets: usize) -> Vec<Run> {
+    buckets_broken(x, y, buckets, &[])
+}
+
+/// As [`buckets`], with the runs also broken before each row index in `breaks` (ascending): the
+/// first rows of a recorder's continuous segments, so no line joins the readings of two boots.
+pub fn buckets_broken(x: &[f64], y: &[f64], buckets: usize, breaks: &[usize]) -> Vec<Run> {
     let n = x.len().min(y.len());
     let (x, y) = (&x[..n], &y[..n]);
     let single = |seg: Segment| -> Run {
@@ -104,7 +110,14 @@ pub fn buckets(x: &[f64], y: &[f64], buckets: usize) -> Vec<Run> {
             .collect()
     };
     if buckets == 0 || n <= 2 * buckets {
-        return split_at_gaps(x, y).into_iter().map(single).collect();
+        let mut bounds = vec![0];
+        bounds.extend(breaks.iter().copied().filter(|&b| b > 0 && b < n));
+        bounds.push(n);
+        return bounds
+            .windows(2)
+            .flat_map(|w| split_at_gaps(&x[w[0]..w[1]], &y[w[0]..w[1]]))
+            .map(single)
+            .collect();
     }
     let (Some(&x0), Some(&x1)) = (
         x.iter().find(|v| v.is_finite()),
@@ -131,14 +144,16 @@ pub fn buckets(x: &[f64], y: &[f64], buckets: usize) -> Vec<Run> {
             out.push(std::mem::take(cur));
         }
     };
-    for (&xi, &yi) in x.iter().zip(y) {
+    let mut next_break = breaks.iter().copied().peekable();
+    for (i, (&xi, &yi)) in x.iter().zip(y).enumerate() {
+        let at_break = next_break.next_if(|&b| b <= i).is_some();
         if !xi.is_finite() {
             col_has_gap = true;
             continue;
         }
         let k = (((xi - x0) * scale) as usize).min(buckets - 1);
-        if k != col_index {
-            flush(&mut acc, col_has_gap, &mut cur, &mut out);
+        if k != col_index || at_break {
+            flush(&mut acc, col_has_gap || at_break, &mut cur, &mut out);
             col_has_gap = false;
             col_index = k;
         }
@@ -231,6 +246,23 @@ mod tests {
         let last_before = r[0].last().map_or(f64::NAN, |b| b.x);
         let first_after = r[1].first().map_or(f64::NAN, |b| b.x);
         assert!(last_before < 4000.0 && first_after >= 4500.0);
+    }
+
+    #[test]
+    fn a_break_ends_the_run_even_inside_a_pixel_column() {
+        // 10 columns of 100 samples, a break at row 450 (mid column 4): two runs, columns 0..=4
+        // and 4..=9, column 4 cut in two buckets, each with the mean of its own side.
+        let x: Vec<f64> = (0..1000).map(|i| i as f64).collect();
+        let y: Vec<f64> = (0..1000).map(|i| if i < 450 { 1.0 } else { 2.0 }).collect();
+        let r = buckets_broken(&x, &y, 10, &[450]);
+        assert_eq!(r.len(), 2);
+        assert_eq!((r[0].len(), r[1].len()), (5, 6));
+        assert_eq!(r[0][4].mean, 1.0);
+        assert_eq!(r[1][0].mean, 2.0);
+        assert!(r[0][4].x < 450.0 && r[1][0].x >= 450.0);
+        // Not decimated (short): split there as at a gap.
+        let r = buckets_broken(&x[..10], &y[..10], 1000, &[4]);
+        assert_eq!((r.len(), r[0].len(), r[1].len()), (2, 4, 6));
     }
 
     #[test]

@@ -139,6 +139,9 @@ pub struct XYFigure {
 pub enum Figure {
     /// Series against time.
     Time(TimeFigure),
+    /// Series against time with dashed vertical lines across every panel (board resets),
+    /// labelled in the legend.
+    TimeMarked(TimeFigure, Vec<Marker>),
     /// Allan deviation.
     Adev(AdevFigure),
     /// Y against x, linear or log axes.
@@ -158,7 +161,7 @@ impl Figure {
     /// Size in pixels (SVG user units).
     pub fn size(&self) -> (u32, u32) {
         match self {
-            Figure::Time(t) => (
+            Figure::Time(t) | Figure::TimeMarked(t, _) => (
                 WIDTH_PX,
                 TITLE_HEIGHT_PX + PANEL_HEIGHT_PX * t.panels.len().max(1) as u32,
             ),
@@ -193,7 +196,8 @@ where
 {
     root.fill(&WHITE)?;
     match fig {
-        Figure::Time(t) => draw_time(root, t)?,
+        Figure::Time(t) => draw_time(root, t, &[])?,
+        Figure::TimeMarked(t, markers) => draw_time(root, t, markers)?,
         Figure::Adev(a) => draw_adev(root, a)?,
         Figure::XY(f) => draw_xy(root, f)?,
     }
@@ -327,6 +331,7 @@ fn captioned<'a, 'b, DB: DrawingBackend>(
 fn draw_time<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
     fig: &TimeFigure,
+    x_markers: &[Marker],
 ) -> Result<(), DrawError>
 where
     DB::ErrorType: 'static,
@@ -388,6 +393,20 @@ where
                 }
             }
         }
+        let marker_style = BLACK.mix(0.55).stroke_width(1);
+        for (k, m) in x_markers.iter().enumerate() {
+            let dashes = dashed_vertical(m.at, y0, y1);
+            let series = chart.draw_series(
+                dashes
+                    .into_iter()
+                    .map(|seg| PathElement::new(seg, marker_style)),
+            )?;
+            if k == 0 {
+                series
+                    .label(format!("{} (dashed)", m.label))
+                    .legend(legend_line(marker_style));
+            }
+        }
         if any_band {
             chart
                 .draw_series(std::iter::empty::<Rectangle<(f64, f64)>>())?
@@ -399,6 +418,18 @@ where
         }
     }
     Ok(())
+}
+
+/// A dashed vertical line at `x` from `y0` to `y1`: 40 dashes, each half a period long.
+fn dashed_vertical(x: f64, y0: f64, y1: f64) -> Vec<Vec<(f64, f64)>> {
+    const DASHES: usize = 40;
+    let step = (y1 - y0) / DASHES as f64;
+    (0..DASHES)
+        .map(|k| {
+            let a = y0 + k as f64 * step;
+            vec![(x, a), (x, a + 0.5 * step)]
+        })
+        .collect()
 }
 
 fn draw_adev<DB: DrawingBackend>(

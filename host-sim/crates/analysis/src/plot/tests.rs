@@ -80,7 +80,7 @@ fn opts(dir: &Path, format: Format, kind: Kind) -> PlotOptions {
 
 fn time_figure(f: Figure) -> TimeFigure {
     match f {
-        Figure::Time(t) => t,
+        Figure::Time(t) | Figure::TimeMarked(t, _) => t,
         _ => panic!("expected a time figure"),
     }
 }
@@ -396,4 +396,83 @@ fn tilt_peak_to_peak_is_taken_on_block_means_not_on_noisy_readings() {
         "{}",
         f.panels[0].traces[0].label
     );
+}
+
+/// A recorder's log over a board reset, written as `accomp record` writes one: 1 s readings,
+/// then the new boot 0.4 s off the old grid with the reset's event line between.
+fn recorder_log_over_a_reset() -> Log {
+    let mut text = String::from(
+        "# recorder: accomp record 0.1.0\n# start_utc: 2026-01-01T00:00:00Z\n\
+         # input_g: 1\ntime_s,output_v,a_i_exact_g,temperature_c,tilt_arcsec\n",
+    );
+    for k in 0..200 {
+        let w = wiggle(k, 7);
+        text += &format!("{k},{},{},60,{}\n", 1.0 + 1e-5 * w, 1.0 + 1e-6 * w, 0.1 * w);
+    }
+    text += "# event: 2026-01-01T00:03:20Z board_reset seq restarted at 0 after 199\n";
+    for k in 0..200 {
+        let w = wiggle(k, 8);
+        let t = 200.4 + k as f64;
+        text += &format!("{t},{},{},61,{}\n", 1.0 + 1e-5 * w, 1.0 + 1e-6 * w, 0.1 * w);
+    }
+    Log::parse_str(&text).unwrap()
+}
+
+#[test]
+fn a_record_over_a_board_reset_is_plotted_in_segments_with_the_reset_marked() {
+    let dir = scratch("reset");
+    let log = recorder_log_over_a_reset();
+    let out = plot_log(&log, &opts(&dir, Format::Svg, Kind::All)).unwrap();
+    // Every figure drawn, none refused for the phase change.
+    assert_eq!(out.written.len(), 4, "{:?}", out.skipped);
+    assert!(out.skipped.is_empty(), "{:?}", out.skipped);
+    // The note is the one `stability` prints, with where the reset is.
+    assert_eq!(out.notes.len(), 1);
+    assert!(
+        out.notes[0]
+            .starts_with("2 continuous segments: the sampling phase changes at time_s = 200.4"),
+        "{}",
+        out.notes[0]
+    );
+    // The time figures: a dashed line at the reset (200.4 s = 0.0557 h), no line across it.
+    match build(
+        &log,
+        &opts(&dir, Format::Svg, Kind::Temperature),
+        Kind::Temperature,
+    )
+    .unwrap()
+    {
+        Figure::TimeMarked(t, markers) => {
+            assert_eq!(markers.len(), 1);
+            assert!((markers[0].at - 200.4 / 3600.0).abs() < 1e-12);
+            let runs = &t.panels[0].traces[0].runs;
+            assert_eq!(runs.len(), 2);
+            assert_eq!(runs[0].last().unwrap().mean, 60.0);
+            assert_eq!(runs[1].first().unwrap().mean, 61.0);
+        }
+        other => panic!("expected a marked time figure, got {other:?}"),
+    }
+    let svg = assert_svg(&dir.join("t_fig2_temperature.svg"));
+    assert!(svg.contains("board reset (dashed)"));
+    // The Allan deviation pools within the segments: its title says so.
+    match build(&log, &opts(&dir, Format::Svg, Kind::Adev), Kind::Adev).unwrap() {
+        Figure::Adev(a) => {
+            assert!(
+                a.title.contains("pooled within 2 continuous segments"),
+                "{}",
+                a.title
+            );
+            assert!(a.curves.iter().all(|c| !c.points.is_empty()));
+        }
+        other => panic!("expected the Allan figure, got {other:?}"),
+    }
+    // Without the recorder's mark the same rows are off the grid: refused as before.
+    let mut plain = Log::with_time(log.time_s().to_vec()).unwrap();
+    plain
+        .push_column("output_v", log.column("output_v").unwrap().to_vec())
+        .unwrap();
+    assert!(matches!(
+        build(&plain, &opts(&dir, Format::Svg, Kind::Adev), Kind::Adev),
+        Err(PlotError::Grid(GridError::OffGrid { .. }))
+    ));
 }

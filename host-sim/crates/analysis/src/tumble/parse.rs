@@ -39,18 +39,20 @@ impl TumbleLog {
     }
 }
 
+/// A reading of a tumble log: the reader's rule for numbers (`log::reader::parse_number`), a
+/// value required.
 pub(super) fn parse_number(line: usize, column: &str, cell: &str) -> Result<f64, TumbleError> {
-    let v: f64 = cell.trim().parse().map_err(|_| TumbleError::Malformed {
-        line,
-        reason: format!("`{column}` = {:?} is not a number", cell.trim()),
-    })?;
-    if !v.is_finite() {
-        return Err(TumbleError::NonFinite {
+    use crate::log::reader::{parse_required_number, NumberError};
+    parse_required_number(cell.trim().as_bytes()).map_err(|e| match e {
+        NumberError::NotANumber => TumbleError::Malformed {
+            line,
+            reason: format!("`{column}` = {:?} is not a number", cell.trim()),
+        },
+        NumberError::Infinite | NumberError::Missing => TumbleError::NonFinite {
             line,
             column: column.to_string(),
-        });
-    }
-    Ok(v)
+        },
+    })
 }
 
 impl From<ReadError> for TumbleError {

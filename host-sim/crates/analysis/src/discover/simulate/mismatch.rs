@@ -52,6 +52,57 @@ pub struct Mismatch {
     /// Index range of the points (for the cause attribution and the figures).
     #[serde(skip)]
     pub index: (usize, usize),
+    /// After the extension: "unmodelled: <likely cause>" (the extended twin does not cover it).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub unmodelled: Option<String>,
+}
+
+/// Frequency bands of the solid-Earth tide's groups, cycles/day (diurnal, semidiurnal,
+/// terdiurnal).
+const TIDE_BANDS_CPD: [(f64, f64); 3] = [(0.8, 1.15), (1.75, 2.1), (2.8, 3.1)];
+
+/// The likely cause of a mismatch the extended twin leaves, named from where it lies: a
+/// coherent band → a coupling to that channel; tidal bands → the tide model; slower than a day
+/// → the instrument's non-linear drift; the top octave → the output filter or aliasing; short
+/// τ or a broad band within ×1.5 → a noise level that changes over the record (the members'
+/// is stationary); else a cause outside the catalogue. `nyquist_cpd`: the record's Nyquist
+/// frequency in cycles/day.
+pub fn likely_cause(m: &Mismatch, nyquist_cpd: f64) -> String {
+    let (lo_cpd, hi_cpd) = match m.quantity {
+        Quantity::Adev => (DAY_S / (2.0 * m.to), DAY_S / (2.0 * m.from)),
+        _ => (m.from, m.to),
+    };
+    if m.quantity == Quantity::Coherence {
+        return format!(
+            "a coupling to {} the twin lacks (a transfer function, not a constant coefficient)",
+            m.channel.as_deref().unwrap_or("the channel")
+        );
+    }
+    let tidal = TIDE_BANDS_CPD
+        .iter()
+        .any(|(a, b)| lo_cpd <= *b && hi_cpd >= *a);
+    if tidal && m.quantity == Quantity::Psd {
+        return "the tide model (a constituent or loading the twin's tide lacks)".into();
+    }
+    if hi_cpd <= 1.0 || (m.quantity == Quantity::Adev && m.to >= DAY_S) {
+        return "the instrument's slow non-linear drift (beyond the noise family's drift-rate \
+                random walk)"
+            .into();
+    }
+    if lo_cpd >= 0.5 * nyquist_cpd {
+        return "the instrument's output filter or aliasing near Nyquist (beyond a first-order \
+                corner)"
+            .into();
+    }
+    let f = if m.factor >= 1.0 {
+        m.factor
+    } else {
+        1.0 / m.factor
+    };
+    if f < 1.5 {
+        return "a noise level that changes over the record (the members' is stationary)".into();
+    }
+    "a cause outside the catalogue".into()
 }
 
 /// The envelopes, the measured views and what differs.
@@ -71,6 +122,35 @@ pub struct Comparison {
     pub adev_outside_fraction: f64,
     /// Fraction of PSD bands outside.
     pub psd_outside_fraction: f64,
+    /// The envelope's own calibration: each member left out in turn, the fraction of its ADEV
+    /// points outside the other members' 5–95 % envelope, averaged over the members (a record
+    /// that behaves like a member lies outside about this often).
+    pub member_adev_outside_fraction: f64,
+    /// The same for the PSD bands.
+    pub member_psd_outside_fraction: f64,
+    /// The first two members' views (drawn beside the record in the report).
+    pub shown: Vec<Views>,
+}
+
+/// Leave-one-member-out: the mean fraction of a member's points outside the envelope of the
+/// others (`curves[j][i]`: member j, point i, on the abscissa `x`).
+pub fn leave_one_out(x: &[f64], curves: &[Vec<f64>]) -> f64 {
+    if curves.len() < 3 || x.is_empty() {
+        return f64::NAN;
+    }
+    let fractions: Vec<f64> = (0..curves.len())
+        .map(|j| {
+            let others: Vec<Vec<f64>> = curves
+                .iter()
+                .enumerate()
+                .filter(|(k, _)| *k != j)
+                .map(|(_, c)| c.clone())
+                .collect();
+            fraction(&sides(&curves[j], &Envelope::of(x, &others)))
+        })
+        .filter(|f| f.is_finite())
+        .collect();
+    fractions.iter().sum::<f64>() / fractions.len().max(1) as f64
 }
 
 /// +1 above, −1 below, 0 inside (NaN: inside).
@@ -218,6 +298,9 @@ pub fn compare(
     Comparison {
         adev_outside_fraction: fraction(&s_adev),
         psd_outside_fraction: fraction(&s_psd),
+        member_adev_outside_fraction: leave_one_out(&taus, &adev_members),
+        member_psd_outside_fraction: leave_one_out(freqs_hz, &psd_members),
+        shown: members.iter().take(2).cloned().collect(),
         adev,
         psd,
         coherence,
@@ -259,6 +342,7 @@ fn push_runs(
             points: b - a,
             channel: channel.cloned(),
             index: (a, b),
+            unmodelled: None,
         });
     }
 }
@@ -359,6 +443,24 @@ mod tests {
             median: vec![1.0; n],
             high: vec![1.2; n],
         }
+    }
+
+    /// Members that are independent draws of one distribution lie outside the others' 5–95 %
+    /// envelope about 10 % of the time (20 members: the 5 % and 95 % of 19 by interpolation);
+    /// curves that are identical never do.
+    #[test]
+    fn a_left_out_member_lies_outside_the_others_about_a_tenth_of_the_time() {
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, StandardNormal};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let x: Vec<f64> = (0..200).map(|i| i as f64).collect();
+        let curves: Vec<Vec<f64>> = (0..20)
+            .map(|_| x.iter().map(|_| StandardNormal.sample(&mut rng)).collect())
+            .collect();
+        let f = leave_one_out(&x, &curves);
+        assert!((0.07..=0.15).contains(&f), "{f}");
+        let same = vec![x.clone(); 20];
+        assert_eq!(leave_one_out(&x, &same), 0.0);
     }
 
     #[test]

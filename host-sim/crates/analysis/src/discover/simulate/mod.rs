@@ -268,6 +268,16 @@ where
     // filter) fitted by Whittle likelihood to what the extended twin leaves, the drift kept —
     // the comparison keeps it, so the members must carry it.
     let family = match NoiseFamily::fit(&yard.grid.place(&r_after), yard.grid.dt_s) {
+        // Every instrument has a white floor: a fit that does not resolve one has traded it
+        // for other terms (a filter corner with a random walk mimics it) and is not used.
+        Ok(f) if !f.resolved(0) => {
+            warnings.push(
+                "the noise family's white level is not resolved (a degenerate fit): the members \
+                 draw from the likelihood noise model instead"
+                    .to_owned(),
+            );
+            None
+        }
         Ok(f) => Some(f),
         Err(e) => {
             warnings.push(format!(
@@ -323,7 +333,12 @@ where
         &yard,
         "extended",
     )?;
-    let after = mismatch::compare(yard.views(&r_after), &members_ext, &freqs, &channels);
+    let mut after = mismatch::compare(yard.views(&r_after), &members_ext, &freqs, &channels);
+    // What the extended twin still gets wrong is named: unmodelled, with its likely cause.
+    let nyquist_cpd = 0.5 / yard.grid.dt_s * 86_400.0;
+    for m in &mut after.mismatches {
+        m.unmodelled = Some(mismatch::likely_cause(m, nyquist_cpd));
+    }
     lap("ensembles and comparisons");
     // 5. Gain: forward chaining; the extension's contributions refitted on each training part.
     let base_std = gain::forward_std(ds, &det, &[], &noise);

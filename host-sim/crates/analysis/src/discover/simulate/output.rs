@@ -3,7 +3,7 @@
 
 use super::mismatch::{sentence, Comparison, Quantity};
 use super::{Scores, Simulation};
-use crate::plot::draw::{Figure, XYCurve, XYFigure};
+use crate::plot::draw::{Figure, Marker, XYCurve, XYFigure};
 use plotters::style::RGBColor;
 use serde_json::{json, Map, Value};
 use std::fmt::Write as _;
@@ -18,6 +18,11 @@ fn side_json(c: &Comparison, s: &Scores) -> Value {
         "residual_std_fixed_amplitudes": finite(s.residual_std_fixed_amplitudes),
         "adev_outside_fraction": finite(c.adev_outside_fraction),
         "psd_outside_fraction": finite(c.psd_outside_fraction),
+        "calibration": {
+            "method": "leave one member out: the fraction of its points outside the other members' 5-95 % envelope, mean over the members",
+            "member_adev_outside_fraction": finite(c.member_adev_outside_fraction),
+            "member_psd_outside_fraction": finite(c.member_psd_outside_fraction),
+        },
         "mismatches": c.mismatches.iter().map(|m| {
             let mut o = serde_json::to_value(m).unwrap_or(Value::Null);
             if let Value::Object(map) = &mut o {
@@ -193,15 +198,29 @@ pub fn text(s: &Simulation, unit: &str) -> String {
         100.0 * s.before.psd_outside_fraction,
         100.0 * s.after.psd_outside_fraction
     );
+    let _ = writeln!(
+        o,
+        "  a member left out lies outside the others' envelope (the envelope's calibration): \
+         ADEV {:.0} % → {:.0} %, PSD {:.0} % → {:.0} %",
+        100.0 * s.before.member_adev_outside_fraction,
+        100.0 * s.after.member_adev_outside_fraction,
+        100.0 * s.before.member_psd_outside_fraction,
+        100.0 * s.after.member_psd_outside_fraction
+    );
     if s.after.mismatches.is_empty() {
         let _ = writeln!(
             o,
             "  after the extension the residual stays inside the envelopes"
         );
     } else {
-        let _ = writeln!(o, "  still wrong after the extension:");
+        let _ = writeln!(o, "  still wrong after the extension (unmodelled):");
         for m in &s.after.mismatches {
-            let _ = writeln!(o, "    {}", sentence(m));
+            let _ = writeln!(
+                o,
+                "    {} — likely cause: {}",
+                sentence(m),
+                m.unmodelled.as_deref().unwrap_or("not named")
+            );
         }
     }
     match (&s.extended_path, &s.extended_toml) {
@@ -223,7 +242,40 @@ const MEASURED: RGBColor = RGBColor(200, 30, 30);
 const ENVELOPE: RGBColor = RGBColor(40, 90, 180);
 const MEDIAN: RGBColor = RGBColor(120, 150, 210);
 
-fn figure(c: &Comparison, q: Quantity, title: String, unit: &str) -> Figure {
+const MEMBERS: [RGBColor; 2] = [RGBColor(110, 110, 110), RGBColor(170, 170, 170)];
+
+/// A mismatch's label on the figures: its number, factor and what explains it (before) or
+/// its likely cause (after, unmodelled).
+fn label(s: &Simulation, after: bool, i: usize) -> String {
+    let c = if after { &s.after } else { &s.before };
+    let m = &c.mismatches[i];
+    let why = if after {
+        format!(
+            "unmodelled: {}",
+            m.unmodelled
+                .as_deref()
+                .unwrap_or("?")
+                .split(" (")
+                .next()
+                .unwrap_or("")
+        )
+    } else {
+        let names: Vec<&str> = s
+            .explained_by
+            .iter()
+            .filter(|(_, idx)| idx.contains(&i))
+            .map(|(n, _)| n.as_str())
+            .collect();
+        if names.is_empty() {
+            "not explained".into()
+        } else {
+            names.join(", ")
+        }
+    };
+    format!("[{i}] ×{:.1} {why}", m.factor)
+}
+
+fn figure(c: &Comparison, q: Quantity, title: String, unit: &str, labels: &[String]) -> Figure {
     // PSD and its bands on a cycles/day axis (the mismatch ranges are in cycles/day too).
     let (x, m, e, x_desc, y_desc): (Vec<f64>, Vec<f64>, _, String, String) = match q {
         Quantity::Adev => (
@@ -242,6 +294,22 @@ fn figure(c: &Comparison, q: Quantity, title: String, unit: &str) -> Figure {
         ),
     };
     let pts = |y: &[f64]| x.iter().copied().zip(y.iter().copied()).collect::<Vec<_>>();
+    let member = |v: &super::spectra::Views| -> Vec<f64> {
+        match q {
+            Quantity::Adev => v.adev.iter().map(|p| p.1).collect(),
+            _ => v.psd.clone(),
+        }
+    };
+    let x_markers = c
+        .mismatches
+        .iter()
+        .zip(labels)
+        .filter(|(mm, _)| mm.quantity == q)
+        .map(|(mm, l)| Marker {
+            at: (x[mm.index.0] * x[mm.index.1 - 1]).sqrt(),
+            label: l.clone(),
+        })
+        .collect();
     // A run of points is shaded from half-way to its neighbours on each side (the points are
     // octave τ or log-spaced band centres: geometric midpoints).
     let edge = |i: usize, j: usize| (x[i] * x[j]).sqrt();
@@ -284,12 +352,22 @@ fn figure(c: &Comparison, q: Quantity, title: String, unit: &str) -> Figure {
                 points: pts(&e.median),
             },
             XYCurve {
+                label: "member 1".into(),
+                color: MEMBERS[0],
+                points: c.shown.first().map(|v| pts(&member(v))).unwrap_or_default(),
+            },
+            XYCurve {
+                label: "member 2".into(),
+                color: MEMBERS[1],
+                points: c.shown.get(1).map(|v| pts(&member(v))).unwrap_or_default(),
+            },
+            XYCurve {
                 label: "measured".into(),
                 color: MEASURED,
                 points: pts(&m),
             },
         ],
-        x_markers: Vec::new(),
+        x_markers,
         y_markers: Vec::new(),
         x_spans,
     })
@@ -325,14 +403,18 @@ pub fn figures(s: &Simulation, unit: &str) -> Vec<(&'static str, String, Figure)
             "Welch PSD"
         };
         let caption = format!(
-            "{what} of measured − {when} against the ensemble's 5–95 % envelope ({} members); \
-             shaded: the mismatched ranges",
+            "{what} of measured − {when} against the ensemble's 5–95 % envelope ({} members), two \
+             members beside it; shaded and labelled: the mismatched ranges",
             s.ensemble
         );
+        let after = std::ptr::eq(c, &s.after);
+        let labels: Vec<String> = (0..c.mismatches.len())
+            .map(|i| label(s, after, i))
+            .collect();
         v.push((
             stem,
             caption.clone(),
-            figure(c, q, format!("{what}: measured vs {when}"), unit),
+            figure(c, q, format!("{what}: measured vs {when}"), unit, &labels),
         ));
     }
     v

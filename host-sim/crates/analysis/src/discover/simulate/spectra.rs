@@ -332,7 +332,11 @@ pub struct Views {
     pub coherence: Vec<Vec<f64>>,
 }
 
-/// 5 %, 50 % and 95 % of `v` (linear interpolation between order statistics; NaN dropped).
+/// 5 %, 50 % and 95 % of `v` as prediction limits: the p-quantile at rank p·(n + 1) between
+/// order statistics (linear interpolation, clamped to the smallest and largest; NaN dropped).
+/// A new draw from the members' distribution lies above the rank-r member with probability
+/// (n + 1 − r)/(n + 1), so these limits hold a new member 90 % of the time whatever n; the
+/// rank p·(n − 1) + 1 rule holds it only ≈ 81 % of the time with 20 members.
 pub fn percentiles(v: &mut Vec<f64>) -> (f64, f64, f64) {
     v.retain(|x| x.is_finite());
     if v.is_empty() {
@@ -340,7 +344,7 @@ pub fn percentiles(v: &mut Vec<f64>) -> (f64, f64, f64) {
     }
     v.sort_by(f64::total_cmp);
     let q = |p: f64| {
-        let x = p * (v.len() - 1) as f64;
+        let x = (p * (v.len() + 1) as f64 - 1.0).clamp(0.0, (v.len() - 1) as f64);
         let i = x.floor() as usize;
         let j = (i + 1).min(v.len() - 1);
         v[i] + (v[j] - v[i]) * (x - i as f64)
