@@ -5,7 +5,7 @@
 //! log's standard deviation, a blank Allan plot, UTF-16 text, a reversed record, ±inf results).
 
 use std::os::unix::process::CommandExt as _;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::time::{Duration, Instant};
 
@@ -66,6 +66,13 @@ fn simulated_log(dir: &Path) -> String {
     log.to_str().unwrap().to_owned()
 }
 
+/// A file of `len` zero bytes, sparse (no disk used).
+fn sparse_file(dir: &Scratch, name: &str, len: u64) -> PathBuf {
+    let p = dir.path(name);
+    std::fs::File::create(&p).unwrap().set_len(len).unwrap();
+    p
+}
+
 fn table_file(dir: &Path) -> String {
     let p = dir.join("t.acal");
     std::fs::write(&p, accomp_host::device::paper_table().encode()).unwrap();
@@ -76,16 +83,8 @@ fn table_file(dir: &Path) -> String {
 fn dev_zero_and_a_10_gb_file_are_refused_within_seconds_under_1_gib_naming_the_limit() {
     let dir = Scratch::new("robust-huge");
     // 10 GB of zero bytes, sparse: no disk used, a 10 GB file all the same.
-    let huge = dir.path("huge.csv");
-    std::fs::File::create(&huge)
-        .unwrap()
-        .set_len(10_000_000_000)
-        .unwrap();
-    let huge_tsf = dir.path("huge.tsf");
-    std::fs::File::create(&huge_tsf)
-        .unwrap()
-        .set_len(10_000_000_000)
-        .unwrap();
+    let huge = sparse_file(&dir, "huge.csv", 10_000_000_000);
+    let huge_tsf = sparse_file(&dir, "huge.tsf", 10_000_000_000);
     let cal = table_file(&dir);
     let out = dir.path("out");
     for input in [
@@ -480,11 +479,7 @@ fn fit_compensate_and_tumble_take_allow_large_and_their_limits_name_it() {
     let dir = Scratch::new("robust-allow-large");
     // 5 GiB of zero bytes, sparse: above the byte limit of every reader (64 MiB for tables and
     // tumble logs, 4 GiB for sample files) by its size alone.
-    let huge = dir.path("huge.csv");
-    std::fs::File::create(&huge)
-        .unwrap()
-        .set_len(5 << 30)
-        .unwrap();
+    let huge = sparse_file(&dir, "huge.csv", 5 << 30);
     let h = huge.to_str().unwrap();
     let cal = table_file(&dir);
     let commands: Vec<Vec<&str>> = vec![
