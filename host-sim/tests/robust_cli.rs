@@ -485,17 +485,7 @@ fn fit_compensate_and_tumble_take_allow_large_and_their_limits_name_it() {
     let commands: Vec<Vec<&str>> = vec![
         vec!["fit", h],
         vec!["tumble", h],
-        vec![
-            "compensate",
-            "--target",
-            "host",
-            "--calibration",
-            &cal,
-            "--input",
-            h,
-            "--output",
-            "/dev/null",
-        ],
+        compensate_on_host(&cal, h, "/dev/null"),
     ];
     for args in commands {
         let o = accomp(&args);
@@ -551,22 +541,9 @@ fn infinities_are_refused_by_every_reader_with_file_line_and_column() {
         "time_s,output_v,temperature_c\n0,1.25,60\nNaN,1.25,60\n",
     );
     let plots = dir.path("plots");
-    let compensate = |input: &str| -> Vec<String> {
-        [
-            "compensate",
-            "--target",
-            "host",
-            "--calibration",
-            &cal,
-            "--input",
-            input,
-            "--output",
-            dir.path("out.csv").to_str().unwrap(),
-        ]
-        .map(str::to_owned)
-        .to_vec()
-    };
     let own = |v: &[&str]| v.iter().map(|s| (*s).to_owned()).collect::<Vec<_>>();
+    let out = dir.path("out.csv");
+    let compensate = |input: &str| own(&compensate_on_host(&cal, input, out.to_str().unwrap()));
     let cases: Vec<(Vec<String>, &str, &str, &str)> = vec![
         (own(&["stability", &log]), &log, "line 22", "output_v"),
         (
