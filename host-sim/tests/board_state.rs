@@ -51,6 +51,13 @@ fn write_table(dir: &Path, n: u32) -> (PathBuf, u32) {
     (p, t.id())
 }
 
+/// `accomp table get --target qemu` and `extra`.
+fn table_get<'a>(extra: &[&'a str]) -> Vec<&'a str> {
+    let mut args = vec!["table", "get", "--target", "qemu"];
+    args.extend_from_slice(extra);
+    args
+}
+
 /// A board's state folder and a folder for the test's files: `board-state-<name>[-files]`.
 fn board(name: &str) -> (Scratch, Scratch) {
     (
@@ -102,14 +109,7 @@ fn concurrent_loads_and_a_racing_table_get_lose_no_table_in_30_rounds() {
                 .expect("spawn")
         };
         let la = spawn(&["load", "--target", "qemu", a.to_str().unwrap()]);
-        let get = spawn(&[
-            "table",
-            "get",
-            "--target",
-            "qemu",
-            "-o",
-            got.to_str().unwrap(),
-        ]);
+        let get = spawn(&table_get(&["-o", got.to_str().unwrap()]));
         let lb = spawn(&["load", "--target", "qemu", b.to_str().unwrap()]);
         let (oa, og, ob) = (
             la.wait_with_output().unwrap(),
@@ -184,15 +184,7 @@ fn no_wait_refuses_a_busy_board_naming_the_holder() {
     let started = Instant::now();
     let o = accomp(
         &state,
-        &[
-            "table",
-            "get",
-            "--target",
-            "qemu",
-            "--no-wait",
-            "-o",
-            out.to_str().unwrap(),
-        ],
+        &table_get(&["--no-wait", "-o", out.to_str().unwrap()]),
     );
     assert!(!o.status.success());
     let e = stderr(&o);
@@ -202,20 +194,10 @@ fn no_wait_refuses_a_busy_board_naming_the_holder() {
     );
     assert!(started.elapsed() < Duration::from_secs(10));
     // Without --no-wait it waits, says so, and goes on once the lock is released.
-    let child = accomp_cmd(
-        &state,
-        &[
-            "table",
-            "get",
-            "--target",
-            "qemu",
-            "-o",
-            out.to_str().unwrap(),
-        ],
-    )
-    .stderr(Stdio::piped())
-    .spawn()
-    .unwrap();
+    let child = accomp_cmd(&state, &table_get(&["-o", out.to_str().unwrap()]))
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
     std::thread::sleep(Duration::from_millis(500));
     drop(lock);
     let o = child.wait_with_output().unwrap();
@@ -262,15 +244,7 @@ fn a_short_flash_image_is_refused_with_its_size_kept_intact_and_reset_state_move
     }
     let o = accomp(
         &state,
-        &[
-            "table",
-            "get",
-            "--target",
-            "qemu",
-            "--reset-state",
-            "-o",
-            got.to_str().unwrap(),
-        ],
+        &table_get(&["--reset-state", "-o", got.to_str().unwrap()]),
     );
     let e = stderr(&o);
     assert!(e.contains("moved to"), "{e}");
@@ -361,7 +335,7 @@ fn a_state_path_under_a_regular_file_is_named_and_leaves_no_temporary_folder() {
     let file = work.join("a-file");
     std::fs::write(&file, "not a folder").unwrap();
     let state = file.join("state");
-    let child = accomp_cmd(&state, &["table", "get", "--target", "qemu", "-o"])
+    let child = accomp_cmd(&state, &table_get(&["-o"]))
         .arg(work.join("got.acal"))
         .stderr(Stdio::piped())
         .spawn()
@@ -462,15 +436,7 @@ fn kill_9_of_accomp_leaves_no_emulator_and_the_next_run_reclaims_its_folder() {
     );
     let o = accomp(
         &state,
-        &[
-            "table",
-            "get",
-            "--target",
-            "qemu",
-            "--no-wait",
-            "-o",
-            work.join("g.acal").to_str().unwrap(),
-        ],
+        &table_get(&["--no-wait", "-o", work.join("g.acal").to_str().unwrap()]),
     );
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(

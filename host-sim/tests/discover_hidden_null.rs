@@ -21,14 +21,8 @@ const ROWS: usize = 3 * 1440;
 /// One null log from `seed`: what the tool accepted.
 fn accepted_on_null(seed: u64) -> (Vec<String>, String) {
     let mut rng = synth::rng(seed);
-    let thermal = if rng.random::<bool>() {
-        synth::Thermal::Cycling {
-            amplitude_c: 0.5,
-            period_s: rng.random_range(3.0..10.0) * 3600.0,
-        }
-    } else {
-        synth::Thermal::Regulated
-    };
+    let cycling = rng.random::<bool>();
+    let thermal = synth::thermal(cycling, 3.0..10.0, &mut rng);
     let st = synth::station(ROWS, DT_S, thermal, &mut rng);
     let noise = synth::draw_noise(&mut rng);
     let y = synth::output_g(&st, &noise, &vec![0.0; ROWS], &mut rng);

@@ -148,14 +148,7 @@ fn draw_shape(rng: &mut ChaCha8Rng, k: usize) -> Shape {
 /// Generates a log with shape `s` at matched-filter SNR `snr` and runs the discovery.
 fn run(s: Shape, snr: f64, seed: u64) -> (Discovery, f64) {
     let mut rng = synth::rng(seed);
-    let thermal = if s.needs_cycling() {
-        synth::Thermal::Cycling {
-            amplitude_c: 0.5,
-            period_s: rng.random_range(4.0..10.0) * 3600.0,
-        }
-    } else {
-        synth::Thermal::Regulated
-    };
+    let thermal = synth::thermal(s.needs_cycling(), 4.0..10.0, &mut rng);
     let st = synth::station(ROWS, DT_S, thermal, &mut rng);
     let noise = synth::draw_noise(&mut rng);
     let unit = series(s, &st);

@@ -13,7 +13,7 @@ use accomp_host::device::{paper_table, ClientError};
 
 #[path = "common/qemu.rs"]
 mod qemu;
-use qemu::{boot, Rng};
+use qemu::{boot, boot_loaded, Rng};
 
 fn table() -> CalibrationTable {
     paper_table()
@@ -118,8 +118,7 @@ fn ten_thousand_samples_match_the_host_core_bit_for_bit_with_faults_flagged() {
 #[test]
 fn garbage_and_malformed_frames_are_ignored_and_corrupted_tables_refused() {
     let good = table();
-    let (qemu, mut c) = boot();
-    c.load(&good.encode(), |_, _| {}).unwrap();
+    let (qemu, mut c) = boot_loaded(&good);
     let raw: RawSample =
         raw_from_physical(&good, Volts(1.3), Celsius(50.0), TiltArcsec(0.0)).unwrap();
 

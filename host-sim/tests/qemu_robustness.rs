@@ -17,7 +17,7 @@ use accomp_host::device::{paper_table, ClientError};
 
 #[path = "common/qemu.rs"]
 mod qemu;
-use qemu::{boot, Rng};
+use qemu::{boot_loaded, Rng};
 
 fn raw_at(t: &CalibrationTable, volts: f64, temp_c: f64) -> RawSample {
     raw_from_physical(t, Volts(volts), Celsius(temp_c), TiltArcsec(1.0)).unwrap()
@@ -35,8 +35,7 @@ fn assert_uses(t: &CalibrationTable, raw: &RawSample, f: &accomp::pipeline::Fram
 #[test]
 fn corrupted_uploads_are_refused_and_the_good_table_keeps_compensating() {
     let good = paper_table();
-    let (qemu, mut c) = boot();
-    c.load(&good.encode(), |_, _| {}).unwrap();
+    let (qemu, mut c) = boot_loaded(&good);
     let encoded = good.encode();
 
     // qemu_e2e.rs covers bit flip, truncation and a NaN coefficient; these are the others.
@@ -130,8 +129,7 @@ fn corrupted_uploads_are_refused_and_the_good_table_keeps_compensating() {
 #[test]
 fn garbage_on_the_line_mid_stream_costs_at_most_the_frame_it_hits() {
     let good = paper_table();
-    let (qemu, mut c) = boot();
-    c.load(&good.encode(), |_, _| {}).unwrap();
+    let (qemu, mut c) = boot_loaded(&good);
     let mut rng = Rng(0xBAD_C0DE_5EED_0042);
     let raws: Vec<RawSample> = (0..4)
         .map(|k| raw_at(&good, 0.3 * k as f64, 40.0 + k as f64))

@@ -10,6 +10,7 @@ use std::process::{Child, ChildStdin, Command, Stdio};
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
+use accomp::table::CalibrationTable;
 use accomp_host::device::board_sim::Station;
 use accomp_host::device::record::{self, Options};
 use accomp_host::log::Log;
@@ -55,6 +56,13 @@ impl BoardSim {
         self.stdin.flush().unwrap();
     }
 
+    /// Raises the fault `name` for `ms` of wall clock, then clears it.
+    fn fault_for(&mut self, name: &str, ms: u64) {
+        self.command(name);
+        std::thread::sleep(Duration::from_millis(ms));
+        self.command(&format!("{name}=off"));
+    }
+
     fn kill(mut self) {
         let _ = self.child.kill();
         let _ = self.child.wait();
@@ -94,17 +102,39 @@ fn port(dir: &Path) -> String {
     format!("serial:{}", dir.join("board").display())
 }
 
-/// Loads the paper's table into the board (a table makes temperature and a_i valid).
-fn load_table(dir: &Path) {
-    let table = dir.join("table.acal");
-    std::fs::write(&table, accomp_host::device::paper_table().encode()).unwrap();
+/// Writes `table` to `dir/file` and loads it into the board with `accomp load`.
+fn load(dir: &Path, table: &CalibrationTable, file: &str) {
+    let path = dir.join(file);
+    std::fs::write(&path, table.encode()).unwrap();
     let ok = Command::new(BIN)
         .args(["load", "--target", &port(dir)])
-        .arg(&table)
+        .arg(&path)
         .stderr(Stdio::null())
         .status()
         .unwrap();
     assert!(ok.success());
+}
+
+/// Loads the paper's table into the board (a table makes temperature and a_i valid).
+fn load_table(dir: &Path) {
+    load(dir, &accomp_host::device::paper_table(), "table.acal");
+}
+
+/// A fresh directory `name`, a board in it at `speed`× with the paper's table loaded, and the
+/// path the record goes to.
+fn board_with_table(name: &str, speed: u32, seed: u64) -> (PathBuf, BoardSim, PathBuf) {
+    let dir = temp_dir(name);
+    let board = BoardSim::start(&dir, speed, seed);
+    load_table(&dir);
+    let out = dir.join("rec.csv");
+    (dir, board, out)
+}
+
+/// A recorder process writing `samples` rows to `out`, once it has written `rows` of them.
+fn recording(dir: &Path, out: &Path, samples: &str, rows: usize) -> Recorder {
+    let rec = Recorder::spawn(record_cmd(dir, out, &["--samples", samples]));
+    wait_rows(out, rows);
+    rec
 }
 
 fn record_cmd(dir: &Path, out: &Path, extra: &[&str]) -> Command {
@@ -166,6 +196,41 @@ fn kinds(r: &Rec) -> Vec<&str> {
     r.events.iter().map(|(k, _)| k.as_str()).collect()
 }
 
+/// The details of every event of `kind`, in file order.
+fn details<'a>(r: &'a Rec, kind: &str) -> Vec<&'a str> {
+    r.events
+        .iter()
+        .filter(|(k, _)| k == kind)
+        .map(|(_, d)| d.as_str())
+        .collect()
+}
+
+fn assert_events(r: &Rec, expected: &[&str]) {
+    let k = kinds(r);
+    for kind in expected {
+        assert!(k.contains(kind), "no {kind} event in {k:?}");
+    }
+}
+
+/// The first status event raises `flag` from OK, and a later one returns to OK.
+fn assert_status_raised_and_cleared(r: &Rec, flag: &str) {
+    let status = details(r, "status");
+    assert!(
+        status
+            .first()
+            .is_some_and(|d| d.starts_with("OK -> ") && d.contains(flag)),
+        "{status:?}"
+    );
+    assert!(status.iter().any(|d| d.ends_with("-> OK")), "{status:?}");
+}
+
+/// The board booted again during the record: its clock and seq start again (seq counts its
+/// readings since boot).
+fn assert_a_new_boot(r: &Rec) {
+    let restart = r.rows.windows(2).position(|w| w[1].1 < w[0].1).unwrap();
+    assert!(r.rows[restart + 1].2 < r.rows[restart].2);
+}
+
 fn assert_time_increases(r: &Rec) {
     for w in r.rows.windows(2) {
         assert!(w[1].0 > w[0].0, "time_s {} then {}", w[0].0, w[1].0);
@@ -191,10 +256,7 @@ fn wait_rows(path: &Path, n: usize) {
 
 #[test]
 fn recorded_samples_are_the_scenarios_physics_in_seq_and_board_time() {
-    let dir = temp_dir("truth");
-    let _board = BoardSim::start(&dir, 1000, 7);
-    load_table(&dir);
-    let out = dir.join("rec.csv");
+    let (dir, _board, out) = board_with_table("truth", 1000, 7);
     let ok = record_cmd(
         &dir,
         &out,
@@ -259,25 +321,16 @@ fn recorded_samples_are_the_scenarios_physics_in_seq_and_board_time() {
 
 #[test]
 fn the_record_goes_on_when_the_board_is_killed_and_restarted_on_the_same_link() {
-    let dir = temp_dir("restart");
-    let board = BoardSim::start(&dir, 1000, 1);
-    load_table(&dir);
-    let out = dir.join("rec.csv");
-    let mut rec = Recorder::spawn(record_cmd(&dir, &out, &["--samples", "3000"]));
-    wait_rows(&out, 800);
+    let (dir, board, out) = board_with_table("restart", 1000, 1);
+    let mut rec = recording(&dir, &out, "3000", 800);
     board.kill();
     std::thread::sleep(Duration::from_millis(800));
     let _board = BoardSim::start(&dir, 1000, 1);
     assert!(rec.wait_success());
     let r = read_rec(&out);
     assert_eq!(r.rows.len(), 3000);
-    let k = kinds(&r);
-    for kind in ["link_lost", "reconnected", "board_reset"] {
-        assert!(k.contains(&kind), "no {kind} event in {k:?}");
-    }
-    let restart = r.rows.windows(2).position(|w| w[1].1 < w[0].1).unwrap();
-    // The new boot's clock and seq start again (seq counts its readings since boot).
-    assert!(r.rows[restart + 1].2 < r.rows[restart].2);
+    assert_events(&r, &["link_lost", "reconnected", "board_reset"]);
+    assert_a_new_boot(&r);
     assert_time_increases(&r);
     // The table survived in the board's flash: the frames are still compensated.
     assert_eq!(r.rows.last().unwrap().6, "OK");
@@ -285,10 +338,7 @@ fn the_record_goes_on_when_the_board_is_killed_and_restarted_on_the_same_link() 
 
 #[test]
 fn a_killed_recorder_is_continued_with_append() {
-    let dir = temp_dir("append");
-    let _board = BoardSim::start(&dir, 1000, 2);
-    load_table(&dir);
-    let out = dir.join("rec.csv");
+    let (dir, _board, out) = board_with_table("append", 1000, 2);
     let mut rec = Recorder::spawn(record_cmd(&dir, &out, &[]));
     wait_rows(&out, 400);
     rec.kill();
@@ -306,16 +356,13 @@ fn a_killed_recorder_is_continued_with_append() {
     let r = read_rec(&out);
     assert_eq!(r.headers, 1, "one header: the same record goes on");
     assert_eq!(r.rows.len(), before.rows.len() + 300);
-    let k = kinds(&r);
-    for kind in ["trimmed", "append", "seq_gap"] {
-        assert!(k.contains(&kind), "no {kind} event in {k:?}");
-    }
+    assert_events(&r, &["trimmed", "append", "seq_gap"]);
     // The frames streamed while no recorder ran are counted in the gap.
     let last_before = before.rows.last().unwrap().1;
     let first_after = r.rows[before.rows.len()].1;
-    let gap = r.events.iter().find(|(k, _)| k == "seq_gap").unwrap();
+    let gap = details(&r, "seq_gap")[0];
     let lost = first_after - last_before - 1;
-    assert!(gap.1.starts_with(&format!("lost={lost} ")), "{gap:?}");
+    assert!(gap.starts_with(&format!("lost={lost} ")), "{gap:?}");
     assert_time_increases(&r);
     // Same boot: time_s follows the board clock across the recorder's absence.
     let (a, b) = (&r.rows[before.rows.len() - 1], &r.rows[before.rows.len()]);
@@ -324,63 +371,35 @@ fn a_killed_recorder_is_continued_with_append() {
 
 #[test]
 fn a_board_reset_and_garbage_on_the_line_are_events_and_lose_nothing_else() {
-    let dir = temp_dir("reset");
-    let mut board = BoardSim::start(&dir, 1000, 3);
-    load_table(&dir);
-    let out = dir.join("rec.csv");
-    let mut rec = Recorder::spawn(record_cmd(&dir, &out, &["--samples", "2500"]));
-    wait_rows(&out, 500);
+    let (dir, mut board, out) = board_with_table("reset", 1000, 3);
+    let mut rec = recording(&dir, &out, "2500", 500);
     board.command("garbage=300");
     wait_rows(&out, 1000);
     board.command("reset");
     assert!(rec.wait_success());
     let r = read_rec(&out);
+    assert_events(&r, &["line_noise", "board_reset"]);
     let k = kinds(&r);
-    for kind in ["line_noise", "board_reset"] {
-        assert!(k.contains(&kind), "no {kind} event in {k:?}");
-    }
     assert!(!k.contains(&"link_lost"), "{k:?}");
     assert_time_increases(&r);
-    let restart = r.rows.windows(2).position(|w| w[1].1 < w[0].1).unwrap();
-    // The new boot's clock and seq start again (seq counts its readings since boot).
-    assert!(r.rows[restart + 1].2 < r.rows[restart].2);
+    assert_a_new_boot(&r);
 }
 
 #[test]
 fn an_unplugged_link_keeps_the_boot_and_flag_changes_are_events() {
-    let dir = temp_dir("unplug");
-    let mut board = BoardSim::start(&dir, 1000, 5);
-    load_table(&dir);
-    let out = dir.join("rec.csv");
-    let mut rec = Recorder::spawn(record_cmd(&dir, &out, &["--samples", "3000"]));
-    wait_rows(&out, 400);
+    let (dir, mut board, out) = board_with_table("unplug", 1000, 5);
+    let mut rec = recording(&dir, &out, "3000", 400);
     // ≈ 375 frames with the loop open (the file shows rows half a second late: waiting for
     // a row count would not separate the two commands).
-    board.command("rtd-open");
-    std::thread::sleep(Duration::from_millis(300));
-    board.command("rtd-open=off");
+    board.fault_for("rtd-open", 300);
     std::thread::sleep(Duration::from_millis(300));
     board.command("unplug=1");
     assert!(rec.wait_success());
     let r = read_rec(&out);
+    assert_events(&r, &["link_lost", "reconnected", "seq_gap"]);
     let k = kinds(&r);
-    for kind in ["link_lost", "reconnected", "seq_gap"] {
-        assert!(k.contains(&kind), "no {kind} event in {k:?}");
-    }
     assert!(!k.contains(&"board_reset"), "{k:?}");
-    let status: Vec<&str> = r
-        .events
-        .iter()
-        .filter(|(k, _)| k == "status")
-        .map(|(_, d)| d.as_str())
-        .collect();
-    assert!(
-        status
-            .first()
-            .is_some_and(|d| d.starts_with("OK -> ") && d.contains("RTD_OPEN")),
-        "{status:?}"
-    );
-    assert!(status.iter().any(|d| d.ends_with("-> OK")), "{status:?}");
+    assert_status_raised_and_cleared(&r, "RTD_OPEN");
     // The open loop's rows are flagged and carry no resistance.
     assert!(r
         .rows
@@ -395,9 +414,9 @@ fn an_unplugged_link_keeps_the_boot_and_flag_changes_are_events() {
     let (a, b) = (&r.rows[gap], &r.rows[gap + 1]);
     assert!(b.1 > a.1);
     assert!(((b.0 - a.0) - (b.2 - a.2) as f64 * 1e-6).abs() < 1e-3);
-    let lost = r.events.iter().find(|(k, _)| k == "seq_gap").unwrap();
+    let lost = details(&r, "seq_gap")[0];
     assert!(
-        lost.1.starts_with(&format!("lost={} ", b.1 - a.1 - 1)),
+        lost.starts_with(&format!("lost={} ", b.1 - a.1 - 1)),
         "{lost:?}"
     );
     assert_time_increases(&r);
@@ -437,11 +456,9 @@ fn a_pc_clock_step_is_an_event_and_moves_no_row() {
     let summary = record::record(&opts, &pc, &stop, &mut |_| {}).unwrap();
     assert_eq!(summary.samples, 800);
     let r = read_rec(&opts.output);
-    let steps: Vec<f64> = r
-        .events
+    let steps: Vec<f64> = details(&r, "pc_clock_step")
         .iter()
-        .filter(|(k, _)| k == "pc_clock_step")
-        .filter_map(|(_, d)| d.strip_prefix("step_s=")?.split(' ').next()?.parse().ok())
+        .filter_map(|d| d.strip_prefix("step_s=")?.split(' ').next()?.parse().ok())
         .collect();
     assert!(
         steps.iter().any(|s| (s + 300.0).abs() < 2.0),
@@ -457,16 +474,10 @@ fn a_pc_clock_step_is_an_event_and_moves_no_row() {
 
 #[test]
 fn a_drdy_stall_is_flagged_in_rows_and_status_events_and_takes_no_number_from_seq() {
-    let dir = temp_dir("drdystall");
-    let mut board = BoardSim::start(&dir, 1000, 6);
-    load_table(&dir);
-    let out = dir.join("rec.csv");
-    let mut rec = Recorder::spawn(record_cmd(&dir, &out, &["--samples", "2500"]));
-    wait_rows(&out, 400);
+    let (dir, mut board, out) = board_with_table("drdystall", 1000, 6);
+    let mut rec = recording(&dir, &out, "2500", 400);
     // 300 ms of wall clock: 300 s of the board's, ≈ 375 pair periods without a conversion.
-    board.command("drdy-stall");
-    std::thread::sleep(Duration::from_millis(300));
-    board.command("drdy-stall=off");
+    board.fault_for("drdy-stall", 300);
     assert!(rec.wait_success());
     let r = read_rec(&out);
     let k = kinds(&r);
@@ -484,19 +495,7 @@ fn a_drdy_stall_is_flagged_in_rows_and_status_events_and_takes_no_number_from_se
     assert!(flagged.len() > 100, "{} rows flagged", flagged.len());
     // A timeout reading carries no conversion: no output value.
     assert!(flagged.iter().all(|row| row.3.is_nan()));
-    let status: Vec<&str> = r
-        .events
-        .iter()
-        .filter(|(k, _)| k == "status")
-        .map(|(_, d)| d.as_str())
-        .collect();
-    assert!(
-        status
-            .first()
-            .is_some_and(|d| d.starts_with("OK -> ") && d.contains("DRDY_TIMEOUT")),
-        "{status:?}"
-    );
-    assert!(status.iter().any(|d| d.ends_with("-> OK")), "{status:?}");
+    assert_status_raised_and_cleared(&r, "DRDY_TIMEOUT");
     assert_eq!(r.rows.last().unwrap().6, "OK");
     assert_time_increases(&r);
 }
@@ -505,15 +504,7 @@ fn a_drdy_stall_is_flagged_in_rows_and_status_events_and_takes_no_number_from_se
 fn load_dated_table(dir: &Path, day: u8) {
     let mut t = accomp_host::device::paper_table();
     t.date.day = day;
-    let path = dir.join(format!("table{day}.acal"));
-    std::fs::write(&path, t.encode()).unwrap();
-    let ok = Command::new(BIN)
-        .args(["load", "--target", &port(dir)])
-        .arg(&path)
-        .stderr(Stdio::null())
-        .status()
-        .unwrap();
-    assert!(ok.success());
+    load(dir, &t, &format!("table{day}.acal"));
 }
 
 #[test]

@@ -5,7 +5,7 @@
 //! log's standard deviation, a blank Allan plot, UTF-16 text, a reversed record, ±inf results).
 
 use std::os::unix::process::CommandExt as _;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::time::{Duration, Instant};
 
@@ -41,6 +41,21 @@ fn accomp_in_1_gib(args: &[&str]) -> Output {
     c.output().expect("accomp runs")
 }
 
+/// `accomp compensate --target host` of `input` with the table `cal` into `output`.
+fn compensate_on_host<'a>(cal: &'a str, input: &'a str, output: &'a str) -> Vec<&'a str> {
+    vec![
+        "compensate",
+        "--target",
+        "host",
+        "--calibration",
+        cal,
+        "--input",
+        input,
+        "--output",
+        output,
+    ]
+}
+
 fn simulated_log(dir: &Path) -> String {
     let log = cli::simulated_log(
         dir,
@@ -49,6 +64,13 @@ fn simulated_log(dir: &Path) -> String {
         &["--days", "2", "--interval", "60"],
     );
     log.to_str().unwrap().to_owned()
+}
+
+/// A file of `len` zero bytes, sparse (no disk used).
+fn sparse_file(dir: &Scratch, name: &str, len: u64) -> PathBuf {
+    let p = dir.path(name);
+    std::fs::File::create(&p).unwrap().set_len(len).unwrap();
+    p
 }
 
 fn table_file(dir: &Path) -> String {
@@ -61,16 +83,8 @@ fn table_file(dir: &Path) -> String {
 fn dev_zero_and_a_10_gb_file_are_refused_within_seconds_under_1_gib_naming_the_limit() {
     let dir = Scratch::new("robust-huge");
     // 10 GB of zero bytes, sparse: no disk used, a 10 GB file all the same.
-    let huge = dir.path("huge.csv");
-    std::fs::File::create(&huge)
-        .unwrap()
-        .set_len(10_000_000_000)
-        .unwrap();
-    let huge_tsf = dir.path("huge.tsf");
-    std::fs::File::create(&huge_tsf)
-        .unwrap()
-        .set_len(10_000_000_000)
-        .unwrap();
+    let huge = sparse_file(&dir, "huge.csv", 10_000_000_000);
+    let huge_tsf = sparse_file(&dir, "huge.tsf", 10_000_000_000);
     let cal = table_file(&dir);
     let out = dir.path("out");
     for input in [
@@ -84,17 +98,7 @@ fn dev_zero_and_a_10_gb_file_are_refused_within_seconds_under_1_gib_naming_the_l
             vec!["discover", input],
             vec!["fit", input],
             vec!["tumble", input],
-            vec![
-                "compensate",
-                "--target",
-                "host",
-                "--calibration",
-                &cal,
-                "--input",
-                input,
-                "--output",
-                "/dev/null",
-            ],
+            compensate_on_host(&cal, input, "/dev/null"),
         ];
         for args in commands {
             let started = Instant::now();
@@ -152,20 +156,7 @@ fn outputs_are_checked_before_any_work_and_named() {
         (vec!["tumble", &log, "-o", d], "is a directory"),
         (vec!["simulate-tumble", "-o", d], "is a directory"),
         (vec!["plot", &log, "--out-dir", f], "is a file"),
-        (
-            vec![
-                "compensate",
-                "--target",
-                "host",
-                "--calibration",
-                &cal,
-                "--input",
-                &log,
-                "--output",
-                d,
-            ],
-            "is a directory",
-        ),
+        (compensate_on_host(&cal, &log, d), "is a directory"),
         (
             vec!["table", "get", "--target", "qemu", "-o", d],
             "is a directory",
@@ -488,27 +479,13 @@ fn fit_compensate_and_tumble_take_allow_large_and_their_limits_name_it() {
     let dir = Scratch::new("robust-allow-large");
     // 5 GiB of zero bytes, sparse: above the byte limit of every reader (64 MiB for tables and
     // tumble logs, 4 GiB for sample files) by its size alone.
-    let huge = dir.path("huge.csv");
-    std::fs::File::create(&huge)
-        .unwrap()
-        .set_len(5 << 30)
-        .unwrap();
+    let huge = sparse_file(&dir, "huge.csv", 5 << 30);
     let h = huge.to_str().unwrap();
     let cal = table_file(&dir);
     let commands: Vec<Vec<&str>> = vec![
         vec!["fit", h],
         vec!["tumble", h],
-        vec![
-            "compensate",
-            "--target",
-            "host",
-            "--calibration",
-            &cal,
-            "--input",
-            h,
-            "--output",
-            "/dev/null",
-        ],
+        compensate_on_host(&cal, h, "/dev/null"),
     ];
     for args in commands {
         let o = accomp(&args);
@@ -564,22 +541,9 @@ fn infinities_are_refused_by_every_reader_with_file_line_and_column() {
         "time_s,output_v,temperature_c\n0,1.25,60\nNaN,1.25,60\n",
     );
     let plots = dir.path("plots");
-    let compensate = |input: &str| -> Vec<String> {
-        [
-            "compensate",
-            "--target",
-            "host",
-            "--calibration",
-            &cal,
-            "--input",
-            input,
-            "--output",
-            dir.path("out.csv").to_str().unwrap(),
-        ]
-        .map(str::to_owned)
-        .to_vec()
-    };
     let own = |v: &[&str]| v.iter().map(|s| (*s).to_owned()).collect::<Vec<_>>();
+    let out = dir.path("out.csv");
+    let compensate = |input: &str| own(&compensate_on_host(&cal, input, out.to_str().unwrap()));
     let cases: Vec<(Vec<String>, &str, &str, &str)> = vec![
         (own(&["stability", &log]), &log, "line 22", "output_v"),
         (

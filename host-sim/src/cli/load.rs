@@ -8,19 +8,34 @@ use anyhow::Context as _;
 /// Upload a calibration table to the device, verify by read-back, activate it.
 #[derive(clap::Args, Debug)]
 pub struct LoadArgs {
-    /// qemu or serial:<port>
-    #[arg(long)]
-    pub target: Target,
+    #[command(flatten)]
+    pub device: DeviceArgs,
     /// Calibration table file.
     pub calibration: PathBuf,
     /// Send the file even if it does not validate here (tests the device's validation).
     #[arg(long)]
     pub no_local_check: bool,
+}
+
+/// The device a command talks to: where, which firmware QEMU boots, how the board state is taken.
+#[derive(clap::Args, Debug)]
+pub struct DeviceArgs {
+    /// qemu or serial:<port>
+    #[arg(long)]
+    pub target: Target,
     /// Firmware ELF for --target qemu.
     #[arg(long)]
     pub firmware: Option<PathBuf>,
     #[command(flatten)]
     pub state: BoardStateArgs,
+}
+
+impl DeviceArgs {
+    /// Connects to the device (the board state options apply to every connection of the process).
+    pub fn open(&self) -> anyhow::Result<Connection> {
+        self.state.apply();
+        Ok(Connection::open(&self.target, self.firmware.as_deref())?)
+    }
 }
 
 /// How a command takes the QEMU board's persistent state (one command at a time).
@@ -49,12 +64,11 @@ impl BoardStateArgs {
 
 /// Runs `accomp load`.
 pub fn run(args: &LoadArgs) -> anyhow::Result<()> {
-    args.state.apply();
     let bytes = crate::calibration_file::read_table_bytes(&args.calibration)?;
     if !args.no_local_check {
         crate::calibration_file::decode_named(&bytes).context("table refused locally")?;
     }
-    let mut conn = Connection::open(&args.target, args.firmware.as_deref())?;
+    let mut conn = args.device.open()?;
     // A bar on a terminal, nothing when stderr is a file or a pipe (the `\r` line it replaces
     // ran together there: "upload 64/426 bytesupload 128/426 …").
     let bar = indicatif::ProgressBar::new(bytes.len() as u64);

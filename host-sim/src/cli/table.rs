@@ -3,7 +3,6 @@
 //! board runs).
 
 use crate::calibration_file::{decode_named, read_table, read_table_bytes};
-use crate::device::{Connection, Target};
 use accomp::poly::TempPoly;
 use accomp::table::{CalibrationTable, ENCODED_LEN};
 use accomp::units::{Celsius, RAD_PER_ARCMIN};
@@ -304,24 +303,17 @@ pub fn run(args: &TableArgs) -> Result<()> {
 /// Read the device's active table into a file.
 #[derive(clap::Args, Debug)]
 pub struct TableGetArgs {
-    /// qemu or serial:<port>
-    #[arg(long)]
-    pub target: Target,
+    #[command(flatten)]
+    pub device: super::load::DeviceArgs,
     /// Where to write the table.
     #[arg(short, long)]
     pub output: PathBuf,
-    /// Firmware ELF for --target qemu.
-    #[arg(long)]
-    pub firmware: Option<PathBuf>,
-    #[command(flatten)]
-    pub state: super::load::BoardStateArgs,
 }
 
 /// Runs `accomp table get`.
 pub fn run_get(args: &TableGetArgs) -> anyhow::Result<()> {
-    args.state.apply();
     crate::outputs::check_file(&args.output)?;
-    let mut conn = Connection::open(&args.target, args.firmware.as_deref())?;
+    let mut conn = args.device.open()?;
     let bytes = conn.client.read_table()?;
     conn.close()?;
     crate::outputs::write_file(&args.output, &bytes)?;

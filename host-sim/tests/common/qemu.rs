@@ -6,6 +6,7 @@
 
 use std::path::{Path, PathBuf};
 
+use accomp::table::CalibrationTable;
 use accomp_host::device::qemu::QemuOptions;
 use accomp_host::device::{firmware_path, Client, Qemu};
 
@@ -28,6 +29,13 @@ pub fn boot_with(opts: &QemuOptions) -> (Qemu, Client) {
 /// Boots the firmware on a blank board.
 pub fn boot() -> (Qemu, Client) {
     boot_with(&QemuOptions::default())
+}
+
+/// Boots the firmware on a blank board and loads `table` into it.
+pub fn boot_loaded(table: &CalibrationTable) -> (Qemu, Client) {
+    let (qemu, mut c) = boot();
+    c.load(&table.encode(), |_, _| {}).unwrap();
+    (qemu, c)
 }
 
 /// Boots the firmware on the board state (flash image) in `state`.

@@ -21,6 +21,19 @@ use accomp_host::log::Log;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
+/// A test log's thermal programme: a ±0.5 °C cycle whose period is drawn from `period_h` (hours)
+/// when `cycling`, else the regulated thermostat.
+pub fn thermal(cycling: bool, period_h: std::ops::Range<f64>, rng: &mut ChaCha8Rng) -> Thermal {
+    if cycling {
+        Thermal::Cycling {
+            amplitude_c: 0.5,
+            period_s: rng.random_range(period_h) * 3600.0,
+        }
+    } else {
+        Thermal::Regulated
+    }
+}
+
 /// Standard normal deviate (Box–Muller).
 pub fn gauss(rng: &mut ChaCha8Rng) -> f64 {
     let u1: f64 = rng.random::<f64>().max(1e-300);

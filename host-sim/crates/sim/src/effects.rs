@@ -251,191 +251,148 @@ impl ScenarioEffect {
                 why: why.to_owned(),
             })
         };
-        let finite = |v: f64| v.is_finite();
-        let positive = |v: f64| v.is_finite() && v > 0.0;
+        // One check per field: the condition, the field it names and what it must be.
+        let check = |ok: bool, field: &str, why: &str| if ok { Ok(()) } else { at(field, why) };
+        let finite = |field: &str, v: f64| check(v.is_finite(), field, "must be finite");
+        let positive = |field: &str, v: f64| check(v.is_finite() && v > 0.0, field, "must be > 0");
+        let non_negative =
+            |field: &str, v: f64| check(v.is_finite() && v >= 0.0, field, "must be ≥ 0");
+        let named =
+            |channel: &str| check(!channel.trim().is_empty(), "channel", "must name a channel");
         match self {
             ScenarioEffect::ThermalLag { tau_s, coefficient }
             | ScenarioEffect::SelfHeating { tau_s, coefficient } => {
-                if !positive(*tau_s) {
-                    return at("tau_s", "must be > 0");
-                }
-                if !finite(*coefficient) {
-                    return at("coefficient", "must be finite");
-                }
+                positive("tau_s", *tau_s)?;
+                finite("coefficient", *coefficient)
             }
             ScenarioEffect::ThermalHysteresis {
                 half_width,
                 play_half_width_c,
             } => {
-                if !positive(*play_half_width_c) {
-                    return at("play_half_width_c", "must be > 0");
-                }
-                if !finite(*half_width) {
-                    return at("half_width", "must be finite");
-                }
+                positive("play_half_width_c", *play_half_width_c)?;
+                finite("half_width", *half_width)
             }
             ScenarioEffect::Warmup { tau_s, amplitude }
             | ScenarioEffect::AgingDrift { tau_s, amplitude } => {
-                if !positive(*tau_s) {
-                    return at("tau_s", "must be > 0");
-                }
-                if !finite(*amplitude) {
-                    return at("amplitude", "must be finite");
-                }
+                positive("tau_s", *tau_s)?;
+                finite("amplitude", *amplitude)
             }
             ScenarioEffect::Step {
                 time_s,
                 size,
                 duration_s,
             } => {
-                if !finite(*time_s) {
-                    return at("time_s", "must be finite");
-                }
-                if !finite(*size) {
-                    return at("size", "must be finite");
-                }
-                if !(finite(*duration_s) && *duration_s >= 0.0) {
-                    return at("duration_s", "must be ≥ 0");
-                }
+                finite("time_s", *time_s)?;
+                finite("size", *size)?;
+                non_negative("duration_s", *duration_s)
             }
             ScenarioEffect::TidalGravity {
                 amplitude_factor,
                 delay_s,
                 groups,
             } => {
-                if !finite(*amplitude_factor) {
-                    return at("amplitude_factor", "must be finite");
-                }
+                finite("amplitude_factor", *amplitude_factor)?;
                 // A delay beyond a quarter of the shortest tidal period (M3, 8 h) is a phase
                 // error of more than 90°: not a delay.
-                if !(finite(*delay_s) && delay_s.abs() <= 2.0 * 3600.0) {
-                    return at("delay_s", "must be within ±7200 s");
-                }
+                check(
+                    delay_s.is_finite() && delay_s.abs() <= 2.0 * 3600.0,
+                    "delay_s",
+                    "must be within ±7200 s",
+                )?;
                 for g in groups {
-                    if group_band(&g.name).is_none() {
-                        return at(
-                            "groups",
-                            &format!(
-                                "has an unknown group {:?} (known: {})",
-                                g.name,
-                                group_names().join(", ")
-                            ),
-                        );
-                    }
-                    if !(finite(g.factor) && finite(g.phase_deg)) {
-                        return at(
-                            "groups",
-                            &format!("{}: factor and phase must be finite", g.name),
-                        );
-                    }
+                    check(
+                        group_band(&g.name).is_some(),
+                        "groups",
+                        &format!(
+                            "has an unknown group {:?} (known: {})",
+                            g.name,
+                            group_names().join(", ")
+                        ),
+                    )?;
+                    check(
+                        g.factor.is_finite() && g.phase_deg.is_finite(),
+                        "groups",
+                        &format!("{}: factor and phase must be finite", g.name),
+                    )?;
                 }
+                Ok(())
             }
             ScenarioEffect::TidalTilt {
                 amplitude_factor,
                 azimuth_deg,
-            } => {
-                if !(finite(*amplitude_factor) && finite(*azimuth_deg)) {
-                    return at("amplitude_factor and azimuth_deg", "must be finite");
-                }
-            }
+            } => check(
+                amplitude_factor.is_finite() && azimuth_deg.is_finite(),
+                "amplitude_factor and azimuth_deg",
+                "must be finite",
+            ),
             ScenarioEffect::BuildingTilt {
                 amplitude,
                 phase_rad,
-            } => {
-                if !(finite(*amplitude) && finite(*phase_rad)) {
-                    return at("amplitude and phase_rad", "must be finite");
-                }
-            }
-            ScenarioEffect::TiltCoupling { gain } => {
-                if !finite(*gain) {
-                    return at("gain", "must be finite");
-                }
-            }
+            } => check(
+                amplitude.is_finite() && phase_rad.is_finite(),
+                "amplitude and phase_rad",
+                "must be finite",
+            ),
+            ScenarioEffect::TiltCoupling { gain } => finite("gain", *gain),
             ScenarioEffect::AmbientCoupling {
                 channel,
                 coefficient,
                 lag_s,
             } => {
-                if channel.trim().is_empty() {
-                    return at("channel", "must name a channel");
-                }
-                if !finite(*coefficient) {
-                    return at("coefficient", "must be finite");
-                }
-                if !(finite(*lag_s) && *lag_s >= 0.0) {
-                    return at("lag_s", "must be ≥ 0");
-                }
+                named(channel)?;
+                finite("coefficient", *coefficient)?;
+                non_negative("lag_s", *lag_s)
             }
             ScenarioEffect::PressureAdmittance { coefficient } => {
-                if !finite(*coefficient) {
-                    return at("coefficient", "must be finite");
-                }
+                finite("coefficient", *coefficient)
             }
             ScenarioEffect::Periodic {
                 period_s,
                 amplitude,
                 phase_rad,
             } => {
-                if !positive(*period_s) {
-                    return at("period_s", "must be > 0");
-                }
-                if !(finite(*amplitude) && finite(*phase_rad)) {
-                    return at("amplitude and phase_rad", "must be finite");
-                }
+                positive("period_s", *period_s)?;
+                check(
+                    amplitude.is_finite() && phase_rad.is_finite(),
+                    "amplitude and phase_rad",
+                    "must be finite",
+                )
             }
             ScenarioEffect::RateCoupling {
                 channel,
                 coefficient,
             } => {
-                if channel.trim().is_empty() {
-                    return at("channel", "must name a channel");
-                }
-                if !finite(*coefficient) {
-                    return at("coefficient", "must be finite");
-                }
+                named(channel)?;
+                finite("coefficient", *coefficient)
             }
             ScenarioEffect::Lag2Coupling {
                 channel,
                 tau_s,
                 coefficient,
             } => {
-                if channel.trim().is_empty() {
-                    return at("channel", "must name a channel");
-                }
-                if !positive(*tau_s) {
-                    return at("tau_s", "must be > 0");
-                }
-                if !finite(*coefficient) {
-                    return at("coefficient", "must be finite");
-                }
+                named(channel)?;
+                positive("tau_s", *tau_s)?;
+                finite("coefficient", *coefficient)
             }
             ScenarioEffect::CreepDrift {
                 exponent,
                 amplitude,
             } => {
-                if !positive(*exponent) {
-                    return at("exponent", "must be > 0");
-                }
-                if !finite(*amplitude) {
-                    return at("amplitude", "must be finite");
-                }
+                positive("exponent", *exponent)?;
+                finite("amplitude", *amplitude)
             }
             ScenarioEffect::ChannelNoise { channel, noise } => {
-                if !NOISY_CHANNELS.contains(&channel.as_str()) {
-                    return at(
-                        "channel",
-                        &format!(
-                            "{channel:?} is not a measured channel ({})",
-                            NOISY_CHANNELS.join(", ")
-                        ),
-                    );
-                }
-                if !(finite(*noise) && *noise >= 0.0) {
-                    return at("noise", "must be ≥ 0");
-                }
+                check(
+                    NOISY_CHANNELS.contains(&channel.as_str()),
+                    "channel",
+                    &format!(
+                        "{channel:?} is not a measured channel ({})",
+                        NOISY_CHANNELS.join(", ")
+                    ),
+                )?;
+                non_negative("noise", *noise)
             }
         }
-        Ok(())
     }
 }
 
@@ -1035,6 +992,59 @@ mod tests {
         };
         assert!(e.validate(0).unwrap_err().to_string().contains("output_v"));
         assert_eq!(group_band("P1K1+J1"), Some((0.986, 1.5)));
+    }
+
+    #[test]
+    fn each_range_rule_names_its_field_and_what_it_must_be() {
+        let cases = [
+            (
+                ScenarioEffect::ThermalLag {
+                    tau_s: 0.0,
+                    coefficient: 1.0,
+                },
+                "effects[1] (thermal_lag): tau_s must be > 0",
+            ),
+            (
+                ScenarioEffect::SelfHeating {
+                    tau_s: 1.0,
+                    coefficient: f64::NAN,
+                },
+                "effects[1] (self_heating): coefficient must be finite",
+            ),
+            (
+                ScenarioEffect::Step {
+                    time_s: 0.0,
+                    size: 1.0,
+                    duration_s: -1.0,
+                },
+                "effects[1] (step): duration_s must be ≥ 0",
+            ),
+            (
+                ScenarioEffect::TidalGravity {
+                    amplitude_factor: 1.0,
+                    delay_s: 7201.0,
+                    groups: vec![],
+                },
+                "effects[1] (tidal_gravity): delay_s must be within ±7200 s",
+            ),
+            (
+                ScenarioEffect::BuildingTilt {
+                    amplitude: 1.0,
+                    phase_rad: f64::INFINITY,
+                },
+                "effects[1] (building_tilt): amplitude and phase_rad must be finite",
+            ),
+            (
+                ScenarioEffect::RateCoupling {
+                    channel: " ".into(),
+                    coefficient: 1.0,
+                },
+                "effects[1] (rate_coupling): channel must name a channel",
+            ),
+        ];
+        for (e, want) in cases {
+            assert_eq!(e.validate(1).unwrap_err().to_string(), want);
+        }
     }
 
     #[test]

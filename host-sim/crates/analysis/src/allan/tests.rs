@@ -252,16 +252,21 @@ fn gaps_skip_every_term_that_touches_them() {
     }
 }
 
-#[test]
-fn mdev_chains_agree_with_brute_force_on_a_gapless_record() {
-    let mut g = Lcg(3);
+/// `n` readings of unit white noise on a random walk of step `walk` (each reading draws the
+/// walk's step, then the white noise).
+fn white_plus_walk(g: &mut Lcg, n: usize, walk: f64) -> Vec<f64> {
     let mut r = 0.0;
-    let y: Vec<f64> = (0..2000)
+    (0..n)
         .map(|_| {
-            r += 0.1 * g.normal();
+            r += walk * g.normal();
             g.normal() + r
         })
-        .collect();
+        .collect()
+}
+
+#[test]
+fn mdev_chains_agree_with_brute_force_on_a_gapless_record() {
+    let y = white_plus_walk(&mut Lcg(3), 2000, 0.1);
     let p = Phase::from_readings(&y, 1.0).unwrap();
     for m in [1, 5, 16, 100, 600] {
         let d = p.point(Statistic::Mdev, m).unwrap();
@@ -292,14 +297,7 @@ fn noise_id_recognises_random_walk_and_white_pm() {
 #[test]
 fn streaming_noise_id_agrees_with_the_slice_version() {
     // Random walk + white: the identified type changes with tau, exercising d = 0 and 1.
-    let mut g = Lcg(5);
-    let mut r = 0.0;
-    let y: Vec<f64> = (0..20_000)
-        .map(|_| {
-            r += 0.05 * g.normal();
-            g.normal() + r
-        })
-        .collect();
+    let y = white_plus_walk(&mut Lcg(5), 20_000, 0.05);
     let p = Phase::from_readings(&y, 1.0).unwrap();
     let mut seen = Vec::new();
     for m in [1, 2, 4, 16, 64, 256, 512] {

@@ -20,6 +20,8 @@ use accomp::model::{CrossAxis, StaticCoefficients};
 use accomp::units::{Gs, Radians, RAD_PER_ARCMIN, RAD_PER_ARCSEC};
 use serde::Serialize;
 
+use crate::sim::accelerometer::SpindleAxis;
+
 /// Standard gravity g_n (m/s²), the unit `local_gravity_m_s2` is divided by: the core's.
 pub use accomp::tide::STANDARD_GRAVITY_M_S2;
 /// Default dividing-head index error (arcsec, 1σ): the paper's head indexes to 0.2".
@@ -60,19 +62,15 @@ impl RotationAxis {
         }
     }
 
-    /// The cross-axis inputs of equation (1) at head angle θ with gravity g (in g).
+    /// The cross-axis inputs of equation (1) at head angle θ with gravity g (in g): the
+    /// simulator's dividing-head geometry ([`crate::sim::accelerometer::axes`]), the same axis
+    /// along the spindle.
     pub fn cross(self, g: f64, theta: f64) -> CrossAxis {
-        let c = g * theta.cos();
-        match self {
-            RotationAxis::Output => CrossAxis {
-                a_p: Gs(c),
-                a_o: Gs(0.0),
-            },
-            RotationAxis::Pendulum => CrossAxis {
-                a_p: Gs(0.0),
-                a_o: Gs(c),
-            },
-        }
+        let spindle = match self {
+            RotationAxis::Output => SpindleAxis::Output,
+            RotationAxis::Pendulum => SpindleAxis::Pendulum,
+        };
+        crate::sim::accelerometer::axes(spindle, 1.0, theta, g).1
     }
 
     /// Sign with which K1·δ·g·cos θ enters E: +δo·a_p, −δp·a_o.

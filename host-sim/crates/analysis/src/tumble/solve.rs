@@ -13,17 +13,31 @@ pub(super) struct Params {
     pub(super) gap_s: f64,
 }
 
+/// `key` (a metadata key or CLI option) refused with its value and why.
+fn bad_parameter(key: &str, value: impl ToString, reason: &'static str) -> TumbleError {
+    TumbleError::BadParameter {
+        key: key.into(),
+        value: value.to_string(),
+        reason,
+    }
+}
+
+/// `value` of `key` is accepted when `ok`, else refused with `reason`.
+fn require(ok: bool, key: &str, value: f64, reason: &'static str) -> Result<(), TumbleError> {
+    if ok {
+        Ok(())
+    } else {
+        Err(bad_parameter(key, value, reason))
+    }
+}
+
 pub(super) fn meta_number(log: &TumbleLog, key: &str) -> Result<Option<f64>, TumbleError> {
     log.meta(key)
         .map(|v| {
             v.parse::<f64>()
                 .ok()
                 .filter(|x| x.is_finite())
-                .ok_or_else(|| TumbleError::BadParameter {
-                    key: key.into(),
-                    value: v.into(),
-                    reason: "not a finite number",
-                })
+                .ok_or_else(|| bad_parameter(key, v, "not a finite number"))
         })
         .transpose()
 }
@@ -40,43 +54,37 @@ pub(super) fn resolve(
         ),
         (None, None) => (1.0, "default 1 g".to_string()),
     };
-    if !(gravity_g.is_finite() && gravity_g > 0.5 && gravity_g < 1.5) {
-        return Err(TumbleError::BadParameter {
-            key: "gravity".into(),
-            value: gravity_g.to_string(),
-            reason: "expected 0.5..1.5 g",
-        });
-    }
+    require(
+        gravity_g.is_finite() && gravity_g > 0.5 && gravity_g < 1.5,
+        "gravity",
+        gravity_g,
+        "expected 0.5..1.5 g",
+    )?;
     let index = match opts.index_error_arcsec {
         Some(v) => v,
         None => meta_number(log, "index_error_arcsec")?.unwrap_or(DEFAULT_INDEX_ERROR_ARCSEC),
     };
-    if !(index.is_finite() && index >= 0.0) {
-        return Err(TumbleError::BadParameter {
-            key: "index_error_arcsec".into(),
-            value: index.to_string(),
-            reason: "must be ≥ 0",
-        });
-    }
+    require(
+        index.is_finite() && index >= 0.0,
+        "index_error_arcsec",
+        index,
+        "must be ≥ 0",
+    )?;
     let axis = match opts.rotation_axis {
         Some(a) => a,
         None => match log.meta("rotation_axis") {
-            Some(v) => RotationAxis::parse(v).ok_or_else(|| TumbleError::BadParameter {
-                key: "rotation_axis".into(),
-                value: v.into(),
-                reason: "expected output or pendulum",
-            })?,
+            Some(v) => RotationAxis::parse(v)
+                .ok_or_else(|| bad_parameter("rotation_axis", v, "expected output or pendulum"))?,
             None => return Err(TumbleError::MissingRotationAxis),
         },
     };
     let gap_s = opts.gap_s.unwrap_or(DEFAULT_TEST_GAP_S);
-    if !(gap_s.is_finite() && gap_s > 0.0) {
-        return Err(TumbleError::BadParameter {
-            key: "gap_s".into(),
-            value: gap_s.to_string(),
-            reason: "must be > 0",
-        });
-    }
+    require(
+        gap_s.is_finite() && gap_s > 0.0,
+        "gap_s",
+        gap_s,
+        "must be > 0",
+    )?;
     Ok((
         Params {
             gravity_g,
