@@ -21,7 +21,8 @@ use rand_chacha::ChaCha8Rng;
 /// An off-catalogue shape (unit size; the test scales it).
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Shape {
-    /// Proof mass behind the RTD through TWO first-order stages (the catalogue has one).
+    /// Proof mass behind the RTD through TWO first-order stages of unequal time constants (the
+    /// catalogue has one stage, `thermal_lag`, and two equal stages, `lag2_coupling`).
     SecondOrderLag { tau1_s: f64, tau2_s: f64 },
     /// Bouc–Wen hysteresis (smooth loops; the catalogue has play operators), see [`bouc_wen`].
     BoucWenHysteresis {
@@ -32,8 +33,8 @@ enum Shape {
     /// Power-law settling ((1 + t/t0)^p − 1) (the catalogue has ln(1 + t/τ)).
     PowerLawAging { t0_s: f64, p: f64 },
     /// A bias change that settles exponentially after it starts, 1 − e^(−(t − t0)/τ) (a tare
-    /// followed by creep; the catalogue's step crosses over a straight ramp, session 4, so a
-    /// ramped step is no longer off the catalogue).
+    /// followed by creep; the catalogue's step crosses over a straight ramp, so a ramped step is
+    /// not off the catalogue).
     SettlingStep { time_s: f64, tau_s: f64 },
     /// Controls with exactly the catalogue's shapes: must not be called poor.
     ExactStep { time_s: f64 },
@@ -42,13 +43,18 @@ enum Shape {
 }
 
 impl Shape {
-    /// The closest catalogue cause.
-    fn closest(&self) -> &'static str {
+    /// Whether `name` is the closest catalogue cause. A two-stage lag is a transfer function of
+    /// the temperature of order one or two: at moderate SNR the lower order explains it as well
+    /// and is preferred, at high SNR the second stage shows.
+    fn is_closest(&self, name: Option<&str>) -> bool {
         match self {
-            Shape::SecondOrderLag { .. } | Shape::ExactLag { .. } => "thermal_lag",
-            Shape::BoucWenHysteresis { .. } => "thermal_hysteresis",
-            Shape::PowerLawAging { .. } => "aging_drift",
-            Shape::SettlingStep { .. } | Shape::ExactStep { .. } => "step",
+            Shape::SecondOrderLag { .. } => {
+                matches!(name, Some("thermal_lag") | Some("lag2_coupling"))
+            }
+            Shape::ExactLag { .. } => name == Some("thermal_lag"),
+            Shape::BoucWenHysteresis { .. } => name == Some("thermal_hysteresis"),
+            Shape::PowerLawAging { .. } => name == Some("aging_drift"),
+            Shape::SettlingStep { .. } | Shape::ExactStep { .. } => name == Some("step"),
         }
     }
 
@@ -59,9 +65,15 @@ impl Shape {
     /// Whether the catalogue's family cannot describe the shape, so a strong one must be called
     /// poor. Not Bouc–Wen: a rate-independent loop that the Preisach distribution of plays
     /// approximates closely (the Prandtl–Ishlinskii class), so "poor" is neither required nor
-    /// wrong there; its count is printed apart.
+    /// wrong there; its count is printed apart. Not the unequal two-stage lag either: the
+    /// equal-stage `lag2_coupling` holds it within the noise of a 3-day log, so it must instead be
+    /// named a transfer function of the temperature.
     fn poor_expected(&self) -> bool {
-        self.off_catalogue() && !matches!(self, Shape::BoucWenHysteresis { .. })
+        self.off_catalogue()
+            && !matches!(
+                self,
+                Shape::BoucWenHysteresis { .. } | Shape::SecondOrderLag { .. }
+            )
     }
 
     fn needs_cycling(&self) -> bool {
@@ -217,7 +229,7 @@ fn off_catalogue_shapes_are_named_by_their_closest_cause_and_a_poor_fit_is_said(
         let snr = rng.random_range(8.0..15.0);
         let (d, _) = run(s, snr, rng.random::<u64>());
         let first = d.selection.accepted.first().map(|a| a.effect.name());
-        let ok = first == Some(s.closest());
+        let ok = s.is_closest(first);
         eprintln!(
             "moderate draw {i}: {s:?} at SNR {snr:.1}: named={ok} {}",
             describe(&d)
@@ -231,6 +243,7 @@ fn off_catalogue_shapes_are_named_by_their_closest_cause_and_a_poor_fit_is_said(
     // Strong SNR: a wrong shape must be called poor, a right one not.
     let (mut poor_off, mut n_off, mut poor_exact, mut n_exact) = (0, 0, 0, 0);
     let (mut poor_loop, mut n_loop) = (0, 0);
+    let (mut two_stage_named, mut n_two_stage) = (0, 0);
     for i in 0..DRAWS {
         let s = draw_shape(&mut rng, i);
         let snr = rng.random_range(40.0..80.0);
@@ -240,7 +253,11 @@ fn off_catalogue_shapes_are_named_by_their_closest_cause_and_a_poor_fit_is_said(
             "strong draw {i}: {s:?} at SNR {snr:.1}: poor={poor} {}",
             describe(&d)
         );
-        if s.poor_expected() {
+        if matches!(s, Shape::SecondOrderLag { .. }) {
+            n_two_stage += 1;
+            let first = d.selection.accepted.first().map(|a| a.effect.name());
+            two_stage_named += usize::from(s.is_closest(first));
+        } else if s.poor_expected() {
             n_off += 1;
             poor_off += usize::from(poor);
         } else if s.off_catalogue() {
@@ -254,17 +271,19 @@ fn off_catalogue_shapes_are_named_by_their_closest_cause_and_a_poor_fit_is_said(
     eprintln!(
         "OFF-CATALOGUE: closest cause named {named}/{DRAWS} (off-catalogue {off_named}/{off_total}); \
          poor fit said {poor_off}/{n_off} off-catalogue (Bouc–Wen loops {poor_loop}/{n_loop}), \
-         {poor_exact}/{n_exact} exact"
+         {poor_exact}/{n_exact} exact; two-stage lags named a lag {two_stage_named}/{n_two_stage}"
     );
     hidden::assert_at_least_percent(named, DRAWS, 75, "closest cause named at SNR 8–15");
-    // Stated before measuring: ≥ 50 % of the off-catalogue shapes. Measured 2/6 in session 3
-    // (the check kept the accepted member and searched a second one); since session 4 the best
-    // pair of the family replaces the effect (a two-stage lag is two first-order lags) and
-    // overlapping steps are one change: 4/6 (both two-stage lags, both settling steps; not the
-    // power laws, never told from ln(1 + t/τ) over 3 days). Asserted at the measured 4/6
+    // Stated before measuring: ≥ 50 % of the shapes the catalogue cannot describe. Measured 2/4:
+    // both settling steps; not the power laws, never told from ln(1 + t/τ) over 3 days
     // (docs/discovery.md, "Shape check"). The exact controls: 1/4 (an exact lag at SNR 54 on the
-    // true temperature, fitted on the smoothed RTD reading), at the stated limit.
-    hidden::assert_at_least_percent(poor_off, n_off, 66, "poor fit said at SNR 40–80");
+    // true temperature, fitted on the smoothed RTD reading), at the stated limit. The two-stage
+    // lags: named `lag2_coupling` 2/2 with a good shape check.
+    hidden::assert_at_least_percent(poor_off, n_off, 50, "poor fit said at SNR 40–80");
+    assert_eq!(
+        two_stage_named, n_two_stage,
+        "a strong two-stage lag must be named a lag of the temperature"
+    );
     hidden::assert_at_most_percent(poor_exact, n_exact, 25, "exact shapes called poor");
 }
 
