@@ -144,8 +144,8 @@ fn spectra(y: &[f64], x: &[f64], segs: &[usize], len: usize) -> Spectra {
     for &a in segs {
         let mut yw = detrend_window(&y[a..a + len], &hann);
         let mut xw = detrend_window(&x[a..a + len], &hann);
-        let fy = super::simulate::spectra::half_spectrum(&mut yw);
-        let fx = super::simulate::spectra::half_spectrum(&mut xw);
+        let fy = crate::numerics::fft::half_spectrum(&mut yw);
+        let fx = crate::numerics::fft::half_spectrum(&mut xw);
         for k in 0..m {
             let (yr, yi) = fy[k];
             let (xr, xi) = fx[k];
