@@ -460,24 +460,11 @@ impl NoiseModel {
     /// ln(f/w) and ln(q·dt/w) in [−30, 25] and the flicker slope β in
     /// [`FLICKER_SLOPE_RANGE`]: a start grid (or the given `start` models: the previous round's,
     /// an Allan fit), then Nelder–Mead; `max_evals` bounds the work.
-    #[allow(clippy::needless_range_loop)] // Nelder–Mead: indices over the D coordinates
+    ///
+    /// For a record whose points have different white variances (bins of unequal counts),
+    /// `white_scale` as in [`white_scale_from_counts`]; the fitted model carries it.
+    #[allow(clippy::too_many_arguments, clippy::needless_range_loop)] // Nelder–Mead: indices over the D coordinates
     pub fn fit_ml(
-        t_s: &[f64],
-        idx: &[usize],
-        x: &[f64],
-        dt_s: f64,
-        span_s: f64,
-        start: &[&NoiseModel],
-        max_evals: usize,
-    ) -> NoiseFit {
-        Self::fit_ml_scaled(t_s, idx, x, dt_s, span_s, start, max_evals, None)
-    }
-
-    /// [`NoiseModel::fit_ml`] for a record whose points have different white variances
-    /// (bins of unequal counts): `white_scale` as in [`white_scale_from_counts`]; the fitted
-    /// model carries it.
-    #[allow(clippy::too_many_arguments, clippy::needless_range_loop)]
-    pub fn fit_ml_scaled(
         t_s: &[f64],
         idx: &[usize],
         x: &[f64],
@@ -920,7 +907,7 @@ pub(crate) mod tests {
             })
             .collect();
         let idx: Vec<usize> = (0..n).collect();
-        let f = NoiseModel::fit_ml(&t, &idx, &x, 75.0, t[n - 1], &[], 110);
+        let f = NoiseModel::fit_ml(&t, &idx, &x, 75.0, t[n - 1], &[], 110, None);
         assert_eq!(f.method, METHOD_KALMAN_ML, "{:?}", f.failure);
         let m = &f.model;
         assert!((m.white_var.sqrt() - 1.0).abs() < 0.1, "{m:?}");
@@ -944,8 +931,8 @@ pub(crate) mod tests {
         let idx: Vec<usize> = (0..n).collect();
         let scale = white_scale_from_counts(&counts);
         assert!(scale.is_some());
-        let scaled = NoiseModel::fit_ml_scaled(&t, &idx, &x, 86.4, t[n - 1], &[], 110, scale);
-        let plain = NoiseModel::fit_ml(&t, &idx, &x, 86.4, t[n - 1], &[], 110);
+        let scaled = NoiseModel::fit_ml(&t, &idx, &x, 86.4, t[n - 1], &[], 110, scale);
+        let plain = NoiseModel::fit_ml(&t, &idx, &x, 86.4, t[n - 1], &[], 110, None);
         assert_eq!(scaled.method, METHOD_KALMAN_ML, "{:?}", scaled.failure);
         // The white level is that of a bin of the mean count (1.5 samples): 1/1.5.
         let w = scaled.model.white_var;
@@ -981,6 +968,7 @@ pub(crate) mod tests {
             99.0,
             &[],
             50,
+            None,
         );
         assert_eq!(f.method, METHOD_WHITE_FALLBACK);
         assert!(f.failure.is_some());
