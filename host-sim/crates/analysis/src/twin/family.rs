@@ -293,15 +293,7 @@ impl NoiseFamily {
         } else {
             (h_0, f64::INFINITY, nll_0)
         };
-        let mut ln_params = [0.0; PARAMS];
-        for i in 0..4 {
-            ln_params[i] = if h[i] > 0.0 {
-                h[i].ln()
-            } else {
-                f64::NEG_INFINITY
-            };
-        }
-        ln_params[4] = ln_fc;
+        let ln_params = ln_params_of(&h, ln_fc);
         let (h_cov, ln_fc_var) = covariance(&bins, &h, ln_fc);
         Ok(NoiseFamily {
             dt_s,
@@ -527,16 +519,17 @@ fn scoring(bins: &[Bin], ln_fc: f64, active: [bool; 4], strict: bool) -> ([f64; 
     if strict && negative {
         return (h, f64::INFINITY);
     }
+    (h, whittle(&ln_params_of(&h, ln_fc), bins))
+}
+
+/// The parameters in logs: ln of each level (−∞ for a level at zero) and ln f_c.
+fn ln_params_of(h: &[f64; 4], ln_fc: f64) -> [f64; PARAMS] {
     let mut p = [0.0; PARAMS];
-    for a in 0..4 {
-        p[a] = if h[a] > 0.0 {
-            h[a].ln()
-        } else {
-            f64::NEG_INFINITY
-        };
+    for (pa, &ha) in p.iter_mut().zip(h) {
+        *pa = if ha > 0.0 { ha.ln() } else { f64::NEG_INFINITY };
     }
     p[4] = ln_fc;
-    (h, whittle(&p, bins))
+    p
 }
 
 /// Covariance of the levels and of ln f_c: the inverse Fisher information of the Whittle
