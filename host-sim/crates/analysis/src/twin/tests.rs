@@ -45,6 +45,16 @@ fn dataset(s: &Scenario, seed: u64) -> Dataset {
     .unwrap()
 }
 
+/// Member `seed` of `twin` less its deterministic part `det`: what the member draws.
+fn member_less(twin: &Twin, det: &[f64], seed: u64) -> Vec<f64> {
+    twin.run(Some(seed))
+        .unwrap()
+        .iter()
+        .zip(det)
+        .map(|(a, b)| a - b)
+        .collect()
+}
+
 /// Standard deviation about a least-squares line in time (the derived twin's offset and
 /// drift come from a line through the record, which also takes the linear part of what the
 /// twin does not know).
@@ -139,13 +149,7 @@ fn members_draw_from_a_given_noise_model_and_the_scenario_gets_its_levels() {
     let m = NoiseModel::white(0.25);
     let twin = Twin::new(&ds, None, Some(&m)).unwrap();
     let det = twin.run(None).unwrap();
-    let n: Vec<f64> = twin
-        .run(Some(3))
-        .unwrap()
-        .iter()
-        .zip(&det)
-        .map(|(a, b)| a - b)
-        .collect();
+    let n = member_less(&twin, &det, 3);
     assert!((std(&n) / 0.5 - 1.0).abs() < 0.1, "{}", std(&n));
     let g = twin.scenario().gravimeter().unwrap();
     // √h_w with h_w = 0.25 µGal²·300 s.
@@ -172,13 +176,7 @@ fn members_redraw_the_weather_of_simulated_drivers_only() {
         twin.weather_drivers()
     );
     let det = twin.run(None).unwrap();
-    let d1: Vec<f64> = twin
-        .run(Some(1))
-        .unwrap()
-        .iter()
-        .zip(&det)
-        .map(|(a, b)| a - b)
-        .collect();
+    let d1 = member_less(&twin, &det, 1);
     assert!((std(&d1) / 1e-7 - 1.0).abs() < 0.2, "{}", std(&d1));
     // Without a temperature channel the twin simulates it; each member draws its own
     // weather: member − deterministic part is far above the instrument noise, differs
@@ -188,14 +186,7 @@ fn members_redraw_the_weather_of_simulated_drivers_only() {
     let twin = Twin::new(&no_t, None, Some(&m)).unwrap();
     assert_eq!(twin.weather_drivers(), vec!["temperature".to_owned()]);
     let det = twin.run(None).unwrap();
-    let r = |k| -> Vec<f64> {
-        twin.run(Some(k))
-            .unwrap()
-            .iter()
-            .zip(&det)
-            .map(|(a, b)| a - b)
-            .collect()
-    };
+    let r = |k| member_less(&twin, &det, k);
     let (a, b) = (r(1), r(2));
     assert_eq!(a, r(1));
     assert!(
