@@ -55,17 +55,7 @@ const ROWS: usize = 14 * 720;
 /// One null log of the given kind from `seed`: the accepted effects with their parameters.
 fn accepted_on(trouble: Trouble, seed: u64) -> Vec<String> {
     let mut r = synth::rng(seed);
-    let st = synth::station(
-        ROWS,
-        DT_S,
-        synth::Thermal::Programme {
-            amplitude_c: 0.5,
-            min_half_s: 2.0 * 3600.0,
-            max_half_s: 6.0 * 3600.0,
-        },
-        &mut r,
-    );
-    let mut noise = synth::draw_noise(&mut r);
+    let (st, mut noise) = synth::programme_station(ROWS, DT_S, &mut r);
     if trouble == Trouble::RandomWalk {
         noise.flicker_floor = 1e-12;
         noise.rw_per_sqrt_s = r.random_range(20.0e-9..40.0e-9);

@@ -24,22 +24,6 @@ use rand::Rng;
 const DT_S: f64 = 120.0;
 const ROWS: usize = 14 * 720;
 
-/// A programme station (ramps of 2–6 h, ±0.5 °C) and its sensor noise.
-fn programme(r: &mut rand_chacha::ChaCha8Rng) -> (synth::Station, synth::SensorNoise) {
-    let st = synth::station(
-        ROWS,
-        DT_S,
-        synth::Thermal::Programme {
-            amplitude_c: 0.5,
-            min_half_s: 2.0 * 3600.0,
-            max_half_s: 6.0 * 3600.0,
-        },
-        r,
-    );
-    let noise = synth::draw_noise(r);
-    (st, noise)
-}
-
 fn blind(st: &synth::Station, noise: &synth::SensorNoise, extra: &[f64], seed: u64) -> Discovery {
     let mut r = synth::rng(seed);
     let y = synth::output_g(st, noise, extra, &mut r);
@@ -76,7 +60,7 @@ fn a_bias_on_the_rate_of_temperature_change_is_a_rate_coupling_of_the_temperatur
     let mut rng = synth::rng(0x7A7E_0001);
     for i in 0..2 {
         let mut r = synth::rng(rng.random::<u64>());
-        let (st, noise) = programme(&mut r);
+        let (st, noise) = synth::programme_station(ROWS, DT_S, &mut r);
         let rate: Vec<f64> = (0..ROWS)
             .map(|k| {
                 let (a, b) = (k.saturating_sub(1), (k + 1).min(ROWS - 1));
@@ -110,7 +94,7 @@ fn a_second_order_lag_of_unequal_stages_is_a_coupling_of_the_temperature_with_th
     let mut rng = synth::rng(0x7A7E_0002);
     for i in 0..2 {
         let mut r = synth::rng(rng.random::<u64>());
-        let (st, noise) = programme(&mut r);
+        let (st, noise) = synth::programme_station(ROWS, DT_S, &mut r);
         let (t1, t2) = (
             r.random_range(600.0..1200.0),
             r.random_range(1800.0..3600.0),

@@ -339,6 +339,23 @@ pub fn draw_noise(rng: &mut ChaCha8Rng) -> SensorNoise {
     }
 }
 
+/// A station on a lab's programmed chamber (±0.5 °C ramps of 2–6 h, what makes
+/// `thermal_hysteresis` a candidate) and its sensor's noise levels, drawn in that order.
+pub fn programme_station(n: usize, dt_s: f64, rng: &mut ChaCha8Rng) -> (Station, SensorNoise) {
+    let st = station(
+        n,
+        dt_s,
+        Thermal::Programme {
+            amplitude_c: 0.5,
+            min_half_s: 2.0 * 3600.0,
+            max_half_s: 6.0 * 3600.0,
+        },
+        rng,
+    );
+    let noise = draw_noise(rng);
+    (st, noise)
+}
+
 /// The accelerometer's output in g at 1 g: 1 + bias polynomial of the true temperature
 /// (1–10 µg/°C, a few 0.1 µg/°C²) + the 1 g tilt term (cos θ − 1) + `extra_g` + noise.
 pub fn output_g(
