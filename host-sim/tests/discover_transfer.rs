@@ -61,12 +61,7 @@ fn a_bias_on_the_rate_of_temperature_change_is_a_rate_coupling_of_the_temperatur
     for i in 0..2 {
         let mut r = synth::rng(rng.random::<u64>());
         let (st, noise) = synth::programme_station(ROWS, DT_S, &mut r);
-        let rate: Vec<f64> = (0..ROWS)
-            .map(|k| {
-                let (a, b) = (k.saturating_sub(1), (k + 1).min(ROWS - 1));
-                (st.temp_true_c[b] - st.temp_true_c[a]) / ((b - a) as f64 * DT_S)
-            })
-            .collect();
+        let rate = synth::true_rate_c_per_s(&st);
         // 2–4 µg at the programme's fastest ramp (0.5 °C per 2 h).
         let g = hidden::sign(&mut r) * r.random_range(2.0e-6..4.0e-6) / (1.0 / 7200.0);
         let extra: Vec<f64> = rate.iter().map(|v| g * v).collect();
@@ -101,11 +96,7 @@ fn a_second_order_lag_of_unequal_stages_is_a_coupling_of_the_temperature_with_th
         );
         let k = hidden::sign(&mut r) * r.random_range(6.0e-6..10.0e-6);
         let l2 = synth::low_pass(&synth::low_pass(&st.temp_true_c, DT_S, t1), DT_S, t2);
-        let extra: Vec<f64> = l2
-            .iter()
-            .zip(&st.temp_true_c)
-            .map(|(l, t)| k * (l - t))
-            .collect();
+        let extra = synth::lag_error(&l2, &st.temp_true_c, k);
         let d = blind(&st, &noise, &extra, r.random());
         eprintln!(
             "lag2 {i}: τ {t1:.0} + {t2:.0} s, {:.1} µg/°C → {:?}",
@@ -152,11 +143,7 @@ fn a_lag_on_a_slow_cycle_is_reported_ambiguous_with_a_rate_coupling_and_what_sep
     let noise = synth::draw_noise(&mut r);
     let (tau, k) = (1800.0, 20.0e-6);
     let lag = synth::low_pass(&st.temp_true_c, DT_S, tau);
-    let extra: Vec<f64> = lag
-        .iter()
-        .zip(&st.temp_true_c)
-        .map(|(l, t)| k * (l - t))
-        .collect();
+    let extra = synth::lag_error(&lag, &st.temp_true_c, k);
     let d = blind(&st, &noise, &extra, r.random());
     eprintln!("slow ramps: {:?}", hidden::accepted_with_params(&d));
     const TEMPERATURE_COUPLINGS: [&str; 3] = ["thermal_lag", "rate_coupling", "lag2_coupling"];
