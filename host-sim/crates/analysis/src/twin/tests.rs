@@ -29,7 +29,9 @@ fn gravimeter_scenario() -> Scenario {
     s
 }
 
-fn dataset(s: &Scenario, seed: u64) -> Dataset {
+/// The log the simulator writes for `s` with `seed`, read back as the discovery reads records
+/// (every point kept).
+pub(super) fn dataset(s: &Scenario, seed: u64) -> Dataset {
     let bytes = simulate(s, seed, &Options::default(), Vec::new(), &mut |_, _| {})
         .unwrap()
         .1;
