@@ -1010,11 +1010,8 @@ pub(crate) mod tests {
         // Pure random walk, white noise negligible: the prediction at a held-out row is the last
         // observed value, its variance q·(time since it).
         let model = NoiseModel {
-            white_var: 1e-20,
-            flicker: Vec::new(),
             rw_per_s: 1.0,
-            h: [0.0; 3],
-            white_scale: None,
+            ..NoiseModel::white(1e-20)
         };
         let t: Vec<f64> = (0..6).map(f64::from).collect();
         let x = [0.0, 1.0, 3.0, 7.0, 2.0, 2.0];
@@ -1063,11 +1060,8 @@ pub(crate) mod tests {
         // A strong random walk with a tiny white part: innovations → first differences (the
         // walk starts at 0 with no uncertainty: the level is the regression's offset column).
         let rw = NoiseModel {
-            white_var: 1e-12,
-            flicker: Vec::new(),
             rw_per_s: 1.0,
-            h: [0.0; 3],
-            white_scale: None,
+            ..NoiseModel::white(1e-12)
         };
         let w = Whitener::new(&rw, &t, (0..5).collect());
         let e = w.filter(&[0.0, 2.0, 5.0, 9.0, 14.0], false);
