@@ -47,6 +47,14 @@ pub(super) fn dataset(s: &Scenario, seed: u64) -> Dataset {
     .unwrap()
 }
 
+/// One day of paper-1g at `interval_s` (seed 2), read back as the discovery reads it.
+fn paper_1g_day(interval_s: f64) -> Dataset {
+    let mut s = Scenario::preset("paper-1g").unwrap();
+    s.run.duration_s = 86_400.0;
+    s.run.interval_s = interval_s;
+    dataset(&s, 2)
+}
+
 /// Member `seed` of `twin` less its deterministic part `det`: what the member draws.
 fn member_less(twin: &Twin, det: &[f64], seed: u64) -> Vec<f64> {
     twin.run(Some(seed))
@@ -108,10 +116,7 @@ fn a_gravimeter_log_is_written_in_its_unit_and_its_twin_predicts_the_tide() {
 
 #[test]
 fn an_accelerometer_twin_follows_the_measured_temperature_and_tilt() {
-    let mut s = Scenario::preset("paper-1g").unwrap();
-    s.run.duration_s = 86_400.0;
-    s.run.interval_s = 120.0;
-    let ds = dataset(&s, 2);
+    let ds = paper_1g_day(120.0);
     let twin = Twin::new(&ds, None, None).unwrap();
     assert!(twin.scenario().gravimeter().is_none());
     let det = twin.run(None).unwrap();
@@ -164,10 +169,7 @@ fn members_draw_from_a_given_noise_model_and_the_scenario_gets_its_levels() {
 
 #[test]
 fn members_redraw_the_weather_of_simulated_drivers_only() {
-    let mut s = Scenario::preset("paper-1g").unwrap();
-    s.run.duration_s = 86_400.0;
-    s.run.interval_s = 300.0;
-    let full = dataset(&s, 2);
+    let full = paper_1g_day(300.0);
     let m = NoiseModel::white(1e-14);
     // Every driver the accelerometer follows is measured: members are the deterministic
     // part plus the instrument noise.
