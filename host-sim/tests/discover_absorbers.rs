@@ -55,17 +55,7 @@ const ROWS: usize = 14 * 720;
 /// One null log of the given kind from `seed`: the accepted effects with their parameters.
 fn accepted_on(trouble: Trouble, seed: u64) -> Vec<String> {
     let mut r = synth::rng(seed);
-    let st = synth::station(
-        ROWS,
-        DT_S,
-        synth::Thermal::Programme {
-            amplitude_c: 0.5,
-            min_half_s: 2.0 * 3600.0,
-            max_half_s: 6.0 * 3600.0,
-        },
-        &mut r,
-    );
-    let mut noise = synth::draw_noise(&mut r);
+    let (st, mut noise) = synth::programme_station(ROWS, DT_S, &mut r);
     if trouble == Trouble::RandomWalk {
         noise.flicker_floor = 1e-12;
         noise.rw_per_sqrt_s = r.random_range(20.0e-9..40.0e-9);
@@ -97,12 +87,7 @@ fn accepted_on(trouble: Trouble, seed: u64) -> Vec<String> {
         Trouble::RateCoupling => {
             // dT/dt by central differences of the true temperature, smoothed over 30 min (the
             // gradient builds up through the housing), scaled to `size` at its 99th percentile.
-            let rate: Vec<f64> = (0..ROWS)
-                .map(|i| {
-                    let (a, b) = (i.saturating_sub(1), (i + 1).min(ROWS - 1));
-                    (st.temp_true_c[b] - st.temp_true_c[a]) / ((b - a) as f64 * DT_S)
-                })
-                .collect();
+            let rate = synth::true_rate_c_per_s(&st);
             let smooth = synth::low_pass(&rate, DT_S, 1800.0);
             let mut mags: Vec<f64> = smooth.iter().map(|v| v.abs()).collect();
             mags.sort_by(f64::total_cmp);
@@ -196,24 +181,12 @@ fn a_lag_on_a_cycling_programme_is_named_a_lag_not_a_loop_and_an_ambiguity_is_re
     let mut loops = 0;
     for i in 0..ONE_RATE_LOGS {
         let mut r = synth::rng(rng.random::<u64>());
-        let st = synth::station(
-            ROWS,
-            DT_S,
-            synth::Thermal::Cycling {
-                amplitude_c: 0.5,
-                period_s: 8.0 * 3600.0,
-            },
-            &mut r,
-        );
+        let st = synth::station(ROWS, DT_S, synth::EIGHT_HOUR_CYCLE, &mut r);
         let noise = synth::draw_noise(&mut r);
         let tau = r.random_range(1200.0..2400.0);
         let k = hidden::sign(&mut r) * r.random_range(5.0e-6..10.0e-6);
         let lag = synth::low_pass(&st.temp_true_c, DT_S, tau);
-        let extra: Vec<f64> = lag
-            .iter()
-            .zip(&st.temp_true_c)
-            .map(|(l, t)| k * (l - t))
-            .collect();
+        let extra = synth::lag_error(&lag, &st.temp_true_c, k);
         let y = synth::output_g(&st, &noise, &extra, &mut r);
         let (_, d) = hidden::discover_blind(&synth::log_of(&st, y));
         let thermal = d.selection.accepted.iter().find(|a| {

@@ -302,17 +302,7 @@ fn hysteresis_branch_offsets_of_a_few_microg_are_found_in_a_14_day_cycling_log()
         let mut r = synth::rng(seed);
         let n = 14 * 720;
         let dt = 120.0;
-        let st = synth::station(
-            n,
-            dt,
-            synth::Thermal::Programme {
-                amplitude_c: 0.5,
-                min_half_s: 2.0 * 3600.0,
-                max_half_s: 6.0 * 3600.0,
-            },
-            &mut r,
-        );
-        let noise = synth::draw_noise(&mut r);
+        let (st, noise) = synth::programme_station(n, dt, &mut r);
         let shape = draw_bouc_wen(&mut r);
         let half_width_g = r.random_range(1.0e-6..4.0e-6);
         let unit = series(shape, &st);

@@ -27,15 +27,7 @@ const DRIFT_G_PER_C: f64 = 3.0e-6;
 /// The station, the true table (T0 at the station's mean temperature) and the record in g.
 fn record(seed: u64) -> (Log, CalibrationTable) {
     let mut rng = synth::rng(seed);
-    let st = synth::station(
-        ROWS,
-        DT_S,
-        synth::Thermal::Cycling {
-            amplitude_c: 0.5,
-            period_s: 8.0 * 3600.0,
-        },
-        &mut rng,
-    );
+    let st = synth::station(ROWS, DT_S, synth::EIGHT_HOUR_CYCLE, &mut rng);
     let mean = st.temp_true_c.iter().sum::<f64>() / ROWS as f64;
     let mut truth = accomp::reference::paper_order2_table();
     truth.thermal = accomp::reference::paper_order2_models(Celsius(mean.round()));

@@ -24,22 +24,6 @@ use rand::Rng;
 const DT_S: f64 = 120.0;
 const ROWS: usize = 14 * 720;
 
-/// A programme station (ramps of 2–6 h, ±0.5 °C) and its sensor noise.
-fn programme(r: &mut rand_chacha::ChaCha8Rng) -> (synth::Station, synth::SensorNoise) {
-    let st = synth::station(
-        ROWS,
-        DT_S,
-        synth::Thermal::Programme {
-            amplitude_c: 0.5,
-            min_half_s: 2.0 * 3600.0,
-            max_half_s: 6.0 * 3600.0,
-        },
-        r,
-    );
-    let noise = synth::draw_noise(r);
-    (st, noise)
-}
-
 fn blind(st: &synth::Station, noise: &synth::SensorNoise, extra: &[f64], seed: u64) -> Discovery {
     let mut r = synth::rng(seed);
     let y = synth::output_g(st, noise, extra, &mut r);
@@ -76,13 +60,8 @@ fn a_bias_on_the_rate_of_temperature_change_is_a_rate_coupling_of_the_temperatur
     let mut rng = synth::rng(0x7A7E_0001);
     for i in 0..2 {
         let mut r = synth::rng(rng.random::<u64>());
-        let (st, noise) = programme(&mut r);
-        let rate: Vec<f64> = (0..ROWS)
-            .map(|k| {
-                let (a, b) = (k.saturating_sub(1), (k + 1).min(ROWS - 1));
-                (st.temp_true_c[b] - st.temp_true_c[a]) / ((b - a) as f64 * DT_S)
-            })
-            .collect();
+        let (st, noise) = synth::programme_station(ROWS, DT_S, &mut r);
+        let rate = synth::true_rate_c_per_s(&st);
         // 2–4 µg at the programme's fastest ramp (0.5 °C per 2 h).
         let g = hidden::sign(&mut r) * r.random_range(2.0e-6..4.0e-6) / (1.0 / 7200.0);
         let extra: Vec<f64> = rate.iter().map(|v| g * v).collect();
@@ -110,18 +89,14 @@ fn a_second_order_lag_of_unequal_stages_is_a_coupling_of_the_temperature_with_th
     let mut rng = synth::rng(0x7A7E_0002);
     for i in 0..2 {
         let mut r = synth::rng(rng.random::<u64>());
-        let (st, noise) = programme(&mut r);
+        let (st, noise) = synth::programme_station(ROWS, DT_S, &mut r);
         let (t1, t2) = (
             r.random_range(600.0..1200.0),
             r.random_range(1800.0..3600.0),
         );
         let k = hidden::sign(&mut r) * r.random_range(6.0e-6..10.0e-6);
         let l2 = synth::low_pass(&synth::low_pass(&st.temp_true_c, DT_S, t1), DT_S, t2);
-        let extra: Vec<f64> = l2
-            .iter()
-            .zip(&st.temp_true_c)
-            .map(|(l, t)| k * (l - t))
-            .collect();
+        let extra = synth::lag_error(&l2, &st.temp_true_c, k);
         let d = blind(&st, &noise, &extra, r.random());
         eprintln!(
             "lag2 {i}: τ {t1:.0} + {t2:.0} s, {:.1} µg/°C → {:?}",
@@ -168,11 +143,7 @@ fn a_lag_on_a_slow_cycle_is_reported_ambiguous_with_a_rate_coupling_and_what_sep
     let noise = synth::draw_noise(&mut r);
     let (tau, k) = (1800.0, 20.0e-6);
     let lag = synth::low_pass(&st.temp_true_c, DT_S, tau);
-    let extra: Vec<f64> = lag
-        .iter()
-        .zip(&st.temp_true_c)
-        .map(|(l, t)| k * (l - t))
-        .collect();
+    let extra = synth::lag_error(&lag, &st.temp_true_c, k);
     let d = blind(&st, &noise, &extra, r.random());
     eprintln!("slow ramps: {:?}", hidden::accepted_with_params(&d));
     const TEMPERATURE_COUPLINGS: [&str; 3] = ["thermal_lag", "rate_coupling", "lag2_coupling"];

@@ -136,6 +136,12 @@ pub enum Thermal {
     },
 }
 
+/// The cycling programme of the lag-or-loop and table-error tests: ±0.5 °C, 8 h period.
+pub const EIGHT_HOUR_CYCLE: Thermal = Thermal::Cycling {
+    amplitude_c: 0.5,
+    period_s: 8.0 * 3600.0,
+};
+
 /// A generated station record: time, true and measured channels.
 #[derive(Debug, Clone)]
 pub struct Station {
@@ -337,6 +343,39 @@ pub fn draw_noise(rng: &mut ChaCha8Rng) -> SensorNoise {
         flicker_floor: rng.random_range(0.3e-6..1.0e-6),
         rw_per_sqrt_s: rng.random_range(2.0e-9..8.0e-9),
     }
+}
+
+/// The rate of change of the true temperature, °C/s: central differences, one-sided at the ends.
+pub fn true_rate_c_per_s(st: &Station) -> Vec<f64> {
+    let n = st.temp_true_c.len();
+    (0..n)
+        .map(|i| {
+            let (a, b) = (i.saturating_sub(1), (i + 1).min(n - 1));
+            (st.temp_true_c[b] - st.temp_true_c[a]) / ((b - a) as f64 * st.dt_s)
+        })
+        .collect()
+}
+
+/// What a coupling of `k` per °C through a lag adds to the output: k·(lagged − temp), per point.
+pub fn lag_error(lagged: &[f64], temp: &[f64], k: f64) -> Vec<f64> {
+    lagged.iter().zip(temp).map(|(l, t)| k * (l - t)).collect()
+}
+
+/// A station on a lab's programmed chamber (±0.5 °C ramps of 2–6 h, what makes
+/// `thermal_hysteresis` a candidate) and its sensor's noise levels, drawn in that order.
+pub fn programme_station(n: usize, dt_s: f64, rng: &mut ChaCha8Rng) -> (Station, SensorNoise) {
+    let st = station(
+        n,
+        dt_s,
+        Thermal::Programme {
+            amplitude_c: 0.5,
+            min_half_s: 2.0 * 3600.0,
+            max_half_s: 6.0 * 3600.0,
+        },
+        rng,
+    );
+    let noise = draw_noise(rng);
+    (st, noise)
 }
 
 /// The accelerometer's output in g at 1 g: 1 + bias polynomial of the true temperature

@@ -70,7 +70,7 @@ fn noise_of(ds: &Dataset, r: &[f64], warm: Option<&NoiseModel>) -> NoiseFit {
     let idx: Vec<usize> = (0..r.len()).collect();
     let scale = point_white_scale(ds);
     let fit = |start: &[&NoiseModel], evals: usize| {
-        NoiseModel::fit_ml_scaled(
+        NoiseModel::fit_ml(
             &ds.t_s,
             &idx,
             r,

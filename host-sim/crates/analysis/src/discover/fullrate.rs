@@ -114,20 +114,11 @@ fn uniform_runs(ds: &Dataset, dt: f64) -> Vec<(usize, usize)> {
 
 /// Removes the least-squares line and applies the Hann window.
 fn detrend_window(x: &[f64], hann: &[f64]) -> Vec<f64> {
-    let n = x.len() as f64;
-    let mk = (n - 1.0) / 2.0;
-    let mean = x.iter().sum::<f64>() / n;
-    let (mut sxy, mut sxx) = (0.0, 0.0);
-    for (k, v) in x.iter().enumerate() {
-        let d = k as f64 - mk;
-        sxy += d * (v - mean);
-        sxx += d * d;
+    let mut d = crate::allan::detrend_linear(x);
+    for (v, w) in d.iter_mut().zip(hann) {
+        *v *= w;
     }
-    let b = sxy / sxx;
-    x.iter()
-        .enumerate()
-        .map(|(k, v)| (v - mean - b * (k as f64 - mk)) * hann[k])
-        .collect()
+    d
 }
 
 fn spectra(y: &[f64], x: &[f64], segs: &[usize], len: usize) -> Spectra {
@@ -144,8 +135,8 @@ fn spectra(y: &[f64], x: &[f64], segs: &[usize], len: usize) -> Spectra {
     for &a in segs {
         let mut yw = detrend_window(&y[a..a + len], &hann);
         let mut xw = detrend_window(&x[a..a + len], &hann);
-        let fy = super::simulate::spectra::half_spectrum(&mut yw);
-        let fx = super::simulate::spectra::half_spectrum(&mut xw);
+        let fy = crate::numerics::fft::half_spectrum(&mut yw);
+        let fx = crate::numerics::fft::half_spectrum(&mut xw);
         for k in 0..m {
             let (yr, yi) = fy[k];
             let (xr, xi) = fx[k];

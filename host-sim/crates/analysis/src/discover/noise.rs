@@ -460,24 +460,11 @@ impl NoiseModel {
     /// ln(f/w) and ln(q·dt/w) in [−30, 25] and the flicker slope β in
     /// [`FLICKER_SLOPE_RANGE`]: a start grid (or the given `start` models: the previous round's,
     /// an Allan fit), then Nelder–Mead; `max_evals` bounds the work.
-    #[allow(clippy::needless_range_loop)] // Nelder–Mead: indices over the D coordinates
+    ///
+    /// For a record whose points have different white variances (bins of unequal counts),
+    /// `white_scale` as in [`white_scale_from_counts`]; the fitted model carries it.
+    #[allow(clippy::too_many_arguments, clippy::needless_range_loop)] // Nelder–Mead: indices over the D coordinates
     pub fn fit_ml(
-        t_s: &[f64],
-        idx: &[usize],
-        x: &[f64],
-        dt_s: f64,
-        span_s: f64,
-        start: &[&NoiseModel],
-        max_evals: usize,
-    ) -> NoiseFit {
-        Self::fit_ml_scaled(t_s, idx, x, dt_s, span_s, start, max_evals, None)
-    }
-
-    /// [`NoiseModel::fit_ml`] for a record whose points have different white variances
-    /// (bins of unequal counts): `white_scale` as in [`white_scale_from_counts`]; the fitted
-    /// model carries it.
-    #[allow(clippy::too_many_arguments, clippy::needless_range_loop)]
-    pub fn fit_ml_scaled(
         t_s: &[f64],
         idx: &[usize],
         x: &[f64],
@@ -920,7 +907,7 @@ pub(crate) mod tests {
             })
             .collect();
         let idx: Vec<usize> = (0..n).collect();
-        let f = NoiseModel::fit_ml(&t, &idx, &x, 75.0, t[n - 1], &[], 110);
+        let f = NoiseModel::fit_ml(&t, &idx, &x, 75.0, t[n - 1], &[], 110, None);
         assert_eq!(f.method, METHOD_KALMAN_ML, "{:?}", f.failure);
         let m = &f.model;
         assert!((m.white_var.sqrt() - 1.0).abs() < 0.1, "{m:?}");
@@ -944,8 +931,8 @@ pub(crate) mod tests {
         let idx: Vec<usize> = (0..n).collect();
         let scale = white_scale_from_counts(&counts);
         assert!(scale.is_some());
-        let scaled = NoiseModel::fit_ml_scaled(&t, &idx, &x, 86.4, t[n - 1], &[], 110, scale);
-        let plain = NoiseModel::fit_ml(&t, &idx, &x, 86.4, t[n - 1], &[], 110);
+        let scaled = NoiseModel::fit_ml(&t, &idx, &x, 86.4, t[n - 1], &[], 110, scale);
+        let plain = NoiseModel::fit_ml(&t, &idx, &x, 86.4, t[n - 1], &[], 110, None);
         assert_eq!(scaled.method, METHOD_KALMAN_ML, "{:?}", scaled.failure);
         // The white level is that of a bin of the mean count (1.5 samples): 1/1.5.
         let w = scaled.model.white_var;
@@ -981,6 +968,7 @@ pub(crate) mod tests {
             99.0,
             &[],
             50,
+            None,
         );
         assert_eq!(f.method, METHOD_WHITE_FALLBACK);
         assert!(f.failure.is_some());
@@ -1022,11 +1010,8 @@ pub(crate) mod tests {
         // Pure random walk, white noise negligible: the prediction at a held-out row is the last
         // observed value, its variance q·(time since it).
         let model = NoiseModel {
-            white_var: 1e-20,
-            flicker: Vec::new(),
             rw_per_s: 1.0,
-            h: [0.0; 3],
-            white_scale: None,
+            ..NoiseModel::white(1e-20)
         };
         let t: Vec<f64> = (0..6).map(f64::from).collect();
         let x = [0.0, 1.0, 3.0, 7.0, 2.0, 2.0];
@@ -1075,11 +1060,8 @@ pub(crate) mod tests {
         // A strong random walk with a tiny white part: innovations → first differences (the
         // walk starts at 0 with no uncertainty: the level is the regression's offset column).
         let rw = NoiseModel {
-            white_var: 1e-12,
-            flicker: Vec::new(),
             rw_per_s: 1.0,
-            h: [0.0; 3],
-            white_scale: None,
+            ..NoiseModel::white(1e-12)
         };
         let w = Whitener::new(&rw, &t, (0..5).collect());
         let e = w.filter(&[0.0, 2.0, 5.0, 9.0, 14.0], false);

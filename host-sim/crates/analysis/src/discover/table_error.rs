@@ -183,7 +183,7 @@ fn noise_of(ds: &Dataset, r: &[f64]) -> NoiseModel {
     let idx: Vec<usize> = (0..r.len()).collect();
     let start = NoiseModel::fit(&residual::adev(ds, r), ds.dt_s, ds.span_s());
     let starts: Vec<&NoiseModel> = start.iter().collect();
-    NoiseModel::fit_ml_scaled(
+    NoiseModel::fit_ml(
         &ds.t_s,
         &idx,
         r,

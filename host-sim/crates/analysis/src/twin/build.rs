@@ -353,43 +353,55 @@ pub(super) fn drivers(
             ),
         })
     };
-    let temperature_c = match ds.channel(ChannelKind::Temperature) {
-        Some(c) => {
-            say("temperature", Some(&c.name));
-            c.values.clone()
-        }
-        None => {
-            say("temperature", None);
-            simulated.temperature = true;
-            at(&sim_t)
+    // Each channel the record's own when it has it (named in the provenance), else the quiet
+    // station's: (series, simulated?).
+    let mut measured_or = |kind: ChannelKind,
+                           measured_what: &str,
+                           measured: fn(&[f64]) -> Vec<f64>,
+                           simulated_what: &str,
+                           simulated: &dyn Fn() -> Vec<f64>|
+     -> (Vec<f64>, bool) {
+        match ds.channel(kind) {
+            Some(c) => {
+                say(measured_what, Some(&c.name));
+                (measured(&c.values), false)
+            }
+            None => {
+                say(simulated_what, None);
+                (simulated(), true)
+            }
         }
     };
-    let tilt_rad = match ds.channel(ChannelKind::Tilt) {
-        Some(c) => {
-            say("tilt", Some(&c.name));
-            c.values.clone()
-        }
-        None => {
-            say("tilt (tide tilt added)", None);
-            simulated.tilt = true;
+    let (temperature_c, sim_temperature) = measured_or(
+        ChannelKind::Temperature,
+        "temperature",
+        <[f64]>::to_vec,
+        "temperature",
+        &|| at(&sim_t),
+    );
+    let (tilt_rad, sim_tilt_used) = measured_or(
+        ChannelKind::Tilt,
+        "tilt",
+        <[f64]>::to_vec,
+        "tilt (tide tilt added)",
+        &|| {
             at(&sim_tilt)
                 .iter()
                 .zip(&tide_tilt_rad)
                 .map(|(a, b)| a + b)
                 .collect()
-        }
-    };
-    let pressure_dev_pa = match ds.channel(ChannelKind::Pressure) {
-        Some(c) => {
-            say("pressure (centred on its mean)", Some(&c.name));
-            centred(&c.values)
-        }
-        None => {
-            say("pressure", None);
-            simulated.pressure = true;
-            at(&sim_p)
-        }
-    };
+        },
+    );
+    let (pressure_dev_pa, sim_pressure) = measured_or(
+        ChannelKind::Pressure,
+        "pressure (centred on its mean)",
+        centred,
+        "pressure",
+        &|| at(&sim_p),
+    );
+    simulated.temperature = sim_temperature;
+    simulated.tilt = sim_tilt_used;
+    simulated.pressure = sim_pressure;
     let head = DividingHead::new(&s.accelerometer.orientation).map_err(SimError::from)?;
     let input_g = match (ds.changing_input(), s.gravimeter()) {
         (_, Some(_)) => vec![1.0; n],

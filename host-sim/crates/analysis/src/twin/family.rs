@@ -217,7 +217,7 @@ fn segment_bins(d: &[f64], dt_s: f64, below: f64, out: &mut Vec<Bin>) {
     let gain = |f: f64| 4.0 * (std::f64::consts::PI * f * dt_s).sin().powi(2);
     let freq = |k: usize| k as f64 / (n as f64 * dt_s);
     let mut xw: Vec<f64> = d.iter().zip(&w).map(|(a, b)| a * b).collect();
-    let spec = crate::discover::simulate::spectra::half_spectrum(&mut xw);
+    let spec = crate::numerics::fft::half_spectrum(&mut xw);
     for k in SKIP_BINS.max(2)..spec.len().saturating_sub(1) {
         if below > 0.0 && freq(k) >= below {
             break;
@@ -293,15 +293,7 @@ impl NoiseFamily {
         } else {
             (h_0, f64::INFINITY, nll_0)
         };
-        let mut ln_params = [0.0; PARAMS];
-        for i in 0..4 {
-            ln_params[i] = if h[i] > 0.0 {
-                h[i].ln()
-            } else {
-                f64::NEG_INFINITY
-            };
-        }
-        ln_params[4] = ln_fc;
+        let ln_params = ln_params_of(&h, ln_fc);
         let (h_cov, ln_fc_var) = covariance(&bins, &h, ln_fc);
         Ok(NoiseFamily {
             dt_s,
@@ -400,9 +392,7 @@ impl NoiseFamily {
         }
         let len = (SYNTHESIS_FACTOR * cells).next_power_of_two().max(4);
         let dt = self.dt_s;
-        let mut planner = realfft::RealFftPlanner::<f64>::new();
-        let plan = planner.plan_fft_inverse(len);
-        let mut spec = plan.make_input_vec();
+        let mut spec = vec![(0.0, 0.0); len / 2 + 1];
         // E|X_k|² = len · S(f_k) / (4Δ) per real and imaginary part, so that the series' one-sided
         // PSD is S; the Nyquist bin is real.
         for (k, c) in spec.iter_mut().enumerate() {
@@ -412,17 +402,14 @@ impl NoiseFamily {
             let f = k as f64 / (len as f64 * dt);
             let sd = (len as f64 * self.psd(f) / (4.0 * dt)).sqrt();
             if k == len / 2 {
-                c.re = sd * std::f64::consts::SQRT_2 * gauss(rng);
-                c.im = 0.0;
+                c.0 = sd * std::f64::consts::SQRT_2 * gauss(rng);
+                c.1 = 0.0;
             } else {
-                c.re = sd * gauss(rng);
-                c.im = sd * gauss(rng);
+                c.0 = sd * gauss(rng);
+                c.1 = sd * gauss(rng);
             }
         }
-        let mut out = plan.make_output_vec();
-        if plan.process(&mut spec, &mut out).is_err() {
-            return vec![f64::NAN; cells];
-        }
+        let mut out = crate::numerics::fft::real_from_half_spectrum(&spec);
         out.truncate(cells);
         for v in &mut out {
             *v /= len as f64;
@@ -532,16 +519,17 @@ fn scoring(bins: &[Bin], ln_fc: f64, active: [bool; 4], strict: bool) -> ([f64; 
     if strict && negative {
         return (h, f64::INFINITY);
     }
+    (h, whittle(&ln_params_of(&h, ln_fc), bins))
+}
+
+/// The parameters in logs: ln of each level (−∞ for a level at zero) and ln f_c.
+fn ln_params_of(h: &[f64; 4], ln_fc: f64) -> [f64; PARAMS] {
     let mut p = [0.0; PARAMS];
-    for a in 0..4 {
-        p[a] = if h[a] > 0.0 {
-            h[a].ln()
-        } else {
-            f64::NEG_INFINITY
-        };
+    for (pa, &ha) in p.iter_mut().zip(h) {
+        *pa = if ha > 0.0 { ha.ln() } else { f64::NEG_INFINITY };
     }
     p[4] = ln_fc;
-    (h, whittle(&p, bins))
+    p
 }
 
 /// Covariance of the levels and of ln f_c: the inverse Fisher information of the Whittle

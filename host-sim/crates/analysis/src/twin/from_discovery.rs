@@ -233,8 +233,6 @@ struct Accepted<'a> {
 #[cfg(test)]
 mod from_discovery_tests {
     use super::*;
-    use crate::discover::import::{dataset_from_log, DatasetOptions};
-    use crate::log::Log;
     use crate::sim::{simulate, Options};
 
     #[test]
@@ -249,18 +247,7 @@ mod from_discovery_tests {
             size: 2e-5,
             duration_s: 0.0,
         }];
-        let bytes = simulate(&hidden, 5, &Options::default(), Vec::new(), &mut |_, _| {})
-            .unwrap()
-            .1;
-        let ds = dataset_from_log(
-            &Log::read(&bytes[..]).unwrap(),
-            &DatasetOptions {
-                output: None,
-                max_points: 1_000_000,
-                unit_per_g_from_calibration: None,
-            },
-        )
-        .unwrap();
+        let ds = crate::twin::tests::dataset(&hidden, 5);
         let d = crate::discover::discover(ds, None, &crate::discover::select::Config::default())
             .unwrap();
         let (effects, refused) = scenario_effects_from_discovery(&d);

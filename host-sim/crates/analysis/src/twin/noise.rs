@@ -12,21 +12,46 @@ pub(super) fn add_model_noise(out: &mut [f64], t: &[f64], m: &NoiseModel, seed: 
         .iter()
         .map(|&(_, v)| v.max(0.0).sqrt() * gauss(&mut rng))
         .collect();
+    let taus: Vec<f64> = m.flicker.iter().map(|&(tau, _)| tau).collect();
+    add_ou_sum(
+        out,
+        t,
+        &mut rng,
+        white,
+        (&mut x, &taus),
+        |c, phi| (m.flicker[c].1.max(0.0) * (1.0 - phi * phi)).sqrt(),
+        |dt| (m.rw_per_s.max(0.0) * dt).sqrt(),
+    );
+}
+
+/// Adds white noise (σ `white` per point), the OU components `x` (initial states, correlation
+/// times `taus`) and a random walk at the instants `t`: each component advances exactly over
+/// the actual spacing, x ← φx + innovation(c, φ)·N(0,1) with φ = e^{−Δ/τ} (an OU process
+/// sampled at any instants is an AR(1)), the walk by walk_sd(Δ)·N(0,1).
+fn add_ou_sum(
+    out: &mut [f64],
+    t: &[f64],
+    rng: &mut crate::sim::noise::SimRng,
+    white: f64,
+    (x, taus): (&mut [f64], &[f64]),
+    innovation: impl Fn(usize, f64) -> f64,
+    walk_sd: impl Fn(f64) -> f64,
+) {
     let mut walk = 0.0;
     let mut last = t.first().copied().unwrap_or(0.0);
     for (y, &ti) in out.iter_mut().zip(t) {
         let dt = (ti - last).max(0.0);
         last = ti;
         let mut f = 0.0;
-        for (xc, &(tau, v)) in x.iter_mut().zip(&m.flicker) {
+        for (c, (xc, &tau)) in x.iter_mut().zip(taus).enumerate() {
             if dt > 0.0 {
                 let phi = (-dt / tau).exp();
-                *xc = phi * *xc + (v.max(0.0) * (1.0 - phi * phi)).sqrt() * gauss(&mut rng);
+                *xc = phi * *xc + innovation(c, phi) * gauss(rng);
             }
             f += *xc;
         }
-        walk += (m.rw_per_s.max(0.0) * dt).sqrt() * gauss(&mut rng);
-        *y += white * gauss(&mut rng) + f + walk;
+        walk += walk_sd(dt) * gauss(rng);
+        *y += white * gauss(rng) + f + walk;
     }
 }
 
@@ -53,20 +78,13 @@ pub(super) fn add_noise(out: &mut [f64], t: &[f64], dt_s: f64, p: &AllanParams, 
     let v = p.flicker_floor.powi(2) * FLICKER_RATIO.ln() / (2.0 * std::f64::consts::LN_2);
     let sd = v.sqrt();
     let mut x: Vec<f64> = taus.iter().map(|_| sd * gauss(&mut rng)).collect();
-    let mut walk = 0.0;
-    let mut last = t.first().copied().unwrap_or(0.0);
-    for (y, &ti) in out.iter_mut().zip(t) {
-        let dt = (ti - last).max(0.0);
-        last = ti;
-        let mut f = 0.0;
-        for (xc, tau) in x.iter_mut().zip(&taus) {
-            if dt > 0.0 {
-                let phi = (-dt / tau).exp();
-                *xc = phi * *xc + sd * (1.0 - phi * phi).sqrt() * gauss(&mut rng);
-            }
-            f += *xc;
-        }
-        walk += p.random_walk_per_sqrt_s * dt.sqrt() * gauss(&mut rng);
-        *y += white * gauss(&mut rng) + f + walk;
-    }
+    add_ou_sum(
+        out,
+        t,
+        &mut rng,
+        white,
+        (&mut x, &taus),
+        |_, phi| sd * (1.0 - phi * phi).sqrt(),
+        |dt| p.random_walk_per_sqrt_s * dt.sqrt(),
+    );
 }

@@ -29,7 +29,9 @@ fn gravimeter_scenario() -> Scenario {
     s
 }
 
-fn dataset(s: &Scenario, seed: u64) -> Dataset {
+/// The log the simulator writes for `s` with `seed`, read back as the discovery reads records
+/// (every point kept).
+pub(super) fn dataset(s: &Scenario, seed: u64) -> Dataset {
     let bytes = simulate(s, seed, &Options::default(), Vec::new(), &mut |_, _| {})
         .unwrap()
         .1;
@@ -43,6 +45,24 @@ fn dataset(s: &Scenario, seed: u64) -> Dataset {
         },
     )
     .unwrap()
+}
+
+/// One day of paper-1g at `interval_s` (seed 2), read back as the discovery reads it.
+fn paper_1g_day(interval_s: f64) -> Dataset {
+    let mut s = Scenario::preset("paper-1g").unwrap();
+    s.run.duration_s = 86_400.0;
+    s.run.interval_s = interval_s;
+    dataset(&s, 2)
+}
+
+/// Member `seed` of `twin` less its deterministic part `det`: what the member draws.
+fn member_less(twin: &Twin, det: &[f64], seed: u64) -> Vec<f64> {
+    twin.run(Some(seed))
+        .unwrap()
+        .iter()
+        .zip(det)
+        .map(|(a, b)| a - b)
+        .collect()
 }
 
 /// Standard deviation about a least-squares line in time (the derived twin's offset and
@@ -96,10 +116,7 @@ fn a_gravimeter_log_is_written_in_its_unit_and_its_twin_predicts_the_tide() {
 
 #[test]
 fn an_accelerometer_twin_follows_the_measured_temperature_and_tilt() {
-    let mut s = Scenario::preset("paper-1g").unwrap();
-    s.run.duration_s = 86_400.0;
-    s.run.interval_s = 120.0;
-    let ds = dataset(&s, 2);
+    let ds = paper_1g_day(120.0);
     let twin = Twin::new(&ds, None, None).unwrap();
     assert!(twin.scenario().gravimeter().is_none());
     let det = twin.run(None).unwrap();
@@ -139,13 +156,7 @@ fn members_draw_from_a_given_noise_model_and_the_scenario_gets_its_levels() {
     let m = NoiseModel::white(0.25);
     let twin = Twin::new(&ds, None, Some(&m)).unwrap();
     let det = twin.run(None).unwrap();
-    let n: Vec<f64> = twin
-        .run(Some(3))
-        .unwrap()
-        .iter()
-        .zip(&det)
-        .map(|(a, b)| a - b)
-        .collect();
+    let n = member_less(&twin, &det, 3);
     assert!((std(&n) / 0.5 - 1.0).abs() < 0.1, "{}", std(&n));
     let g = twin.scenario().gravimeter().unwrap();
     // √h_w with h_w = 0.25 µGal²·300 s.
@@ -158,10 +169,7 @@ fn members_draw_from_a_given_noise_model_and_the_scenario_gets_its_levels() {
 
 #[test]
 fn members_redraw_the_weather_of_simulated_drivers_only() {
-    let mut s = Scenario::preset("paper-1g").unwrap();
-    s.run.duration_s = 86_400.0;
-    s.run.interval_s = 300.0;
-    let full = dataset(&s, 2);
+    let full = paper_1g_day(300.0);
     let m = NoiseModel::white(1e-14);
     // Every driver the accelerometer follows is measured: members are the deterministic
     // part plus the instrument noise.
@@ -172,13 +180,7 @@ fn members_redraw_the_weather_of_simulated_drivers_only() {
         twin.weather_drivers()
     );
     let det = twin.run(None).unwrap();
-    let d1: Vec<f64> = twin
-        .run(Some(1))
-        .unwrap()
-        .iter()
-        .zip(&det)
-        .map(|(a, b)| a - b)
-        .collect();
+    let d1 = member_less(&twin, &det, 1);
     assert!((std(&d1) / 1e-7 - 1.0).abs() < 0.2, "{}", std(&d1));
     // Without a temperature channel the twin simulates it; each member draws its own
     // weather: member − deterministic part is far above the instrument noise, differs
@@ -188,14 +190,7 @@ fn members_redraw_the_weather_of_simulated_drivers_only() {
     let twin = Twin::new(&no_t, None, Some(&m)).unwrap();
     assert_eq!(twin.weather_drivers(), vec!["temperature".to_owned()]);
     let det = twin.run(None).unwrap();
-    let r = |k| -> Vec<f64> {
-        twin.run(Some(k))
-            .unwrap()
-            .iter()
-            .zip(&det)
-            .map(|(a, b)| a - b)
-            .collect()
-    };
+    let r = |k| member_less(&twin, &det, k);
     let (a, b) = (r(1), r(2));
     assert_eq!(a, r(1));
     assert!(

@@ -250,6 +250,7 @@ where
         ds.span_s(),
         &[&cause.selection.final_noise.model],
         NOISE_EVALS,
+        None,
     );
     if let Some(why) = &nf.failure {
         warnings.push(format!(

@@ -11,6 +11,7 @@
 //! gap-free stretches.
 
 use crate::discover::import::Dataset;
+use crate::numerics::fft;
 
 /// Interior holes up to this many cells are filled by linear interpolation.
 pub const MAX_FILLED_CELLS: usize = 3;
@@ -213,7 +214,7 @@ impl Welch {
                 let x = &placed[s..s + self.seg];
                 let m = x.iter().sum::<f64>() / self.seg as f64;
                 let mut buf: Vec<f64> = x.iter().zip(&w).map(|(v, wi)| (v - m) * wi).collect();
-                half_spectrum(&mut buf)
+                fft::half_spectrum(&mut buf)
             })
             .collect()
     }
@@ -287,27 +288,6 @@ impl Welch {
 /// Precomputed segment spectra of a measured channel.
 #[derive(Debug, Clone)]
 pub struct ChannelSpectra(Vec<Vec<(f64, f64)>>);
-
-/// The spectrum of a real segment, bins 0..n/2 (realfft, a maintained FFT; planned once per
-/// segment length and thread).
-pub fn half_spectrum(x: &mut [f64]) -> Vec<(f64, f64)> {
-    use realfft::RealFftPlanner;
-    use std::cell::RefCell;
-    thread_local! {
-        static PLANNER: RefCell<RealFftPlanner<f64>> = RefCell::new(RealFftPlanner::new());
-    }
-    let n = x.len();
-    if n < 2 {
-        return x.iter().map(|&v| (v, 0.0)).collect();
-    }
-    let plan = PLANNER.with(|p| p.borrow_mut().plan_fft_forward(n));
-    let mut out = plan.make_output_vec();
-    // The lengths are the plan's own: process() cannot fail here.
-    if plan.process(x, &mut out).is_err() {
-        return vec![(f64::NAN, f64::NAN); n / 2];
-    }
-    out.iter().take(n / 2).map(|c| (c.re, c.im)).collect()
-}
 
 /// Overlapping ADEV at octave τ of a placed series (gaps skipped by the Allan code), τ up to
 /// span / [`ADEV_MAX_TAU_FRACTION`]: (τ s, deviation).
@@ -388,43 +368,6 @@ impl Envelope {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn fft_of_a_cosine_puts_its_power_in_its_bin() {
-        let n = 64;
-        let mut x: Vec<f64> = (0..n)
-            .map(|i| (2.0 * std::f64::consts::PI * 5.0 * i as f64 / n as f64).cos())
-            .collect();
-        let x = half_spectrum(&mut x);
-        assert_eq!(x.len(), 32);
-        assert!((x[5].0 - 32.0).abs() < 1e-9 && x[5].1.abs() < 1e-9);
-        assert!(x[4].0.abs() < 1e-9 && x[6].0.abs() < 1e-9);
-    }
-
-    /// The spectrum equals the DFT's definition, Σ x_k e^{−2πi jk/n}, summed in f64 with exact
-    /// twiddles (k·j reduced mod n), within 1e-12 of the largest bin.
-    #[test]
-    fn half_spectrum_is_the_dft_within_1e_12() {
-        use rand::{Rng, SeedableRng};
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
-        for n in [256usize, 4096] {
-            let x: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
-            let got = half_spectrum(&mut x.clone());
-            let dft: Vec<(f64, f64)> = (0..n / 2)
-                .map(|j| {
-                    x.iter().enumerate().fold((0.0, 0.0), |(re, im), (k, v)| {
-                        let a = -2.0 * std::f64::consts::PI * ((j * k) % n) as f64 / n as f64;
-                        (re + v * a.cos(), im + v * a.sin())
-                    })
-                })
-                .collect();
-            let scale = dft.iter().map(|c| c.0.hypot(c.1)).fold(0.0, f64::max);
-            for (j, (g, d)) in got.iter().zip(&dft).enumerate() {
-                let err = (g.0 - d.0).hypot(g.1 - d.1);
-                assert!(err <= 1e-12 * scale, "n {n} bin {j}: {g:?} vs {d:?}");
-            }
-        }
-    }
 
     #[test]
     fn welch_psd_of_white_noise_is_its_variance_times_twice_the_spacing() {
