@@ -22,9 +22,8 @@ fn main() -> anyhow::Result<()> {
     let ds = dataset_from_log(
         &log,
         &DatasetOptions {
-            output: None,
             max_points,
-            unit_per_g_from_calibration: None,
+            ..DatasetOptions::default()
         },
     )?;
     let import = t.elapsed().as_secs_f64();

@@ -70,9 +70,8 @@ fn dataset_with(s: &Scenario, extra: &[(&str, &dyn Fn(&Log) -> Vec<f64>)]) -> Da
     dataset_from_log(
         &log,
         &DatasetOptions {
-            output: None,
             max_points: 1_000_000,
-            unit_per_g_from_calibration: None,
+            ..DatasetOptions::default()
         },
     )
     .unwrap()

@@ -39,9 +39,8 @@ pub(super) fn dataset(s: &Scenario, seed: u64) -> Dataset {
     dataset_from_log(
         &log,
         &DatasetOptions {
-            output: None,
             max_points: 1_000_000,
-            unit_per_g_from_calibration: None,
+            ..DatasetOptions::default()
         },
     )
     .unwrap()
