@@ -16,6 +16,7 @@
 //!    before and after.
 
 pub mod cause;
+pub mod drift;
 pub mod ensemble;
 mod entry;
 mod error;
@@ -32,6 +33,7 @@ use super::import::Dataset;
 use super::noise::NoiseModel;
 use super::{select, Discovery};
 use crate::twin::family::NoiseFamily;
+use crate::twin::transients::Transients;
 use ensemble::Yardstick;
 use mismatch::Comparison;
 
@@ -82,6 +84,8 @@ pub trait TwinModel: Sync + Sized {
     fn extended(&self, effects: &[Self::Effect]) -> Self;
     /// The twin whose members draw their noise from the fitted family on the record's grid.
     fn with_family(&self, family: &NoiseFamily, grid: &spectra::RegularGrid) -> Self;
+    /// The twin whose members also draw the record's transient disturbances.
+    fn with_transients(&self, found: &Transients) -> Self;
     /// What came from the record and what from defaults.
     fn provenance(&self) -> Vec<String>;
     /// The scenario as TOML (`accomp simulate` runs it), if the twin has one.
@@ -143,6 +147,14 @@ pub struct Simulation {
     pub family: Option<NoiseFamily>,
     /// Wall time of each stage (name, s): for docs/benchmarks.md.
     pub timing_s: Vec<(&'static str, f64)>,
+    /// The drift polynomial removed from every residual (order and −ℓ per order tried).
+    pub drift: drift::DriftOrder,
+    /// Its Legendre coefficients on the record (P₀…P_order of the record's time on [−1, 1]) with
+    /// their 1σ, output unit: generalised least squares on measured − extended twin under the
+    /// noise model refitted with the drift removed.
+    pub drift_coefficients: Vec<(f64, f64)>,
+    /// Transient disturbances found in what the extended twin leaves (members draw them).
+    pub transients: Transients,
 }
 
 /// Runs the comparison with twins made by `build` (noise model → twin).
@@ -265,10 +277,47 @@ where
     };
     spin.finish_and_clear();
     lap("extension and noise fit");
+    // The instrument's smooth drift: the polynomial order selected by the likelihood (the noise
+    // model refitted for each order) on what the extended twin leaves; removed from the record
+    // and every member alike (calibration constants, as the level and the linear rate).
+    // Transient disturbances (spikes far outside the Gaussian noise): found on what the
+    // extended twin leaves, kept out of the noise fits, drawn by the members.
+    let grid = yard.grid.clone();
+    let transients = Transients::find(&grid.place(&r_after), grid.dt_s);
+    let clean = |x: &[f64]| transients.removed(&grid.place(x));
+    let linear_family = NoiseFamily::fit(&clean(&r_after), yard.grid.dt_s).ok();
+    let profile = |x: &[f64]| {
+        linear_family
+            .as_ref()
+            .map_or(f64::INFINITY, |f| f.neg_loglik_of(&clean(x)))
+    };
+    let drift_order = drift::select_order(yard.unit_time(), &r_after, ds.span_s(), profile);
+    let yard = yard.with_drift_order(drift_order.order);
+    let r_before = yard.detrend(&r_before);
+    let r_after = yard.detrend(&r_after);
+    let drift_noise = NoiseModel::fit_ml(
+        &ds.t_s,
+        &idx,
+        &r_after,
+        ds.dt_s,
+        ds.span_s(),
+        &[&noise],
+        NOISE_EVALS,
+        None,
+    )
+    .model;
+    let whitener = super::noise::Whitener::new(&drift_noise, &ds.t_s, idx.clone());
+    let drift_coefficients = drift::gls(
+        yard.unit_time(),
+        &sub(&ds.y, &det_ext),
+        drift_order.order,
+        |x| whitener.whiten(x),
+    );
+    lap("drift order");
     // The members' noise: the family (white, flicker, random walk, drift-rate walk, output
     // filter) fitted by Whittle likelihood to what the extended twin leaves, the drift kept —
     // the comparison keeps it, so the members must carry it.
-    let family = match NoiseFamily::fit(&yard.grid.place(&r_after), yard.grid.dt_s) {
+    let family = match NoiseFamily::fit(&clean(&r_after), yard.grid.dt_s) {
         // Every instrument has a white floor: a fit that does not resolve one has traded it
         // for other terms (a filter corner with a random walk mimics it) and is not used.
         Ok(f) if !f.resolved(0) => {
@@ -294,7 +343,7 @@ where
     //    noise's.
     let mut twin = build(Some(&noise)).map_err(SimulateError::twin)?;
     if let Some(f) = &family {
-        twin = twin.with_family(f, &yard.grid);
+        twin = twin.with_family(f, &yard.grid).with_transients(&transients);
     }
     let ext = twin.extended(&effects.iter().map(|e| e.1.clone()).collect::<Vec<_>>());
     let mut provenance = ext.provenance();
@@ -385,6 +434,9 @@ where
         simulator: quiet.is_simulator(),
         family,
         timing_s,
+        drift: drift_order,
+        drift_coefficients,
+        transients,
     })
 }
 
