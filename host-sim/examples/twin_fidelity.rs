@@ -136,6 +136,45 @@ fn main() -> anyhow::Result<()> {
         }
     }
     println!();
+    // The slow residual against each channel: 6-hour means, both with the drift polynomial's
+    // order removed, correlation and slope.
+    let u = accomp_host::discover::simulate::drift::unit_time(&ds.t_s);
+    for ch in &ds.channels {
+        let c = accomp_host::discover::simulate::drift::remove(&u, &ch.values, s.drift.order).1;
+        let cp = grid.place(&c);
+        let per = (21_600.0 / grid.dt_s).round() as usize;
+        let mut pairs = Vec::new();
+        for (a, b) in placed.chunks(per).zip(cp.chunks(per)) {
+            let v: Vec<(f64, f64)> = a
+                .iter()
+                .zip(b)
+                .filter(|(x, y)| x.is_finite() && y.is_finite())
+                .map(|(x, y)| (*x, *y))
+                .collect();
+            if v.len() > per / 2 {
+                let n = v.len() as f64;
+                pairs.push((
+                    v.iter().map(|p| p.0).sum::<f64>() / n,
+                    v.iter().map(|p| p.1).sum::<f64>() / n,
+                ));
+            }
+        }
+        let n = pairs.len() as f64;
+        let (mx, my) = (
+            pairs.iter().map(|p| p.0).sum::<f64>() / n,
+            pairs.iter().map(|p| p.1).sum::<f64>() / n,
+        );
+        let sxy: f64 = pairs.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
+        let sxx: f64 = pairs.iter().map(|p| (p.0 - mx).powi(2)).sum();
+        let syy: f64 = pairs.iter().map(|p| (p.1 - my).powi(2)).sum();
+        println!(
+            "6-hour means vs {}: correlation {:.2}, slope {:.3e} per channel unit ({} means)",
+            ch.name,
+            sxy / (sxx * syy).sqrt(),
+            sxy / syy,
+            pairs.len()
+        );
+    }
     let gaps: Vec<(usize, usize)> = RegularGrid::runs(&placed);
     println!("gap-free runs (cells): {gaps:?} of {n}");
     let mut counts = std::collections::BTreeMap::new();

@@ -106,6 +106,22 @@ impl Transients {
         x
     }
 
+    /// Record values `x` (point i in grid cell `cells[i]`) with the events taken out.
+    pub fn removed_points(&self, cells: &[usize], x: &[f64]) -> Vec<f64> {
+        let mut shape_at = vec![0.0; self.cells];
+        for (a, shape) in &self.events {
+            for (k, s) in shape.iter().enumerate() {
+                if let Some(v) = shape_at.get_mut(a + k) {
+                    *v = *s;
+                }
+            }
+        }
+        x.iter()
+            .zip(cells)
+            .map(|(v, &c)| v - shape_at.get(c).copied().unwrap_or(0.0))
+            .collect()
+    }
+
     /// Events per day.
     pub fn rate_per_day(&self) -> f64 {
         let days = self.cells as f64 * self.dt_s / 86_400.0;

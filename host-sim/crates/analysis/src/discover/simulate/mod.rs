@@ -39,6 +39,8 @@ use mismatch::Comparison;
 
 /// Likelihood evaluations of the twin's noise fit (warm start).
 const NOISE_EVALS: usize = 40;
+/// The same for each drift order's profile likelihood (warm-started from the previous order's).
+const DRIFT_NOISE_EVALS: usize = 60;
 
 /// Default ensemble size.
 pub const DEFAULT_ENSEMBLE: usize = 20;
@@ -285,31 +287,50 @@ where
     let grid = yard.grid.clone();
     let transients = Transients::find(&grid.place(&r_after), grid.dt_s);
     let clean = |x: &[f64]| transients.removed(&grid.place(x));
-    let linear_family = NoiseFamily::fit(&clean(&r_after), yard.grid.dt_s).ok();
+    let r_clean = transients.removed_points(&grid.cell, &r_after);
+    let last = std::cell::RefCell::new(noise.clone());
     let profile = |x: &[f64]| {
-        linear_family
-            .as_ref()
-            .map_or(f64::INFINITY, |f| f.neg_loglik_of(&clean(x)))
+        let prev = last.borrow().clone();
+        let f = NoiseModel::fit_ml(
+            &ds.t_s,
+            &idx,
+            x,
+            ds.dt_s,
+            ds.span_s(),
+            &[&prev, &noise],
+            DRIFT_NOISE_EVALS,
+            None,
+        );
+        let fitted = 0.5 * super::noise::neg2_loglik(&f.model, &ds.t_s, &idx, x);
+        let held = 0.5 * super::noise::neg2_loglik(&prev, &ds.t_s, &idx, x);
+        // The profile is the best model found: the refit or, if its search fell short, the
+        // previous order's.
+        if fitted <= held {
+            *last.borrow_mut() = f.model;
+            fitted
+        } else {
+            held
+        }
     };
-    let drift_order = drift::select_order(yard.unit_time(), &r_after, ds.span_s(), profile);
+    let drift_order = drift::select_order(yard.unit_time(), &r_clean, ds.span_s(), profile);
     let yard = yard.with_drift_order(drift_order.order);
     let r_before = yard.detrend(&r_before);
     let r_after = yard.detrend(&r_after);
     let drift_noise = NoiseModel::fit_ml(
         &ds.t_s,
         &idx,
-        &r_after,
+        &yard.detrend(&r_clean),
         ds.dt_s,
         ds.span_s(),
-        &[&noise],
-        NOISE_EVALS,
+        &[&last.borrow(), &noise],
+        DRIFT_NOISE_EVALS,
         None,
     )
     .model;
     let whitener = super::noise::Whitener::new(&drift_noise, &ds.t_s, idx.clone());
     let drift_coefficients = drift::gls(
         yard.unit_time(),
-        &sub(&ds.y, &det_ext),
+        &transients.removed_points(&grid.cell, &sub(&ds.y, &det_ext)),
         drift_order.order,
         |x| whitener.whiten(x),
     );
