@@ -1289,35 +1289,9 @@ mod tests {
             t.get()
         };
         let bytes = d.encode();
-        let uid = 77;
-        let begin = Request::UploadBegin {
-            upload_id: uid,
-            total_len: ENCODED_LEN as u32,
-            body_crc32: upload_body_crc32(&bytes),
-        };
-        s.handle(
-            HostFrame {
-                id: 1,
-                request: begin,
-            },
-            &clock,
-        );
-        for (k, chunk) in bytes.chunks(CHUNK_LEN).enumerate() {
-            let request = Request::UploadChunk {
-                upload_id: uid,
-                offset: (k * CHUNK_LEN) as u32,
-                data: heapless::Vec::from_slice(chunk).unwrap(),
-            };
-            s.handle(HostFrame { id: 2, request }, &clock);
+        for (id, request) in (1..).zip(crate::protocol::upload_requests(77, &bytes)) {
+            s.handle(HostFrame { id, request }, &clock);
         }
-        let commit = Request::UploadCommit { upload_id: uid };
-        s.handle(
-            HostFrame {
-                id: 3,
-                request: commit,
-            },
-            &clock,
-        );
         assert_eq!(counter.get(), 1);
         let l = info(&mut s).losses;
         assert_eq!((l.erase_stalls, l.erase_stall_us), (1, 1_500_000));

@@ -636,28 +636,10 @@ impl Device {
     }
 
     fn upload(&mut self, b: &mut Bench, table: &CalibrationTable) {
-        use accomp::protocol::{upload_body_crc32, Request, CHUNK_LEN};
         let bytes = table.encode();
-        let upload_id = self.next_id + 1000;
-        self.request(
-            b,
-            Request::UploadBegin {
-                upload_id,
-                total_len: bytes.len() as u32,
-                body_crc32: upload_body_crc32(&bytes),
-            },
-        );
-        for (k, chunk) in bytes.chunks(CHUNK_LEN).enumerate() {
-            self.request(
-                b,
-                Request::UploadChunk {
-                    upload_id,
-                    offset: (k * CHUNK_LEN) as u32,
-                    data: heapless::Vec::from_slice(chunk).unwrap(),
-                },
-            );
+        for request in accomp::protocol::upload_requests(self.next_id + 1000, &bytes) {
+            self.request(b, request);
         }
-        self.request(b, Request::UploadCommit { upload_id });
     }
 }
 
@@ -1112,26 +1094,15 @@ impl Rig {
 
     /// Uploads `table` over the line as the host client does, chunk by chunk, and commits.
     fn upload(&mut self, table: &CalibrationTable) {
-        use accomp::protocol::{upload_body_crc32, Request, Response, CHUNK_LEN};
         let bytes = table.encode();
-        let upload_id = 7000 + self.next_id;
-        self.call(Request::UploadBegin {
-            upload_id,
-            total_len: bytes.len() as u32,
-            body_crc32: upload_body_crc32(&bytes),
-        });
-        for (k, chunk) in bytes.chunks(CHUNK_LEN).enumerate() {
-            self.call(Request::UploadChunk {
-                upload_id,
-                offset: (k * CHUNK_LEN) as u32,
-                data: heapless::Vec::from_slice(chunk).unwrap(),
-            });
-        }
+        let answers: Vec<_> = accomp::protocol::upload_requests(7000 + self.next_id, &bytes)
+            .map(|request| self.call(request))
+            .collect();
         assert_eq!(
-            self.call(Request::UploadCommit { upload_id }),
-            Response::Committed {
+            answers.last(),
+            Some(&accomp::protocol::Response::Committed {
                 table_id: table.id()
-            }
+            })
         );
     }
 

@@ -318,9 +318,7 @@ mod tests {
     use std::sync::atomic::Ordering;
 
     use accomp::pipeline::{Frame, LossFlags};
-    use accomp::protocol::{
-        decode_message, upload_body_crc32, HostFrame, Request, Response, CHUNK_LEN,
-    };
+    use accomp::protocol::{decode_message, upload_requests, HostFrame, Request, Response};
 
     use super::*;
 
@@ -374,22 +372,12 @@ mod tests {
             let mut t = crate::paper_table();
             t.date.day = day;
             let bytes = t.encode();
-            let upload_id = 100 + u32::from(day);
-            self.call(Request::UploadBegin {
-                upload_id,
-                total_len: bytes.len() as u32,
-                body_crc32: upload_body_crc32(&bytes),
-            });
-            for (k, c) in bytes.chunks(CHUNK_LEN).enumerate() {
-                self.call(Request::UploadChunk {
-                    upload_id,
-                    offset: (k * CHUNK_LEN) as u32,
-                    data: heapless::Vec::from_slice(c).unwrap(),
-                });
-            }
+            let answers: Vec<_> = upload_requests(100 + u32::from(day), &bytes)
+                .map(|request| self.call(request))
+                .collect();
             assert_eq!(
-                self.call(Request::UploadCommit { upload_id }),
-                Response::Committed { table_id: t.id() }
+                answers.last(),
+                Some(&Response::Committed { table_id: t.id() })
             );
         }
     }
