@@ -601,7 +601,7 @@ mod tests {
     use super::*;
     use crate::pipeline::{raw_from_physical, Status};
     use crate::protocol::{encode_frame, FrameDecoder, MAX_FRAME_LEN};
-    use crate::storage::RamFlash;
+    use crate::storage::{RamFlash, RamFlashError};
     use crate::table::tests::paper_table;
     use crate::table::CRC32;
     use crate::units::{Celsius, TiltArcsec, Volts};
@@ -1000,46 +1000,31 @@ mod tests {
 
     /// RamFlash that counts erases and can be told to fail every program (a worn cell, a
     /// driver error), to see where the service erases and what a flash failure does.
-    struct Probe {
-        inner: Flash,
+    type Probe = crate::storage::Watched<Flash, ProbeWatch>;
+
+    #[derive(Default)]
+    struct ProbeWatch {
         erases: std::rc::Rc<core::cell::Cell<u32>>,
         fail_writes: bool,
     }
 
-    impl embedded_storage::nor_flash::ErrorType for Probe {
-        type Error = crate::storage::RamFlashError;
-    }
-
-    impl embedded_storage::nor_flash::ReadNorFlash for Probe {
-        const READ_SIZE: usize = 1;
-        fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
-            self.inner.read(offset, bytes)
-        }
-        fn capacity(&self) -> usize {
-            self.inner.capacity()
-        }
-    }
-
-    impl NorFlash for Probe {
-        const WRITE_SIZE: usize = 4;
-        const ERASE_SIZE: usize = 1024;
-        fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+    impl crate::storage::Watcher<Flash> for ProbeWatch {
+        fn before_erase(&mut self, _from: u32, _to: u32) -> Result<(), RamFlashError> {
             self.erases.set(self.erases.get() + 1);
-            self.inner.erase(from, to)
+            Ok(())
         }
-        fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
+        fn before_write(&mut self, _offset: u32, _bytes: &[u8]) -> Result<(), RamFlashError> {
             if self.fail_writes {
-                return Err(crate::storage::RamFlashError::OutOfBounds);
+                return Err(RamFlashError::OutOfBounds);
             }
-            self.inner.write(offset, bytes)
+            Ok(())
         }
     }
 
     fn probe_service() -> Service<Probe> {
         let flash = Probe {
-            inner: Flash::new(),
-            erases: Default::default(),
-            fail_writes: false,
+            flash: Flash::new(),
+            watcher: ProbeWatch::default(),
         };
         Service::new(Board::Qemu, flash, LAYOUT)
     }
@@ -1047,14 +1032,14 @@ mod tests {
     /// The erase counter of the service's flash (shared, so no reboot is needed to read it).
     fn probe_counter(s: &mut Service<Probe>) -> std::rc::Rc<core::cell::Cell<u32>> {
         let flash = s.store.take().unwrap().into_flash();
-        let counter = flash.erases.clone();
+        let counter = flash.watcher.erases.clone();
         *s = Service::new(Board::Qemu, flash, LAYOUT);
         counter
     }
 
     fn flash_bytes(s: Service<Probe>) -> (Service<Probe>, std::vec::Vec<u8>) {
         let flash = s.into_flash().unwrap();
-        let bytes = flash.inner.as_bytes().to_vec();
+        let bytes = flash.flash.as_bytes().to_vec();
         (Service::new(Board::Qemu, flash, LAYOUT), bytes)
     }
 
@@ -1307,7 +1292,7 @@ mod tests {
         let (a, b) = (paper_table(), second_table());
         upload(&mut s, &a.encode());
         let mut flash = s.into_flash().unwrap();
-        flash.fail_writes = true;
+        flash.watcher.fail_writes = true;
         let mut s = Service::new(Board::Qemu, flash, LAYOUT);
         assert_eq!(
             error_code(&upload(&mut s, &b.encode())),

@@ -128,7 +128,7 @@ impl VirtualBoard {
         clock.set(1_000);
         let run_end_us = clock.now();
         let layout = flash::SLOT_LAYOUT;
-        let stalled_us = flash.stalled_us.clone();
+        let stalled_us = flash.watcher.stalled_us.clone();
         let mut service = Service::new(Board::Frontend, flash, layout);
         service.set_boot_report(BootReport {
             reset_cause,
@@ -388,9 +388,9 @@ mod tests {
     #[test]
     fn an_erase_stall_fault_stalls_the_board_clock_and_info_counts_its_length() {
         let scenario = accomp_sim::scenario::Scenario::preset("paper-1g").unwrap();
-        let flash = BoardFlash::open(None).unwrap();
+        let flash = flash::open(None).unwrap();
         // The fault control's switch, as `board-sim`'s `erase-stall=2000` sets it.
-        let flash_stall = flash.erase_stall_ms.clone();
+        let flash_stall = flash.watcher.erase_stall_ms.clone();
         let mut host = Host {
             board: VirtualBoard::boot(flash, 0, 0),
             station: Station::new(&scenario, 1).unwrap(),
