@@ -671,6 +671,12 @@ mod tests {
         }
     }
 
+    /// (active, previous) table ids as Info reports them.
+    fn tables<F: CalibrationFlash>(s: &mut Service<F>) -> (Option<u32>, Option<u32>) {
+        let i = info(s);
+        (i.active_table, i.previous_table)
+    }
+
     fn active_id<F: CalibrationFlash>(s: &mut Service<F>) -> Option<u32> {
         match req(s, Request::Info) {
             DeviceMessage::Response {
@@ -1043,6 +1049,15 @@ mod tests {
         (Service::new(Board::Qemu, flash, LAYOUT), bytes)
     }
 
+    /// A QEMU-layout service that committed the paper's table, then a second one.
+    fn two_tables_committed() -> (Service<Flash>, CalibrationTable, CalibrationTable) {
+        let mut s = qemu_service();
+        let (a, b) = (paper_table(), second_table());
+        upload(&mut s, &a.encode());
+        upload(&mut s, &b.encode());
+        (s, a, b)
+    }
+
     fn second_table() -> CalibrationTable {
         let mut b = paper_table();
         b.date.day = 2;
@@ -1104,16 +1119,9 @@ mod tests {
 
     #[test]
     fn two_commits_survive_a_reboot_as_active_and_previous() {
-        let mut s = qemu_service();
-        let (a, b) = (paper_table(), second_table());
-        upload(&mut s, &a.encode());
-        upload(&mut s, &b.encode());
+        let (s, a, b) = two_tables_committed();
         let mut s = reboot(s);
-        let i = info(&mut s);
-        assert_eq!(
-            (i.active_table, i.previous_table),
-            (Some(b.id()), Some(a.id()))
-        );
+        assert_eq!(tables(&mut s), (Some(b.id()), Some(a.id())));
         // And the rollback table restored from flash can be rolled back to.
         req(&mut s, Request::Rollback);
         assert_eq!(active_id(&mut s), Some(a.id()));
@@ -1121,10 +1129,7 @@ mod tests {
 
     #[test]
     fn a_rollback_is_persisted_with_its_own_rollback_table() {
-        let mut s = qemu_service();
-        let (a, b) = (paper_table(), second_table());
-        upload(&mut s, &a.encode());
-        upload(&mut s, &b.encode());
+        let (mut s, a, b) = two_tables_committed();
         assert!(matches!(
             req(&mut s, Request::Rollback),
             DeviceMessage::Response {
@@ -1133,19 +1138,14 @@ mod tests {
             }
         ));
         let mut s = reboot(s);
-        let i = info(&mut s);
         assert_eq!(
-            (i.active_table, i.previous_table),
+            tables(&mut s),
             (Some(a.id()), Some(b.id())),
             "the rolled-back-from table is the rollback table after a reboot"
         );
         req(&mut s, Request::Activate { table_id: b.id() });
         let mut s = reboot(s);
-        let i = info(&mut s);
-        assert_eq!(
-            (i.active_table, i.previous_table),
-            (Some(b.id()), Some(a.id()))
-        );
+        assert_eq!(tables(&mut s), (Some(b.id()), Some(a.id())));
     }
 
     #[test]
@@ -1166,11 +1166,7 @@ mod tests {
         let (mut s, after) = flash_bytes(s);
         assert!(before == after, "the no-op upload wrote to flash");
         assert_eq!(counter.get(), erases);
-        let i = info(&mut s);
-        assert_eq!(
-            (i.active_table, i.previous_table),
-            (Some(t2.id()), Some(t1.id()))
-        );
+        assert_eq!(tables(&mut s), (Some(t2.id()), Some(t1.id())));
         req(&mut s, Request::Rollback);
         assert_eq!(active_id(&mut s), Some(t1.id()));
         req(&mut s, Request::Activate { table_id: t2.id() });
@@ -1236,17 +1232,9 @@ mod tests {
         assert_eq!(counter.get(), 2);
         assert_eq!(s.erase_ahead(&|| 0), Ok(true));
         assert_eq!(counter.get(), 3);
-        let i = info(&mut s);
-        assert_eq!(
-            (i.active_table, i.previous_table),
-            (Some(c.id()), Some(a.id()))
-        );
+        assert_eq!(tables(&mut s), (Some(c.id()), Some(a.id())));
         let mut s = reboot(s);
-        let i = info(&mut s);
-        assert_eq!(
-            (i.active_table, i.previous_table),
-            (Some(c.id()), Some(a.id()))
-        );
+        assert_eq!(tables(&mut s), (Some(c.id()), Some(a.id())));
         let _ = b;
     }
 
