@@ -221,15 +221,7 @@ mod app {
             }
             ads.on_drdy(now)
         }) {
-            // A full queue loses this reading: counted, and flagged on the next one.
-            if cx
-                .local
-                .drdy_to_worker
-                .try_send(Inbound::Ads(reading))
-                .is_err()
-            {
-                READINGS_DROPPED.fetch_add(1, Ordering::Relaxed);
-            }
+            send_reading(cx.local.drdy_to_worker, Inbound::Ads(reading));
         }
     }
 
@@ -252,14 +244,7 @@ mod app {
             });
             if let Some(reading) = reading {
                 ACQ_PROGRESS.fetch_add(1, Ordering::Relaxed);
-                if cx
-                    .local
-                    .supervisor_to_worker
-                    .try_send(Inbound::Ads(reading))
-                    .is_err()
-                {
-                    READINGS_DROPPED.fetch_add(1, Ordering::Relaxed);
-                }
+                send_reading(cx.local.supervisor_to_worker, Inbound::Ads(reading));
             }
         }
     }
@@ -271,14 +256,7 @@ mod app {
         loop {
             Mono::delay(period_us.micros()).await;
             if let Some(reading) = cx.local.rtd.on_tick(now_us()) {
-                if cx
-                    .local
-                    .rtd_to_worker
-                    .try_send(Inbound::Rtd(reading))
-                    .is_err()
-                {
-                    READINGS_DROPPED.fetch_add(1, Ordering::Relaxed);
-                }
+                send_reading(cx.local.rtd_to_worker, Inbound::Rtd(reading));
             }
         }
     }
@@ -404,6 +382,15 @@ mod app {
     /// that could fail (a `RefCell`'s "already borrowed" panic would bring `core::fmt` along).
     static TIME_BASE: cortex_m::interrupt::Mutex<core::cell::Cell<Extended64>> =
         cortex_m::interrupt::Mutex::new(core::cell::Cell::new(Extended64::new()));
+
+    /// Hands a reading to the worker; a full queue loses it, counted in `READINGS_DROPPED`
+    /// (flagged on the next one).
+    #[inline(always)]
+    fn send_reading(to_worker: &mut Sender<'static, Inbound, INBOUND_CAPACITY>, reading: Inbound) {
+        if to_worker.try_send(reading).is_err() {
+            READINGS_DROPPED.fetch_add(1, Ordering::Relaxed);
+        }
+    }
 
     /// Firmware time in µs: the board's TIM2 at 1 MHz extended to 64 bits (both boards; on the
     /// front-end it counts on through a flash-erase stall). A few instructions with interrupts

@@ -606,7 +606,7 @@ mod tests {
     use super::*;
     use crate::pipeline::{raw_from_physical, Status};
     use crate::protocol::{encode_frame, FrameDecoder, MAX_FRAME_LEN};
-    use crate::storage::RamFlash;
+    use crate::storage::{RamFlash, RamFlashError};
     use crate::table::tests::paper_table;
     use crate::table::CRC32;
     use crate::units::{Celsius, TiltArcsec, Volts};
@@ -674,6 +674,12 @@ mod tests {
             DeviceMessage::Error { error, .. } => Some((error.code, error.detail)),
             _ => None,
         }
+    }
+
+    /// (active, previous) table ids as Info reports them.
+    fn tables<F: CalibrationFlash>(s: &mut Service<F>) -> (Option<u32>, Option<u32>) {
+        let i = info(s);
+        (i.active_table, i.previous_table)
     }
 
     fn active_id<F: CalibrationFlash>(s: &mut Service<F>) -> Option<u32> {
@@ -1005,46 +1011,31 @@ mod tests {
 
     /// RamFlash that counts erases and can be told to fail every program (a worn cell, a
     /// driver error), to see where the service erases and what a flash failure does.
-    struct Probe {
-        inner: Flash,
+    type Probe = crate::storage::Watched<Flash, ProbeWatch>;
+
+    #[derive(Default)]
+    struct ProbeWatch {
         erases: std::rc::Rc<core::cell::Cell<u32>>,
         fail_writes: bool,
     }
 
-    impl embedded_storage::nor_flash::ErrorType for Probe {
-        type Error = crate::storage::RamFlashError;
-    }
-
-    impl embedded_storage::nor_flash::ReadNorFlash for Probe {
-        const READ_SIZE: usize = 1;
-        fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
-            self.inner.read(offset, bytes)
-        }
-        fn capacity(&self) -> usize {
-            self.inner.capacity()
-        }
-    }
-
-    impl NorFlash for Probe {
-        const WRITE_SIZE: usize = 4;
-        const ERASE_SIZE: usize = 1024;
-        fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+    impl crate::storage::Watcher<Flash> for ProbeWatch {
+        fn before_erase(&mut self, _from: u32, _to: u32) -> Result<(), RamFlashError> {
             self.erases.set(self.erases.get() + 1);
-            self.inner.erase(from, to)
+            Ok(())
         }
-        fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
+        fn before_write(&mut self, _offset: u32, _bytes: &[u8]) -> Result<(), RamFlashError> {
             if self.fail_writes {
-                return Err(crate::storage::RamFlashError::OutOfBounds);
+                return Err(RamFlashError::OutOfBounds);
             }
-            self.inner.write(offset, bytes)
+            Ok(())
         }
     }
 
     fn probe_service() -> Service<Probe> {
         let flash = Probe {
-            inner: Flash::new(),
-            erases: Default::default(),
-            fail_writes: false,
+            flash: Flash::new(),
+            watcher: ProbeWatch::default(),
         };
         Service::new(Board::Qemu, flash, LAYOUT)
     }
@@ -1052,15 +1043,24 @@ mod tests {
     /// The erase counter of the service's flash (shared, so no reboot is needed to read it).
     fn probe_counter(s: &mut Service<Probe>) -> std::rc::Rc<core::cell::Cell<u32>> {
         let flash = s.store.take().unwrap().into_flash();
-        let counter = flash.erases.clone();
+        let counter = flash.watcher.erases.clone();
         *s = Service::new(Board::Qemu, flash, LAYOUT);
         counter
     }
 
     fn flash_bytes(s: Service<Probe>) -> (Service<Probe>, std::vec::Vec<u8>) {
         let flash = s.into_flash().unwrap();
-        let bytes = flash.inner.as_bytes().to_vec();
+        let bytes = flash.flash.as_bytes().to_vec();
         (Service::new(Board::Qemu, flash, LAYOUT), bytes)
+    }
+
+    /// A QEMU-layout service that committed the paper's table, then a second one.
+    fn two_tables_committed() -> (Service<Flash>, CalibrationTable, CalibrationTable) {
+        let mut s = qemu_service();
+        let (a, b) = (paper_table(), second_table());
+        upload(&mut s, &a.encode());
+        upload(&mut s, &b.encode());
+        (s, a, b)
     }
 
     fn second_table() -> CalibrationTable {
@@ -1124,16 +1124,9 @@ mod tests {
 
     #[test]
     fn two_commits_survive_a_reboot_as_active_and_previous() {
-        let mut s = qemu_service();
-        let (a, b) = (paper_table(), second_table());
-        upload(&mut s, &a.encode());
-        upload(&mut s, &b.encode());
+        let (s, a, b) = two_tables_committed();
         let mut s = reboot(s);
-        let i = info(&mut s);
-        assert_eq!(
-            (i.active_table, i.previous_table),
-            (Some(b.id()), Some(a.id()))
-        );
+        assert_eq!(tables(&mut s), (Some(b.id()), Some(a.id())));
         // And the rollback table restored from flash can be rolled back to.
         req(&mut s, Request::Rollback);
         assert_eq!(active_id(&mut s), Some(a.id()));
@@ -1141,10 +1134,7 @@ mod tests {
 
     #[test]
     fn a_rollback_is_persisted_with_its_own_rollback_table() {
-        let mut s = qemu_service();
-        let (a, b) = (paper_table(), second_table());
-        upload(&mut s, &a.encode());
-        upload(&mut s, &b.encode());
+        let (mut s, a, b) = two_tables_committed();
         assert!(matches!(
             req(&mut s, Request::Rollback),
             DeviceMessage::Response {
@@ -1153,19 +1143,14 @@ mod tests {
             }
         ));
         let mut s = reboot(s);
-        let i = info(&mut s);
         assert_eq!(
-            (i.active_table, i.previous_table),
+            tables(&mut s),
             (Some(a.id()), Some(b.id())),
             "the rolled-back-from table is the rollback table after a reboot"
         );
         req(&mut s, Request::Activate { table_id: b.id() });
         let mut s = reboot(s);
-        let i = info(&mut s);
-        assert_eq!(
-            (i.active_table, i.previous_table),
-            (Some(b.id()), Some(a.id()))
-        );
+        assert_eq!(tables(&mut s), (Some(b.id()), Some(a.id())));
     }
 
     #[test]
@@ -1186,11 +1171,7 @@ mod tests {
         let (mut s, after) = flash_bytes(s);
         assert!(before == after, "the no-op upload wrote to flash");
         assert_eq!(counter.get(), erases);
-        let i = info(&mut s);
-        assert_eq!(
-            (i.active_table, i.previous_table),
-            (Some(t2.id()), Some(t1.id()))
-        );
+        assert_eq!(tables(&mut s), (Some(t2.id()), Some(t1.id())));
         req(&mut s, Request::Rollback);
         assert_eq!(active_id(&mut s), Some(t1.id()));
         req(&mut s, Request::Activate { table_id: t2.id() });
@@ -1256,17 +1237,9 @@ mod tests {
         assert_eq!(counter.get(), 2);
         assert_eq!(s.erase_ahead(&|| 0), Ok(true));
         assert_eq!(counter.get(), 3);
-        let i = info(&mut s);
-        assert_eq!(
-            (i.active_table, i.previous_table),
-            (Some(c.id()), Some(a.id()))
-        );
+        assert_eq!(tables(&mut s), (Some(c.id()), Some(a.id())));
         let mut s = reboot(s);
-        let i = info(&mut s);
-        assert_eq!(
-            (i.active_table, i.previous_table),
-            (Some(c.id()), Some(a.id()))
-        );
+        assert_eq!(tables(&mut s), (Some(c.id()), Some(a.id())));
         let _ = b;
     }
 
@@ -1294,35 +1267,9 @@ mod tests {
             t.get()
         };
         let bytes = d.encode();
-        let uid = 77;
-        let begin = Request::UploadBegin {
-            upload_id: uid,
-            total_len: ENCODED_LEN as u32,
-            body_crc32: upload_body_crc32(&bytes),
-        };
-        s.handle(
-            HostFrame {
-                id: 1,
-                request: begin,
-            },
-            &clock,
-        );
-        for (k, chunk) in bytes.chunks(CHUNK_LEN).enumerate() {
-            let request = Request::UploadChunk {
-                upload_id: uid,
-                offset: (k * CHUNK_LEN) as u32,
-                data: heapless::Vec::from_slice(chunk).unwrap(),
-            };
-            s.handle(HostFrame { id: 2, request }, &clock);
+        for (id, request) in (1..).zip(crate::protocol::upload_requests(77, &bytes)) {
+            s.handle(HostFrame { id, request }, &clock);
         }
-        let commit = Request::UploadCommit { upload_id: uid };
-        s.handle(
-            HostFrame {
-                id: 3,
-                request: commit,
-            },
-            &clock,
-        );
         assert_eq!(counter.get(), 1);
         let l = info(&mut s).losses;
         assert_eq!((l.erase_stalls, l.erase_stall_us), (1, 1_500_000));
@@ -1338,7 +1285,7 @@ mod tests {
         let (a, b) = (paper_table(), second_table());
         upload(&mut s, &a.encode());
         let mut flash = s.into_flash().unwrap();
-        flash.fail_writes = true;
+        flash.watcher.fail_writes = true;
         let mut s = Service::new(Board::Qemu, flash, LAYOUT);
         assert_eq!(
             error_code(&upload(&mut s, &b.encode())),

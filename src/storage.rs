@@ -25,8 +25,10 @@
 mod ram_flash;
 #[cfg(test)]
 mod tests;
+mod watched;
 
 pub use ram_flash::{RamFlash, RamFlashError};
+pub use watched::{Watched, Watcher};
 
 use embedded_storage::nor_flash::NorFlash;
 

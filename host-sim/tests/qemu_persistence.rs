@@ -10,8 +10,8 @@ use std::process::Command;
 use std::time::Duration;
 
 use accomp::protocol::model::TableHistory;
-use accomp::protocol::{upload_body_crc32, Request};
-use accomp::table::{CalibrationTable, ENCODED_LEN};
+use accomp::protocol::upload_requests;
+use accomp::table::CalibrationTable;
 use accomp_host::device::paper_table;
 use accomp_host::device::qemu::{FLASH_IMAGE, STATE_ENV};
 
@@ -240,20 +240,8 @@ fn power_cut_at_every_step_of_an_upload_commit_and_erase_ahead_leaves_old_or_new
         reset();
         let (q, mut c) = boot(&state);
         let uid = c.new_upload_id();
-        let mut reqs = vec![Request::UploadBegin {
-            upload_id: uid,
-            total_len: ENCODED_LEN as u32,
-            body_crc32: upload_body_crc32(&bytes),
-        }];
-        for (i, ch) in bytes.chunks(64).enumerate() {
-            reqs.push(Request::UploadChunk {
-                upload_id: uid,
-                offset: (i * 64) as u32,
-                data: heapless::Vec::from_slice(ch).unwrap(),
-            });
-        }
-        reqs.push(Request::UploadCommit { upload_id: uid });
-        for (k, r) in reqs.into_iter().enumerate() {
+        let reqs = upload_requests(uid, &bytes);
+        for (k, r) in reqs.enumerate() {
             if k + 1 == stop_after && k + 1 == 9 {
                 // The commit is sent but its answer not awaited: the kill races the commit.
                 c.send(r).unwrap();

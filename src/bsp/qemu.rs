@@ -15,8 +15,7 @@ use super::{Fatal, Parts};
 use accomp::acquisition::{AdsReading, RtdReading};
 use accomp::drivers::ads1262::DataRate;
 use accomp::protocol::{Board, BootReport};
-use accomp::storage::{RamFlash, RamFlashError, SlotLayout};
-use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
+use accomp::storage::{RamFlash, SlotLayout, Watched, Watcher};
 use semihosting::io::{Read as _, Seek as _, SeekFrom, Write as _};
 
 /// Board reported in READY and Info.
@@ -72,8 +71,10 @@ pub mod exit_code {
 }
 
 /// [`RamCalibrationFlash`] written through to [`FLASH_FILE`] after every operation.
-pub struct PersistentFlash {
-    ram: &'static mut RamCalibrationFlash,
+pub type PersistentFlash = Watched<&'static mut RamCalibrationFlash, HostImage>;
+
+/// The host file the flash is written through to, and the power-cut test hook.
+pub struct HostImage {
     /// None when the host file could not be opened: the board then runs with RAM only.
     file: Option<semihosting::fs::File>,
     /// Flash operations persisted since boot.
@@ -83,76 +84,84 @@ pub struct PersistentFlash {
     cut_at: Option<(u32, u32)>,
 }
 
-impl PersistentFlash {
-    /// Restores the image from the host file (a missing or short file is a factory-new,
-    /// erased part, and is created).
-    fn open(ram: &'static mut RamCalibrationFlash) -> Self {
-        let existing = semihosting::fs::OpenOptions::new()
+/// Restores the image from the host file (a missing or short file is a factory-new, erased
+/// part, and is created).
+fn open_flash(ram: &'static mut RamCalibrationFlash) -> PersistentFlash {
+    let existing = semihosting::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .open(FLASH_FILE);
+    let file = match existing {
+        Ok(mut f) => {
+            let mut image = [0xFFu8; 3 * SLOT_BYTES];
+            let mut got = 0;
+            while let Some(rest) = image.get_mut(got..) {
+                match f.read(rest) {
+                    Ok(0) | Err(_) => break,
+                    Ok(n) => got += n,
+                }
+            }
+            if got == image.len() {
+                ram.as_bytes_mut().copy_from_slice(&image);
+                defmt::info!("flash image restored from the host");
+            } else {
+                defmt::warn!("flash image short ({} bytes): starting erased", got);
+            }
+            Some(f)
+        }
+        Err(_) => semihosting::fs::OpenOptions::new()
             .read(true)
             .write(true)
-            .open(FLASH_FILE);
-        let file = match existing {
-            Ok(mut f) => {
-                let mut image = [0xFFu8; 3 * SLOT_BYTES];
-                let mut got = 0;
-                while let Some(rest) = image.get_mut(got..) {
-                    match f.read(rest) {
-                        Ok(0) | Err(_) => break,
-                        Ok(n) => got += n,
-                    }
-                }
-                if got == image.len() {
-                    ram.as_bytes_mut().copy_from_slice(&image);
-                    defmt::info!("flash image restored from the host");
-                } else {
-                    defmt::warn!("flash image short ({} bytes): starting erased", got);
-                }
-                Some(f)
-            }
-            Err(_) => semihosting::fs::OpenOptions::new()
-                .read(true)
-                .write(true)
-                .create(true)
-                .truncate(true)
-                .open(FLASH_FILE)
-                .ok(),
-        };
-        if file.is_none() {
-            defmt::warn!("no host flash file: tables live in RAM only");
-        }
-        let mut flash = PersistentFlash {
-            ram,
-            file,
-            ops: 0,
-            cut_at: read_cut_at(),
-        };
-        // A new or short file gets the whole (erased) image, so later offsets exist.
-        if flash.file.is_some() {
-            let len = flash.ram.as_bytes().len() as u32;
-            flash.persist_range(0, len, false);
-        }
-        flash
+            .create(true)
+            .truncate(true)
+            .open(FLASH_FILE)
+            .ok(),
+    };
+    if file.is_none() {
+        defmt::warn!("no host flash file: tables live in RAM only");
     }
+    let mut image = HostImage {
+        file,
+        ops: 0,
+        cut_at: read_cut_at(),
+    };
+    // A new or short file gets the whole (erased) image, so later offsets exist.
+    if image.file.is_some() {
+        let len = ram.as_bytes().len() as u32;
+        image.persist_range(ram, 0, len, false);
+    }
+    Watched {
+        flash: ram,
+        watcher: image,
+    }
+}
 
-    fn persist(&mut self, from: u32, to: u32) {
+impl Watcher<&'static mut RamCalibrationFlash> for HostImage {
+    fn changed(&mut self, ram: &&'static mut RamCalibrationFlash, from: u32, to: u32) {
+        self.persist(ram, from, to);
+    }
+}
+
+impl HostImage {
+    fn persist(&mut self, ram: &RamCalibrationFlash, from: u32, to: u32) {
         if let Some((op, quarters)) = self.cut_at.filter(|(op, _)| *op == self.ops) {
             // Power cut during this operation: only part of it reaches the cells.
             let part = (to - from) / 4 * quarters.min(4);
-            self.persist_range(from, from + part, false);
+            self.persist_range(ram, from, from + part, false);
             defmt::warn!("power-cut hook: exiting during flash operation {}", op);
             semihosting::process::exit(exit_code::POWER_CUT)
         }
-        self.persist_range(from, to, true);
+        self.persist_range(ram, from, to, true);
     }
 
-    fn persist_range(&mut self, from: u32, to: u32, count: bool) {
+    fn persist_range(&mut self, ram: &RamCalibrationFlash, from: u32, to: u32, count: bool) {
         if count {
             self.ops = self.ops.wrapping_add(1);
         }
         let Some(file) = self.file.as_mut() else {
             return;
         };
-        let Some(bytes) = self.ram.as_bytes().get(from as usize..to as usize) else {
+        let Some(bytes) = ram.as_bytes().get(from as usize..to as usize) else {
             return;
         };
         let written = file.seek(SeekFrom::Start(u64::from(from))).is_ok() && write_all(file, bytes);
@@ -188,35 +197,6 @@ fn read_cut_at() -> Option<(u32, u32)> {
     Some((op, quarters))
 }
 
-impl ErrorType for PersistentFlash {
-    type Error = RamFlashError;
-}
-
-impl ReadNorFlash for PersistentFlash {
-    const READ_SIZE: usize = 1;
-    fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
-        self.ram.read(offset, bytes)
-    }
-    fn capacity(&self) -> usize {
-        self.ram.capacity()
-    }
-}
-
-impl NorFlash for PersistentFlash {
-    const WRITE_SIZE: usize = RamCalibrationFlash::WRITE_SIZE;
-    const ERASE_SIZE: usize = RamCalibrationFlash::ERASE_SIZE;
-    fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
-        self.ram.erase(from, to)?;
-        self.persist(from, to);
-        Ok(())
-    }
-    fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
-        self.ram.write(offset, bytes)?;
-        self.persist(offset, offset + bytes.len() as u32);
-        Ok(())
-    }
-}
-
 /// HSI clock (QEMU hangs on any HSE/PLL set-up), USART1 at 115200 8N1 with the RX interrupt on.
 pub fn init(dp: pac::Peripherals) -> Parts {
     let mut rcc = dp.RCC.freeze(Config::hsi());
@@ -228,7 +208,7 @@ pub fn init(dp: pac::Peripherals) -> Parts {
         Some(f) => f,
         None => fatal(Fatal::Flash),
     };
-    let flash = PersistentFlash::open(ram);
+    let flash = open_flash(ram);
     Parts {
         rx,
         tx,

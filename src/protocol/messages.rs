@@ -112,6 +112,29 @@ pub fn upload_body_crc32(bytes: &[u8]) -> u32 {
     crate::table::CRC32.checksum(bytes.get(..bytes.len().saturating_sub(4)).unwrap_or(&[]))
 }
 
+/// Every request of a whole upload of `bytes` as `upload_id`, in order: UploadBegin, one
+/// UploadChunk per [`CHUNK_LEN`] bytes, UploadCommit — what a host sends when no answer is
+/// lost (the host client adds the resending on top).
+pub fn upload_requests(upload_id: u32, bytes: &[u8]) -> impl Iterator<Item = Request> + '_ {
+    let begin = Request::UploadBegin {
+        upload_id,
+        total_len: bytes.len() as u32,
+        body_crc32: upload_body_crc32(bytes),
+    };
+    let chunks = bytes
+        .chunks(CHUNK_LEN)
+        .enumerate()
+        .map(move |(k, chunk)| Request::UploadChunk {
+            upload_id,
+            offset: (k * CHUNK_LEN) as u32,
+            // Never empty: `chunks(CHUNK_LEN)` yields at most CHUNK_LEN bytes.
+            data: Vec::from_slice(chunk).unwrap_or_default(),
+        });
+    core::iter::once(begin)
+        .chain(chunks)
+        .chain(core::iter::once(Request::UploadCommit { upload_id }))
+}
+
 /// The protocol version of a device message body, read from the fields that keep their place
 /// in every version: Ready's `protocol`, and Info's (firmware, board, protocol) at the start
 /// of the reply. None for any other message or bytes that are not one. Lets the host name the

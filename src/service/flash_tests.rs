@@ -22,27 +22,13 @@ fn call(s: &mut Service<BoardFlash>, request: Request) -> DeviceMessage {
 }
 
 fn upload(s: &mut Service<BoardFlash>, bytes: &[u8], uid: u32) -> DeviceMessage {
-    let r = call(
-        s,
-        Request::UploadBegin {
-            upload_id: uid,
-            total_len: bytes.len() as u32,
-            body_crc32: crate::protocol::upload_body_crc32(bytes),
-        },
-    );
-    assert!(matches!(r, DeviceMessage::Response { .. }), "{r:?}");
-    for (i, c) in bytes.chunks(CHUNK_LEN).enumerate() {
-        let r = call(
-            s,
-            Request::UploadChunk {
-                upload_id: uid,
-                offset: (i * CHUNK_LEN) as u32,
-                data: heapless::Vec::from_slice(c).unwrap(),
-            },
-        );
-        assert!(matches!(r, DeviceMessage::Response { .. }), "{r:?}");
+    let mut last = None;
+    for request in crate::protocol::upload_requests(uid, bytes) {
+        if let Some(r) = last.replace(call(s, request)) {
+            assert!(matches!(r, DeviceMessage::Response { .. }), "{r:?}");
+        }
     }
-    call(s, Request::UploadCommit { upload_id: uid })
+    last.expect("an upload ends with its commit")
 }
 
 fn tables(s: &mut Service<BoardFlash>) -> (Option<u32>, Option<u32>) {

@@ -5,9 +5,9 @@
 
 use super::*;
 use crate::protocol::model::TableHistory;
+use crate::protocol::upload_requests;
 use crate::storage::RamFlash;
 use crate::table::tests::paper_table;
-use crate::table::CRC32;
 
 type Flash = RamFlash<3072, 1024, 4>;
 const LAYOUT: SlotLayout = SlotLayout::consecutive(1024);
@@ -68,23 +68,17 @@ fn run(
 ) -> Expect {
     match op {
         Op::Load(t) => {
-            let bytes = &encoded[t];
-            let upload_id = 0x5EED_0000 + t as u32;
-            let begin = Request::UploadBegin {
-                upload_id,
-                total_len: ENCODED_LEN as u32,
-                body_crc32: CRC32.checksum(&bytes[..ENCODED_LEN - 4]),
-            };
-            assert_eq!(answer(&call(s, begin)), Ok(()));
-            for (i, c) in bytes.chunks(CHUNK_LEN).enumerate() {
-                let chunk = Request::UploadChunk {
-                    upload_id,
-                    offset: (i * CHUNK_LEN) as u32,
-                    data: heapless::Vec::from_slice(c).unwrap_or_default(),
+            let mut requests = upload_requests(0x5EED_0000 + t as u32, &encoded[t]).peekable();
+            loop {
+                let Some(request) = requests.next() else {
+                    unreachable!("an upload ends with its commit")
                 };
-                assert_eq!(answer(&call(s, chunk)), Ok(()));
+                let a = answer(&call(s, request));
+                if requests.peek().is_none() {
+                    break a;
+                }
+                assert_eq!(a, Ok(()));
             }
-            answer(&call(s, Request::UploadCommit { upload_id }))
         }
         Op::Activate(t) => answer(&call(s, Request::Activate { table_id: ids[t] })),
         Op::Rollback => answer(&call(s, Request::Rollback)),

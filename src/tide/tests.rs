@@ -61,40 +61,27 @@ fn unix_seconds_match_known_timestamps() {
 
 #[test]
 fn calendar_rejects_impossible_dates() {
-    assert_eq!(
-        UtcTime::new(2023, 2, 29, 0, 0, 0.0),
-        Err(TideError::DayOutOfRange)
-    );
-    assert_eq!(
-        UtcTime::new(1900, 2, 29, 0, 0, 0.0),
-        Err(TideError::DayOutOfRange)
-    );
+    use TideError::*;
+    // (year, month, day, hour, minute, second) → the named error.
+    let rejected = [
+        ((2023, 2, 29, 0, 0, 0.0), DayOutOfRange),
+        ((1900, 2, 29, 0, 0, 0.0), DayOutOfRange),
+        ((2023, 13, 1, 0, 0, 0.0), MonthOutOfRange),
+        ((2023, 4, 31, 0, 0, 0.0), DayOutOfRange),
+        ((2023, 4, 1, 24, 0, 0.0), TimeOfDayOutOfRange),
+        ((2023, 4, 1, 0, 0, 61.0), TimeOfDayOutOfRange),
+        ((2023, 4, 1, 0, 0, f64::NAN), NotFinite),
+        ((1200, 4, 1, 0, 0, 0.0), YearOutOfRange),
+    ];
+    for ((y, mo, d, h, mi, s), error) in rejected {
+        assert_eq!(
+            UtcTime::new(y, mo, d, h, mi, s),
+            Err(error),
+            "{y}-{mo}-{d} {h}:{mi}:{s}"
+        );
+    }
     assert!(UtcTime::new(2000, 2, 29, 0, 0, 0.0).is_ok());
-    assert_eq!(
-        UtcTime::new(2023, 13, 1, 0, 0, 0.0),
-        Err(TideError::MonthOutOfRange)
-    );
-    assert_eq!(
-        UtcTime::new(2023, 4, 31, 0, 0, 0.0),
-        Err(TideError::DayOutOfRange)
-    );
-    assert_eq!(
-        UtcTime::new(2023, 4, 1, 24, 0, 0.0),
-        Err(TideError::TimeOfDayOutOfRange)
-    );
-    assert_eq!(
-        UtcTime::new(2023, 4, 1, 0, 0, 61.0),
-        Err(TideError::TimeOfDayOutOfRange)
-    );
     assert!(UtcTime::new(2016, 12, 31, 23, 59, 60.5).is_ok());
-    assert_eq!(
-        UtcTime::new(2023, 4, 1, 0, 0, f64::NAN),
-        Err(TideError::NotFinite)
-    );
-    assert_eq!(
-        UtcTime::new(1200, 4, 1, 0, 0, 0.0),
-        Err(TideError::YearOutOfRange)
-    );
 }
 
 #[test]

@@ -302,6 +302,13 @@ fn cargo_once() -> Command {
     c
 }
 
+/// `cargo clippy <what> -- -D warnings`: every lint is an error.
+fn clippy(step: &str, what: &[&str]) -> Result<()> {
+    let mut c = cargo_once();
+    c.arg("clippy").args(what).args(["--", "-D", "warnings"]);
+    run(step, c)
+}
+
 fn test() -> Result<()> {
     ensure_toolchain()?;
     ensure_qemu()?;
@@ -309,30 +316,20 @@ fn test() -> Result<()> {
     fmt.args(["fmt", "--all", "--check"]);
     run("cargo fmt --check", fmt)?;
 
-    let mut clippy = cargo_once();
-    clippy.args([
-        "clippy",
-        "--workspace",
-        "--all-targets",
-        "--",
-        "-D",
-        "warnings",
-    ]);
-    run("clippy (host, all targets)", clippy)?;
-
-    let mut clippy_fw = cargo_once();
-    clippy_fw.args([
-        "clippy",
-        "--package",
-        "accomp",
-        "--target",
-        FIRMWARE_TARGET,
-        "--release",
-        "--",
-        "-D",
-        "warnings",
-    ]);
-    run("clippy (firmware)", clippy_fw)?;
+    clippy(
+        "clippy (host, all targets)",
+        &["--workspace", "--all-targets"],
+    )?;
+    clippy(
+        "clippy (firmware)",
+        &[
+            "--package",
+            "accomp",
+            "--target",
+            FIRMWARE_TARGET,
+            "--release",
+        ],
+    )?;
 
     // Frontend first: both builds write the same ELF path, and the QEMU one must be left there.
     let frontend = build_frontend_firmware()?;

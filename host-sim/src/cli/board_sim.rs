@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
 
-use crate::device::board_sim::flash::BoardFlash;
+use crate::device::board_sim::flash;
 use crate::device::board_sim::pty::{self, Pty};
 use crate::device::board_sim::{Station, VirtualBoard};
 
@@ -148,8 +148,8 @@ pub fn run(args: &BoardSimArgs) -> anyhow::Result<()> {
     if let Some(d) = &state {
         std::fs::create_dir_all(d).with_context(|| format!("state directory {}", d.display()))?;
     }
-    let flash = BoardFlash::open(state.as_deref())?;
-    let erase_stall = flash.erase_stall_ms.clone();
+    let flash = flash::open(state.as_deref())?;
+    let erase_stall = flash.watcher.erase_stall_ms.clone();
 
     let mut line = Some(open_line(args.link.as_deref())?);
     {

@@ -4,6 +4,7 @@
 use std::path::PathBuf;
 
 use super::values::{ImageFormat, RecordFormat};
+use super::LogLimitArgs;
 use crate::discover::import::{self, DatasetOptions};
 use crate::discover::simulate::{self, output, simulate_dataset, write_report, write_scenario};
 use crate::discover::{discover_path, note_bad_rows, report, select};
@@ -52,24 +53,19 @@ pub struct DiscoverArgs {
     /// `--calibration`; refused when none was found or the core's validator refuses the result).
     #[arg(long, requires = "calibration")]
     pub write_table: Option<PathBuf>,
-    /// Read a log above the reader's limits (20 million data lines, 4 GiB).
-    #[arg(long)]
-    pub allow_large: bool,
+    #[command(flatten)]
+    pub limits: LogLimitArgs,
 }
 
 /// `accomp discover`.
 pub fn run(args: &DiscoverArgs) -> anyhow::Result<()> {
-    crate::log::reader::set_allow_large(args.allow_large);
+    args.limits.apply();
     // Outputs proved writable before minutes of work, not after.
-    if let Some(p) = &args.write_scenario {
-        crate::outputs::check_file(p)?;
-    }
+    crate::outputs::check_optional_file(args.write_scenario.as_deref())?;
     if let Some(d) = &args.report {
         crate::outputs::check_dir(d)?;
     }
-    if let Some(p) = &args.write_table {
-        crate::outputs::check_file(p)?;
-    }
+    crate::outputs::check_optional_file(args.write_table.as_deref())?;
     if args.simulate {
         return run_simulate(args);
     }

@@ -58,9 +58,7 @@ fn read(path: &Path) -> Result<String, FitError> {
 /// `accomp fit`.
 pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     crate::log::reader::set_allow_large(args.allow_large);
-    if let Some(p) = &args.output {
-        crate::outputs::check_file(p)?;
-    }
+    crate::outputs::check_optional_file(args.output.as_deref())?;
     let at = Celsius(args.at);
     let table = parse_coefficient_table(&read(&args.input)?).map_err(|error| FitError::Csv {
         path: args.input.clone(),

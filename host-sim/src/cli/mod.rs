@@ -20,3 +20,18 @@ pub mod stability;
 pub mod table;
 pub mod tumble;
 pub mod values;
+
+/// `--allow-large` of the commands that read a log.
+#[derive(Debug, Clone, clap::Args)]
+pub struct LogLimitArgs {
+    /// Read a log above the reader's limits (20 million data lines, 4 GiB).
+    #[arg(long)]
+    pub allow_large: bool,
+}
+
+impl LogLimitArgs {
+    /// Lifts the log reader's size limits for this run when `--allow-large` is given.
+    pub fn apply(&self) {
+        crate::log::reader::set_allow_large(self.allow_large);
+    }
+}

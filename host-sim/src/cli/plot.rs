@@ -4,6 +4,7 @@
 use std::path::PathBuf;
 
 use super::values::{ImageFormat, PlotKind};
+use super::LogLimitArgs;
 use crate::log::Log;
 use crate::plot::{plot_log, Format, Kind, PlotOptions, DEFAULT_RAW};
 
@@ -28,14 +29,13 @@ pub struct PlotArgs {
     /// output_linearized_v, output_compensated_g that the log has.
     #[arg(long = "compensated")]
     pub compensated: Vec<String>,
-    /// Read a log above the reader's limits (20 million data lines, 4 GiB).
-    #[arg(long)]
-    pub allow_large: bool,
+    #[command(flatten)]
+    pub limits: LogLimitArgs,
 }
 
 /// Runs the subcommand: reads the log, writes the figures, prints their paths.
 pub fn run(args: &PlotArgs) -> anyhow::Result<()> {
-    crate::log::reader::set_allow_large(args.allow_large);
+    args.limits.apply();
     crate::outputs::check_dir(&args.out_dir)?;
     let log = Log::read_path(&args.log).map_err(|e| e.in_file(&args.log))?;
     let stem = args

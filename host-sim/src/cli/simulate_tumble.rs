@@ -53,9 +53,7 @@ pub struct SimulateTumbleArgs {
 
 /// Runs `accomp simulate-tumble`.
 pub fn run(args: SimulateTumbleArgs) -> anyhow::Result<()> {
-    if let Some(p) = &args.output {
-        crate::outputs::check_file(p)?;
-    }
+    crate::outputs::check_optional_file(args.output.as_deref())?;
     let SimulateTumbleArgs {
         seed,
         output,

@@ -3,6 +3,7 @@
 
 use std::path::PathBuf;
 
+use super::LogLimitArgs;
 use crate::allan::TauSet;
 use crate::log::Log;
 use crate::stability::{analyse, Options, StabilityError};
@@ -21,9 +22,8 @@ pub struct StabilityArgs {
     /// Averaging times: octave (m = 1, 2, 4, ...) or all (every m; short logs only).
     #[arg(long, value_enum, default_value_t = TausArg::Octave)]
     pub taus: TausArg,
-    /// Read a log above the reader's limits (20 million data lines, 4 GiB).
-    #[arg(long)]
-    pub allow_large: bool,
+    #[command(flatten)]
+    pub limits: LogLimitArgs,
 }
 
 /// `--taus` values.
@@ -37,7 +37,7 @@ pub enum TausArg {
 
 /// Runs the subcommand, printing to stdout.
 pub fn run(args: &StabilityArgs) -> Result<(), StabilityError> {
-    crate::log::reader::set_allow_large(args.allow_large);
+    args.limits.apply();
     let log = Log::read_path(&args.log).map_err(|e| e.in_file(&args.log))?;
     let opts = Options {
         columns: args.columns.clone(),

@@ -45,9 +45,7 @@ pub struct TumbleArgs {
 /// Runs `accomp tumble`.
 pub fn run(args: TumbleArgs) -> anyhow::Result<()> {
     crate::log::reader::set_allow_large(args.allow_large);
-    if let Some(p) = &args.output {
-        crate::outputs::check_file(p)?;
-    }
+    crate::outputs::check_optional_file(args.output.as_deref())?;
     let TumbleArgs {
         logs,
         json,

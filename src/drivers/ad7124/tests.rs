@@ -116,16 +116,31 @@ fn reset() -> Vec<SpiT<u8>> {
 }
 
 fn board_init() -> Vec<SpiT<u8>> {
+    board_init_with(true)
+}
+
+/// `init` of the board configuration with or without CRC: reset, ID, ERROR_EN (switching the
+/// CRC on, it is written without CRC and read back with it), then every register written and
+/// read back.
+fn board_init_with(crc: bool) -> Vec<SpiT<u8>> {
+    let error_en = if crc {
+        [
+            wr(ERROR_EN, &ERROR_EN_CRC, false),
+            rd(ERROR_EN, &ERROR_EN_CRC, true),
+        ]
+        .concat()
+    } else {
+        written(ERROR_EN, &ERROR_EN_NO_CRC, false)
+    };
     [
         reset(),
         rd(ID, &[ID_AD7124_4_REV4], false),
-        wr(ERROR_EN, &ERROR_EN_CRC, false),
-        rd(ERROR_EN, &ERROR_EN_CRC, true),
-        written(IO_CONTROL_1, &IOCON1, true),
-        written(CONFIG_0, &CONFIG, true),
-        written(FILTER_0, &FILTER, true),
-        written(CHANNEL_0, &CHANNEL, true),
-        written(ADC_CONTROL, &ADC_CTRL, true),
+        error_en,
+        written(IO_CONTROL_1, &IOCON1, crc),
+        written(CONFIG_0, &CONFIG, crc),
+        written(FILTER_0, &FILTER, crc),
+        written(CHANNEL_0, &CHANNEL, crc),
+        written(ADC_CONTROL, &ADC_CTRL, crc),
     ]
     .concat()
 }
@@ -179,18 +194,7 @@ fn init_without_crc_sends_no_crc_bytes() {
         crc: false,
         ..config()
     };
-    let spi = [
-        reset(),
-        rd(ID, &[ID_AD7124_4_REV4], false),
-        written(ERROR_EN, &ERROR_EN_NO_CRC, false),
-        written(IO_CONTROL_1, &IOCON1, false),
-        written(CONFIG_0, &CONFIG, false),
-        written(FILTER_0, &FILTER, false),
-        written(CHANNEL_0, &CHANNEL, false),
-        written(ADC_CONTROL, &ADC_CTRL, false),
-    ]
-    .concat();
-    let mut d = driver(&spi, &[], cfg);
+    let mut d = driver(&board_init_with(false), &[], cfg);
     assert!(d.init().is_ok());
     finish(d);
 }

@@ -107,13 +107,19 @@ fn rdata1(answer: &[u8]) -> Vec<SpiT<u8>> {
 }
 
 fn board_init() -> Vec<SpiT<u8>> {
+    init_writing(&BOARD_BLOCK, 0x00)
+}
+
+/// `init` of a configuration whose POWER..INPMUX block is `block` and REFMUX `refmux`: reset,
+/// ID, the block written and read back, REFMUX written and read back, START1.
+fn init_writing(block: &[u8], refmux: u8) -> Vec<SpiT<u8>> {
     [
         command(RESET),
         rreg(ID, &[ID_ADS1262_REV3, POWER_AFTER_RESET]),
-        wreg(POWER, &BOARD_BLOCK),
-        rreg(POWER, &BOARD_BLOCK),
-        wreg(REFMUX, &[0x00]),
-        rreg(REFMUX, &[0x00]),
+        wreg(POWER, block),
+        rreg(POWER, block),
+        wreg(REFMUX, &[refmux]),
+        rreg(REFMUX, &[refmux]),
         command(START1),
     ]
     .concat()
@@ -128,6 +134,15 @@ fn driver(spi: &[SpiT<u8>], pin: &[PinT], config: Ads1262Config) -> Driver {
         NoopDelay::new(),
         config,
     )
+}
+
+/// `read_conversion` of the board configuration on one RDATA1 answer (status, four data bytes,
+/// check byte), the mock then checked done.
+fn conversion_of(answer: &[u8]) -> Result<Sample, DriverError<SpiMock<u8>, PinMock>> {
+    let mut d = driver(&rdata1(answer), &[], config());
+    let r = d.read_conversion();
+    finish(d);
+    r
 }
 
 fn finish(d: Driver) {
@@ -166,17 +181,7 @@ fn chop_delay_fir_and_external_reference_are_encoded_as_the_datasheet_says() {
     // 0x13; MODE1 FILTER=100 → 0x80; MODE2 gain 1, DR=0100 (20 SPS) → 0x04; INPMUX 0x01.
     // REFMUX RMUXP=011 (AIN4) at [5:3], RMUXN=011 (AIN5) → 0x1B.
     let block = [0x00, 0x06, 0x13, 0x80, 0x04, 0x01];
-    let spi = [
-        command(RESET),
-        rreg(ID, &[ID_ADS1262_REV3, POWER_AFTER_RESET]),
-        wreg(POWER, &block),
-        rreg(POWER, &block),
-        wreg(REFMUX, &[0x1B]),
-        rreg(REFMUX, &[0x1B]),
-        command(START1),
-    ]
-    .concat();
-    let mut d = driver(&spi, &[], cfg);
+    let mut d = driver(&init_writing(&block, 0x1B), &[], cfg);
     assert!(d.init().is_ok());
     finish(d);
 }
@@ -270,36 +275,30 @@ fn init_refuses_impossible_configurations_without_touching_the_bus() {
 #[test]
 fn conversion_with_good_checksum_is_decoded() {
     // 0x12+0x34+0x56+0x78 = 0x114; + 0x9B = 0x1AF → checksum 0xAF.
-    let spi = rdata1(&[0x40, 0x12, 0x34, 0x56, 0x78, 0xAF]);
-    let mut d = driver(&spi, &[], config());
     assert_eq!(
-        d.read_conversion().map(|s| (s.code, s.status)),
+        conversion_of(&[0x40, 0x12, 0x34, 0x56, 0x78, 0xAF]).map(|s| (s.code, s.status)),
         Ok((Ads1262Code(0x1234_5678), Some(Status(0x40))))
     );
-    finish(d);
 }
 
 #[test]
 fn negative_conversion_is_sign_extended() {
     // 0xFF+0xFF+0xFF+0xFE = 0x3FB; + 0x9B = 0x496 → 0x96.
-    let spi = rdata1(&[0x40, 0xFF, 0xFF, 0xFF, 0xFE, 0x96]);
-    let mut d = driver(&spi, &[], config());
-    assert_eq!(d.read_conversion().map(|s| s.code), Ok(Ads1262Code(-2)));
-    finish(d);
+    assert_eq!(
+        conversion_of(&[0x40, 0xFF, 0xFF, 0xFF, 0xFE, 0x96]).map(|s| s.code),
+        Ok(Ads1262Code(-2))
+    );
 }
 
 #[test]
 fn corrupted_frame_fails_the_checksum() {
-    let spi = rdata1(&[0x40, 0x12, 0x34, 0x56, 0x78, 0xAE]);
-    let mut d = driver(&spi, &[], config());
     assert_eq!(
-        d.read_conversion(),
+        conversion_of(&[0x40, 0x12, 0x34, 0x56, 0x78, 0xAE]),
         Err(Error::Checksum {
             expected: 0xAF,
             received: 0xAE
         })
     );
-    finish(d);
 }
 
 #[test]
@@ -347,31 +346,29 @@ fn frame_without_status_and_check_byte_is_four_bytes() {
 #[test]
 fn status_alarms_are_reported_with_the_code() {
     // ADC1 new data + REF_ALM + PGAD_ALM; checksum of 00 00 01 00 = 0x01 + 0x9B = 0x9C.
-    let spi = rdata1(&[0x40 | 0x10 | 0x02, 0x00, 0x00, 0x01, 0x00, 0x9C]);
-    let mut d = driver(&spi, &[], config());
-    let status = d.read_conversion().map(|s| s.status);
+    let status =
+        conversion_of(&[0x40 | 0x10 | 0x02, 0x00, 0x00, 0x01, 0x00, 0x9C]).map(|s| s.status);
     let Ok(Some(st)) = status else {
         panic!("no status byte decoded: {status:?}");
     };
     assert!(st.reference_alarm() && st.pga_differential_alarm() && st.any_alarm());
     assert!(!st.pga_low_alarm() && !st.pga_high_alarm());
-    finish(d);
 }
 
 #[test]
 fn status_reset_flag_is_an_unexpected_reset() {
-    let spi = rdata1(&[0x41, 0x00, 0x00, 0x00, 0x00, 0x9B]);
-    let mut d = driver(&spi, &[], config());
-    assert_eq!(d.read_conversion(), Err(Error::UnexpectedReset));
-    finish(d);
+    assert_eq!(
+        conversion_of(&[0x41, 0x00, 0x00, 0x00, 0x00, 0x9B]),
+        Err(Error::UnexpectedReset)
+    );
 }
 
 #[test]
 fn conversion_without_new_data_flag_is_stale() {
-    let spi = rdata1(&[0x00, 0x00, 0x00, 0x00, 0x00, 0x9B]);
-    let mut d = driver(&spi, &[], config());
-    assert_eq!(d.read_conversion(), Err(Error::StaleData));
-    finish(d);
+    assert_eq!(
+        conversion_of(&[0x00, 0x00, 0x00, 0x00, 0x00, 0x9B]),
+        Err(Error::StaleData)
+    );
 }
 
 #[test]

@@ -127,6 +127,11 @@ fn fit_at(e: &Effect, ds: &Dataset, ctx: &Context, r: &[f64], theta: f64) -> (f6
     }
 }
 
+/// [`recover`] over the catalogue's own grid of the effect's time scale.
+fn recover_on_grid(e: &Effect, ds: &Dataset, r: &[f64]) -> Vec<(String, f64)> {
+    recover(e, ds, r, &effects::grid(e, ds))
+}
+
 /// The best θ on `grid` refined by golden section between its neighbours (in ln θ for a
 /// positive grid), and the named parameters there.
 fn recover(e: &Effect, ds: &Dataset, r: &[f64], grid: &[f64]) -> Vec<(String, f64)> {
@@ -205,12 +210,7 @@ fn thermal_effects_are_recovered_with_their_time_constant_and_size() {
             coefficient: 1e-3,
         },
     );
-    let p = recover(
-        &Effect::ThermalLag,
-        &ds,
-        &r,
-        &effects::grid(&Effect::ThermalLag, &ds),
-    );
+    let p = recover_on_grid(&Effect::ThermalLag, &ds, &r);
     close(&p, "tau_s", 1800.0, 0.05);
     close(&p, "coefficient", 1e-3, 0.02);
 
@@ -394,12 +394,7 @@ fn self_heating_is_recovered_from_the_head_programme() {
         ds.changing_input().is_some(),
         "the input_g column is not taken"
     );
-    let p = recover(
-        &Effect::SelfHeating,
-        &ds,
-        &r,
-        &effects::grid(&Effect::SelfHeating, &ds),
-    );
+    let p = recover_on_grid(&Effect::SelfHeating, &ds, &r);
     close(&p, "tau_s", 1800.0, 0.05);
     close(&p, "coefficient", 2e-4, 0.02);
 }
@@ -425,7 +420,7 @@ fn ambient_coupling_is_recovered_from_the_room_channel() {
         Some("temperature_c")
     );
     let e = Effect::AmbientCoupling("room_c".into());
-    let p = recover(&e, &ds, &r, &effects::grid(&e, &ds));
+    let p = recover_on_grid(&e, &ds, &r);
     close(&p, "lag_s", 2.0 * 3600.0, 0.05);
     close(&p, "coefficient", 5e-5, 0.02);
 }

@@ -81,19 +81,13 @@ impl Board {
         let ads = Rc::new(RefCell::new(Ads1262Model::new(clock.clone())));
         let rtd = Rc::new(RefCell::new(Ad7124Model::new(clock.clone())));
         let ads_driver = Ads1262::new(
-            SimSpi {
-                chip: ads.clone(),
-                bus: ads_bus,
-            },
+            SimSpi::new(&ads, ads_bus),
             InterruptDrdy,
             SimDelay(clock.clone()),
             board::ads1262_config(),
         );
         let rtd_driver = Ad7124::new(
-            SimSpi {
-                chip: rtd.clone(),
-                bus: rtd_bus,
-            },
+            SimSpi::new(&rtd, rtd_bus),
             InterruptDrdy,
             SimDelay(clock.clone()),
             board::ad7124_config(),

@@ -68,6 +68,16 @@ pub struct SimSpi<M> {
     pub bus: SpiSettings,
 }
 
+impl<M> SimSpi<M> {
+    /// A driver's handle on `chip`, over a bus run with `bus`.
+    pub fn new(chip: &Rc<RefCell<M>>, bus: SpiSettings) -> Self {
+        SimSpi {
+            chip: chip.clone(),
+            bus,
+        }
+    }
+}
+
 impl<M> ErrorType for SimSpi<M> {
     type Error = BusRefusal;
 }

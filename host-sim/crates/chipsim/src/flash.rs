@@ -7,7 +7,8 @@
 use std::cell::Cell;
 use std::rc::Rc;
 
-use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
+use accomp::storage::{Watched, Watcher};
+use embedded_storage::nor_flash::ErrorType;
 
 /// Durations of the flash operations, µs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -27,9 +28,11 @@ impl FlashTiming {
     };
 }
 
-/// `F` with every erase and program adding its duration to `busy_us`.
-pub struct TimedFlash<F> {
-    pub flash: F,
+/// `F` with every erase and program adding its duration to `busy_us` ([`timed`]).
+pub type TimedFlash<F> = Watched<F, FlashClock>;
+
+/// What [`TimedFlash`] adds to a flash: how long it was busy, and the erases run.
+pub struct FlashClock {
     pub timing: FlashTiming,
     /// Total time the flash was busy (the core stalled), µs.
     pub busy_us: Rc<Cell<u64>>,
@@ -37,44 +40,30 @@ pub struct TimedFlash<F> {
     pub erases: Rc<Cell<u32>>,
 }
 
-impl<F> TimedFlash<F> {
-    pub fn new(flash: F, timing: FlashTiming) -> Self {
-        Self {
-            flash,
+/// `flash`, timed by `timing`.
+pub fn timed<F>(flash: F, timing: FlashTiming) -> TimedFlash<F> {
+    Watched {
+        flash,
+        watcher: FlashClock {
             timing,
             busy_us: Rc::default(),
             erases: Rc::default(),
-        }
+        },
     }
 }
 
-impl<F: ErrorType> ErrorType for TimedFlash<F> {
-    type Error = F::Error;
-}
-
-impl<F: ReadNorFlash> ReadNorFlash for TimedFlash<F> {
-    const READ_SIZE: usize = F::READ_SIZE;
-    fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), F::Error> {
-        self.flash.read(offset, bytes)
-    }
-    fn capacity(&self) -> usize {
-        self.flash.capacity()
-    }
-}
-
-impl<F: NorFlash> NorFlash for TimedFlash<F> {
-    const WRITE_SIZE: usize = F::WRITE_SIZE;
-    const ERASE_SIZE: usize = F::ERASE_SIZE;
-    fn erase(&mut self, from: u32, to: u32) -> Result<(), F::Error> {
+impl<F: ErrorType> Watcher<F> for FlashClock {
+    fn before_erase(&mut self, _from: u32, _to: u32) -> Result<(), F::Error> {
         // One slot is one sector on the board, whatever the host flash's block size.
         self.erases.set(self.erases.get() + 1);
         self.busy_us
             .set(self.busy_us.get() + self.timing.sector_erase_us);
-        self.flash.erase(from, to)
+        Ok(())
     }
-    fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), F::Error> {
+
+    fn before_write(&mut self, _offset: u32, bytes: &[u8]) -> Result<(), F::Error> {
         self.busy_us
             .set(self.busy_us.get() + bytes.len() as u64 * self.timing.byte_program_us);
-        self.flash.write(offset, bytes)
+        Ok(())
     }
 }

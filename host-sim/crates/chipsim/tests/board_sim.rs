@@ -636,28 +636,10 @@ impl Device {
     }
 
     fn upload(&mut self, b: &mut Bench, table: &CalibrationTable) {
-        use accomp::protocol::{upload_body_crc32, Request, CHUNK_LEN};
         let bytes = table.encode();
-        let upload_id = self.next_id + 1000;
-        self.request(
-            b,
-            Request::UploadBegin {
-                upload_id,
-                total_len: bytes.len() as u32,
-                body_crc32: upload_body_crc32(&bytes),
-            },
-        );
-        for (k, chunk) in bytes.chunks(CHUNK_LEN).enumerate() {
-            self.request(
-                b,
-                Request::UploadChunk {
-                    upload_id,
-                    offset: (k * CHUNK_LEN) as u32,
-                    data: heapless::Vec::from_slice(chunk).unwrap(),
-                },
-            );
+        for request in accomp::protocol::upload_requests(self.next_id + 1000, &bytes) {
+            self.request(b, request);
         }
-        self.request(b, Request::UploadCommit { upload_id });
     }
 }
 
@@ -670,12 +652,12 @@ impl Device {
 fn tables_changed_while_streaming_lose_readings_only_to_counted_flagged_erase_stalls() {
     use accomp::pipeline::LossFlags;
     use accomp::protocol::{Board, Request};
-    let flash = accomp_chipsim::TimedFlash::new(accomp::storage::RamFlash::new(), ERASES_ONLY);
-    let erases = flash.erases.clone();
+    let flash = accomp_chipsim::timed(accomp::storage::RamFlash::new(), ERASES_ONLY);
+    let erases = flash.watcher.erases.clone();
     let layout = accomp::storage::SlotLayout::consecutive(1024);
     let mut b = Bench::new();
     let mut dev = Device {
-        busy_us: flash.busy_us.clone(),
+        busy_us: flash.watcher.busy_us.clone(),
         service: accomp::service::Service::new(Board::Frontend, flash, layout),
         next_id: 0,
     };
@@ -828,7 +810,7 @@ impl Rig {
     fn boot(flash: BoardFlash) -> Rig {
         let clock = Clock::default();
         clock.set(1_000);
-        let busy_us = flash.busy_us.clone();
+        let busy_us = flash.watcher.busy_us.clone();
         let mut usart = accomp_chipsim::UsartRx::new();
         // start_rx_dma: the circular stream enabled, then USART_CR3.DMAR.
         usart.dmar = true;
@@ -1112,26 +1094,15 @@ impl Rig {
 
     /// Uploads `table` over the line as the host client does, chunk by chunk, and commits.
     fn upload(&mut self, table: &CalibrationTable) {
-        use accomp::protocol::{upload_body_crc32, Request, Response, CHUNK_LEN};
         let bytes = table.encode();
-        let upload_id = 7000 + self.next_id;
-        self.call(Request::UploadBegin {
-            upload_id,
-            total_len: bytes.len() as u32,
-            body_crc32: upload_body_crc32(&bytes),
-        });
-        for (k, chunk) in bytes.chunks(CHUNK_LEN).enumerate() {
-            self.call(Request::UploadChunk {
-                upload_id,
-                offset: (k * CHUNK_LEN) as u32,
-                data: heapless::Vec::from_slice(chunk).unwrap(),
-            });
-        }
+        let answers: Vec<_> = accomp::protocol::upload_requests(7000 + self.next_id, &bytes)
+            .map(|request| self.call(request))
+            .collect();
         assert_eq!(
-            self.call(Request::UploadCommit { upload_id }),
-            Response::Committed {
+            answers.last(),
+            Some(&accomp::protocol::Response::Committed {
                 table_id: table.id()
-            }
+            })
         );
     }
 
@@ -1272,11 +1243,11 @@ fn a_400_sps_stream_through_uploads_rollback_and_reboot_loses_no_byte_and_accoun
             t
         })
         .collect();
-    let flash = accomp_chipsim::TimedFlash::new(
+    let flash = accomp_chipsim::timed(
         accomp::storage::RamFlash::new(),
         accomp_chipsim::FlashTiming::MAX,
     );
-    let erases = flash.erases.clone();
+    let erases = flash.watcher.erases.clone();
 
     // First boot, a factory-blank flash: three uploads (each into a blank slot: programming
     // only) and a rollback (into the slot of table 1: an erase) while streaming.

@@ -607,11 +607,11 @@ mod tests {
     fn board_on_lossy_line(
         lose: HashMap<usize, Lose>,
     ) -> (LossyLine, std::thread::JoinHandle<Vec<Request>>) {
-        use crate::board_sim::{flash::BoardFlash, VirtualBoard};
+        use crate::board_sim::{flash, VirtualBoard};
         let (to_board, requests) = std::sync::mpsc::channel::<Vec<u8>>();
         let (answers, from_board) = std::sync::mpsc::channel();
         let board = std::thread::spawn(move || {
-            let mut board = VirtualBoard::boot(BoardFlash::open(None).unwrap(), 0, 0);
+            let mut board = VirtualBoard::boot(flash::open(None).unwrap(), 0, 0);
             board.tx.clear();
             let mut got = Vec::new();
             for (k, bytes) in requests.iter().enumerate() {

@@ -53,6 +53,11 @@ fn probe(dir: &Path) -> std::io::Result<()> {
     r
 }
 
+/// [`check_file`] of an optional output: nothing to check when there is none.
+pub fn check_optional_file(path: Option<&Path>) -> Result<(), OutputError> {
+    path.map_or(Ok(()), check_file)
+}
+
 /// Checks that `path` can be written as a file: not a directory, its folder exists and takes
 /// a file. Creates nothing that stays.
 pub fn check_file(path: &Path) -> Result<(), OutputError> {

@@ -57,6 +57,13 @@ pub struct ParamSpec {
     pub unit: &'static str,
 }
 
+/// A `&'static [ParamSpec]` written as a table: `params!["tau_s": "s", "amplitude": "output"]`.
+macro_rules! params {
+    ($($name:literal: $unit:literal),* $(,)?) => {
+        &[$(ParamSpec { name: $name, unit: $unit }),*]
+    };
+}
+
 impl EffectKind {
     /// Every entry, in the catalogue's order.
     pub const ALL: [EffectKind; 17] = [
@@ -123,144 +130,32 @@ impl EffectKind {
     /// `tidal_gravity` also takes the tidal analysis's `delay_s` and wave `groups`.
     pub fn parameters(self) -> &'static [ParamSpec] {
         match self {
-            EffectKind::ThermalLag => &[
-                ParamSpec {
-                    name: "tau_s",
-                    unit: "s",
-                },
-                ParamSpec {
-                    name: "coefficient",
-                    unit: "output/°C",
-                },
-            ],
-            EffectKind::ThermalHysteresis => &[
-                ParamSpec {
-                    name: "half_width",
-                    unit: "output",
-                },
-                ParamSpec {
-                    name: "play_half_width_c",
-                    unit: "°C",
-                },
-            ],
-            EffectKind::SelfHeating => &[
-                ParamSpec {
-                    name: "tau_s",
-                    unit: "s",
-                },
-                ParamSpec {
-                    name: "coefficient",
-                    unit: "output/g²",
-                },
-            ],
-            EffectKind::Warmup | EffectKind::AgingDrift => &[
-                ParamSpec {
-                    name: "tau_s",
-                    unit: "s",
-                },
-                ParamSpec {
-                    name: "amplitude",
-                    unit: "output",
-                },
-            ],
-            EffectKind::Step => &[
-                ParamSpec {
-                    name: "time_s",
-                    unit: "s",
-                },
-                ParamSpec {
-                    name: "size",
-                    unit: "output",
-                },
-                ParamSpec {
-                    name: "duration_s",
-                    unit: "s",
-                },
-            ],
-            EffectKind::TidalGravity => &[ParamSpec {
-                name: "amplitude_factor",
-                unit: "1",
-            }],
-            EffectKind::TidalTilt => &[
-                ParamSpec {
-                    name: "amplitude_factor",
-                    unit: "1",
-                },
-                ParamSpec {
-                    name: "azimuth_deg",
-                    unit: "°",
-                },
-            ],
-            EffectKind::BuildingTilt => &[
-                ParamSpec {
-                    name: "amplitude",
-                    unit: "output",
-                },
-                ParamSpec {
-                    name: "phase_rad",
-                    unit: "rad",
-                },
-            ],
-            EffectKind::TiltCoupling => &[ParamSpec {
-                name: "gain",
-                unit: "1",
-            }],
-            EffectKind::AmbientCoupling => &[
-                ParamSpec {
-                    name: "coefficient",
-                    unit: "output/channel unit",
-                },
-                ParamSpec {
-                    name: "lag_s",
-                    unit: "s",
-                },
-            ],
-            EffectKind::PressureAdmittance => &[ParamSpec {
-                name: "coefficient",
-                unit: "output/Pa",
-            }],
-            EffectKind::Periodic => &[
-                ParamSpec {
-                    name: "period_s",
-                    unit: "s",
-                },
-                ParamSpec {
-                    name: "amplitude",
-                    unit: "output",
-                },
-                ParamSpec {
-                    name: "phase_rad",
-                    unit: "rad",
-                },
-            ],
-            EffectKind::RateCoupling => &[ParamSpec {
-                name: "coefficient",
-                unit: "output·s/channel unit",
-            }],
-            EffectKind::Lag2Coupling => &[
-                ParamSpec {
-                    name: "tau_s",
-                    unit: "s",
-                },
-                ParamSpec {
-                    name: "coefficient",
-                    unit: "output/channel unit",
-                },
-            ],
-            EffectKind::CreepDrift => &[
-                ParamSpec {
-                    name: "exponent",
-                    unit: "1",
-                },
-                ParamSpec {
-                    name: "amplitude",
-                    unit: "output",
-                },
-            ],
-            EffectKind::ChannelNoise => &[ParamSpec {
-                name: "noise",
-                unit: "channel unit (°C, rad, Pa)",
-            }],
+            EffectKind::ThermalLag => params!["tau_s": "s", "coefficient": "output/°C"],
+            EffectKind::ThermalHysteresis => {
+                params!["half_width": "output", "play_half_width_c": "°C"]
+            }
+            EffectKind::SelfHeating => params!["tau_s": "s", "coefficient": "output/g²"],
+            EffectKind::Warmup | EffectKind::AgingDrift => {
+                params!["tau_s": "s", "amplitude": "output"]
+            }
+            EffectKind::Step => params!["time_s": "s", "size": "output", "duration_s": "s"],
+            EffectKind::TidalGravity => params!["amplitude_factor": "1"],
+            EffectKind::TidalTilt => params!["amplitude_factor": "1", "azimuth_deg": "°"],
+            EffectKind::BuildingTilt => params!["amplitude": "output", "phase_rad": "rad"],
+            EffectKind::TiltCoupling => params!["gain": "1"],
+            EffectKind::AmbientCoupling => {
+                params!["coefficient": "output/channel unit", "lag_s": "s"]
+            }
+            EffectKind::PressureAdmittance => params!["coefficient": "output/Pa"],
+            EffectKind::Periodic => {
+                params!["period_s": "s", "amplitude": "output", "phase_rad": "rad"]
+            }
+            EffectKind::RateCoupling => params!["coefficient": "output·s/channel unit"],
+            EffectKind::Lag2Coupling => {
+                params!["tau_s": "s", "coefficient": "output/channel unit"]
+            }
+            EffectKind::CreepDrift => params!["exponent": "1", "amplitude": "output"],
+            EffectKind::ChannelNoise => params!["noise": "channel unit (°C, rad, Pa)"],
         }
     }
 

@@ -8,8 +8,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 
-use accomp::storage::{RamFlash, RamFlashError, SlotLayout};
-use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
+use accomp::storage::{RamFlash, RamFlashError, SlotLayout, Watched, Watcher};
 
 /// One 1 KiB erase block per slot, three slots (the QEMU board's layout).
 const SLOT_BYTES: usize = 1024;
@@ -22,8 +21,10 @@ pub const SLOT_LAYOUT: SlotLayout = SlotLayout::consecutive(SLOT_BYTES as u32);
 pub const FLASH_FILE: &str = "flash.bin";
 
 /// The flash, its file, and the erase-stall switch.
-pub struct BoardFlash {
-    ram: Ram,
+pub type BoardFlash = Watched<Ram, BoardImage>;
+
+/// The file the flash is mirrored to, and the erase-stall switch.
+pub struct BoardImage {
     file: Option<PathBuf>,
     /// Milliseconds the next erase stalls (0: none); shared with the fault control.
     pub erase_stall_ms: Arc<AtomicU64>,
@@ -31,80 +32,57 @@ pub struct BoardFlash {
     pub stalled_us: Arc<AtomicU64>,
 }
 
-impl BoardFlash {
-    /// The flash stored in `dir` (erased if there is none yet), mirrored back there.
-    pub fn open(dir: Option<&Path>) -> std::io::Result<Self> {
-        let mut ram = Ram::new();
-        let file = dir.map(|d| d.join(FLASH_FILE));
-        if let Some(f) = &file {
-            match std::fs::read(f) {
-                Ok(bytes) if bytes.len() == 3 * SLOT_BYTES => {
-                    let mut image = [0xFFu8; 3 * SLOT_BYTES];
-                    image.copy_from_slice(&bytes);
-                    ram = Ram::from_bytes(image);
-                }
-                Ok(bytes) => {
-                    return Err(std::io::Error::other(format!(
-                        "{}: {} bytes, a board flash image has {}",
-                        f.display(),
-                        bytes.len(),
-                        3 * SLOT_BYTES
-                    )))
-                }
-                Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-                Err(e) => return Err(e),
+/// The flash stored in `dir` (erased if there is none yet), mirrored back there.
+pub fn open(dir: Option<&Path>) -> std::io::Result<BoardFlash> {
+    let mut ram = Ram::new();
+    let file = dir.map(|d| d.join(FLASH_FILE));
+    if let Some(f) = &file {
+        match std::fs::read(f) {
+            Ok(bytes) if bytes.len() == 3 * SLOT_BYTES => {
+                let mut image = [0xFFu8; 3 * SLOT_BYTES];
+                image.copy_from_slice(&bytes);
+                ram = Ram::from_bytes(image);
             }
+            Ok(bytes) => {
+                return Err(std::io::Error::other(format!(
+                    "{}: {} bytes, a board flash image has {}",
+                    f.display(),
+                    bytes.len(),
+                    3 * SLOT_BYTES
+                )))
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(e) => return Err(e),
         }
-        Ok(BoardFlash {
-            ram,
+    }
+    Ok(Watched {
+        flash: ram,
+        watcher: BoardImage {
             file,
             erase_stall_ms: Arc::new(AtomicU64::new(0)),
             stalled_us: Arc::new(AtomicU64::new(0)),
-        })
-    }
-
-    fn persist(&self) {
-        if let Some(f) = &self.file {
-            // Written whole and renamed: a kill in the middle leaves the old image.
-            let tmp = f.with_extension("tmp");
-            if std::fs::write(&tmp, self.ram.as_bytes()).is_ok() {
-                let _ = std::fs::rename(&tmp, f);
-            }
-        }
-    }
+        },
+    })
 }
 
-impl ErrorType for BoardFlash {
-    type Error = RamFlashError;
-}
-
-impl ReadNorFlash for BoardFlash {
-    const READ_SIZE: usize = 1;
-    fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
-        self.ram.read(offset, bytes)
-    }
-    fn capacity(&self) -> usize {
-        self.ram.capacity()
-    }
-}
-
-impl NorFlash for BoardFlash {
-    const WRITE_SIZE: usize = Ram::WRITE_SIZE;
-    const ERASE_SIZE: usize = Ram::ERASE_SIZE;
-    fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+impl Watcher<Ram> for BoardImage {
+    fn before_erase(&mut self, _from: u32, _to: u32) -> Result<(), RamFlashError> {
         let stall = self.erase_stall_ms.swap(0, Ordering::Relaxed);
         if stall > 0 {
             // The CPU is stalled: the board (`VirtualBoard`) lives through it on its own clock
             // before anything else of it runs.
             self.stalled_us.fetch_add(stall * 1000, Ordering::Relaxed);
         }
-        self.ram.erase(from, to)?;
-        self.persist();
         Ok(())
     }
-    fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
-        self.ram.write(offset, bytes)?;
-        self.persist();
-        Ok(())
+
+    fn changed(&mut self, ram: &Ram, _from: u32, _to: u32) {
+        if let Some(f) = &self.file {
+            // Written whole and renamed: a kill in the middle leaves the old image.
+            let tmp = f.with_extension("tmp");
+            if std::fs::write(&tmp, ram.as_bytes()).is_ok() {
+                let _ = std::fs::rename(&tmp, f);
+            }
+        }
     }
 }

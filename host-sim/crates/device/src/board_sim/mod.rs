@@ -138,7 +138,7 @@ impl VirtualBoard {
         clock.set(1_000);
         let run_end_us = clock.now();
         let layout = flash::SLOT_LAYOUT;
-        let stalled_us = flash.stalled_us.clone();
+        let stalled_us = flash.watcher.stalled_us.clone();
         let mut service = Service::new(Board::Frontend, flash, layout);
         let report = BootReport {
             reset_cause,
@@ -340,9 +340,7 @@ mod tests {
     use std::sync::atomic::Ordering;
 
     use accomp::pipeline::{Frame, LossFlags};
-    use accomp::protocol::{
-        decode_message, upload_body_crc32, HostFrame, Request, Response, CHUNK_LEN,
-    };
+    use accomp::protocol::{decode_message, upload_requests, HostFrame, Request, Response};
 
     use super::*;
 
@@ -396,22 +394,12 @@ mod tests {
             let mut t = crate::paper_table();
             t.date.day = day;
             let bytes = t.encode();
-            let upload_id = 100 + u32::from(day);
-            self.call(Request::UploadBegin {
-                upload_id,
-                total_len: bytes.len() as u32,
-                body_crc32: upload_body_crc32(&bytes),
-            });
-            for (k, c) in bytes.chunks(CHUNK_LEN).enumerate() {
-                self.call(Request::UploadChunk {
-                    upload_id,
-                    offset: (k * CHUNK_LEN) as u32,
-                    data: heapless::Vec::from_slice(c).unwrap(),
-                });
-            }
+            let answers: Vec<_> = upload_requests(100 + u32::from(day), &bytes)
+                .map(|request| self.call(request))
+                .collect();
             assert_eq!(
-                self.call(Request::UploadCommit { upload_id }),
-                Response::Committed { table_id: t.id() }
+                answers.last(),
+                Some(&Response::Committed { table_id: t.id() })
             );
         }
     }
@@ -422,9 +410,9 @@ mod tests {
     #[test]
     fn an_erase_stall_fault_stalls_the_board_clock_and_info_counts_its_length() {
         let scenario = accomp_sim::scenario::Scenario::preset("paper-1g").unwrap();
-        let flash = BoardFlash::open(None).unwrap();
+        let flash = flash::open(None).unwrap();
         // The fault control's switch, as `board-sim`'s `erase-stall=2000` sets it.
-        let flash_stall = flash.erase_stall_ms.clone();
+        let flash_stall = flash.watcher.erase_stall_ms.clone();
         let mut host = Host {
             board: VirtualBoard::boot(flash, 0, 0),
             station: Station::new(&scenario, 1).unwrap(),
