@@ -123,14 +123,19 @@ mod app {
         Mono::start(cx.core.SYST, bsp::SYSTICK_HZ);
         // Boot restores the newest valid calibration slot (none: samples flag NO_CALIBRATION).
         let mut service = Service::new(bsp::BOARD, parts.flash, bsp::SLOT_LAYOUT);
-        service.set_boot_report(parts.boot);
-        let (watchdog_resets, brownout_resets) = bsp::count_resets(parts.boot);
-        service.losses_mut().watchdog_resets = watchdog_resets;
-        service.losses_mut().brownout_resets = brownout_resets;
+        let kept = bsp::keep_across_resets(parts.boot);
+        let boot = accomp::protocol::BootReport {
+            boot_id: kept.boot_id,
+            ..parts.boot
+        };
+        service.set_boot_report(boot);
+        service.losses_mut().watchdog_resets = kept.watchdog_resets;
+        service.losses_mut().brownout_resets = kept.brownout_resets;
         defmt::info!(
-            "reset cause {=u8:#x}, clock fallback {}",
-            parts.boot.reset_cause,
-            parts.boot.clock_fallback
+            "reset cause {=u8:#x}, clock fallback {}, boot id {=u32:#x}",
+            boot.reset_cause,
+            boot.clock_fallback,
+            boot.boot_id
         );
         match service.boot_table() {
             BootTable::Restored {

@@ -175,6 +175,11 @@ impl<F: CalibrationFlash> Service<F> {
         self.boot_report = report;
     }
 
+    /// The boot report Info gives.
+    pub fn boot_report(&self) -> BootReport {
+        self.boot_report
+    }
+
     /// The crystal failed while running (Clock Security System): Info's `clock_fallback`.
     pub fn clock_fell_back(&mut self) {
         self.boot_report.clock_fallback = true;

@@ -423,6 +423,42 @@ fn an_unplugged_link_keeps_the_boot_and_flag_changes_are_events() {
 }
 
 #[test]
+fn a_reset_while_unplugged_is_a_new_boot_though_its_clock_and_seq_passed_the_old_boots() {
+    let (dir, mut board, out) = board_with_table("unplugreset", 1000, 9);
+    let mut rec = recording(&dir, &out, "3000", 400);
+    // Unplugged for 1 s of wall clock (1000 s of the board's) and reset at once: READY goes
+    // into the void, and when the link is back the new boot's uptime and seq are far past the
+    // old boot's last frame (≈ 320 s, seq ≈ 400). Only Info's boot id tells it is a new boot.
+    board.command("unplug=1");
+    std::thread::sleep(Duration::from_millis(50));
+    board.command("reset");
+    assert!(rec.wait_success());
+    let r = read_rec(&out);
+    assert_events(&r, &["link_lost", "reconnected", "board_reset"]);
+    let k = kinds(&r);
+    assert!(!k.contains(&"seq_gap"), "a new boot's seq is no gap: {k:?}");
+    let reset = details(&r, "board_reset")[0];
+    assert!(reset.contains("boot id 0x"), "{reset:?}");
+    // The jump in seq is where the new boot starts, and the new boot's rows really are far
+    // past the old boot in seq and board time (what made the uptime test alone fail).
+    let jump = r
+        .rows
+        .windows(2)
+        .position(|w| w[1].1 != w[0].1 + 1)
+        .unwrap();
+    let (a, b) = (&r.rows[jump], &r.rows[jump + 1]);
+    assert!(
+        b.1 > a.1 && b.2 > a.2,
+        "seq {} → {}, board µs {} → {}",
+        a.1,
+        b.1,
+        a.2,
+        b.2
+    );
+    assert_time_increases(&r);
+}
+
+#[test]
 fn a_pc_clock_step_is_an_event_and_moves_no_row() {
     let dir = temp_dir("pcstep");
     // At 100× the board's clock and a PC clock that also runs 100× fast, the board looks like a
@@ -474,10 +510,10 @@ fn a_pc_clock_step_is_an_event_and_moves_no_row() {
 
 #[test]
 fn a_drdy_stall_is_flagged_in_rows_and_status_events_and_takes_no_number_from_seq() {
-    let (dir, mut board, out) = board_with_table("drdystall", 1000, 6);
+    let (dir, mut board, out) = board_with_table("drdystall", 250, 6);
     let mut rec = recording(&dir, &out, "2500", 400);
-    // 300 ms of wall clock: 300 s of the board's, ≈ 375 pair periods without a conversion.
-    board.fault_for("drdy-stall", 300);
+    // 1.2 s of wall clock: 300 s of the board's, ≈ 375 pair periods without a conversion.
+    board.fault_for("drdy-stall", 1200);
     assert!(rec.wait_success());
     let r = read_rec(&out);
     let k = kinds(&r);

@@ -293,6 +293,8 @@ pub fn init(mut dp: pac::Peripherals) -> Parts {
         boot: BootReport {
             reset_cause,
             clock_fallback: !crystal,
+            // Set by `init` from the RAM kept across resets.
+            boot_id: 0,
         },
     }
 }

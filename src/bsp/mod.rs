@@ -122,38 +122,79 @@ pub static UART_OVERRUNS: AtomicU32 = AtomicU32::new(0);
 /// UART bytes received with a framing or noise error (SR.FE / SR.NF) since boot.
 pub static UART_LINE_ERRORS: AtomicU32 = AtomicU32::new(0);
 
-/// Reset counts kept in RAM that survives a reset but not a power cycle: magic, then
-/// (watchdog, brown-out). Written once per boot, before interrupts run.
+/// What a boot keeps in RAM that survives a reset but not a power cycle: magic, then
+/// (watchdog, brown-out) reset counts, then the boot id. Written once per boot, before
+/// interrupts run.
 #[link_section = ".uninit.accomp_resets"]
-static mut KEPT_RESETS: core::mem::MaybeUninit<[u32; 2]> = core::mem::MaybeUninit::uninit();
-const KEPT_MAGIC: u32 = 0xACC0_4E5E;
+static mut KEPT_RESETS: core::mem::MaybeUninit<[u32; 3]> = core::mem::MaybeUninit::uninit();
+const KEPT_MAGIC: u32 = 0xACC0_4E5F;
 
-/// The (watchdog, brown-out) reset counts since power-on, including this boot (RCC_CSR flags
-/// in `boot`), and keeps them for the next boot.
-pub fn count_resets(boot: accomp::protocol::BootReport) -> (u16, u16) {
+/// RAM the program never writes: after a power-on it holds the SRAM's power-up state, whose
+/// unstable cells differ from one power-on to the next; hashed with the time base into the
+/// power-on nonce of the boot id. (Under QEMU it is zero and the time base nearly constant:
+/// boots of one QEMU process still differ by their count, a new QEMU process may repeat an id,
+/// and the host then falls back to the board's uptime.)
+#[link_section = ".uninit.accomp_power_on_noise"]
+static mut POWER_ON_NOISE: core::mem::MaybeUninit<[u32; 32]> = core::mem::MaybeUninit::uninit();
+
+/// What a boot learns from the RAM kept across resets.
+#[derive(Clone, Copy)]
+pub struct KeptAcrossResets {
+    /// Independent-watchdog resets since power-on, this boot included.
+    pub watchdog_resets: u16,
+    /// Brown-out resets since power-on, this boot included.
+    pub brownout_resets: u16,
+    /// This boot's id (Info's `boot.boot_id`).
+    pub boot_id: u32,
+}
+
+/// The reset counts since power-on including this boot (RCC_CSR flags in `boot`) and this
+/// boot's id, and keeps them for the next boot.
+pub fn keep_across_resets(boot: accomp::protocol::BootReport) -> KeptAcrossResets {
     // SAFETY: called once from `init`, before any task runs: nothing else touches the static.
     // Its bytes may be garbage after a power-on; the magic word decides whether they count.
     let cell = unsafe { &mut *core::ptr::addr_of_mut!(KEPT_RESETS) };
     let words = cell.as_mut_ptr().cast::<u32>();
-    // SAFETY: both words lie inside the static; volatile so the read of memory the program
-    // never wrote in this boot is not assumed away.
-    let (magic, counts) = unsafe {
+    // SAFETY: the three words lie inside the static; volatile so the read of memory the
+    // program never wrote in this boot is not assumed away.
+    let (magic, counts, id) = unsafe {
         (
             core::ptr::read_volatile(words),
             core::ptr::read_volatile(words.add(1)),
+            core::ptr::read_volatile(words.add(2)),
         )
     };
-    let kept = (magic == KEPT_MAGIC).then_some(((counts >> 16) as u16, counts as u16));
-    let (watchdog, brownout) = boot.counted_resets(kept);
+    let valid = magic == KEPT_MAGIC;
+    let kept = valid.then_some(((counts >> 16) as u16, counts as u16));
+    let (watchdog_resets, brownout_resets) = boot.counted_resets(kept);
+    let boot_id = boot.next_boot_id(valid.then_some(id), power_on_nonce);
     // SAFETY: as above.
     unsafe {
         core::ptr::write_volatile(words, KEPT_MAGIC);
         core::ptr::write_volatile(
             words.add(1),
-            u32::from(watchdog) << 16 | u32::from(brownout),
+            u32::from(watchdog_resets) << 16 | u32::from(brownout_resets),
         );
+        core::ptr::write_volatile(words.add(2), boot_id);
     }
-    (watchdog, brownout)
+    KeptAcrossResets {
+        watchdog_resets,
+        brownout_resets,
+        boot_id,
+    }
+}
+
+/// FNV-1a over the never-written RAM's power-up state, then the time base's count.
+fn power_on_nonce() -> u32 {
+    let noise = core::ptr::addr_of!(POWER_ON_NOISE).cast::<u32>();
+    let mut h: u32 = 0x811C_9DC5;
+    for i in 0..32 {
+        // SAFETY: `i` < 32 stays inside the static, which nothing writes; volatile because the
+        // compiler would otherwise treat memory never written as undefined.
+        let w = unsafe { core::ptr::read_volatile(noise.add(i)) };
+        h = (h ^ w).wrapping_mul(0x0100_0193);
+    }
+    (h ^ time_base_count()).wrapping_mul(0x0100_0193)
 }
 
 /// Sends bytes, blocking on the transmit register (115200 Bd: ~87 µs per byte).

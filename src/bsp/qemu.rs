@@ -241,6 +241,8 @@ pub fn init(dp: pac::Peripherals) -> Parts {
         boot: BootReport {
             reset_cause: 0,
             clock_fallback: false,
+            // Set by `init` from the RAM kept across resets.
+            boot_id: 0,
         },
     }
 }

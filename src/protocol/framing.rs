@@ -499,6 +499,7 @@ mod tests {
                 boot: BootReport {
                     reset_cause: u8::MAX,
                     clock_fallback: true,
+                    boot_id: u32::MAX,
                 },
             }),
         };

@@ -10,7 +10,7 @@ use super::codes::ErrorReply;
 
 /// Protocol version reported by Ready and Info; bumped on any incompatible message change. The
 /// host refuses a board of another version, naming both ([`peek_protocol_version`]).
-pub const PROTOCOL_VERSION: u16 = 4;
+pub const PROTOCOL_VERSION: u16 = 5;
 /// Largest data chunk of an upload or read-back.
 pub const CHUNK_LEN: usize = 64;
 
@@ -278,6 +278,12 @@ pub struct BootReport {
     /// The crystal did not start within 100 ms, or failed later (Clock Security System): the
     /// core runs from the HSI (±1 %).
     pub clock_fallback: bool,
+    /// Differs from one boot to the next, so a host that lost the link across a reset (and
+    /// missed READY) still tells a new boot from the old one: uptime alone cannot, since a new
+    /// boot's clock can have passed the old boot's last time stamp by the time the host is
+    /// back. High 16 bits: a nonce drawn at power-on; low 16 bits: boots since power-on
+    /// ([`BootReport::next_boot_id`]).
+    pub boot_id: u32,
 }
 
 impl BootReport {
@@ -295,6 +301,28 @@ impl BootReport {
     pub const WWDG: u8 = 1 << 5;
     /// Low-power reset.
     pub const LOW_POWER: u8 = 1 << 6;
+
+    /// This boot's id, given the id kept from the boot before (memory that survives a reset but
+    /// not a power cycle; None when it held nothing valid) and `power_on_nonce`, bits that differ
+    /// between power-ons (read only when a new nonce is needed). A reset keeps the nonce and
+    /// counts the boot; a power-on (or nothing kept) draws a new nonce and starts the count at 1.
+    pub fn next_boot_id(self, kept: Option<u32>, power_on_nonce: impl FnOnce() -> u32) -> u32 {
+        match kept {
+            Some(id) if self.reset_cause & Self::POR == 0 => {
+                // The count skips 0, so a kept id never equals a fresh one's count by wrapping.
+                let count = match (id as u16).wrapping_add(1) {
+                    0 => 1,
+                    n => n,
+                };
+                id & 0xFFFF_0000 | u32::from(count)
+            }
+            _ => {
+                let n = power_on_nonce();
+                // Fold all 32 bits into the 16 the id keeps.
+                (n ^ (n << 16)) & 0xFFFF_0000 | 1
+            }
+        }
+    }
 
     /// The (watchdog, brown-out) reset counts after this boot, given the counts kept from the
     /// boot before (memory that survives a reset but not a power cycle; None when it held
@@ -357,7 +385,7 @@ mod tests {
     fn watchdog_and_brown_out_resets_are_counted_from_power_on() {
         let boot = |cause| BootReport {
             reset_cause: cause,
-            clock_fallback: false,
+            ..BootReport::default()
         };
         let power_on = boot(BootReport::POR | BootReport::BOR | BootReport::PIN);
         assert_eq!(power_on.counted_resets(Some((7, 7))), (0, 0));
@@ -369,5 +397,38 @@ mod tests {
         // Nothing kept (first boot after flashing, or memory lost): counting starts afresh.
         assert_eq!(dog.counted_resets(None), (1, 0));
         assert_eq!(boot(BootReport::PIN).counted_resets(Some((3, 4))), (3, 4));
+    }
+
+    #[test]
+    fn a_reset_keeps_the_power_on_nonce_and_counts_the_boot_while_a_power_on_draws_a_new_one() {
+        let boot = |cause| BootReport {
+            reset_cause: cause,
+            ..BootReport::default()
+        };
+        let no_nonce = || -> u32 { panic!("a reset must not draw a new nonce") };
+        let dog = boot(BootReport::IWDG | BootReport::PIN);
+        assert_eq!(dog.next_boot_id(Some(0xBEEF_0001), no_nonce), 0xBEEF_0002);
+        assert_eq!(
+            boot(BootReport::PIN).next_boot_id(Some(0xBEEF_0002), no_nonce),
+            0xBEEF_0003
+        );
+        // The count skips 0 when it wraps, so every boot of one power-on differs from the last.
+        assert_eq!(dog.next_boot_id(Some(0xBEEF_FFFF), no_nonce), 0xBEEF_0001);
+        // A power-on (POR set) or nothing kept: a new nonce, folded to 16 bits, count 1.
+        let power_on = boot(BootReport::POR | BootReport::BOR | BootReport::PIN);
+        assert_eq!(
+            power_on.next_boot_id(Some(0xBEEF_0005), || 0x1234_0000),
+            0x1234_0001
+        );
+        assert_eq!(dog.next_boot_id(None, || 0x0000_5678), 0x5678_0001);
+        // Nonces that differ only in their high or only in their low half still give new ids.
+        assert_ne!(
+            dog.next_boot_id(None, || 0x0001_0000),
+            dog.next_boot_id(None, || 0x0002_0000)
+        );
+        assert_ne!(
+            dog.next_boot_id(None, || 0x0000_0001),
+            dog.next_boot_id(None, || 0x0000_0002)
+        );
     }
 }

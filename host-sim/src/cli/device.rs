@@ -170,6 +170,7 @@ pub fn info_json(i: &DeviceInfo) -> serde_json::Value {
         "reset_cause": i.boot.reset_cause,
         "reset_causes": reset_causes(&i.boot),
         "clock_fallback": i.boot.clock_fallback,
+        "boot_id": format!("{:#010x}", i.boot.boot_id),
         "active_table": i.active_table.map(table_id_text),
         "previous_table": i.previous_table.map(table_id_text),
         "rate_hz": i.rate_hz,
@@ -193,7 +194,7 @@ pub fn info_text(i: &DeviceInfo) -> String {
     };
     format!(
         "firmware        {}\nprotocol        {}\nboard           {:?}\nuptime          {:.3} s\n\
-         reset cause     {cause} ({:#04x}){}\nactive table    {}\nprevious table  {}\n\
+         reset cause     {cause} ({:#04x}){}\nboot id         {:#010x}\nactive table    {}\nprevious table  {}\n\
          rate            {} samples/s\nstreaming       {}\nsamples         {}\n\
          frames dropped  {}\n{}",
         i.firmware,
@@ -206,6 +207,7 @@ pub fn info_text(i: &DeviceInfo) -> String {
         } else {
             ""
         },
+        i.boot.boot_id,
         opt_id(i.active_table),
         opt_id(i.previous_table),
         i.rate_hz,
@@ -236,7 +238,7 @@ mod tests {
     fn reset_causes_are_named_bit_by_bit() {
         let b = BootReport {
             reset_cause: BootReport::PIN | BootReport::IWDG,
-            clock_fallback: false,
+            ..BootReport::default()
         };
         assert_eq!(reset_causes(&b), vec!["reset pin", "independent watchdog"]);
     }

@@ -107,6 +107,7 @@ fn context(ds: &Dataset) -> Context {
         tilt_term: crate::discover::baseline::tilt_term_g(ds)
             .map(|v| v.iter().map(|x| x * u).collect()),
         hysteresis: None,
+        full_rate: Vec::new(),
     }
 }
 

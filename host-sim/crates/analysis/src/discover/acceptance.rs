@@ -19,6 +19,9 @@ pub(super) fn refuse(list: &mut Vec<(String, String)>, name: &str, why: String) 
     list.push((name.to_owned(), why));
 }
 
+/// The refusal of a binned lag at its grid's lower edge says where the lag is fitted instead.
+pub(super) const FASTER_THAN_BINS: &str = "it is fitted on the full-rate rows";
+
 /// What a parameter at the edge of its range usually means.
 pub(super) fn edge_hint(e: &Effect, theta: f64, ds: &Dataset) -> String {
     let lower = effects::grid(e, ds)
@@ -29,6 +32,18 @@ pub(super) fn edge_hint(e: &Effect, theta: f64, ds: &Dataset) -> String {
             "; the position is {theta:.0} s, and its transition duration {duration_s:.0} s is the \
              longest searched: a change this slow is a drift, not a step"
         ),
+        // On bins of several rows a lag faster than two bins is only its low-frequency limit
+        // −τ·dc/dt there: the edge says the lag is faster than the bins, which the full-rate
+        // stage resolves (`fullrate`), not that the channel is noisy.
+        Effect::ThermalLag | Effect::AmbientCoupling(_)
+            if lower && ds.rows_per_point() >= super::fullrate::MIN_ROWS_PER_BIN =>
+        {
+            format!(
+                "; a lag faster than two bins ({:.1} s) is not resolved on the bins: \
+                 {FASTER_THAN_BINS} (full rate)",
+                2.0 * ds.dt_s
+            )
+        }
         Effect::ThermalLag | Effect::AmbientCoupling(_) if lower => {
             "; the shortest lag improving the fit is the signature of the channel's own \
              reading noise (errors in variables: smoothing a noisy regressor always helps), \

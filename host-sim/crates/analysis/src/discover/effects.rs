@@ -140,6 +140,32 @@ pub struct Context {
     /// once it has fitted one): its column is then that distribution scaled to width θ; without
     /// one, a single play of half-width θ.
     pub hysteresis: Option<super::hysteresis::Preisach>,
+    /// Lags found on the full-rate rows (`fullrate`), as their columns on the bins: a lag of τ
+    /// shorter than a bin has no exact column on the bins themselves (the discrete lag of the
+    /// block means at τ < Δt is not the block means of the lag), so its column is the block
+    /// means of the lag computed at the rows' own rate. [`columns`] returns it for that effect
+    /// at exactly that τ.
+    pub full_rate: Vec<FastColumn>,
+}
+
+/// A lag of the full-rate stage as a column of the binned model (see [`Context::full_rate`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct FastColumn {
+    /// `ThermalLag` or `AmbientCoupling(channel)`.
+    pub effect: Effect,
+    /// Its τ, s (found on the full-rate rows, held).
+    pub tau_s: f64,
+    /// The block means of its column at the full rate, on the bins.
+    pub column: Vec<f64>,
+}
+
+impl Context {
+    /// The full-rate column of `e` at `theta`, if the full-rate stage found that lag.
+    pub fn full_rate_column(&self, e: &Effect, theta: f64) -> Option<&FastColumn> {
+        self.full_rate
+            .iter()
+            .find(|f| f.effect == *e && f.tau_s == theta)
+    }
 }
 
 /// Tide series at the dataset's instants (evaluated at most every 60 s and interpolated
@@ -439,6 +465,9 @@ pub fn columns(e: &Effect, ds: &Dataset, ctx: &Context, theta: f64) -> Vec<Vec<f
             .map(|c| c.values.clone())
     };
     let u = ds.unit_per_g.unwrap_or(1.0);
+    if let Some(f) = ctx.full_rate_column(e, theta) {
+        return vec![f.column.clone()];
+    }
     match e {
         Effect::ThermalLag => temp()
             .map(|tc| {

@@ -20,8 +20,8 @@
 //! white reading noise (the floor of S_xx) attenuates Ĥ: it is subtracted from S_xx and the band
 //! stops where the channel's spectrum falls below [`FLOOR_FACTOR`] × that floor.
 
-use super::effects::{log_grid, Effect, Param};
-use super::import::{ChannelKind, Dataset};
+use super::effects::{self, log_grid, Effect, FastColumn, Param};
+use super::import::{block_means_like, ChannelKind, Dataset};
 use super::select::Accepted;
 use crate::numerics::linalg::least_squares;
 use crate::numerics::optimize::golden_section_min as golden;
@@ -396,6 +396,86 @@ pub fn analyse(
         });
     }
     Ok(out)
+}
+
+/// A fast term carried into the binned model: its column on the bins, its τ held at the
+/// full-rate value, its evidence from the full rate.
+#[derive(Debug, Clone)]
+pub struct InModel {
+    /// The column, effect and τ (`Context::full_rate`).
+    pub column: FastColumn,
+    /// σ of τ from the full-rate fit, s.
+    pub sigma_tau_s: f64,
+    /// The term's parameters as the full-rate fit gave them (`params_at_acceptance`).
+    pub params: Vec<(String, Param)>,
+    /// Its ΔBIC at the full rate.
+    pub delta_bic: f64,
+}
+
+/// The fast terms as columns of the binned model (`binned` from the same log as `full`): the
+/// catalogue's column of each, computed on the full-rate rows at the found τ and averaged into
+/// the bins. A term whose bins cannot be rebuilt is returned in the second list with why (it
+/// then stays a full-rate finding only, and the report says so).
+pub fn binned_columns(
+    full: &Dataset,
+    binned: &Dataset,
+    f: &FullRate,
+) -> (Vec<InModel>, Vec<(String, String)>) {
+    let (mut out, mut left) = (Vec::new(), Vec::new());
+    for t in &f.terms {
+        let Some(ch) = full.channels.iter().find(|c| c.name == t.channel) else {
+            continue;
+        };
+        let key = if t.name == "thermal_lag" {
+            "tau_s"
+        } else {
+            "lag_s"
+        };
+        let Some(tau) = param(t, key) else { continue };
+        let lagged = effects::lag_filter(&ch.values, &full.t_s, &full.segment_start, tau.value);
+        let (effect, col) = if ch.kind == ChannelKind::Temperature {
+            let e: Vec<f64> = lagged.iter().zip(&ch.values).map(|(l, x)| l - x).collect();
+            (Effect::ThermalLag, block_means_like(full, binned, &e))
+        } else {
+            let c = block_means_like(full, binned, &lagged).map(|mut c| {
+                let m = c.iter().sum::<f64>() / c.len().max(1) as f64;
+                c.iter_mut().for_each(|v| *v -= m);
+                c
+            });
+            (Effect::AmbientCoupling(ch.name.clone()), c)
+        };
+        let label = format!("{} ({})", t.name, t.channel);
+        match col {
+            Some(column) => out.push(InModel {
+                column: FastColumn {
+                    effect,
+                    tau_s: tau.value,
+                    column,
+                },
+                sigma_tau_s: tau.sigma,
+                params: t
+                    .params
+                    .iter()
+                    .map(|(k, v, s)| {
+                        (
+                            k.clone(),
+                            Param {
+                                value: *v,
+                                sigma: *s,
+                            },
+                        )
+                    })
+                    .collect(),
+                delta_bic: t.delta_bic,
+            }),
+            None => left.push((
+                label,
+                "its column could not be averaged into the selection's bins (the bins rebuilt                  from the rows differ): reported at the full rate only, not in the final model"
+                    .into(),
+            )),
+        }
+    }
+    (out, left)
 }
 
 /// The named parameters of a fast term as the report prints them.

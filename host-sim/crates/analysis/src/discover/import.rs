@@ -499,6 +499,44 @@ pub fn full_rate_from_log(log: &Log, opts: &DatasetOptions) -> Result<Dataset, I
     reduce(log, opts, false)
 }
 
+/// The block means, on the bins of `binned`, of a series `v` over the rows of `full` (both from
+/// the same log and options: [`full_rate_from_log`], [`dataset_from_log`]): the bins are
+/// rebuilt as [`reduce`] builds them (bin index from the first row's time, a new bin at an input
+/// change). `None` when the rebuilt bins are not the dataset's (count or mean time differ).
+pub fn block_means_like(full: &Dataset, binned: &Dataset, v: &[f64]) -> Option<Vec<f64>> {
+    let bin = binned.dt_s;
+    let (&t0, true) = (full.t_s.first()?, v.len() == full.len() && bin > 0.0) else {
+        return None;
+    };
+    let input = full
+        .channel(ChannelKind::Input)
+        .map(|c| c.values.as_slice());
+    let (mut sums, mut ts, mut counts) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut cur, mut cur_input) = (None, f64::NAN);
+    for (i, (&t, &x)) in full.t_s.iter().zip(v).enumerate() {
+        let b = ((t - t0) / bin).floor() as i64;
+        let moved = input.is_some_and(|c| c[i] != cur_input);
+        if cur != Some(b) || moved {
+            cur = Some(b);
+            cur_input = input.map_or(f64::NAN, |c| c[i]);
+            sums.push(0.0);
+            ts.push(0.0);
+            counts.push(0.0);
+        }
+        let k = sums.len() - 1;
+        sums[k] += x;
+        ts[k] += t;
+        counts[k] += 1.0;
+    }
+    let same = ts.len() == binned.len()
+        && ts
+            .iter()
+            .zip(&counts)
+            .zip(&binned.t_s)
+            .all(|((s, c), tb)| (s / c - tb).abs() <= 1e-6 * bin);
+    same.then(|| sums.iter().zip(&counts).map(|(s, c)| s / c).collect())
+}
+
 fn reduce(log: &Log, opts: &DatasetOptions, binning: bool) -> Result<Dataset, ImportError> {
     if binning && !(MIN_MAX_POINTS..=MAX_MAX_POINTS).contains(&opts.max_points) {
         return Err(ImportError::Shape(format!(
@@ -804,6 +842,14 @@ impl Dataset {
         }
     }
 
+    /// Mean rows read per point (1 when not binned or not known).
+    pub fn rows_per_point(&self) -> f64 {
+        if self.samples_per_point.is_empty() {
+            1.0
+        } else {
+            self.samples_per_point.iter().sum::<f64>() / self.samples_per_point.len() as f64
+        }
+    }
     /// The first channel of a kind.
     pub fn channel(&self, kind: ChannelKind) -> Option<&Channel> {
         self.channels.iter().find(|c| c.kind == kind)

@@ -52,7 +52,13 @@ pub(super) fn joint_fit(
     let mut sigmas = vec![f64::NAN; accepted.len()];
     for i in 0..accepted.len() {
         let th = thetas[i];
+        // A lag found on the full-rate rows keeps its τ and σ from there: on the bins its τ is
+        // not resolved (only its column at that τ is known, `Context::full_rate`).
         if !th.is_finite() {
+            continue;
+        }
+        if ctx.full_rate_column(&accepted[i].effect, th).is_some() {
+            sigmas[i] = accepted[i].theta.sigma;
             continue;
         }
         let e = accepted[i].effect.clone();

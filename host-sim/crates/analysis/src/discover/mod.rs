@@ -116,6 +116,7 @@ pub fn context(ds: &Dataset, base: &baseline::Baseline) -> Context {
         tide_tilt_rad: tide.map(|t| (t.1, t.2)),
         tilt_term,
         hysteresis: None,
+        full_rate: Vec::new(),
     }
 }
 
@@ -130,6 +131,19 @@ pub const FIT_ON_SMOOTHED_CHANNELS: bool = true;
 /// Runs the whole discovery on a dataset.
 pub fn discover(
     ds: Dataset,
+    table: Option<&accomp::table::CalibrationTable>,
+    cfg: &select::Config,
+) -> Result<Discovery, baseline::BaselineError> {
+    discover_binned(ds, None, table, cfg)
+}
+
+/// [`discover`] on a binned dataset with its full-rate rows (`full`, the same log unbinned):
+/// after the binned rounds the full-rate stage ([`fullrate`]) fits the lags faster than the
+/// bins, and what it finds joins the final model (its column averaged into the bins, τ held)
+/// before the joint fit, so the parameters, the residual and the checks after it hold it.
+pub fn discover_binned(
+    ds: Dataset,
+    full: Option<Dataset>,
     table: Option<&accomp::table::CalibrationTable>,
     cfg: &select::Config,
 ) -> Result<Discovery, baseline::BaselineError> {
@@ -149,10 +163,23 @@ pub fn discover(
     };
     let ctx = context(&ds, &base);
     let (cands, not_candidates) = effects::candidates(&ds, &ctx, base.tilt_subtracted);
-    let sel = select::select(&ds, &base.target, &base.columns, &cands, &ctx, cfg);
-    // The accepted hysteresis's Preisach distribution shapes its column from here on.
+    let rounds = select::rounds(&ds, &base.target, &base.columns, &cands, &ctx, cfg);
+    let mut full_rate = full.map(|f| fullrate::analyse(&f, &ds, &rounds.accepted).map(|r| (f, r)));
+    let fast = match &mut full_rate {
+        Some(Ok((f, r))) => {
+            let (fast, left) = fullrate::binned_columns(f, &ds, r);
+            r.refused.extend(left);
+            fast
+        }
+        _ => Vec::new(),
+    };
+    let full_rate = full_rate.map(|r| r.map(|(_, r)| r));
+    let sel = select::finish(&ds, &base.target, &base.columns, cfg, rounds, &fast);
+    // The accepted hysteresis's Preisach distribution and the full-rate lags' columns shape
+    // their columns from here on.
     let ctx = Context {
         hysteresis: sel.hysteresis.clone(),
+        full_rate: sel.full_rate_columns.clone(),
         ..ctx
     };
     let spectrum_before = residual::periodogram(&ds.t_s, &sel.baseline_residual, 4096);
@@ -206,7 +233,7 @@ pub fn discover(
         channel_noise,
         measured_channels,
         tidal,
-        full_rate: None,
+        full_rate,
         table_check,
         unexplained,
         dataset: ds,
@@ -248,16 +275,13 @@ pub fn discover_log(
     note_bad_rows(&mut ds, bad);
     // Bins of several rows hide what is faster than two of them: the full-rate rows are kept
     // for the fast terms (the log itself is dropped first: it holds every column read).
-    let rows_per_bin = ds.samples_per_point.iter().sum::<f64>() / ds.len().max(1) as f64;
-    let full = if rows_per_bin >= fullrate::MIN_ROWS_PER_BIN {
+    let full = if ds.rows_per_point() >= fullrate::MIN_ROWS_PER_BIN {
         Some(import::full_rate_from_log(&log, &opts)?)
     } else {
         None
     };
     drop(log);
-    let mut d = discover(ds, table, cfg)?;
-    d.full_rate = full.map(|f| fullrate::analyse(&f, &d.dataset, &d.selection.accepted));
-    Ok(d)
+    Ok(discover_binned(ds, full, table, cfg)?)
 }
 
 /// Says in the dataset's notes how many rows the reader skipped and why (the first ten).

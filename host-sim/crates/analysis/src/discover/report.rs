@@ -58,6 +58,7 @@ pub fn json(d: &Discovery) -> Value {
                 "prediction_z_forward_after": a.forward_after.prediction_z,
                 "gain_forward": a.gain_forward(),
                 "delta_bic": a.delta_bic,
+                "found_at_full_rate": a.full_rate,
             });
             if let Some(c) = a.effect.channel() {
                 o["channel"] = json!(c);
@@ -255,7 +256,7 @@ pub fn text(d: &Discovery) -> String {
             .collect();
         let _ = writeln!(
             o,
-            "  {}. {}{}: {}\n     ΔBIC {:.1}; std {:.4e} → {:.4e} {unit}; out of sample {:.4e} → {:.4e}; gain {:.1} %; forward gain {:.1} %",
+            "  {}. {}{}{}: {}\n     ΔBIC {:.1}; std {:.4e} → {:.4e} {unit}; out of sample {:.4e} → {:.4e}; gain {:.1} %; forward gain {:.1} %",
             i + 1,
             a.effect.name(),
             a.effect
@@ -263,6 +264,12 @@ pub fn text(d: &Discovery) -> String {
                 .map(|c| format!(" ({c}, {})", d.dataset.channel_unit(c)))
                 .or_else(|| a.effect.drift_family().map(|f| format!(" (drift, {f})")))
                 .unwrap_or_default(),
+            if a.full_rate {
+                " [found on the full-rate rows: τ and ΔBIC from there, coefficient from the \
+                 binned joint fit]"
+            } else {
+                ""
+            },
             ps.join(", "),
             a.delta_bic,
             a.std_before,

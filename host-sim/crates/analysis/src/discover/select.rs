@@ -92,6 +92,11 @@ pub struct Accepted {
     pub forward_before: CvScore,
     /// After.
     pub forward_after: CvScore,
+    /// Found on the full-rate rows (`fullrate`): τ is held at the full-rate value and its σ;
+    /// the coefficient comes from the binned joint fit, `delta_bic` and `params_at_acceptance`
+    /// from the full rate; the scores before/after are the binned final model without and
+    /// with its column.
+    pub full_rate: bool,
 }
 
 impl Accepted {
@@ -148,12 +153,14 @@ pub struct Selection {
     pub hysteresis: Option<Preisach>,
     /// Of the final model.
     pub final_forward: CvScore,
+    /// The columns on the bins of the lags found on the full-rate rows (`Context::full_rate`).
+    pub full_rate_columns: Vec<effects::FastColumn>,
 }
 
 /// Candidates re-scored with a re-fitted noise model per round.
 pub(super) const RESCORE: usize = 4;
 
-/// Runs the greedy selection from a baseline (target and free columns).
+/// Runs the greedy selection from a baseline (target and free columns) and the final joint fit.
 pub fn select(
     ds: &Dataset,
     target: &[f64],
@@ -162,6 +169,36 @@ pub fn select(
     ctx: &Context,
     cfg: &Config,
 ) -> Selection {
+    let r = rounds(ds, target, base_cols, cands, ctx, cfg);
+    finish(ds, target, base_cols, cfg, r, &[])
+}
+
+/// The selection after its greedy rounds, before the final joint fit ([`finish`]).
+pub struct Rounds {
+    /// Accepted so far.
+    pub accepted: Vec<Accepted>,
+    cols: Vec<Vec<f64>>,
+    last_noise: (usize, NoiseFit),
+    warm: super::noise::NoiseModel,
+    cur0_noise: NoiseFit,
+    base_raw: Vec<f64>,
+    baseline_cv: CvScore,
+    baseline_std: f64,
+    last_round: Vec<(String, f64)>,
+    refused: Vec<(String, String)>,
+    lag_or_loop: Vec<String>,
+    ctx: Context,
+}
+
+/// The greedy rounds of the selection.
+pub fn rounds(
+    ds: &Dataset,
+    target: &[f64],
+    base_cols: &[Vec<f64>],
+    cands: &[Effect],
+    ctx: &Context,
+    cfg: &Config,
+) -> Rounds {
     let tides = cands
         .iter()
         .any(|e| matches!(e, Effect::TidalGravity | Effect::TidalTilt));
@@ -414,18 +451,156 @@ pub fn select(
                 ambiguous_with,
                 forward_before: fwd_before,
                 forward_after: fwd_after,
+                full_rate: false,
             });
             cur_std = std_after;
             done.push(s.effect);
         }
     }
-    let final_noise = if last_noise.0 == cols.len() {
+    Rounds {
+        accepted,
+        cols,
+        last_noise,
+        warm,
+        cur0_noise: cur0.noise,
+        base_raw,
+        baseline_cv,
+        baseline_std,
+        last_round,
+        refused,
+        lag_or_loop,
+        ctx: ctx_own,
+    }
+}
+
+/// The final model: the accepted effects, the fast terms found on the full-rate rows (`fast`,
+/// their columns on the bins, τ held), the final noise model and the joint fit of them all.
+pub fn finish(
+    ds: &Dataset,
+    target: &[f64],
+    base_cols: &[Vec<f64>],
+    cfg: &Config,
+    r: Rounds,
+    fast: &[super::fullrate::InModel],
+) -> Selection {
+    let Rounds {
+        mut accepted,
+        mut cols,
+        last_noise,
+        warm,
+        cur0_noise,
+        base_raw,
+        baseline_cv,
+        baseline_std,
+        last_round,
+        mut refused,
+        lag_or_loop,
+        ctx: mut ctx_own,
+    } = r;
+    let cur0_model = cur0_noise.model.clone();
+    let mut final_noise = if last_noise.0 == cols.len() {
         last_noise.1
     } else {
         fit_state(ds, &cols, target, NoiseChoice::Fit(Some(&warm)))
             .0
             .noise
     };
+    if !fast.is_empty() {
+        // One transfer function per channel: on the bins a lag of τ ≪ one bin is only its
+        // low-frequency limit −c·τ·dc/dt, which a rate coupling (or a second-order lag at the
+        // edge of its grid) of the same channel took in the binned rounds; the full rate
+        // resolves it as the lag, which replaces them.
+        let replaced = |a: &Accepted| {
+            fast.iter().any(|f| {
+                let ch = match &f.column.effect {
+                    Effect::AmbientCoupling(c) => Some(c.as_str()),
+                    e => e.coupled_channel(ds),
+                };
+                matches!(&a.effect, Effect::RateCoupling(c) | Effect::Lag2Coupling(c)
+                    if Some(c.as_str()) == ch)
+            })
+        };
+        if accepted.iter().any(replaced) {
+            for a in accepted.iter().filter(|a| replaced(a)) {
+                refused.push((
+                    a.effect.name().to_owned(),
+                    format!(
+                        "accepted on the bins (ΔBIC {:.1}), replaced by the lag of its channel \
+                         found on the full-rate rows: on the bins a lag much shorter than a bin \
+                         is −coefficient·τ·dc/dt, the same column (one transfer function per \
+                         channel)",
+                        a.delta_bic
+                    ),
+                ));
+            }
+            accepted.retain(|a| !replaced(a));
+            cols = base_cols.to_vec();
+            for a in &accepted {
+                cols.extend(effects::columns(&a.effect, ds, &ctx_own, a.theta.value));
+            }
+            final_noise = fit_state(
+                ds,
+                &cols,
+                target,
+                NoiseChoice::Fit(Some(&final_noise.model)),
+            )
+            .0
+            .noise;
+        }
+        // The fast terms join the model the binned rounds built, each scored on the bins
+        // against the model without it (its evidence is the full-rate ΔBIC).
+        let (_, mut raw, _) = fit_state(ds, &cols, target, NoiseChoice::Fixed(&final_noise));
+        let mut before = cross_validate(ds, &cols, target, &final_noise.model, cfg);
+        let mut fwd_before = forward_validate(ds, &cols, target, &final_noise.model);
+        for f in fast {
+            cols.push(f.column.column.clone());
+            let (_, raw1, _) = fit_state(ds, &cols, target, NoiseChoice::Fixed(&final_noise));
+            let after = cross_validate(ds, &cols, target, &final_noise.model, cfg);
+            let fwd_after = forward_validate(ds, &cols, target, &final_noise.model);
+            let theta = Param {
+                value: f.column.tau_s,
+                sigma: f.sigma_tau_s,
+            };
+            accepted.push(Accepted {
+                effect: f.column.effect.clone(),
+                theta,
+                params: f.params.clone(),
+                params_at_acceptance: f.params.clone(),
+                delta_bic: f.delta_bic,
+                std_before: std(&raw),
+                std_after: std(&raw1),
+                cv_before: before,
+                cv_after: after,
+                ambiguous_with: None,
+                forward_before: fwd_before,
+                forward_after: fwd_after,
+                full_rate: true,
+            });
+            // The binned rounds' refusal of the same lag at the lower edge of its grid is
+            // answered by the full rate.
+            let name = f.column.effect.name();
+            for (_, why) in refused
+                .iter_mut()
+                .filter(|(n, why)| n == name && why.contains(super::acceptance::FASTER_THAN_BINS))
+            {
+                why.push_str(&format!(
+                    "; found on the full-rate rows: τ = {:.1} ± {:.1} s, in the final model",
+                    theta.value, theta.sigma
+                ));
+            }
+            ctx_own.full_rate.push(f.column.clone());
+            (raw, before, fwd_before) = (raw1, after, fwd_after);
+        }
+        // The lag's low-frequency part had inflated the noise model's slow components.
+        final_noise = fit_state(
+            ds,
+            &cols,
+            target,
+            NoiseChoice::Fit(Some(&final_noise.model)),
+        )
+        .0
+        .noise;
+    }
     let joint = (!accepted.is_empty())
         .then(|| joint_fit(ds, target, base_cols, &mut accepted, &ctx_own, &final_noise));
     if let Some(j) = &joint {
@@ -435,8 +610,8 @@ pub fn select(
         }
     }
     let (cur_f, final_raw, beta) = fit_state(ds, &cols, target, NoiseChoice::Fixed(&final_noise));
-    let final_cv = cross_validate(ds, &cols, target, &cur0.noise.model, cfg);
-    let final_forward = forward_validate(ds, &cols, target, &cur0.noise.model);
+    let final_cv = cross_validate(ds, &cols, target, &cur0_model, cfg);
+    let final_forward = forward_validate(ds, &cols, target, &cur0_model);
     Selection {
         accepted,
         columns: cols,
@@ -449,16 +624,17 @@ pub fn select(
         final_residual: final_raw,
         final_cv,
         last_round,
-        warnings: noise_warnings(&cur0.noise, &cur_f.noise)
+        warnings: noise_warnings(&cur0_noise, &cur_f.noise)
             .into_iter()
             .chain(lag_or_loop)
             .collect(),
         refused,
         joint,
-        baseline_forward: forward_validate(ds, base_cols, target, &cur0.noise.model),
+        baseline_forward: forward_validate(ds, base_cols, target, &cur0_model),
         hysteresis: ctx_own.hysteresis.clone(),
+        full_rate_columns: ctx_own.full_rate.clone(),
         final_forward,
-        baseline_noise: cur0.noise,
+        baseline_noise: cur0_noise,
         final_noise: cur_f.noise,
     }
 }

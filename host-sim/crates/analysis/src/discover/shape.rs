@@ -136,7 +136,9 @@ pub fn check(
     let mut out = Vec::new();
     for (ia, a) in accepted.iter().enumerate() {
         let fam = family(&a.effect, ds, a.theta.value);
-        if fam.len() < 2 || counts[ia] != 1 {
+        // A lag found on the full-rate rows was checked there (its χ²/dof over the band); its
+        // family's members on the bins are not its shape.
+        if fam.len() < 2 || counts[ia] != 1 || a.full_rate {
             continue;
         }
         let start = k0 + counts[..ia].iter().sum::<usize>();
@@ -308,6 +310,7 @@ mod tests {
             std_after: 1.0,
             cv_before: cv,
             cv_after: cv,
+            full_rate: false,
             forward_before: cv,
             forward_after: cv,
         };

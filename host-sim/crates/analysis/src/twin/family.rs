@@ -50,6 +50,10 @@ const ALPHA: [i32; 4] = [0, -1, -2, -4];
 /// Lowest periodogram bins of a segment left out of the likelihood (bin 1 mixes in bin 0,
 /// where a steep spectrum has no finite value).
 pub const SKIP_BINS: usize = 2;
+/// The whole record's lowest bin in the likelihood: bin 1, the slowest wander of the drift
+/// (one cycle over the record). It mixes in bin 0, the differences' mean, which the comparison's
+/// detrending removes (its power is taken as zero).
+const RECORD_FIRST_BIN: usize = 1;
 /// The record is cut into this many segments overlapping by half.
 pub const SEGMENTS_PER_RECORD: usize = 7;
 /// Equivalent noise bandwidth of the Hann window, bins.
@@ -144,6 +148,9 @@ impl Bin {
         let mut c = [0.0; 4];
         for j in 0..3 {
             let f = self.f[j];
+            if f <= 0.0 {
+                continue;
+            }
             let l = HANN_MIX[j] * self.g[j] / (1.0 + (f / fc).powi(2));
             c[0] += l;
             c[1] += l / f;
@@ -156,6 +163,7 @@ impl Bin {
     /// The expected periodogram with log parameters `p`.
     fn expected(&self, p: &[f64; PARAMS]) -> f64 {
         (0..3)
+            .filter(|&j| self.f[j] > 0.0)
             .map(|j| HANN_MIX[j] * self.g[j] * psd(p, self.f[j]))
             .sum()
     }
@@ -163,6 +171,7 @@ impl Bin {
     /// ∂E/∂ln f_c with levels `h`.
     fn d_ln_fc(&self, h: &[f64; 4], fc: f64) -> f64 {
         (0..3)
+            .filter(|&j| self.f[j] > 0.0)
             .map(|j| {
                 let f = self.f[j];
                 let u = (f / fc).powi(2);
@@ -193,7 +202,7 @@ fn diff_periodograms(placed: &[f64], dt_s: f64) -> Result<Vec<Bin>, FamilyError>
     let mut out = Vec::new();
     let mut start = 0;
     while start + n <= d.len() {
-        segment_bins(&d[start..start + n], dt_s, 0.0, &mut out);
+        segment_bins(&d[start..start + n], dt_s, 0.0, SKIP_BINS, &mut out);
         start += (n / 2).max(1);
     }
     // The frequencies below the segments' lowest bin (the slowest drift): the whole record.
@@ -201,14 +210,15 @@ fn diff_periodograms(placed: &[f64], dt_s: f64) -> Result<Vec<Bin>, FamilyError>
         &d,
         dt_s,
         SKIP_BINS.max(2) as f64 / (n as f64 * dt_s),
+        RECORD_FIRST_BIN,
         &mut out,
     );
     Ok(out)
 }
 
-/// Hann-tapered periodogram bins of one stretch of differences, bins ≥ 2 (and below `below`
-/// Hz when it is positive).
-fn segment_bins(d: &[f64], dt_s: f64, below: f64, out: &mut Vec<Bin>) {
+/// Hann-tapered periodogram bins of one stretch of differences, bins ≥ `first` (and below
+/// `below` Hz when it is positive).
+fn segment_bins(d: &[f64], dt_s: f64, below: f64, first: usize, out: &mut Vec<Bin>) {
     let n = d.len();
     let w: Vec<f64> = (0..n)
         .map(|i| 0.5 - 0.5 * (2.0 * std::f64::consts::PI * i as f64 / n as f64).cos())
@@ -218,7 +228,7 @@ fn segment_bins(d: &[f64], dt_s: f64, below: f64, out: &mut Vec<Bin>) {
     let freq = |k: usize| k as f64 / (n as f64 * dt_s);
     let mut xw: Vec<f64> = d.iter().zip(&w).map(|(a, b)| a * b).collect();
     let spec = crate::numerics::fft::half_spectrum(&mut xw);
-    for k in SKIP_BINS.max(2)..spec.len().saturating_sub(1) {
+    for k in first.max(1)..spec.len().saturating_sub(1) {
         if below > 0.0 && freq(k) >= below {
             break;
         }
@@ -303,6 +313,16 @@ impl NoiseFamily {
             bins: bins.len(),
             neg_loglik: nll,
         })
+    }
+
+    /// −ℓ of the family refitted to another series at this fit's corner (the levels at their
+    /// maximum, the corner held): the profile likelihood of a change to the series' mean, such
+    /// as a drift polynomial removed.
+    pub fn neg_loglik_of(&self, placed: &[f64]) -> f64 {
+        match diff_periodograms(placed, self.dt_s) {
+            Ok(bins) if bins.len() == self.bins => levels_best(&bins, self.ln_params[4]).1,
+            _ => f64::INFINITY,
+        }
     }
 
     /// Whether parameter `i` is resolved (above the bottom of its range; the filter: below the

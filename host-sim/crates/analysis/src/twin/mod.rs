@@ -18,6 +18,7 @@ mod from_discovery;
 mod noise;
 #[cfg(test)]
 mod tests;
+pub mod transients;
 
 pub use error::TwinError;
 pub use from_discovery::{scenario_effects_drawn, scenario_effects_from_discovery};
@@ -121,6 +122,8 @@ struct GridNoise {
     cells: Vec<usize>,
     /// Cells in the grid.
     len: usize,
+    /// The record's transient disturbances, when found: members draw them too.
+    transients: Option<transients::Transients>,
 }
 
 /// The scenario with every random process silenced: the deterministic part.
@@ -177,7 +180,10 @@ impl Twin {
                 if let Some(g) = &self.family {
                     let mut rng = stream(seed, TWIN_NOISE_STREAM);
                     let f = g.family.drawn(&mut rng);
-                    let x = f.synthesise(g.len, &mut rng);
+                    let mut x = f.synthesise(g.len, &mut rng);
+                    if let Some(t) = &g.transients {
+                        t.add_drawn(&mut x, &mut rng);
+                    }
                     for (y, &c) in out.iter_mut().zip(&g.cells) {
                         *y += x.get(c).copied().unwrap_or(f64::NAN);
                     }
@@ -198,7 +204,18 @@ impl Twin {
             family: family.clone(),
             cells: cells.to_vec(),
             len,
+            transients: None,
         });
+        t
+    }
+
+    /// The same twin whose members also draw the record's transient disturbances (with a noise
+    /// family only; nothing changes without one).
+    pub fn with_transients(&self, found: &transients::Transients) -> Twin {
+        let mut t = self.clone();
+        if let Some(g) = &mut t.family {
+            g.transients = (!found.events.is_empty()).then(|| found.clone());
+        }
         t
     }
 

@@ -123,6 +123,16 @@ pub struct VirtualBoard {
 impl VirtualBoard {
     /// Powers a board up at world time `world_us` on `flash` (the tables survive in it).
     pub fn boot(flash: BoardFlash, world_us: u64, reset_cause: u8) -> Self {
+        Self::boot_after(flash, world_us, reset_cause, None)
+    }
+
+    /// A boot, given the boot id the board's reset-surviving RAM kept (None: a power-on).
+    fn boot_after(
+        flash: BoardFlash,
+        world_us: u64,
+        reset_cause: u8,
+        kept_boot_id: Option<u32>,
+    ) -> Self {
         let clock = Clock::default();
         // The board's clock starts at its power-up; 1 ms for the reset sequence.
         clock.set(1_000);
@@ -130,9 +140,20 @@ impl VirtualBoard {
         let layout = flash::SLOT_LAYOUT;
         let stalled_us = flash.stalled_us.clone();
         let mut service = Service::new(Board::Frontend, flash, layout);
-        service.set_boot_report(BootReport {
+        let report = BootReport {
             reset_cause,
             clock_fallback: false,
+            boot_id: 0,
+        };
+        // The power-on nonce: a freshly seeded hasher differs in every process and every call,
+        // as the SRAM's power-up state differs between a real board's power-ons.
+        let nonce = || {
+            use std::hash::BuildHasher;
+            std::collections::hash_map::RandomState::new().hash_one(world_us) as u32
+        };
+        service.set_boot_report(BootReport {
+            boot_id: report.next_boot_id(kept_boot_id, nonce),
+            ..report
         });
         let mut b = VirtualBoard {
             board: accomp_chipsim::Board::new(clock),
@@ -173,11 +194,12 @@ impl VirtualBoard {
     /// faults still in force (they are outside the MCU).
     pub fn reset(self, world_us: u64, reset_cause: u8) -> std::io::Result<Self> {
         let faults = self.faults;
+        let boot_id = self.service.boot_report().boot_id;
         let flash = self
             .service
             .into_flash()
             .ok_or_else(|| std::io::Error::other("the board's flash store was unusable"))?;
-        let mut b = VirtualBoard::boot(flash, world_us, reset_cause);
+        let mut b = VirtualBoard::boot_after(flash, world_us, reset_cause, Some(boot_id));
         b.faults = faults;
         Ok(b)
     }

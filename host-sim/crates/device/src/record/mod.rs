@@ -245,6 +245,9 @@ struct Recorder<'a> {
     start_unix_s: Option<f64>,
     clock: ClockModel,
     last_seq: Option<u32>,
+    /// Info's boot id of the boot the last frames came from (None: not known, as when a
+    /// recording is appended to: then only the board's uptime tells a new boot).
+    last_boot_id: Option<u32>,
     last_status: Option<Status>,
     frames_dropped: Option<u32>,
     /// The device's counters as last read (None: not yet on this connection).
@@ -527,6 +530,7 @@ pub fn record(
         start_unix_s: existing.as_ref().map(|e| e.start_unix_s),
         clock: ClockModel::new(last),
         last_seq: existing.as_ref().and_then(|e| e.last.map(|l| l.1)),
+        last_boot_id: None,
         last_status: None,
         frames_dropped: None,
         counters: None,
@@ -621,11 +625,16 @@ pub fn record(
                         r.summary.reconnects += 1;
                         r.event(t, "reconnected", format!("after {secs:.1} s"))?;
                     }
-                    // Same boot when the board's clock is past the last frame's.
-                    let same_boot = r
-                        .clock
-                        .last()
-                        .is_some_and(|l| r.last_seq.is_some() && uptime_us >= l.board_us);
+                    // Same boot when the boot id is the last frames' and the board's clock is
+                    // past the last frame's. The id decides: a new boot's clock may well have
+                    // passed the old boot's last time stamp by the time the link is back.
+                    let boot_id = newdev.info.boot.boot_id;
+                    let same_boot = r.clock.last().is_some_and(|l| {
+                        r.last_seq.is_some()
+                            && uptime_us >= l.board_us
+                            && r.last_boot_id.is_none_or(|id| id == boot_id)
+                    });
+                    r.last_boot_id = Some(boot_id);
                     if same_boot {
                         r.clock.continue_boot();
                     } else if r.clock.last().is_some() {
@@ -636,7 +645,8 @@ pub fn record(
                             t,
                             "board_reset",
                             format!(
-                                "uptime {:.3} s, reset cause {:#04x}: a new boot",
+                                "uptime {:.3} s, reset cause {:#04x}, boot id {boot_id:#010x}: \
+                                 a new boot",
                                 newdev.info.uptime_us as f64 / 1e6,
                                 newdev.info.boot.reset_cause
                             ),
@@ -715,12 +725,14 @@ pub fn record(
                 })();
                 match restart {
                     Ok(info) => {
+                        r.last_boot_id = Some(info.boot.boot_id);
                         r.event(
                             t,
                             "board_reset",
                             format!(
-                                "READY: a new boot, reset cause {:#04x}; stream restarted",
-                                info.boot.reset_cause
+                                "READY: a new boot, reset cause {:#04x}, boot id {:#010x}; \
+                                 stream restarted",
+                                info.boot.reset_cause, info.boot.boot_id
                             ),
                         )?;
                         r.counters = None;

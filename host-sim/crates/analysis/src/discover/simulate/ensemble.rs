@@ -18,6 +18,11 @@ pub struct Yardstick<'a> {
     pub welch: Option<Welch>,
     /// Measured channels (name, spectra on the Welch segments).
     pub channels: Vec<(String, ChannelSpectra)>,
+    /// Order of the drift polynomial removed from every residual (1: level and linear rate;
+    /// see [`super::drift`]).
+    pub drift_order: usize,
+    /// The record's time on [−1, 1] (the polynomials' argument).
+    unit_t: Vec<f64>,
 }
 
 impl<'a> Yardstick<'a> {
@@ -40,26 +45,33 @@ impl<'a> Yardstick<'a> {
             grid,
             welch,
             channels,
+            drift_order: 1,
+            unit_t: super::drift::unit_time(&ds.t_s),
         }
     }
 
-    /// Offset and linear drift (least squares, per record) removed: the level and the linear
-    /// drift rate of an instrument are calibration constants, not predictions of the simulation.
+    /// The same yardstick removing a drift polynomial of `order` from every residual.
+    pub fn with_drift_order(mut self, order: usize) -> Self {
+        self.drift_order = order.max(1);
+        self
+    }
+
+    /// The record's time on [−1, 1].
+    pub fn unit_time(&self) -> &[f64] {
+        &self.unit_t
+    }
+
+    /// Offset, linear drift and the drift polynomial's higher terms up to
+    /// [`Yardstick::drift_order`] (least squares, per record) removed: the level, the drift rate
+    /// and the shape of a smooth drift are calibration constants of an instrument, not
+    /// predictions of the simulation; the measured residual and every member's are treated
+    /// alike.
     pub fn detrend(&self, r: &[f64]) -> Vec<f64> {
-        let t = &self.ds.t_s;
-        let n = r.len().min(t.len());
-        if n < 2 {
+        let n = r.len().min(self.unit_t.len());
+        if n < self.drift_order + 1 {
             return r.to_vec();
         }
-        let mt = t[..n].iter().sum::<f64>() / n as f64;
-        let mr = r[..n].iter().sum::<f64>() / n as f64;
-        let (mut sxy, mut sxx) = (0.0, 0.0);
-        for i in 0..n {
-            sxy += (t[i] - mt) * (r[i] - mr);
-            sxx += (t[i] - mt) * (t[i] - mt);
-        }
-        let b = if sxx > 0.0 { sxy / sxx } else { 0.0 };
-        (0..n).map(|i| r[i] - mr - b * (t[i] - mt)).collect()
+        super::drift::remove(&self.unit_t[..n], &r[..n], self.drift_order).1
     }
 
     /// The views of a residual (already detrended).

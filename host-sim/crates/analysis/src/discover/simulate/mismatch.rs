@@ -64,8 +64,8 @@ const TIDE_BANDS_CPD: [(f64, f64); 3] = [(0.8, 1.15), (1.75, 2.1), (2.8, 3.1)];
 /// The likely cause of a mismatch the extended twin leaves, named from where it lies: a
 /// coherent band → a coupling to that channel; tidal bands → the tide model; slower than a day
 /// → the instrument's non-linear drift; the top octave → the output filter or aliasing; short
-/// τ or a broad band within ×1.5 → a noise level that changes over the record (the members'
-/// is stationary); else a cause outside the catalogue. `nyquist_cpd`: the record's Nyquist
+/// τ or a broad band within ×1.5 → the noise's spectral shape (a process the power-law family
+/// lacks, or a level that changes); else a cause outside the catalogue. `nyquist_cpd`: the record's Nyquist
 /// frequency in cycles/day.
 pub fn likely_cause(m: &Mismatch, nyquist_cpd: f64) -> String {
     let (lo_cpd, hi_cpd) = match m.quantity {
@@ -85,8 +85,8 @@ pub fn likely_cause(m: &Mismatch, nyquist_cpd: f64) -> String {
         return "the tide model (a constituent or loading the twin's tide lacks)".into();
     }
     if hi_cpd <= 1.0 || (m.quantity == Quantity::Adev && m.to >= DAY_S) {
-        return "the instrument's slow non-linear drift (beyond the noise family's drift-rate \
-                random walk)"
+        return "the instrument's slow non-linear drift (beyond the drift polynomial and the noise \
+                family's random walks)"
             .into();
     }
     if lo_cpd >= 0.5 * nyquist_cpd {
@@ -100,7 +100,10 @@ pub fn likely_cause(m: &Mismatch, nyquist_cpd: f64) -> String {
         1.0 / m.factor
     };
     if f < 1.5 {
-        return "a noise level that changes over the record (the members' is stationary)".into();
+        return "the noise's spectral shape between the family's power laws (a broad excess \
+                within ×1.5: a process at these periods the family lacks, or a noise level that \
+                changes over the record)"
+            .into();
     }
     "a cause outside the catalogue".into()
 }

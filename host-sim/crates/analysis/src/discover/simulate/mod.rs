@@ -16,6 +16,7 @@
 //!    before and after.
 
 pub mod cause;
+pub mod drift;
 pub mod ensemble;
 mod entry;
 mod error;
@@ -32,11 +33,14 @@ use super::import::Dataset;
 use super::noise::NoiseModel;
 use super::{select, Discovery};
 use crate::twin::family::NoiseFamily;
+use crate::twin::transients::Transients;
 use ensemble::Yardstick;
 use mismatch::Comparison;
 
 /// Likelihood evaluations of the twin's noise fit (warm start).
 const NOISE_EVALS: usize = 40;
+/// The same for each drift order's profile likelihood (warm-started from the previous order's).
+const DRIFT_NOISE_EVALS: usize = 60;
 
 /// Default ensemble size.
 pub const DEFAULT_ENSEMBLE: usize = 20;
@@ -82,6 +86,8 @@ pub trait TwinModel: Sync + Sized {
     fn extended(&self, effects: &[Self::Effect]) -> Self;
     /// The twin whose members draw their noise from the fitted family on the record's grid.
     fn with_family(&self, family: &NoiseFamily, grid: &spectra::RegularGrid) -> Self;
+    /// The twin whose members also draw the record's transient disturbances.
+    fn with_transients(&self, found: &Transients) -> Self;
     /// What came from the record and what from defaults.
     fn provenance(&self) -> Vec<String>;
     /// The scenario as TOML (`accomp simulate` runs it), if the twin has one.
@@ -143,6 +149,14 @@ pub struct Simulation {
     pub family: Option<NoiseFamily>,
     /// Wall time of each stage (name, s): for docs/benchmarks.md.
     pub timing_s: Vec<(&'static str, f64)>,
+    /// The drift polynomial removed from every residual (order and −ℓ per order tried).
+    pub drift: drift::DriftOrder,
+    /// Its Legendre coefficients on the record (P₀…P_order of the record's time on [−1, 1]) with
+    /// their 1σ, output unit: generalised least squares on measured − extended twin under the
+    /// noise model refitted with the drift removed.
+    pub drift_coefficients: Vec<(f64, f64)>,
+    /// Transient disturbances found in what the extended twin leaves (members draw them).
+    pub transients: Transients,
 }
 
 /// Runs the comparison with twins made by `build` (noise model → twin).
@@ -265,10 +279,66 @@ where
     };
     spin.finish_and_clear();
     lap("extension and noise fit");
+    // The instrument's smooth drift: the polynomial order selected by the likelihood (the noise
+    // model refitted for each order) on what the extended twin leaves; removed from the record
+    // and every member alike (calibration constants, as the level and the linear rate).
+    // Transient disturbances (spikes far outside the Gaussian noise): found on what the
+    // extended twin leaves, kept out of the noise fits, drawn by the members.
+    let grid = yard.grid.clone();
+    let transients = Transients::find(&grid.place(&r_after), grid.dt_s);
+    let clean = |x: &[f64]| transients.removed(&grid.place(x));
+    let r_clean = transients.removed_points(&grid.cell, &r_after);
+    let last = std::cell::RefCell::new(noise.clone());
+    let profile = |x: &[f64]| {
+        let prev = last.borrow().clone();
+        let f = NoiseModel::fit_ml(
+            &ds.t_s,
+            &idx,
+            x,
+            ds.dt_s,
+            ds.span_s(),
+            &[&prev, &noise],
+            DRIFT_NOISE_EVALS,
+            None,
+        );
+        let fitted = 0.5 * super::noise::neg2_loglik(&f.model, &ds.t_s, &idx, x);
+        let held = 0.5 * super::noise::neg2_loglik(&prev, &ds.t_s, &idx, x);
+        // The profile is the best model found: the refit or, if its search fell short, the
+        // previous order's.
+        if fitted <= held {
+            *last.borrow_mut() = f.model;
+            fitted
+        } else {
+            held
+        }
+    };
+    let drift_order = drift::select_order(yard.unit_time(), &r_clean, ds.span_s(), profile);
+    let yard = yard.with_drift_order(drift_order.order);
+    let r_before = yard.detrend(&r_before);
+    let r_after = yard.detrend(&r_after);
+    let drift_noise = NoiseModel::fit_ml(
+        &ds.t_s,
+        &idx,
+        &yard.detrend(&r_clean),
+        ds.dt_s,
+        ds.span_s(),
+        &[&last.borrow(), &noise],
+        DRIFT_NOISE_EVALS,
+        None,
+    )
+    .model;
+    let whitener = super::noise::Whitener::new(&drift_noise, &ds.t_s, idx.clone());
+    let drift_coefficients = drift::gls(
+        yard.unit_time(),
+        &transients.removed_points(&grid.cell, &sub(&ds.y, &det_ext)),
+        drift_order.order,
+        |x| whitener.whiten(x),
+    );
+    lap("drift order");
     // The members' noise: the family (white, flicker, random walk, drift-rate walk, output
     // filter) fitted by Whittle likelihood to what the extended twin leaves, the drift kept —
     // the comparison keeps it, so the members must carry it.
-    let family = match NoiseFamily::fit(&yard.grid.place(&r_after), yard.grid.dt_s) {
+    let family = match NoiseFamily::fit(&clean(&r_after), yard.grid.dt_s) {
         // Every instrument has a white floor: a fit that does not resolve one has traded it
         // for other terms (a filter corner with a random walk mimics it) and is not used.
         Ok(f) if !f.resolved(0) => {
@@ -294,7 +364,7 @@ where
     //    noise's.
     let mut twin = build(Some(&noise)).map_err(SimulateError::twin)?;
     if let Some(f) = &family {
-        twin = twin.with_family(f, &yard.grid);
+        twin = twin.with_family(f, &yard.grid).with_transients(&transients);
     }
     let ext = twin.extended(&effects.iter().map(|e| e.1.clone()).collect::<Vec<_>>());
     let mut provenance = ext.provenance();
@@ -385,6 +455,9 @@ where
         simulator: quiet.is_simulator(),
         family,
         timing_s,
+        drift: drift_order,
+        drift_coefficients,
+        transients,
     })
 }
 

@@ -60,7 +60,22 @@ pub fn json(s: &Simulation) -> Value {
         "twin": if s.simulator { "simulator" } else { "stand-in" },
         "provenance": s.provenance,
         "ensemble": s.ensemble,
-        "residual": "measured − twin prediction, offset and linear drift removed",
+        "residual": format!("measured − twin prediction, the drift polynomial of order {} removed (offset and linear drift at order 1)", s.drift.order),
+        "drift": json!({
+            "method": "Legendre polynomial of the record's time on [-1, 1], removed from the record and every member alike; order by BIC on the time-domain likelihood (white + flicker + random walk refitted per order, Kalman innovations); coefficients by generalised least squares",
+            "order": s.drift.order,
+            "neg_loglik_per_order": s.drift.neg_loglik.iter().map(|(k, v)| json!({"order": k, "neg_loglik": finite(*v)})).collect::<Vec<_>>(),
+            "bic_price_per_coefficient": finite(s.drift.threshold),
+            "coefficients": s.drift_coefficients.iter().enumerate().map(|(k, (v, e))| json!({"legendre": k, "value": finite(*v), "sigma": finite(*e)})).collect::<Vec<_>>(),
+            "unit": s.cause.dataset.output_unit,
+        }),
+        "transients": json!({
+            "method": format!("first differences beyond {} robust sigma of the extended twin's residual; the noise family is fitted without them, members draw a Poisson number of the record's shapes at random cells", crate::twin::transients::THRESHOLD_SIGMAS),
+            "count": s.transients.events.len(),
+            "rate_per_day": finite(s.transients.rate_per_day()),
+            "sigma_diff": finite(s.transients.sigma_diff),
+            "events": s.transients.events.iter().zip(s.transients.peaks()).map(|((a, shape), p)| json!({"t_s": *a as f64 * s.transients.dt_s, "cells": shape.len(), "peak": finite(p)})).collect::<Vec<_>>(),
+        }),
         "before": side_json(&s.before, &s.before_scores),
         "after": side_json(&s.after, &s.after_scores),
         "gain": {
@@ -69,7 +84,7 @@ pub fn json(s: &Simulation) -> Value {
             "psd_outside_fraction": {"before": finite(s.before.psd_outside_fraction), "after": finite(s.after.psd_outside_fraction)},
         },
         "noise_family": s.family.as_ref().map(|f| json!({
-            "method": "Whittle likelihood on the periodogram of the extended twin's residual (first differences, Hann taper), drift kept",
+            "method": "Whittle likelihood on the periodogram of the extended twin's residual (first differences, Hann taper), the drift polynomial and the transients removed",
             "psd": "S(f) = [h0 + h_1/f + h_2/f^2 + h_4/f^4] / (1 + (f/fc)^2), one-sided, unit^2/Hz",
             "periodogram_bins": f.bins,
             "components": f.components(&s.cause.dataset.output_unit).iter().map(|c| json!({
@@ -106,6 +121,31 @@ pub fn text(s: &Simulation, unit: &str) -> String {
     for p in &s.provenance {
         let _ = writeln!(o, "  twin: {p}");
     }
+    let _ = writeln!(
+        o,
+        "  drift: Legendre polynomial of order {} (BIC on the time-domain likelihood), removed \
+         from the record and every member alike; coefficients {}",
+        s.drift.order,
+        s.drift_coefficients
+            .iter()
+            .map(|(v, e)| format!("{v:.3e} ± {e:.1e}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    let _ = writeln!(
+        o,
+        "  transients: {} beyond {} robust σ of the first differences ({:.3} per day), peaks {} \
+         {unit}; drawn by the members",
+        s.transients.events.len(),
+        crate::twin::transients::THRESHOLD_SIGMAS,
+        s.transients.rate_per_day(),
+        s.transients
+            .peaks()
+            .iter()
+            .map(|p| format!("{p:.2e}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
     if let Some(f) = &s.family {
         let _ = writeln!(
             o,

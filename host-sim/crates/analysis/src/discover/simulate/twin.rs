@@ -14,6 +14,7 @@ use crate::discover::Discovery;
 use crate::sim::effects::ScenarioEffect;
 use crate::sim::noise::{gauss, stream};
 use crate::twin::family::NoiseFamily;
+use crate::twin::transients::Transients;
 use crate::twin::{scenario_effects_drawn, scenario_effects_from_discovery, Twin, TwinError};
 
 /// Random stream of a member's draw of the effects' parameters (not the noise's stream).
@@ -90,6 +91,10 @@ impl TwinModel for Twin {
 
     fn with_family(&self, family: &NoiseFamily, grid: &RegularGrid) -> Self {
         Twin::with_family(self, family, &grid.cell, grid.len)
+    }
+
+    fn with_transients(&self, found: &Transients) -> Self {
+        Twin::with_transients(self, found)
     }
 
     fn provenance(&self) -> Vec<String> {

@@ -1,0 +1,196 @@
+//! Where the extended twin leaves the record (docs/discovery.md, "`--simulate` on gMetrology"):
+//! `cargo run -p accomp-host --release --example twin_fidelity -- [RECORD] [MEMBERS]` prints,
+//! for every ADEV τ and PSD band after the extension, the measured value, the members' 5/50/95 %
+//! and the ratio to the median, the noise family, and the residual's noise level per tenth of
+//! the record (a noise level that changes shows there).
+
+use accomp_host::discover::import::{dataset_from_log, load, DatasetOptions, Format};
+use accomp_host::discover::select;
+use accomp_host::discover::simulate::simulate_dataset;
+use accomp_host::discover::simulate::spectra::RegularGrid;
+
+fn main() -> anyhow::Result<()> {
+    let args: Vec<String> = std::env::args().collect();
+    let path = args.get(1).cloned().unwrap_or_else(|| {
+        concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../data/measured/gmetrology_relative_gravimeter_2021-06-08_51d.tsf"
+        )
+        .to_owned()
+    });
+    let members = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(20);
+    let (log, _) = load(std::path::Path::new(&path), Format::Auto)?;
+    let mut ds = dataset_from_log(&log, &DatasetOptions::default())?;
+    // TWIN_FIDELITY_KEEP=a,b keeps the fraction a..b of the record (to see where a mismatch
+    // comes from).
+    if let Ok(v) = std::env::var("TWIN_FIDELITY_KEEP") {
+        let f: Vec<f64> = v.split(',').filter_map(|x| x.parse().ok()).collect();
+        let n = ds.len() as f64;
+        let (a, b) = ((f[0] * n) as usize, (f[1] * n) as usize);
+        ds.t_s = ds.t_s[a..b].to_vec();
+        ds.y = ds.y[a..b].to_vec();
+        ds.segment_start = ds.segment_start[a..b].to_vec();
+        ds.segment_start[0] = true;
+        for c in &mut ds.channels {
+            c.values = c.values[a..b].to_vec();
+        }
+        if !ds.samples_per_point.is_empty() {
+            ds.samples_per_point = ds.samples_per_point[a..b].to_vec();
+        }
+    }
+    let s = simulate_dataset(&ds, None, members, &select::Config::default())?;
+    for (label, c) in [("before", &s.before), ("after", &s.after)] {
+        println!(
+            "{label}: ADEV outside {:.1} %, PSD outside {:.1} % (member {:.1} % / {:.1} %)",
+            100.0 * c.adev_outside_fraction,
+            100.0 * c.psd_outside_fraction,
+            100.0 * c.member_adev_outside_fraction,
+            100.0 * c.member_psd_outside_fraction
+        );
+    }
+    println!(
+        "drift order {} (−ℓ per order {:?}), coefficients {:?}",
+        s.drift.order, s.drift.neg_loglik, s.drift_coefficients
+    );
+    println!(
+        "transients: {} ({:.3} per day), peaks {:?}",
+        s.transients.events.len(),
+        s.transients.rate_per_day(),
+        s.transients.peaks()
+    );
+    let a = &s.after;
+    let row = |x: f64, m: f64, lo: f64, med: f64, hi: f64| {
+        let out = if m > hi || m < lo { "OUT" } else { "" };
+        println!(
+            "{x:>12.4e} {m:>11.3e} {lo:>11.3e} {med:>11.3e} {hi:>11.3e} {:>6.2} {out}",
+            m / med
+        );
+    };
+    println!("ADEV: tau_s measured p5 p50 p95 ratio");
+    for i in 0..a.adev.x.len() {
+        row(
+            a.adev.x[i],
+            a.measured.adev[i].1,
+            a.adev.low[i],
+            a.adev.median[i],
+            a.adev.high[i],
+        );
+    }
+    println!("PSD: cycles/day measured p5 p50 p95 ratio");
+    for i in 0..a.psd.x.len() {
+        row(
+            a.psd.x[i] * 86_400.0,
+            a.measured.psd[i],
+            a.psd.low[i],
+            a.psd.median[i],
+            a.psd.high[i],
+        );
+    }
+    if let Some(f) = &s.family {
+        for c in f.components(&ds.output_unit) {
+            println!("{c:?}");
+        }
+    }
+    // The residual's first-difference RMS per tenth of the grid.
+    let grid = RegularGrid::new(&ds);
+    let placed = grid.place(&s.residual_after);
+    let n = placed.len();
+    print!("first-difference RMS per tenth:");
+    for k in 0..10 {
+        let part = &placed[k * n / 10..(k + 1) * n / 10];
+        let d: Vec<f64> = part
+            .windows(2)
+            .map(|w| w[1] - w[0])
+            .filter(|v| v.is_finite())
+            .collect();
+        let rms = (d.iter().map(|v| v * v).sum::<f64>() / d.len().max(1) as f64).sqrt();
+        print!(" {rms:.2e}");
+    }
+    println!();
+    let mut big: Vec<(f64, usize)> = placed
+        .windows(2)
+        .enumerate()
+        .map(|(i, w)| ((w[1] - w[0]).abs(), i))
+        .filter(|v| v.0.is_finite())
+        .collect();
+    big.sort_by(|a, b| b.0.total_cmp(&a.0));
+    println!(
+        "largest first differences (value, day): {:?}",
+        big.iter()
+            .take(12)
+            .map(|(v, i)| (
+                format!("{v:.2e}"),
+                format!("{:.2}", *i as f64 * grid.dt_s / 86_400.0)
+            ))
+            .collect::<Vec<_>>()
+    );
+    // Half-day means of the residual (the slow drift the members must carry).
+    print!("half-day means:");
+    let cells_per = (43_200.0 / grid.dt_s).round() as usize;
+    for chunk in placed.chunks(cells_per.max(1)) {
+        let v: Vec<f64> = chunk.iter().copied().filter(|v| v.is_finite()).collect();
+        if v.is_empty() {
+            print!(" gap");
+        } else {
+            print!(" {:.4}", v.iter().sum::<f64>() / v.len() as f64);
+        }
+    }
+    println!();
+    // The slow residual against each channel: 6-hour means, both with the drift polynomial's
+    // order removed, correlation and slope.
+    let u = accomp_host::discover::simulate::drift::unit_time(&ds.t_s);
+    for ch in &ds.channels {
+        let c = accomp_host::discover::simulate::drift::remove(&u, &ch.values, s.drift.order).1;
+        let cp = grid.place(&c);
+        let per = (21_600.0 / grid.dt_s).round() as usize;
+        let mut pairs = Vec::new();
+        for (a, b) in placed.chunks(per).zip(cp.chunks(per)) {
+            let v: Vec<(f64, f64)> = a
+                .iter()
+                .zip(b)
+                .filter(|(x, y)| x.is_finite() && y.is_finite())
+                .map(|(x, y)| (*x, *y))
+                .collect();
+            if v.len() > per / 2 {
+                let n = v.len() as f64;
+                pairs.push((
+                    v.iter().map(|p| p.0).sum::<f64>() / n,
+                    v.iter().map(|p| p.1).sum::<f64>() / n,
+                ));
+            }
+        }
+        let n = pairs.len() as f64;
+        let (mx, my) = (
+            pairs.iter().map(|p| p.0).sum::<f64>() / n,
+            pairs.iter().map(|p| p.1).sum::<f64>() / n,
+        );
+        let sxy: f64 = pairs.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
+        let sxx: f64 = pairs.iter().map(|p| (p.0 - mx).powi(2)).sum();
+        let syy: f64 = pairs.iter().map(|p| (p.1 - my).powi(2)).sum();
+        println!(
+            "6-hour means vs {}: correlation {:.2}, slope {:.3e} per channel unit ({} means)",
+            ch.name,
+            sxy / (sxx * syy).sqrt(),
+            sxy / syy,
+            pairs.len()
+        );
+    }
+    let gaps: Vec<(usize, usize)> = RegularGrid::runs(&placed);
+    println!("gap-free runs (cells): {gaps:?} of {n}");
+    let mut counts = std::collections::BTreeMap::new();
+    for c in &ds.samples_per_point {
+        *counts.entry(format!("{c}")).or_insert(0) += 1;
+    }
+    println!("samples per point: {counts:?}");
+    for m in &a.mismatches {
+        println!(
+            "{} | {}",
+            accomp_host::discover::simulate::mismatch::sentence(m),
+            m.unmodelled.as_deref().unwrap_or("")
+        );
+    }
+    for (st, t) in &s.timing_s {
+        println!("{st}: {t:.2} s");
+    }
+    Ok(())
+}
