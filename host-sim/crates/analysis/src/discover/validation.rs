@@ -89,6 +89,24 @@ pub fn forward_validate(ds: &Dataset, cols: &[Vec<f64>], y: &[f64], noise: &Nois
     }))
 }
 
+/// Whether any of `cols` still changes after the first forward cut (by more than 10⁻³ of its
+/// range over the record): an effect that does not (a warm-up of hours in a record of days)
+/// gives forward chaining nothing to predict.
+pub fn supported_after_first_cut(ds: &Dataset, cols: &[Vec<f64>]) -> bool {
+    let cut = ds.t_s.first().copied().unwrap_or(0.0) + FORWARD_SPLITS[0] * ds.span_s();
+    let first = ds.t_s.partition_point(|&t| t < cut);
+    let range = |v: &[f64]| {
+        let (lo, hi) = v
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| {
+                (l.min(x), h.max(x))
+            });
+        hi - lo
+    };
+    cols.iter()
+        .any(|c| c.len() > first && range(&c[first..]) > 1e-3 * range(c))
+}
+
 /// Out-of-sample gain of the baseline extended by given effects at fixed nonlinear parameters
 /// (used by the tests to compare with the discovered model): relative reduction of the
 /// cross-validated residual std, with φ from the baseline.
