@@ -538,14 +538,7 @@ pub fn finish(
             for a in &accepted {
                 cols.extend(effects::columns(&a.effect, ds, &ctx_own, a.theta.value));
             }
-            final_noise = fit_state(
-                ds,
-                &cols,
-                target,
-                NoiseChoice::Fit(Some(&final_noise.model)),
-            )
-            .0
-            .noise;
+            final_noise = refit_noise(ds, &cols, target, &final_noise);
         }
         // The fast terms join the model the binned rounds built, each scored on the bins
         // against the model without it (its evidence is the full-rate ΔBIC).
@@ -592,14 +585,7 @@ pub fn finish(
             (raw, before, fwd_before) = (raw1, after, fwd_after);
         }
         // The lag's low-frequency part had inflated the noise model's slow components.
-        final_noise = fit_state(
-            ds,
-            &cols,
-            target,
-            NoiseChoice::Fit(Some(&final_noise.model)),
-        )
-        .0
-        .noise;
+        final_noise = refit_noise(ds, &cols, target, &final_noise);
     }
     let joint = (!accepted.is_empty())
         .then(|| joint_fit(ds, target, base_cols, &mut accepted, &ctx_own, &final_noise));
@@ -637,6 +623,14 @@ pub fn finish(
         baseline_noise: cur0_noise,
         final_noise: cur_f.noise,
     }
+}
+
+/// The noise model refitted by maximum likelihood for the columns `cols`, warm-started from
+/// `warm` (after the final model's columns changed).
+fn refit_noise(ds: &Dataset, cols: &[Vec<f64>], y: &[f64], warm: &NoiseFit) -> NoiseFit {
+    fit_state(ds, cols, y, NoiseChoice::Fit(Some(&warm.model)))
+        .0
+        .noise
 }
 
 #[cfg(test)]
