@@ -11,6 +11,11 @@
 //! The reader must come back before the DMA has written N more bytes: a full round unread
 //! looks exactly like nothing received (write position = read position), and those bytes are
 //! lost. The firmware sizes N for that (docs/drivers.md, "UART reception").
+//!
+//! A stream the hardware stopped (a transfer error clears its EN bit, RM0090 §10.3.15 "Error
+//! management") keeps its NDTR, so the bytes it wrote before stopping are still read; the
+//! firmware then re-arms it with NDTR = N, which writes from slot 0 again, and calls
+//! [`RxRing::restart`] so the reader follows it there.
 
 /// Read position in a circular DMA buffer of `N` bytes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -46,6 +51,12 @@ impl<const N: usize> RxRing<N> {
         self.tail = if self.tail + 1 >= N { 0 } else { self.tail + 1 };
         Some(byte)
     }
+
+    /// The stream was re-armed from the start of the buffer (NDTR reloaded with N): read from
+    /// slot 0. Call it after the bytes written before the stop have been read.
+    pub fn restart(&mut self) {
+        self.tail = 0;
+    }
 }
 
 #[cfg(test)]
@@ -66,6 +77,10 @@ mod tests {
                 buf: [0; N],
                 ndtr: N as u32,
             }
+        }
+        /// The stream re-armed after a stop: NDTR reloaded with N, so it writes slot 0 next.
+        fn rearm(&mut self) {
+            self.ndtr = N as u32;
         }
         fn receive(&mut self, bytes: &[u8]) {
             for &b in bytes {
@@ -160,5 +175,33 @@ mod tests {
         // The reader is still in step for what comes next.
         s.receive(&[9]);
         assert_eq!(drain(&mut ring, &s), vec![9]);
+    }
+
+    #[test]
+    fn after_a_stopped_stream_is_rearmed_new_bytes_come_out_and_old_ones_are_not_replayed() {
+        let mut s = Stream::<8>::new();
+        let mut ring = RxRing::<8>::new();
+        s.receive(&[1, 2, 3]);
+        assert_eq!(drain(&mut ring, &s), vec![1, 2, 3]);
+        // Two more bytes, then a transfer error stops the stream mid-round: NDTR stays at 3.
+        s.receive(&[4, 5]);
+        assert_eq!(s.ndtr, 3);
+        // The bytes written before the stop are still delivered...
+        assert_eq!(drain(&mut ring, &s), vec![4, 5]);
+        // ...then the firmware re-arms the stream from slot 0 and the reader follows it.
+        s.rearm();
+        ring.restart();
+        assert_eq!(drain(&mut ring, &s), Vec::<u8>::new());
+        s.receive(&[6, 7, 8, 9, 10, 11, 12]);
+        assert_eq!(drain(&mut ring, &s), vec![6, 7, 8, 9, 10, 11, 12]);
+        // Without the reader's restart it would have read slots 5.. (stale bytes) and lost the
+        // new ones written at 0..: the same stream, a reader that did not follow.
+        let mut s = Stream::<8>::new();
+        let mut lost = RxRing::<8>::new();
+        s.receive(&[1, 2, 3, 4, 5]);
+        drain(&mut lost, &s);
+        s.rearm();
+        s.receive(&[6, 7]);
+        assert_ne!(drain(&mut lost, &s), vec![6, 7]);
     }
 }

@@ -380,11 +380,38 @@ pub fn read_byte(rx: &mut UartRx) -> Option<u8> {
         };
         counter.fetch_add(1, Ordering::Relaxed);
     }
-    rx.ring.next(ndtr, |i| {
+    let byte = rx.ring.next(ndtr, |i| {
         // SAFETY: `i` < RX_RING_LEN (RxRing's read position); a volatile read of a byte the DMA
         // wrote before it advanced NDTR past it.
         unsafe { core::ptr::read_volatile(core::ptr::addr_of!(RX_RING).cast::<u8>().add(i)) }
-    })
+    });
+    if byte.is_none() {
+        rearm_if_stopped(rx);
+    }
+    byte
+}
+
+/// A transfer error (a bus fault on the stream's AHB access) makes the hardware clear the
+/// stream's EN bit (RM0090 §10.3.15 "Error management"): reception would stop for good while
+/// USART_DR fills and overruns. Once the bytes written before the stop are read, clear the
+/// stream's flags (DMA_LIFCR bits 21:16, §10.5.3), reload NDTR and enable it again; the reader
+/// follows it to slot 0. Counted as a receiver overrun: what arrived while it was stopped is lost.
+fn rearm_if_stopped(rx: &mut UartRx) {
+    // SAFETY: DMA2 stream 2 belongs to this receiver alone; while EN is 0 its NDTR is writable
+    // (§10.5.6) and setting EN last follows §10.3.17's configuration order.
+    unsafe {
+        let dma2 = &*pac::DMA2::ptr();
+        let st = dma2.st(RX_STREAM);
+        let cr = st.cr().read().bits();
+        if cr & 1 != 0 {
+            return;
+        }
+        dma2.lifcr().write(|w| w.bits(0b11_1101 << 16));
+        st.ndtr().write(|w| w.bits(RX_RING_LEN as u32));
+        st.cr().write(|w| w.bits(cr | 1));
+    }
+    rx.ring.restart();
+    super::UART_OVERRUNS.fetch_add(1, Ordering::Relaxed);
 }
 
 /// TIM2's channel 2 capturing the time base's count at each falling DRDY edge on PA1 (RM0090
