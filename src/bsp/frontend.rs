@@ -392,7 +392,7 @@ pub fn read_byte(rx: &mut UartRx) -> Option<u8> {
 }
 
 /// A transfer error (a bus fault on the stream's AHB access) makes the hardware clear the
-/// stream's EN bit (RM0090 §10.3.15 "Error management"): reception would stop for good while
+/// stream's EN bit (RM0090 §10.3.18 "Error management"): reception would stop for good while
 /// USART_DR fills and overruns. Once the bytes written before the stop are read, clear the
 /// stream's flags (DMA_LIFCR bits 21:16, §10.5.3), reload NDTR and enable it again; the reader
 /// follows it to slot 0. Counted as a receiver overrun: what arrived while it was stopped is lost.
