@@ -12,7 +12,7 @@
 //! looks exactly like nothing received (write position = read position), and those bytes are
 //! lost. The firmware sizes N for that (docs/drivers.md, "UART reception").
 //!
-//! A stream the hardware stopped (a transfer error clears its EN bit, RM0090 §10.3.15 "Error
+//! A stream the hardware stopped (a transfer error clears its EN bit, RM0090 §10.3.18 "Error
 //! management") keeps its NDTR, so the bytes it wrote before stopping are still read; the
 //! firmware then re-arms it with NDTR = N, which writes from slot 0 again, and calls
 //! [`RxRing::restart`] so the reader follows it there.
