@@ -10,6 +10,9 @@
 //!   fitted to the upper three quarters of its own spectrum as N + A·(2 sin πfΔt)^(−α)
 //!   (`white_floor`),
 //!   S_signal + S_noise its periodogram smoothed over ±10 % of each frequency;
+//! - `eiv`: the same filter with the reading noise the discovery's errors-in-variables model
+//!   fits to the channel (`discover::eiv::denoise`, the local-linear-trend maximum likelihood
+//!   reported as `channel_noise`);
 //! - `oracle`: the same filter with the true reading noise as the floor.
 //!
 //! Two channels: slow ramps (a ±0.5 °C programme of 2–6 h ramps, 14 days at 120 s, RTD noise
@@ -156,12 +159,33 @@ fn wiener_rate(w: &[f64], dt: f64, floor: Option<f64>) -> Vec<f64> {
         .collect()
 }
 
+/// The reading noise variance the discovery's errors-in-variables model fits to `reading`.
+fn eiv_floor(reading: &[f64], dt: f64) -> Option<f64> {
+    use accomp_host::discover::{eiv, import};
+    let n = reading.len();
+    let mut log =
+        accomp_host::log::Log::with_time((0..n).map(|i| i as f64 * dt).collect()).expect("time");
+    // The output does not enter the channel's model; the import refuses a constant one.
+    log.push_column("output_g", (0..n).map(|i| i as f64).collect())
+        .expect("column");
+    log.push_column("temperature_c", reading.to_vec())
+        .expect("column");
+    let ds = import::dataset_from_log(&log, &import::DatasetOptions::default()).ok()?;
+    let (_, report) = eiv::denoise(&ds, false);
+    report
+        .iter()
+        .find(|c| c.channel == "temperature_c")
+        .map(|c| c.noise * c.noise)
+}
+
 fn main() {
     let records: u64 = std::env::args()
         .nth(1)
         .and_then(|s| s.parse().ok())
         .unwrap_or(4);
-    println!("channel, record, reading noise mK: gain found / true for raw, avg, wiener, oracle");
+    println!(
+        "channel, record, reading noise mK: gain found / true for raw, avg, wiener, eiv, oracle"
+    );
     for case in ["slow ramps", "controller noise"] {
         for rec in 0..records {
             let mut r = synth::rng(0x2A7E_0000 + rec + if case == "slow ramps" { 0 } else { 64 });
@@ -212,6 +236,11 @@ fn main() {
                 central_diff(&reading, dt),
                 central_diff(&moving_average(&reading, half), dt),
                 wiener_rate(&reading, dt, None),
+                wiener_rate(
+                    &reading,
+                    dt,
+                    Some(eiv_floor(&reading, dt).unwrap_or(f64::NAN)),
+                ),
                 wiener_rate(&reading, dt, Some(sigma_r * sigma_r)),
             ];
             let gains: Vec<String> = regressors
