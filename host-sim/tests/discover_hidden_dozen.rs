@@ -91,6 +91,10 @@ struct Hidden {
     p: Vec<f64>,
     /// Steps (time s, size g).
     steps: Vec<(f64, f64)>,
+    /// The ideal detector's χ² of what was hidden (the known shape under the known noise,
+    /// `hidden::matched_filter_snr`²), for the record: docs/discovery-causes.md compares it with
+    /// where the drifts are named.
+    ideal_chi2: f64,
 }
 
 fn sign(r: &mut ChaCha8Rng) -> f64 {
@@ -116,6 +120,7 @@ fn draw(cause: Cause, seed: u64) -> (accomp_host::log::Log, Hidden) {
         cause,
         p: Vec::new(),
         steps: Vec::new(),
+        ideal_chi2: 0.0,
     };
     let extra: Vec<f64> = match cause {
         Cause::Null => vec![0.0; ROWS],
@@ -205,6 +210,13 @@ fn draw(cause: Cause, seed: u64) -> (accomp_host::log::Log, Hidden) {
             st.pressure_true_hpa.iter().map(|p| k * (p - p0)).collect()
         }
     };
+    let allan = accomp_host::sim::noise::AllanParams {
+        white_adev_1s: noise.white_1s,
+        flicker_floor: noise.flicker_floor,
+        random_walk_per_sqrt_s: noise.rw_per_sqrt_s,
+    };
+    let nuisance = hidden::static_nuisance(t, &st.temp_meas_c);
+    h.ideal_chi2 = hidden::matched_filter_snr(&extra, &nuisance, &allan, DT_S, span).powi(2);
     let y = synth::output_g(&st, &noise, &extra, &mut r);
     (synth::log_of(&st, y), h)
 }
@@ -322,10 +334,11 @@ fn a_dozen_logs_with_one_cause_each_are_named_right_with_few_extras() {
         let (_, d) = hidden::discover_blind(&log);
         let (ok, extra) = score(&d, &h);
         eprintln!(
-            "log {i} {cause:?} {:?} steps {:?}: right {ok}, extras {extra}; accepted {:?}; \
-             refused {:?}; last round {:?}",
+            "log {i} {cause:?} {:?} steps {:?} ideal χ² {:.1}: right {ok}, extras {extra}; \
+             accepted {:?}; refused {:?}; last round {:?}",
             h.p,
             h.steps,
+            h.ideal_chi2,
             hidden::accepted_with_params(&d),
             d.selection.refused,
             d.selection.last_round

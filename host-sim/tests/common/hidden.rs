@@ -416,6 +416,28 @@ pub fn matched_filter_snr(
     0.0
 }
 
+/// Generalised least squares of `y` on `cols` (one value per sample each) under the sensor
+/// noise `noise`: both whitened by the same Kalman filter, then ordinary least squares. The
+/// coefficients in the order of `cols`.
+pub fn gls_coefficients(
+    y: &[f64],
+    cols: &[Vec<f64>],
+    noise: &AllanParams,
+    interval_s: f64,
+    duration_s: f64,
+) -> Vec<f64> {
+    let model = NoiseStateSpace::new(noise, interval_s, duration_s);
+    let mut all: Vec<&[f64]> = cols.iter().map(Vec::as_slice).collect();
+    all.push(y);
+    let w = model.whiten(&all);
+    let (yw, cw) = w.split_last().expect("y is there");
+    let n = yw.len();
+    let a: Vec<Vec<f64>> = (0..n).map(|i| cw.iter().map(|c| c[i]).collect()).collect();
+    accomp_numerics::linalg::least_squares(&a, yw)
+        .map(|f| f.coeffs)
+        .unwrap_or_else(|_| vec![f64::NAN; cols.len()])
+}
+
 /// Offset, linear drift and a cubic in the centred temperature: the nuisance columns of a
 /// static baseline (what it can absorb of any effect).
 pub fn static_nuisance(t_s: &[f64], temperature_c: &[f64]) -> Vec<Vec<f64>> {

@@ -1,0 +1,261 @@
+//! Measures the gain of a coupling to the rate of a noisy channel (errors in variables) when
+//! the rate is taken from the reading in four ways, by generalised least squares under the
+//! output's known noise (white + flicker + random walk, `tests/common/hidden.rs`) with an offset
+//! and a linear drift beside it — the fit the discovery makes, without its selection:
+//!
+//! - `raw`: central differences of the reading;
+//! - `avg`: central differences of the reading averaged over ±15 min (what `rate_coupling` uses);
+//! - `wiener`: regression calibration — E[true rate | readings] by a Wiener filter of the
+//!   reading, S_signal/(S_signal + S_noise) per frequency, S_noise the reading's white floor
+//!   fitted to the upper three quarters of its own spectrum as N + A·(2 sin πfΔt)^(−α)
+//!   (`white_floor`),
+//!   S_signal + S_noise its periodogram smoothed over ±10 % of each frequency;
+//! - `eiv`: the same filter with the reading noise the discovery's errors-in-variables model
+//!   fits to the channel (`discover::eiv::denoise`, the local-linear-trend maximum likelihood
+//!   reported as `channel_noise`);
+//! - `oracle`: the same filter with the true reading noise as the floor.
+//!
+//! Two channels: slow ramps (a ±0.5 °C programme of 2–6 h ramps, 14 days at 120 s, RTD noise
+//! 1–5 mK) and a thermostat's fast controller noise (AR(1) of 0.165 °C, correlation 15 min,
+//! 4 days at 60 s, read with 1–5 mK). Prints the gain found / the true gain per record.
+//!
+//! `cargo run -p accomp-host --example rate_regression_calibration [records]`
+
+#[path = "../tests/common/hidden.rs"]
+mod hidden;
+#[path = "../tests/common/synth.rs"]
+mod synth;
+
+use accomp_host::sim::noise::AllanParams;
+use rand::Rng;
+
+fn central_diff(x: &[f64], dt: f64) -> Vec<f64> {
+    let n = x.len();
+    (0..n)
+        .map(|i| {
+            let (a, b) = (i.saturating_sub(1), (i + 1).min(n - 1));
+            (x[b] - x[a]) / ((b - a) as f64 * dt)
+        })
+        .collect()
+}
+
+fn moving_average(x: &[f64], half: usize) -> Vec<f64> {
+    let n = x.len();
+    (0..n)
+        .map(|i| {
+            let (a, b) = (i.saturating_sub(half), (i + half + 1).min(n));
+            x[a..b].iter().sum::<f64>() / (b - a) as f64
+        })
+        .collect()
+}
+
+/// The reading's white floor: the band means of the periodogram `p` (bins of a length-2n FFT
+/// at spacing `dt`) over its upper three quarters, in bands of 10 % of the frequency, fitted
+/// as N + A·(2 sin πfΔt)^(−α) in relative error (α on a grid 0–4, N and A ≥ 0 by least
+/// squares: a sampled random walk or AR(1) is α = 2 to the Nyquist frequency, where f^(−2) is
+/// not); N.
+fn white_floor(p: &[f64], dt: f64) -> f64 {
+    let k = p.len();
+    let big = 2 * k;
+    let mut bands: Vec<(f64, f64)> = Vec::new();
+    let mut j = k / 4;
+    while j < k {
+        let w = (j / 10).max(1);
+        let e = (j + w).min(k);
+        let m = p[j..e].iter().sum::<f64>() / (e - j) as f64;
+        let f = (j + e - 1) as f64 / 2.0 / (big as f64 * dt);
+        bands.push((f, m));
+        j = e;
+    }
+    let mut best = (f64::INFINITY, 0.0);
+    for ai in 0..=40 {
+        let alpha = ai as f64 * 0.1;
+        // Weighted normal equations of Σ((N + A·f^−α − P)/P)², then the non-negative fits.
+        let (mut s11, mut s12, mut s22, mut b1, mut b2) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        for &(f, m) in &bands {
+            let g = (2.0 * (std::f64::consts::PI * f * dt).sin()).powf(-alpha);
+            let w = 1.0 / (m * m);
+            s11 += w;
+            s12 += w * g;
+            s22 += w * g * g;
+            b1 += w * m;
+            b2 += w * m * g;
+        }
+        let det = s11 * s22 - s12 * s12;
+        let mut cands = vec![(b1 / s11, 0.0), (0.0, b2 / s22)];
+        if det.abs() > 0.0 {
+            cands.push(((b1 * s22 - b2 * s12) / det, (s11 * b2 - s12 * b1) / det));
+        }
+        for (n0, a0) in cands {
+            if n0 < 0.0 || a0 < 0.0 {
+                continue;
+            }
+            let cost: f64 = bands
+                .iter()
+                .map(|&(f, m)| {
+                    let g = (2.0 * (std::f64::consts::PI * f * dt).sin()).powf(-alpha);
+                    ((n0 + a0 * g - m) / m).powi(2)
+                })
+                .sum();
+            if cost < best.0 {
+                best = (cost, n0);
+            }
+        }
+    }
+    best.1
+}
+
+/// E[true rate | readings] by a Wiener filter of the reading (see the top); `floor`: the
+/// reading noise variance, None to take it from the spectrum's top quarter.
+fn wiener_rate(w: &[f64], dt: f64, floor: Option<f64>) -> Vec<f64> {
+    let n = w.len();
+    // Linear trend out (its slope is a constant rate, added back), even extension so the
+    // periodic FFT sees no jump at the ends.
+    let tm = (n as f64 - 1.0) / 2.0;
+    let m = w.iter().sum::<f64>() / n as f64;
+    let (mut sxy, mut sxx) = (0.0, 0.0);
+    for (i, v) in w.iter().enumerate() {
+        sxy += (i as f64 - tm) * (v - m);
+        sxx += (i as f64 - tm).powi(2);
+    }
+    let slope = sxy / sxx;
+    let d: Vec<f64> = w
+        .iter()
+        .enumerate()
+        .map(|(i, v)| v - m - slope * (i as f64 - tm))
+        .collect();
+    let mut z: Vec<f64> = d.iter().chain(d.iter().rev()).copied().collect();
+    let big = z.len();
+    let x = accomp_numerics::fft::half_spectrum(&mut z);
+    // Per-bin power, E = σ² for white noise of variance σ² (even extension of length 2n).
+    let p: Vec<f64> = x
+        .iter()
+        .map(|(a, b)| (a * a + b * b) / big as f64)
+        .collect();
+    let k = p.len();
+    let noise = floor.unwrap_or_else(|| white_floor(&p, dt));
+    let mut half: Vec<(f64, f64)> = (0..k)
+        .map(|j| {
+            let band = (j / 10).max(2);
+            let (a, b) = (j.saturating_sub(band).max(1), (j + band + 1).min(k));
+            let ps = p[a..b].iter().sum::<f64>() / (b - a) as f64;
+            let gain = if j == 0 {
+                0.0
+            } else {
+                (1.0 - noise / ps).max(0.0)
+            };
+            let om = std::f64::consts::TAU * j as f64 / (big as f64 * dt);
+            // i·sin(ωΔt)/Δt: the central difference's transfer function.
+            let s = (om * dt).sin() / dt * gain;
+            let (re, im) = x[j];
+            (-im * s, re * s)
+        })
+        .collect();
+    half.push((0.0, 0.0));
+    let r = accomp_numerics::fft::real_from_half_spectrum(&half);
+    r.iter()
+        .take(n)
+        .map(|v| v / big as f64 + slope / dt)
+        .collect()
+}
+
+/// The reading noise variance the discovery's errors-in-variables model fits to `reading`.
+fn eiv_floor(reading: &[f64], dt: f64) -> Option<f64> {
+    use accomp_host::discover::{eiv, import};
+    let n = reading.len();
+    let mut log =
+        accomp_host::log::Log::with_time((0..n).map(|i| i as f64 * dt).collect()).expect("time");
+    // The output does not enter the channel's model; the import refuses a constant one.
+    log.push_column("output_g", (0..n).map(|i| i as f64).collect())
+        .expect("column");
+    log.push_column("temperature_c", reading.to_vec())
+        .expect("column");
+    let ds = import::dataset_from_log(&log, &import::DatasetOptions::default()).ok()?;
+    let (_, report) = eiv::denoise(&ds, false);
+    report
+        .iter()
+        .find(|c| c.channel == "temperature_c")
+        .map(|c| c.noise * c.noise)
+}
+
+fn main() {
+    let records: u64 = std::env::args()
+        .nth(1)
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(4);
+    println!(
+        "channel, record, reading noise mK: gain found / true for raw, avg, wiener, eiv, oracle"
+    );
+    for case in ["slow ramps", "controller noise"] {
+        for rec in 0..records {
+            let mut r = synth::rng(0x2A7E_0000 + rec + if case == "slow ramps" { 0 } else { 64 });
+            let (dt, t_true, reading, sigma_r) = if case == "slow ramps" {
+                let (st, _) = synth::programme_station(14 * 720, 120.0, &mut r);
+                (
+                    120.0,
+                    st.temp_true_c.clone(),
+                    st.temp_meas_c.clone(),
+                    st.rtd_noise_c,
+                )
+            } else {
+                let (n, dt, tau, sd): (usize, f64, f64, f64) = (4 * 1440, 60.0, 900.0, 0.165);
+                let a: f64 = (-dt / tau).exp();
+                let mut c = sd * synth::gauss(&mut r);
+                let t: Vec<f64> = (0..n)
+                    .map(|_| {
+                        c = a * c + (1.0 - a * a).sqrt() * sd * synth::gauss(&mut r);
+                        25.0 + c
+                    })
+                    .collect();
+                let s = r.random_range(0.001..0.005);
+                let w: Vec<f64> = t.iter().map(|v| v + s * synth::gauss(&mut r)).collect();
+                (dt, t, w, s)
+            };
+            let n = t_true.len();
+            let rate = central_diff(&t_true, dt);
+            let rms = (rate.iter().map(|v| v * v).sum::<f64>() / n as f64).sqrt();
+            // 2 µg rms of coupling.
+            let g = 2.0e-6 / rms;
+            let noise = synth::draw_noise(&mut r);
+            let e = synth::sensor_noise(
+                n,
+                dt,
+                noise.white_1s,
+                noise.flicker_floor,
+                noise.rw_per_sqrt_s,
+                &mut r,
+            );
+            let y: Vec<f64> = rate.iter().zip(&e).map(|(v, e)| g * v + e).collect();
+            let allan = AllanParams {
+                white_adev_1s: noise.white_1s,
+                flicker_floor: noise.flicker_floor,
+                random_walk_per_sqrt_s: noise.rw_per_sqrt_s,
+            };
+            let half = (900.0 / dt).round() as usize;
+            let regressors = [
+                central_diff(&reading, dt),
+                central_diff(&moving_average(&reading, half), dt),
+                wiener_rate(&reading, dt, None),
+                wiener_rate(
+                    &reading,
+                    dt,
+                    Some(eiv_floor(&reading, dt).unwrap_or(f64::NAN)),
+                ),
+                wiener_rate(&reading, dt, Some(sigma_r * sigma_r)),
+            ];
+            let gains: Vec<String> = regressors
+                .iter()
+                .map(|x| {
+                    let cols = vec![
+                        vec![1.0; n],
+                        (0..n).map(|i| i as f64 / n as f64).collect(),
+                        x.clone(),
+                    ];
+                    let c = hidden::gls_coefficients(&y, &cols, &allan, dt, n as f64 * dt);
+                    format!("{:.3}", c[2] / g)
+                })
+                .collect();
+            println!("{case}, {rec}, {:.1}: {}", sigma_r * 1e3, gains.join(", "));
+        }
+    }
+}
