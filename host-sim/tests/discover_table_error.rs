@@ -8,6 +8,8 @@
 //! and reading noise) with the output the true table's eq. (1) predicts at the true temperature
 //! (the core's model, which is what a table means).
 
+#[path = "common/scratch.rs"]
+mod scratch;
 #[path = "common/synth.rs"]
 mod synth;
 
@@ -130,9 +132,7 @@ fn a_drifted_bias_tempco_is_named_as_the_table_error_and_the_corrected_table_rem
 #[test]
 fn write_table_writes_the_corrected_table_and_refuses_when_there_is_nothing_to_correct() {
     let (log, truth) = record(5);
-    let dir = std::env::temp_dir().join(format!("accomp-table-error-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).expect("dir");
+    let dir = scratch::Scratch::new("table-error");
     let csv = dir.join("log.csv");
     log.write_to(std::fs::File::create(&csv).expect("create"))
         .expect("write log");
@@ -175,7 +175,6 @@ fn write_table_writes_the_corrected_table_and_refuses_when_there_is_nothing_to_c
     let err = String::from_utf8_lossy(&r.stderr);
     assert!(err.contains("nothing written"), "{err}");
     assert!(!out.exists());
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// A bias error the table cannot hold exactly — ε·sign(T − T0)·|T − T0|^1.5, no coefficient

@@ -18,11 +18,13 @@ use accomp_host::sim::scenario::Scenario;
 
 const BIN: &str = env!("CARGO_BIN_EXE_accomp");
 
-fn temp_dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("accomp-record-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+#[path = "common/scratch.rs"]
+mod scratch;
+use scratch::Scratch;
+
+/// The test's own folder (the board's pty link, the table, the record), removed on drop.
+fn temp_dir(name: &str) -> Scratch {
+    Scratch::new(&format!("record-{name}"))
 }
 
 /// A running `accomp board-sim`, killed on drop.
@@ -122,7 +124,7 @@ fn load_table(dir: &Path) {
 
 /// A fresh directory `name`, a board in it at `speed`× with the paper's table loaded, and the
 /// path the record goes to.
-fn board_with_table(name: &str, speed: u32, seed: u64) -> (PathBuf, BoardSim, PathBuf) {
+fn board_with_table(name: &str, speed: u32, seed: u64) -> (Scratch, BoardSim, PathBuf) {
     let dir = temp_dir(name);
     let board = BoardSim::start(&dir, speed, seed);
     load_table(&dir);
