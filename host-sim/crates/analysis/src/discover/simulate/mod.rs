@@ -86,6 +86,10 @@ pub trait TwinModel: Sync + Sized {
     fn provenance(&self) -> Vec<String>;
     /// The scenario as TOML (`accomp simulate` runs it), if the twin has one.
     fn scenario_toml(&self) -> Option<String>;
+    /// The simulator's model of this twin's members with the discovery's accepted effects
+    /// drawn (what `--write-scenario` writes and the extended ensemble runs), when the twin has
+    /// a noise family and is the simulator.
+    fn written_twin(&self, d: &Discovery) -> Option<crate::sim::twin::MemberModel>;
     /// Whether this is the station simulator (false: a stand-in, announced).
     fn is_simulator(&self) -> bool;
 }
@@ -121,8 +125,18 @@ pub struct Simulation {
     pub explained_by: Vec<(String, Vec<usize>)>,
     /// Effects the extended scenario could not express (name, why).
     pub refused: Vec<(String, String)>,
-    /// The extended scenario's TOML, if the twin has a scenario.
+    /// The extended scenario's TOML, if the twin has a scenario (without the `[twin]` section:
+    /// a station scenario).
     pub extended_toml: Option<String>,
+    /// The extended twin's member model, when the members draw from the noise family: what
+    /// `--write-scenario` writes (the scenario with its `[twin]` section and driver file), the
+    /// same model the extended ensemble ran.
+    pub written_twin: Option<crate::sim::twin::MemberModel>,
+    /// The extended twin's deterministic part at the record's instants (members' residuals are
+    /// taken from it).
+    pub det_after: Vec<f64>,
+    /// Each member's views of the extended ensemble (member k at index k − 1).
+    pub members_after: Vec<spectra::Views>,
     /// Where it was written.
     pub extended_path: Option<std::path::PathBuf>,
     /// The catalogue search on measured − twin.
@@ -323,11 +337,16 @@ where
     )?;
     let before = mismatch::compare(yard.views(&r_before), &members, &freqs, &channels);
     let explained_by = cause::explained_by(&yard, &before, &r_before, &contrib);
+    // With a noise family, the members are the simulator's member model of the extended
+    // twin: the same model `--write-scenario` writes and `accomp simulate` runs.
+    let written_twin = twin.written_twin(&cause);
     let members_ext = ensemble::run(
-        |k| {
-            twin.extended(&quiet.effects_drawn(&cause, k))
+        |k| match &written_twin {
+            Some(m) => m.member(k).map_err(SimulateError::twin),
+            None => twin
+                .extended(&quiet.effects_drawn(&cause, k))
                 .run(Some(k))
-                .map_err(SimulateError::twin)
+                .map_err(SimulateError::twin),
         },
         &det_ext,
         ensemble,
@@ -335,6 +354,7 @@ where
         "extended",
     )?;
     let mut after = mismatch::compare(yard.views(&r_after), &members_ext, &freqs, &channels);
+    let members_after = members_ext;
     // What the extended twin still gets wrong is named: unmodelled, with its likely cause.
     let nyquist_cpd = 0.5 / yard.grid.dt_s * 86_400.0;
     for m in &mut after.mismatches {
@@ -376,6 +396,9 @@ where
         refused,
         extended_toml: ext.scenario_toml(),
         extended_path: None,
+        written_twin,
+        det_after: det_ext,
+        members_after,
         cause,
         frequencies_hz: freqs,
         channels,
@@ -386,6 +409,16 @@ where
         family,
         timing_s,
     })
+}
+
+impl Simulation {
+    /// The views of a series at the record's instants as the extended ensemble's members are
+    /// seen: minus the extended twin's deterministic part, offset and drift removed (`ds`: the
+    /// record the comparison ran on).
+    pub fn member_views(&self, ds: &Dataset, series: &[f64]) -> spectra::Views {
+        let yard = Yardstick::new(ds);
+        yard.views(&yard.detrend(&sub(series, &self.det_after)))
+    }
 }
 
 /// A spinner with the elapsed time on stderr for a stage without countable steps (drawn only
