@@ -6,18 +6,21 @@ use crate::sim::twin::draw::{
     Alternative, Drawn, EffectDraw, EffectDraws, NamedParam, TideGroupDraw,
 };
 
-/// A fitted parameter as the simulator's [`Drawn`].
+/// A fitted parameter as the simulator's [`Drawn`]; a σ that is not a finite number is 0
+/// (the rule does not draw either: the scenario holds finite numbers only).
 fn drawn_of(p: &crate::discover::effects::Param) -> Drawn {
     Drawn {
         value: p.value,
-        sigma: p.sigma,
+        sigma: if p.sigma.is_finite() { p.sigma } else { 0.0 },
     }
 }
 
-/// Named fitted parameters as the simulator's.
+/// Named fitted parameters as the simulator's; a parameter whose value is not finite is left
+/// out (the rule treats both as missing).
 fn named(params: &[(String, crate::discover::effects::Param)]) -> Vec<NamedParam> {
     params
         .iter()
+        .filter(|(_, p)| p.value.is_finite())
         .map(|(name, p)| NamedParam {
             name: name.clone(),
             drawn: drawn_of(p),
