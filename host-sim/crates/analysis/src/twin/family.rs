@@ -25,15 +25,16 @@
 //! × the Hann window's equivalent noise bandwidth (1.5 bins: neighbouring tapered bins are not
 //! independent). A level within [`RESOLVED_SIGMAS`] σ of zero is reported as not resolved.
 //!
-//! Members: spectral synthesis on the record's grid (Gaussian Fourier coefficients with variance
-//! from S, inverse real FFT over 4 × the record's length so that the lowest frequencies are not
-//! forced periodic), after drawing the member's own parameters from the fit's covariance.
+//! Members: [`NoiseFamily::spec`] hands the fit to the simulator (`accomp-sim`, `twin::family`),
+//! which draws each member's own parameters from the fit's covariance and synthesises its noise
+//! on the record's grid.
 
 // Index loops over the four levels and the 3-bin window read as the formulas do.
 #![allow(clippy::needless_range_loop)]
 
 use crate::numerics::optimize::golden_section_min;
-use crate::sim::noise::{gauss, SimRng};
+#[cfg(test)]
+use crate::sim::noise::gauss;
 
 /// Number of parameters: ln h₀, ln h₋₁, ln h₋₂, ln h₋₄, ln f_c.
 pub const PARAMS: usize = 5;
@@ -67,8 +68,6 @@ const SCORING_ITERS: usize = 30;
 const FILTER_DELTA: f64 = 3.0 * HANN_ENBW;
 /// A level is resolved when it is more than this many σ above zero.
 const RESOLVED_SIGMAS: f64 = 2.0;
-/// Synthesis length: this many times the record's grid (rounded up to a power of two).
-const SYNTHESIS_FACTOR: usize = 4;
 /// The filter corner's range, × Nyquist.
 const CORNER_RANGE: (f64, f64) = (0.05, 50.0);
 
@@ -386,55 +385,30 @@ impl NoiseFamily {
             .collect()
     }
 
-    /// A member's parameters: the levels drawn from their covariance (a draw below zero is
-    /// held at zero), the corner from its log-normal.
-    pub fn drawn(&self, rng: &mut SimRng) -> NoiseFamily {
-        let l = cholesky4(&self.h_cov);
-        let z: Vec<f64> = (0..4).map(|_| gauss(rng)).collect();
-        let zf = gauss(rng);
-        let mut f = self.clone();
-        for i in 0..4 {
-            let h = self.ln_params[i].exp();
-            let d: f64 = (0..=i).map(|j| l[i][j] * z[j]).sum();
-            let v = h + d;
-            f.ln_params[i] = if v > 0.0 { v.ln() } else { f64::NEG_INFINITY };
+    /// The family as the simulator's description (`accomp-sim`, `twin::family`), which draws
+    /// the members' parameters and synthesises their noise: the four power laws with their
+    /// covariance and the first-order output filter (`corner_hz = 0`: none).
+    pub fn spec(&self) -> crate::sim::twin::family::NoiseFamily {
+        use crate::sim::twin::family::{NoiseFamily as Spec, NoiseFilter, PowerLaw};
+        Spec {
+            grid_interval_s: self.dt_s,
+            terms: (0..4)
+                .map(|i| PowerLaw {
+                    name: NAMES[i].to_owned(),
+                    alpha: ALPHA[i],
+                    coefficient: self.ln_params[i].exp(),
+                })
+                .collect(),
+            covariance: self.h_cov.iter().map(|r| r.to_vec()).collect(),
+            filters: vec![NoiseFilter::FirstOrderLowPass {
+                corner_hz: if self.ln_params[4].is_finite() {
+                    self.ln_params[4].exp()
+                } else {
+                    0.0
+                },
+                ln_corner_sigma: self.ln_fc_var.max(0.0).sqrt(),
+            }],
         }
-        if self.ln_params[4].is_finite() {
-            f.ln_params[4] += self.ln_fc_var.max(0.0).sqrt() * zf;
-        }
-        f
-    }
-
-    /// One draw of the noise on a grid of `cells` cells (spacing `dt_s`).
-    pub fn synthesise(&self, cells: usize, rng: &mut SimRng) -> Vec<f64> {
-        if cells == 0 {
-            return Vec::new();
-        }
-        let len = (SYNTHESIS_FACTOR * cells).next_power_of_two().max(4);
-        let dt = self.dt_s;
-        let mut spec = vec![(0.0, 0.0); len / 2 + 1];
-        // E|X_k|² = len · S(f_k) / (4Δ) per real and imaginary part, so that the series' one-sided
-        // PSD is S; the Nyquist bin is real.
-        for (k, c) in spec.iter_mut().enumerate() {
-            if k == 0 {
-                continue;
-            }
-            let f = k as f64 / (len as f64 * dt);
-            let sd = (len as f64 * self.psd(f) / (4.0 * dt)).sqrt();
-            if k == len / 2 {
-                c.0 = sd * std::f64::consts::SQRT_2 * gauss(rng);
-                c.1 = 0.0;
-            } else {
-                c.0 = sd * gauss(rng);
-                c.1 = sd * gauss(rng);
-            }
-        }
-        let mut out = crate::numerics::fft::real_from_half_spectrum(&spec);
-        out.truncate(cells);
-        for v in &mut out {
-            *v /= len as f64;
-        }
-        out
     }
 }
 
@@ -601,23 +575,6 @@ fn covariance(bins: &[Bin], h: &[f64; 4], ln_fc: f64) -> ([[f64; 4]; 4], f64) {
     (cov, var_fc)
 }
 
-/// Lower Cholesky factor (a non-positive pivot zeroes its column: that direction is held).
-fn cholesky4(a: &[[f64; 4]; 4]) -> [[f64; 4]; 4] {
-    let mut l = [[0.0; 4]; 4];
-    for i in 0..4 {
-        for j in 0..=i {
-            let s: f64 = (0..j).map(|k| l[i][k] * l[j][k]).sum();
-            if i == j {
-                let d = a[i][i] - s;
-                l[i][j] = if d > 0.0 { d.sqrt() } else { 0.0 };
-            } else if l[j][j] > 0.0 {
-                l[i][j] = (a[i][j] - s) / l[j][j];
-            }
-        }
-    }
-    l
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -643,7 +600,7 @@ mod tests {
             neg_loglik: 0.0,
         };
         let mut rng = stream(11, 0);
-        let x = truth.synthesise(20_000, &mut rng);
+        let x = truth.spec().synthesise(20_000, &mut rng);
         let fit = NoiseFamily::fit(&x, dt).expect("fit");
         let c = fit.components("u");
         for i in 0..PARAMS {
