@@ -95,6 +95,14 @@ fn accomp_simulate_of_the_written_scenario_reproduces_ensemble_member_k() {
         text.contains("[[twin.transients.events]]") && text.contains("[[twin.drift.legendre]]"),
         "the written twin lacks its transients or drift"
     );
+    // The family has a Gauss–Markov term here: it is a term of the written noise, so that the
+    // members below are drawn with it.
+    assert!(
+        s.family.as_ref().is_some_and(|f| f.resolved(5)),
+        "no Gauss–Markov term: {:?}",
+        s.family.as_ref().map(|f| &f.gm_search)
+    );
+    assert!(text.contains("name = \"gauss_markov\""));
     let mut members = Vec::new();
     for k in [1u64, 2] {
         let y = member_from_cli(&toml, k, &dir.join(format!("m{k}.csv"))).expect("member");
