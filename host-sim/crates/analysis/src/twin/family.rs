@@ -73,8 +73,18 @@ const ALPHA: [i32; 4] = [0, -1, -2, -4];
 pub const SKIP_BINS: usize = 2;
 /// The whole record's lowest bin in the likelihood: bin 1, the slowest wander of the drift
 /// (one cycle over the record). It mixes in bin 0, the differences' mean, which the comparison's
-/// detrending removes (its power is taken as zero).
+/// detrending removes (its power is taken as zero). A residual with a drift polynomial of
+/// order N removed starts at bin ⌈(N + 1)/2⌉ instead ([`NoiseFamily::fit_after_drift`]).
 const RECORD_FIRST_BIN: usize = 1;
+
+/// The whole record's lowest bin in the likelihood of a residual from which a polynomial of
+/// `order` was removed: ⌈(order + 1)/2⌉ (at least bin 1). The polynomial has `order` zeros, so
+/// it takes out about the record's lowest (order + 1)/2 cycles along with the drift; fitted with
+/// those bins in, the family would carry their removal into the members, which the comparison
+/// then removes the polynomial from again — the slowest power lost twice.
+pub fn record_first_bin(order: usize) -> usize {
+    (order + 2) / 2
+}
 /// The record is cut into this many segments overlapping by half.
 pub const SEGMENTS_PER_RECORD: usize = 7;
 /// Equivalent noise bandwidth of the Hann window, bins.
@@ -138,6 +148,8 @@ pub struct NoiseFamily {
     pub ln_fg_var: f64,
     /// Periodogram bins in the likelihood.
     pub bins: usize,
+    /// The whole record's lowest bin in the likelihood.
+    pub record_first_bin: usize,
     /// −ℓ at the optimum.
     pub neg_loglik: f64,
     /// The Gauss–Markov term's search, kept or not.
@@ -267,7 +279,11 @@ impl Bin {
 /// transform) in [`SEGMENTS_PER_RECORD`]-th segments overlapping by half, Hann taper: every
 /// part of the record weighs about the same (a non-stationary record, noisier at its start or
 /// with a glitch near an end, is fitted as the comparison's ADEV and Welch PSD see it).
-fn diff_periodograms(placed: &[f64], dt_s: f64) -> Result<Vec<Bin>, FamilyError> {
+fn diff_periodograms(
+    placed: &[f64],
+    dt_s: f64,
+    record_first: usize,
+) -> Result<Vec<Bin>, FamilyError> {
     let x = filled(placed);
     let finite = placed.iter().filter(|v| v.is_finite()).count();
     if finite < 64 || x.len() < 65 {
@@ -291,7 +307,7 @@ fn diff_periodograms(placed: &[f64], dt_s: f64) -> Result<Vec<Bin>, FamilyError>
         &d,
         dt_s,
         SKIP_BINS.max(2) as f64 / (n as f64 * dt_s),
-        RECORD_FIRST_BIN,
+        record_first,
         &mut out,
     );
     Ok(out)
@@ -362,7 +378,25 @@ fn whittle(p: &[f64; PARAMS], bins: &[Bin]) -> f64 {
 impl NoiseFamily {
     /// Fits the family to a residual laid on its regular grid (NaN = gap).
     pub fn fit(placed: &[f64], dt_s: f64) -> Result<NoiseFamily, FamilyError> {
-        let bins = diff_periodograms(placed, dt_s)?;
+        Self::fit_from_bin(placed, dt_s, RECORD_FIRST_BIN)
+    }
+
+    /// Fits the family to a residual from which a drift polynomial of `order` was removed: the
+    /// whole record's bins from [`record_first_bin`]`(order)` up.
+    pub fn fit_after_drift(
+        placed: &[f64],
+        dt_s: f64,
+        order: usize,
+    ) -> Result<NoiseFamily, FamilyError> {
+        Self::fit_from_bin(placed, dt_s, record_first_bin(order))
+    }
+
+    fn fit_from_bin(
+        placed: &[f64],
+        dt_s: f64,
+        record_first: usize,
+    ) -> Result<NoiseFamily, FamilyError> {
+        let bins = diff_periodograms(placed, dt_s, record_first)?;
         if bins.len() < 16 {
             return Err(FamilyError::TooShort(placed.len()));
         }
@@ -415,6 +449,7 @@ impl NoiseFamily {
             ln_fc_var,
             ln_fg_var,
             bins: bins.len(),
+            record_first_bin: record_first,
             neg_loglik: nll,
             gm_search,
         })
@@ -424,7 +459,7 @@ impl NoiseFamily {
     /// maximum, the corner held): the profile likelihood of a change to the series' mean, such
     /// as a drift polynomial removed.
     pub fn neg_loglik_of(&self, placed: &[f64]) -> f64 {
-        match diff_periodograms(placed, self.dt_s) {
+        match diff_periodograms(placed, self.dt_s, self.record_first_bin) {
             Ok(bins) if bins.len() == self.bins => {
                 levels_best(&bins, self.ln_params[4], self.ln_params[6]).1
             }
@@ -773,6 +808,7 @@ mod tests {
             ln_fc_var: 0.0,
             ln_fg_var: 0.0,
             bins: 0,
+            record_first_bin: RECORD_FIRST_BIN,
             neg_loglik: 0.0,
             gm_search: GaussMarkovSearch {
                 ln_corner: f64::NAN,
@@ -821,6 +857,7 @@ mod tests {
             ln_fc_var: 0.0,
             ln_fg_var: 0.0,
             bins: 0,
+            record_first_bin: RECORD_FIRST_BIN,
             neg_loglik: 0.0,
             gm_search: GaussMarkovSearch {
                 ln_corner: fg.ln(),

@@ -355,26 +355,27 @@ where
     // The members' noise: the family (white, flicker, random walk, drift-rate walk, output
     // filter) fitted by Whittle likelihood to what the extended twin leaves, the drift kept —
     // the comparison keeps it, so the members must carry it.
-    let family = match NoiseFamily::fit(&clean(&r_after), yard.grid.dt_s) {
-        // Every instrument has a white floor: a fit that does not resolve one has traded it
-        // for other terms (a filter corner with a random walk mimics it) and is not used.
-        Ok(f) if !f.resolved(0) => {
-            warnings.push(
+    let family =
+        match NoiseFamily::fit_after_drift(&clean(&r_after), yard.grid.dt_s, drift_order.order) {
+            // Every instrument has a white floor: a fit that does not resolve one has traded it
+            // for other terms (a filter corner with a random walk mimics it) and is not used.
+            Ok(f) if !f.resolved(0) => {
+                warnings.push(
                 "the noise family's white level is not resolved (a degenerate fit): the members \
                  draw from the likelihood noise model instead"
                     .to_owned(),
             );
-            None
-        }
-        Ok(f) => Some(f),
-        Err(e) => {
-            warnings.push(format!(
-                "the noise family could not be fitted ({e}): the members draw from the \
+                None
+            }
+            Ok(f) => Some(f),
+            Err(e) => {
+                warnings.push(format!(
+                    "the noise family could not be fitted ({e}): the members draw from the \
                  likelihood noise model instead"
-            ));
-            None
-        }
-    };
+                ));
+                None
+            }
+        };
     lap("noise family");
     // 4. Ensembles and comparisons, before and after. Members of the extended twin draw the
     //    accepted effects' parameters (and the other cause of an ambiguous pair) as well as the
