@@ -29,6 +29,7 @@ pub mod scenario;
 pub mod thermostat;
 pub mod tide;
 pub mod tilt;
+pub mod twin;
 pub use accomp_log::{time, writer};
 
 use std::io::Write;
