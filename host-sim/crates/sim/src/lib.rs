@@ -29,6 +29,7 @@ pub mod scenario;
 pub mod thermostat;
 pub mod tide;
 pub mod tilt;
+pub mod twin;
 
 /// Unit tests' scratch folders, removed on drop (the integration tests' own helper).
 #[cfg(test)]
