@@ -51,14 +51,17 @@ fn a_table_fitted_from_table_1_is_loaded_into_qemu_and_used_by_compensate() {
 
     let dir = scratch::Scratch::new("fit-compensate");
     let cal = dir.join("jn06.acal");
-    accomp(&dir, &[
-        "fit",
-        TABLE1,
-        "-o",
-        cal.to_str().unwrap(),
-        "--date",
-        "2026-11-21",
-    ]);
+    accomp(
+        &dir,
+        &[
+            "fit",
+            TABLE1,
+            "-o",
+            cal.to_str().unwrap(),
+            "--date",
+            "2026-11-21",
+        ],
+    );
     let table =
         CalibrationTable::decode(&std::fs::read(&cal).unwrap()).expect("fit writes a valid table");
 
@@ -75,19 +78,22 @@ fn a_table_fitted_from_table_1_is_loaded_into_qemu_and_used_by_compensate() {
     std::fs::write(&input, csv).unwrap();
 
     let run = |target: &str, out: &Path| {
-        accomp(&dir, &[
-            "compensate",
-            "--target",
-            target,
-            "--calibration",
-            cal.to_str().unwrap(),
-            "--input",
-            input.to_str().unwrap(),
-            "--output",
-            out.to_str().unwrap(),
-            "--firmware",
-            elf.to_str().unwrap(),
-        ]);
+        accomp(
+            &dir,
+            &[
+                "compensate",
+                "--target",
+                target,
+                "--calibration",
+                cal.to_str().unwrap(),
+                "--input",
+                input.to_str().unwrap(),
+                "--output",
+                out.to_str().unwrap(),
+                "--firmware",
+                elf.to_str().unwrap(),
+            ],
+        );
         std::fs::read_to_string(out).unwrap()
     };
     let qemu = run("qemu", &dir.join("qemu.csv"));

@@ -9,6 +9,9 @@ use accomp_host::discover::simulate::{simulate_dataset, write_scenario};
 use accomp_host::sim::scenario::Scenario;
 use std::path::Path;
 
+#[path = "common/scratch.rs"]
+mod scratch;
+
 const GMETROLOGY: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
     "/../data/measured/gmetrology_relative_gravimeter_2021-06-08_51d.tsf"
@@ -81,8 +84,7 @@ fn accomp_simulate_of_the_written_scenario_reproduces_ensemble_member_k() {
         "no noise family: {:?}",
         s.warnings
     );
-    let dir = std::env::temp_dir().join(format!("accomp-twin-written-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch::Scratch::new("twin-written");
     let toml = dir.join("ext.toml");
     write_scenario(&mut s, Some(&toml)).expect("write");
     assert!(dir.join("ext.drivers.csv").is_file());
@@ -182,5 +184,4 @@ fn accomp_simulate_of_the_written_scenario_reproduces_ensemble_member_k() {
         err.contains("[twin]") && err.contains("fixed_effects"),
         "{err}"
     );
-    let _ = std::fs::remove_dir_all(&dir);
 }

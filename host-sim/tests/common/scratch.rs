@@ -63,6 +63,12 @@ impl Deref for Scratch {
     }
 }
 
+impl AsRef<std::ffi::OsStr> for Scratch {
+    fn as_ref(&self) -> &std::ffi::OsStr {
+        self.dir.as_os_str()
+    }
+}
+
 impl AsRef<Path> for Scratch {
     fn as_ref(&self) -> &Path {
         &self.dir
@@ -72,7 +78,10 @@ impl AsRef<Path> for Scratch {
 impl Drop for Scratch {
     fn drop(&mut self) {
         if std::env::var_os(KEEP_ENV).is_some() {
-            eprintln!("{KEEP_ENV} is set: the test's files are kept in {}", self.dir.display());
+            eprintln!(
+                "{KEEP_ENV} is set: the test's files are kept in {}",
+                self.dir.display()
+            );
         } else {
             let _ = std::fs::remove_dir_all(&self.dir);
         }
