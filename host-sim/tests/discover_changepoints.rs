@@ -50,8 +50,7 @@ fn score(d: &Discovery, fl: &[(f64, f64)], known: &[&str]) -> (usize, usize) {
         .iter()
         .filter(|a| a.effect.name() == "step")
         .map(|a| {
-            let size = a.params.iter().find(|(k, _)| k == "size").map(|(_, p)| *p);
-            let size = size.expect("size");
+            let size = hidden::param(a, "size").expect("size");
             (hidden::param_value(a, "time_s"), size.value, size.sigma)
         })
         .collect();

@@ -18,7 +18,7 @@ mod hidden;
 #[path = "common/synth.rs"]
 mod synth;
 
-use accomp_host::discover::{self, select, Discovery};
+use accomp_host::discover::{self, Discovery};
 use rand::Rng;
 
 const DT_S: f64 = 120.0;
@@ -35,13 +35,6 @@ fn why(d: &Discovery) -> String {
         "refused {:?}; last round {:?}; candidates {:?}; baseline {}",
         d.selection.refused, d.selection.last_round, d.candidates, d.baseline_description
     )
-}
-
-fn named<'d>(d: &'d Discovery, name: &str) -> Option<&'d select::Accepted> {
-    d.selection
-        .accepted
-        .iter()
-        .find(|a| a.effect.name() == name)
 }
 
 fn no_absorbers(d: &Discovery) {
@@ -71,7 +64,7 @@ fn a_bias_on_the_rate_of_temperature_change_is_a_rate_coupling_of_the_temperatur
             hidden::accepted_with_params(&d)
         );
         no_absorbers(&d);
-        let a = named(&d, "rate_coupling")
+        let a = hidden::accepted(&d, "rate_coupling")
             .unwrap_or_else(|| panic!("rate_coupling named: {}", why(&d)));
         assert_eq!(a.effect.channel(), Some("temperature_c"));
         let k = hidden::param_value(a, "coefficient");
@@ -104,25 +97,7 @@ fn a_second_order_lag_of_unequal_stages_is_a_coupling_of_the_temperature_with_th
             hidden::accepted_with_params(&d)
         );
         no_absorbers(&d);
-        // The delay of the fitted transfer function: τ of one stage, 2τ of two equal ones.
-        let (a, delay) = match (named(&d, "thermal_lag"), named(&d, "lag2_coupling")) {
-            (Some(a), _) => (a, hidden::param_value(a, "tau_s")),
-            (None, Some(a)) => {
-                assert_eq!(a.effect.channel(), Some("temperature_c"));
-                (a, 2.0 * hidden::param_value(a, "tau_s"))
-            }
-            _ => panic!("no coupling of the temperature named"),
-        };
-        assert!(
-            (delay / (t1 + t2)).ln().abs() < 0.5,
-            "delay {delay:.0} s against {:.0} s",
-            t1 + t2
-        );
-        let c = hidden::param_value(a, "coefficient");
-        assert!(
-            (c / k - 1.0).abs() < 0.4,
-            "coefficient {c:.3e} against {k:.3e}"
-        );
+        hidden::assert_temperature_lag(&d, t1 + t2, k);
     }
 }
 

@@ -23,6 +23,7 @@
 // Each test crate uses a different subset of this module.
 #![allow(dead_code)]
 
+use accomp_host::discover::effects::Param;
 use accomp_host::discover::import::{dataset_from_log, Dataset, DatasetOptions};
 use accomp_host::discover::select::{self, Accepted};
 use accomp_host::discover::{self as disc, Discovery};
@@ -60,6 +61,11 @@ pub fn start_unix_s(meta: &[(String, String)]) -> f64 {
         .find(|(k, _)| k == "start_utc")
         .and_then(|(_, v)| accomp_host::discover::import::parse_utc(v))
         .expect("start_utc")
+}
+
+/// An accepted effect's parameter `key` (value and σ).
+pub fn param(a: &Accepted, key: &str) -> Option<Param> {
+    a.params.iter().find(|(k, _)| k == key).map(|(_, p)| *p)
 }
 
 /// The value of an accepted effect's parameter (NaN when it has no such key).
@@ -118,6 +124,41 @@ pub fn accepted_with_params(d: &Discovery) -> Vec<String> {
             format!("{} [{}]", a.effect.name(), p.join(" "))
         })
         .collect()
+}
+
+/// The accepted effect named `name`, quietly (see [`find_named`]).
+pub fn accepted<'d>(d: &'d Discovery, name: &str) -> Option<&'d Accepted> {
+    d.selection
+        .accepted
+        .iter()
+        .find(|a| a.effect.name() == name)
+}
+
+/// Asserts a lag of the temperature was named with the delay `true_delay_s` (within a factor
+/// e^0.5) and the coefficient `true_coefficient` (within 40 %): the delay of the fitted transfer
+/// function is τ of a `thermal_lag`, 2τ of a `lag2_coupling` of two equal stages.
+pub fn assert_temperature_lag(d: &Discovery, true_delay_s: f64, true_coefficient: f64) {
+    let (a, delay) = match (accepted(d, "thermal_lag"), accepted(d, "lag2_coupling")) {
+        (Some(a), _) => (a, param_value(a, "tau_s")),
+        (None, Some(a)) => {
+            assert_eq!(a.effect.channel(), Some("temperature_c"));
+            (a, 2.0 * param_value(a, "tau_s"))
+        }
+        _ => panic!(
+            "no lag of the temperature named: {:?}; refused {:?}",
+            accepted_with_params(d),
+            d.selection.refused
+        ),
+    };
+    assert!(
+        (delay / true_delay_s).ln().abs() < 0.5,
+        "delay {delay:.0} s against {true_delay_s:.0} s"
+    );
+    let c = param_value(a, "coefficient");
+    assert!(
+        (c / true_coefficient - 1.0).abs() < 0.4,
+        "coefficient {c:.3e} against {true_coefficient:.3e}"
+    );
 }
 
 /// The accepted effect named `name`; when there is none (and something was hidden), prints

@@ -17,6 +17,10 @@
 
 #![allow(dead_code)]
 
+use accomp::table::CalibrationTable;
+use accomp::units::Celsius;
+use accomp_host::discover::import::DatasetOptions;
+use accomp_host::discover::{self as disc, select, Discovery};
 use accomp_host::log::Log;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -467,6 +471,28 @@ pub fn binomial_upper(k: usize, n: usize, alpha: f64) -> f64 {
         }
     }
     hi
+}
+
+/// The bias K0 (g) of `table`'s thermal models at `t_c` (inside the table's range).
+pub fn bias_g_at(table: &CalibrationTable, t_c: f64) -> f64 {
+    table
+        .thermal
+        .coefficients_at(Celsius(t_c))
+        .expect("in range")
+        .0
+        .bias_g
+}
+
+/// Runs the discovery on `log` with the default options, given the calibration `table` (if any).
+pub fn discover(log: Log, table: Option<&CalibrationTable>) -> Discovery {
+    disc::discover_log(
+        log,
+        &[],
+        &DatasetOptions::default(),
+        table,
+        &select::Config::default(),
+    )
+    .expect("discover")
 }
 
 #[cfg(test)]
