@@ -20,6 +20,7 @@ mod synth;
 
 use accomp_host::discover::{self, Discovery};
 use rand::Rng;
+use rand_chacha::ChaCha8Rng;
 
 const DT_S: f64 = 120.0;
 const ROWS: usize = 14 * 720;
@@ -48,12 +49,18 @@ fn no_absorbers(d: &Discovery) {
     );
 }
 
+/// One draw's own generator (seeded from `rng`) and the programme station drawn with it.
+fn programme_draw(rng: &mut ChaCha8Rng) -> (ChaCha8Rng, synth::Station, synth::SensorNoise) {
+    let mut r = synth::rng(rng.random::<u64>());
+    let (st, noise) = synth::programme_station(ROWS, DT_S, &mut r);
+    (r, st, noise)
+}
+
 #[test]
 fn a_bias_on_the_rate_of_temperature_change_is_a_rate_coupling_of_the_temperature() {
     let mut rng = synth::rng(0x7A7E_0001);
     for i in 0..2 {
-        let mut r = synth::rng(rng.random::<u64>());
-        let (st, noise) = synth::programme_station(ROWS, DT_S, &mut r);
+        let (mut r, st, noise) = programme_draw(&mut rng);
         let rate = synth::true_rate_c_per_s(&st);
         // 2–4 µg at the programme's fastest ramp (0.5 °C per 2 h).
         let g = hidden::sign(&mut r) * r.random_range(2.0e-6..4.0e-6) / (1.0 / 7200.0);
@@ -81,8 +88,7 @@ fn a_bias_on_the_rate_of_temperature_change_is_a_rate_coupling_of_the_temperatur
 fn a_second_order_lag_of_unequal_stages_is_a_coupling_of_the_temperature_with_their_delay() {
     let mut rng = synth::rng(0x7A7E_0002);
     for i in 0..2 {
-        let mut r = synth::rng(rng.random::<u64>());
-        let (st, noise) = synth::programme_station(ROWS, DT_S, &mut r);
+        let (mut r, st, noise) = programme_draw(&mut rng);
         let (t1, t2) = (
             r.random_range(600.0..1200.0),
             r.random_range(1800.0..3600.0),
