@@ -156,15 +156,8 @@ fn a_rate_coupling_through_a_small_lag_in_the_real_residual_is_a_rate_coupling_o
     for i in 0..2 {
         let tau = rng.random_range(120.0..300.0);
         let (w, st, unit, g) = draw(&res, &wins, &mut rng, 25.0..40.0, |st| {
-            let lagged = synth::low_pass(&st.temp_true_c, DT_S, tau);
-            let n = lagged.len();
             // Central differences of the lagged TRUE temperature, °C/s.
-            (0..n)
-                .map(|k| {
-                    let (a, b) = (k.saturating_sub(1), (k + 1).min(n - 1));
-                    (lagged[b] - lagged[a]) / ((b - a) as f64 * DT_S)
-                })
-                .collect()
+            synth::central_diff(&synth::low_pass(&st.temp_true_c, DT_S, tau), DT_S)
         });
         let d = run_with_coupling(&res, &w, &unit, g, &st);
         eprintln!(

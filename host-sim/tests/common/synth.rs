@@ -351,11 +351,16 @@ pub fn draw_noise(rng: &mut ChaCha8Rng) -> SensorNoise {
 
 /// The rate of change of the true temperature, °C/s: central differences, one-sided at the ends.
 pub fn true_rate_c_per_s(st: &Station) -> Vec<f64> {
-    let n = st.temp_true_c.len();
+    central_diff(&st.temp_true_c, st.dt_s)
+}
+
+/// Central differences of `x` sampled every `dt_s` (one-sided at the two ends), per second.
+pub fn central_diff(x: &[f64], dt_s: f64) -> Vec<f64> {
+    let n = x.len();
     (0..n)
         .map(|i| {
             let (a, b) = (i.saturating_sub(1), (i + 1).min(n - 1));
-            (st.temp_true_c[b] - st.temp_true_c[a]) / ((b - a) as f64 * st.dt_s)
+            (x[b] - x[a]) / ((b - a) as f64 * dt_s)
         })
         .collect()
 }
