@@ -68,6 +68,20 @@ pub fn param(a: &Accepted, key: &str) -> Option<Param> {
     a.params.iter().find(|(k, _)| k == key).map(|(_, p)| *p)
 }
 
+/// The accepted steps as (time_s, size, σ of the size).
+pub fn accepted_steps(d: &Discovery) -> Vec<(f64, f64, f64)> {
+    d.selection
+        .accepted
+        .iter()
+        .filter(|a| a.effect.name() == "step")
+        .map(|a| {
+            let size = param(a, "size").expect("a step has a size");
+            let time = param(a, "time_s").expect("a step has a time");
+            (time.value, size.value, size.sigma)
+        })
+        .collect()
+}
+
 /// The value of an accepted effect's parameter (NaN when it has no such key).
 pub fn param_value(a: &Accepted, key: &str) -> f64 {
     a.params
@@ -219,6 +233,56 @@ impl Tally {
             self.named, self.draws, self.params
         );
     }
+}
+
+/// What one hidden-effect draw came to: the effect as drawn, whether it was named, whether its
+/// parameters (and, where the test checks it, its gain) came out within tolerance, and all that
+/// was accepted.
+pub struct Outcome<H> {
+    /// The hidden effect with its drawn parameters.
+    pub hidden: H,
+    /// The discovery named it.
+    pub named: bool,
+    /// Named with its parameters within tolerance.
+    pub params_ok: bool,
+    /// Named with its out-of-sample gain close to the true-parameter gain (`None`: not checked).
+    pub gain_ok: Option<bool>,
+    /// Names of all accepted effects.
+    pub accepted: Vec<String>,
+}
+
+/// Runs `draws` hidden-effect draws from `rng` — each an effect and its SNR (`draw`), then the
+/// seed of its log — through `run_one`, prints every outcome and the rates under `label`, and
+/// returns the tally.
+pub fn tally_draws<H: std::fmt::Debug>(
+    label: &str,
+    rng: &mut ChaCha8Rng,
+    draws: usize,
+    mut draw: impl FnMut(&mut ChaCha8Rng) -> (H, f64),
+    mut run_one: impl FnMut(&H, f64, u64) -> Outcome<H>,
+    name: impl Fn(&H) -> &'static str,
+) -> Tally {
+    let mut tally = Tally::default();
+    let mut with_gain = false;
+    for i in 0..draws {
+        let (h, snr) = draw(rng);
+        let seed = rng.random::<u64>();
+        let o = run_one(&h, snr, seed);
+        let gain = o.gain_ok.map_or(String::new(), |g| format!(" gain={g}"));
+        eprintln!(
+            "{label} draw {i}: hidden {:?} at SNR {snr:.1}: accepted {:?} named={} params={}{gain}",
+            o.hidden, o.accepted, o.named, o.params_ok
+        );
+        with_gain |= o.gain_ok.is_some();
+        tally.add(
+            name(&o.hidden),
+            o.named,
+            o.params_ok,
+            o.gain_ok.unwrap_or(false),
+        );
+    }
+    tally.print(label, with_gain);
+    tally
 }
 
 /// Bouc–Wen hysteresis of a temperature series, a differential model of stick–slip (used for
