@@ -219,7 +219,9 @@ fn load_without_local_check_shows_the_device_error() {
     std::fs::write(&file, nan.encode()).unwrap();
     let elf = qemu::elf();
     let run = |extra: &[&str]| {
+        // This test's own emulated board, not the user's persistent one.
         let out = Command::new(env!("CARGO_BIN_EXE_accomp"))
+            .env(accomp_host::device::qemu::STATE_ENV, dir.join("board"))
             .args(["load", "--target", "qemu", "--firmware"])
             .arg(&elf)
             .args(extra)
