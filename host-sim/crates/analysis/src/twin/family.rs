@@ -116,6 +116,8 @@ pub struct NoiseFamily {
     pub ln_fc_var: f64,
     /// Periodogram bins in the likelihood.
     pub bins: usize,
+    /// Bins left out as narrow lines (not noise; [`line_bins`]).
+    pub line_bins: usize,
     /// −ℓ at the optimum.
     pub neg_loglik: f64,
 }
@@ -136,6 +138,8 @@ struct Bin {
     f: [f64; 3],
     g: [f64; 3],
     i: f64,
+    /// Which periodogram (segment, or the whole record's lowest bins) it belongs to.
+    group: usize,
 }
 
 /// Weights of bins k − 1, k, k + 1 in the expected Hann-tapered periodogram at k (the periodic
@@ -201,9 +205,11 @@ fn diff_periodograms(placed: &[f64], dt_s: f64) -> Result<Vec<Bin>, FamilyError>
         .min(d.len());
     let mut out = Vec::new();
     let mut start = 0;
+    let mut group = 0;
     while start + n <= d.len() {
-        segment_bins(&d[start..start + n], dt_s, 0.0, SKIP_BINS, &mut out);
+        segment_bins(&d[start..start + n], dt_s, 0.0, SKIP_BINS, group, &mut out);
         start += (n / 2).max(1);
+        group += 1;
     }
     // The frequencies below the segments' lowest bin (the slowest drift): the whole record.
     segment_bins(
@@ -211,6 +217,7 @@ fn diff_periodograms(placed: &[f64], dt_s: f64) -> Result<Vec<Bin>, FamilyError>
         dt_s,
         SKIP_BINS.max(2) as f64 / (n as f64 * dt_s),
         RECORD_FIRST_BIN,
+        group,
         &mut out,
     );
     Ok(out)
@@ -218,7 +225,7 @@ fn diff_periodograms(placed: &[f64], dt_s: f64) -> Result<Vec<Bin>, FamilyError>
 
 /// Hann-tapered periodogram bins of one stretch of differences, bins ≥ `first` (and below
 /// `below` Hz when it is positive).
-fn segment_bins(d: &[f64], dt_s: f64, below: f64, first: usize, out: &mut Vec<Bin>) {
+fn segment_bins(d: &[f64], dt_s: f64, below: f64, first: usize, group: usize, out: &mut Vec<Bin>) {
     let n = d.len();
     let w: Vec<f64> = (0..n)
         .map(|i| 0.5 - 0.5 * (2.0 * std::f64::consts::PI * i as f64 / n as f64).cos())
@@ -238,6 +245,7 @@ fn segment_bins(d: &[f64], dt_s: f64, below: f64, first: usize, out: &mut Vec<Bi
             f,
             g: [gain(f[0]), gain(f[1]), gain(f[2])],
             i: 2.0 * dt_s * (re * re + im * im) / sw2,
+            group,
         });
     }
 }
@@ -265,6 +273,58 @@ fn filled(placed: &[f64]) -> Vec<f64> {
     x
 }
 
+/// Refits without the line bins at most this many times (the lines found under the previous
+/// fit; a fit inflated by the lines still shows them against their neighbours).
+pub const LINE_PASSES: usize = 3;
+/// Neighbours each side whose median is a bin's local level, bins.
+const LINE_WINDOW: usize = 8;
+/// False-alarm probability of one line bin over the whole likelihood (Bonferroni).
+const LINE_FAP: f64 = 0.01;
+
+/// Indices (ascending) of the bins that are narrow lines, not noise, under the family `p`:
+/// the ratio q = I/E, normalised by its median over the ±[`LINE_WINDOW`] neighbours of the
+/// same periodogram (÷ ln 2: the median of the unit exponential q is under a Gaussian family),
+/// exceeds ln(bins / [`LINE_FAP`]) — for a Gaussian family each bin's q is exponential, so all
+/// the bins of a record pass together with probability 1 − [`LINE_FAP`]. The local median
+/// makes the test see a line against its own neighbours even when the family was inflated by
+/// it. A line bin's two neighbours (the Hann window's main lobe) go with it.
+fn line_bins(bins: &[Bin], p: &[f64; PARAMS]) -> Vec<usize> {
+    let threshold = (bins.len() as f64 / LINE_FAP).ln();
+    let q: Vec<f64> = bins
+        .iter()
+        .map(|b| {
+            let e = b.expected(p);
+            if e > 0.0 && e.is_finite() {
+                b.i / e
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let mut out = std::collections::BTreeSet::new();
+    let mut start = 0;
+    while start < bins.len() {
+        let g = bins[start].group;
+        let end = start + bins[start..].iter().take_while(|b| b.group == g).count();
+        if end - start > 2 * LINE_WINDOW {
+            for k in start..end {
+                let (a, b) = (
+                    k.saturating_sub(LINE_WINDOW).max(start),
+                    (k + LINE_WINDOW + 1).min(end),
+                );
+                let mut w: Vec<f64> = q[a..b].to_vec();
+                w.sort_by(f64::total_cmp);
+                let med = w[w.len() / 2];
+                if med > 0.0 && q[k] * std::f64::consts::LN_2 / med > threshold {
+                    out.extend(k.saturating_sub(1).max(start)..(k + 2).min(end));
+                }
+            }
+        }
+        start = end;
+    }
+    out.into_iter().collect()
+}
+
 /// −ℓ (Whittle) of log parameters `p` on the bins.
 fn whittle(p: &[f64; PARAMS], bins: &[Bin]) -> f64 {
     let mut s = 0.0;
@@ -280,21 +340,52 @@ fn whittle(p: &[f64; PARAMS], bins: &[Bin]) -> f64 {
 
 impl NoiseFamily {
     /// Fits the family to a residual laid on its regular grid (NaN = gap).
+    ///
+    /// Narrow lines (a tide or a periodic disturbance the twin's deterministic part leaves in
+    /// the residual) are not noise: in the Whittle likelihood a bin's cost grows with I/E, so a
+    /// few bins of a strong line pull the coloured terms up by orders of magnitude everywhere
+    /// (a 25-day gMetrology half with its tidal residual: the random walk ×4.6, the members
+    /// ×20–2000 in power below 1 cycle/day). Bins where the periodogram stands out of its
+    /// neighbours beyond what a Gaussian family allows ([`line_bins`]) are left out and the
+    /// family refitted, at most [`LINE_PASSES`] times; the count is reported.
     pub fn fit(placed: &[f64], dt_s: f64) -> Result<NoiseFamily, FamilyError> {
-        let bins = diff_periodograms(placed, dt_s)?;
-        if bins.len() < 16 {
+        let all = diff_periodograms(placed, dt_s)?;
+        if all.len() < 16 {
             return Err(FamilyError::TooShort(placed.len()));
         }
-        if bins.iter().all(|b| b.i <= 0.0) {
+        if all.iter().all(|b| b.i <= 0.0) {
             return Err(FamilyError::Constant);
         }
+        let mut fam = Self::fit_bins(&all, dt_s);
+        for _ in 0..LINE_PASSES {
+            let lines = line_bins(&all, &fam.ln_params);
+            if lines.len() == fam.line_bins {
+                break;
+            }
+            let kept: Vec<Bin> = all
+                .iter()
+                .enumerate()
+                .filter(|(k, _)| lines.binary_search(k).is_err())
+                .map(|(_, b)| *b)
+                .collect();
+            if kept.len() < 16 {
+                break;
+            }
+            fam = Self::fit_bins(&kept, dt_s);
+            fam.line_bins = lines.len();
+        }
+        Ok(fam)
+    }
+
+    /// The family's maximum-likelihood fit to the bins.
+    fn fit_bins(bins: &[Bin], dt_s: f64) -> NoiseFamily {
         let nyq = 0.5 / dt_s;
         let (lo, hi) = ((CORNER_RANGE.0 * nyq).ln(), (CORNER_RANGE.1 * nyq).ln());
         // The profile likelihood in ln f_c (the levels at their maximum for each corner), and
         // without a filter.
-        let best = golden_section_min(|v| levels(&bins, v).1, lo, hi, GOLDEN_STEPS);
-        let (h_f, nll_f) = levels_best(&bins, best);
-        let (h_0, nll_0) = levels_best(&bins, f64::INFINITY);
+        let best = golden_section_min(|v| levels(bins, v).1, lo, hi, GOLDEN_STEPS);
+        let (h_f, nll_f) = levels_best(bins, best);
+        let (h_0, nll_0) = levels_best(bins, f64::INFINITY);
         // The filter is kept when it improves −ℓ by more than FILTER_DELTA (a likelihood-ratio
         // test with one parameter at about 2σ).
         let filtered = nll_0 - nll_f > FILTER_DELTA;
@@ -304,15 +395,16 @@ impl NoiseFamily {
             (h_0, f64::INFINITY, nll_0)
         };
         let ln_params = ln_params_of(&h, ln_fc);
-        let (h_cov, ln_fc_var) = covariance(&bins, &h, ln_fc);
-        Ok(NoiseFamily {
+        let (h_cov, ln_fc_var) = covariance(bins, &h, ln_fc);
+        NoiseFamily {
             dt_s,
             ln_params,
             h_cov,
             ln_fc_var,
             bins: bins.len(),
+            line_bins: 0,
             neg_loglik: nll,
-        })
+        }
     }
 
     /// −ℓ of the family refitted to another series at this fit's corner (the levels at their
@@ -320,7 +412,16 @@ impl NoiseFamily {
     /// as a drift polynomial removed.
     pub fn neg_loglik_of(&self, placed: &[f64]) -> f64 {
         match diff_periodograms(placed, self.dt_s) {
-            Ok(bins) if bins.len() == self.bins => levels_best(&bins, self.ln_params[4]).1,
+            Ok(all) => {
+                let lines = line_bins(&all, &self.ln_params);
+                let bins: Vec<Bin> = all
+                    .iter()
+                    .enumerate()
+                    .filter(|(k, _)| lines.binary_search(k).is_err())
+                    .map(|(_, b)| *b)
+                    .collect();
+                levels_best(&bins, self.ln_params[4]).1
+            }
             _ => f64::INFINITY,
         }
     }
@@ -640,6 +741,7 @@ mod tests {
             h_cov: [[0.0; 4]; 4],
             ln_fc_var: 0.0,
             bins: 0,
+            line_bins: 0,
             neg_loglik: 0.0,
         };
         let mut rng = stream(11, 0);

@@ -21,7 +21,9 @@ mod tests;
 pub mod transients;
 
 pub use error::TwinError;
-pub use from_discovery::{scenario_effects_drawn, scenario_effects_from_discovery};
+pub use from_discovery::{
+    scenario_effects_drawn, scenario_effects_from_discovery, tide_from_groups,
+};
 
 use build::*;
 use noise::*;
