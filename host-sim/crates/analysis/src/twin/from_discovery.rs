@@ -119,7 +119,7 @@ fn scenario_effect(
                     duration_s: p("duration_s").unwrap_or(0.0),
                 },
                 EffectKind::TidalGravity => match &d.tidal {
-                    Ok(t) if !t.groups.is_empty() => tide_from_groups(t, &drawn),
+                    Ok(t) if !t.groups.is_empty() => tide_from_groups(t, drawn),
                     _ => ScenarioEffect::TidalGravity {
                         amplitude_factor: need("amplitude_factor")?,
                         delay_s: 0.0,
@@ -214,6 +214,32 @@ struct Accepted<'a> {
     channel: Option<&'a str>,
 }
 
+/// The wave-group analysis' tide as a `tidal_gravity` entry: a factor and a phase per group
+/// against the model's elastic tide (the delay is in the phases), each value through `value`
+/// (the fitted value, or a member's draw).
+pub fn tide_from_groups(
+    t: &crate::discover::tidal::TidalAnalysis,
+    value: impl Fn(&crate::discover::effects::Param) -> f64,
+) -> ScenarioEffect {
+    ScenarioEffect::TidalGravity {
+        amplitude_factor: 0.0,
+        delay_s: 0.0,
+        groups: t
+            .groups
+            .iter()
+            .filter(|g| {
+                g.amplitude_factor_vs_elastic_model.value.is_finite()
+                    && g.phase_vs_elastic_model_deg.value.is_finite()
+            })
+            .map(|g| crate::sim::effects::TideGroupTerm {
+                name: g.name.clone(),
+                factor: value(&g.amplitude_factor_vs_elastic_model),
+                phase_deg: value(&g.phase_vs_elastic_model_deg),
+            })
+            .collect(),
+    }
+}
+
 #[cfg(test)]
 mod from_discovery_tests {
     use super::*;
@@ -255,31 +281,5 @@ mod from_discovery_tests {
         let mut short = back;
         short.run.duration_s = 3600.0;
         simulate(&short, 1, &Options::default(), Vec::new(), &mut |_, _| {}).unwrap();
-    }
-}
-
-/// The wave-group analysis' tide as a `tidal_gravity` entry: a factor and a phase per group
-/// against the model's elastic tide (the delay is in the phases), each value through `value`
-/// (the fitted value, or a member's draw).
-pub fn tide_from_groups(
-    t: &crate::discover::tidal::TidalAnalysis,
-    value: impl Fn(&crate::discover::effects::Param) -> f64,
-) -> ScenarioEffect {
-    ScenarioEffect::TidalGravity {
-        amplitude_factor: 0.0,
-        delay_s: 0.0,
-        groups: t
-            .groups
-            .iter()
-            .filter(|g| {
-                g.amplitude_factor_vs_elastic_model.value.is_finite()
-                    && g.phase_vs_elastic_model_deg.value.is_finite()
-            })
-            .map(|g| crate::sim::effects::TideGroupTerm {
-                name: g.name.clone(),
-                factor: value(&g.amplitude_factor_vs_elastic_model),
-                phase_deg: value(&g.phase_vs_elastic_model_deg),
-            })
-            .collect(),
     }
 }
