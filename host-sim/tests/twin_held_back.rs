@@ -101,8 +101,9 @@ fn held_back(a: f64, b: f64) {
 
 // Not yet: after the extension 15.4 % of the ADEV points but 28 % of the PSD bands lie
 // outside (7 of 25: a broad excess ×1.2–1.5 at 6.6–12 cycles/day that the power-law family
-// does not shape, ×0.9 at 39–52 cycles/day, and below the envelope at 0.24 and 0.97 cycles/day
-// where the members draw the warm-up's and the tide's parameters); docs/discovery.md, Limits.
+// does not shape, ×0.9 at 39–52 cycles/day, and below the envelope at 0.24 and 0.97 cycles/day,
+// the bands of the warm-up and the tide fitted to the record and not refitted on the members);
+// docs/discovery.md, Limits.
 #[test]
 #[ignore = "fails: the first half is 28 % outside in PSD after the extension (target 20 %)"]
 fn the_first_half_of_the_real_record_held_back_lies_inside_the_extended_twins_envelope() {
