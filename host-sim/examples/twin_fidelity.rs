@@ -36,6 +36,14 @@ fn main() -> anyhow::Result<()> {
         }
     }
     let s = simulate_dataset(&ds, None, members, &select::Config::default())?;
+    // TWIN_FIDELITY_TEXT=1 prints the command's text report first.
+    if std::env::var_os("TWIN_FIDELITY_TEXT").is_some() {
+        println!(
+            "{}",
+            accomp_host::discover::simulate::output::text(&s, &ds.output_unit)
+        );
+        println!("{}", accomp_host::discover::report::text(&s.cause));
+    }
     for (label, c) in [("before", &s.before), ("after", &s.after)] {
         println!(
             "{label}: ADEV outside {:.1} %, PSD outside {:.1} % (member {:.1} % / {:.1} %)",

@@ -150,6 +150,8 @@ pub struct NoiseFamily {
     pub bins: usize,
     /// The whole record's lowest bin in the likelihood.
     pub record_first_bin: usize,
+    /// Bins left out as narrow lines (not noise; [`line_bins`]).
+    pub line_bins: usize,
     /// −ℓ at the optimum.
     pub neg_loglik: f64,
     /// The Gauss–Markov term's search, kept or not.
@@ -209,6 +211,8 @@ struct Bin {
     f: [f64; 3],
     g: [f64; 3],
     i: f64,
+    /// Which periodogram (segment, or the whole record's lowest bins) it belongs to.
+    group: usize,
 }
 
 /// Weights of bins k − 1, k, k + 1 in the expected Hann-tapered periodogram at k (the periodic
@@ -298,9 +302,11 @@ fn diff_periodograms(
         .min(d.len());
     let mut out = Vec::new();
     let mut start = 0;
+    let mut group = 0;
     while start + n <= d.len() {
-        segment_bins(&d[start..start + n], dt_s, 0.0, SKIP_BINS, &mut out);
+        segment_bins(&d[start..start + n], dt_s, 0.0, SKIP_BINS, group, &mut out);
         start += (n / 2).max(1);
+        group += 1;
     }
     // The frequencies below the segments' lowest bin (the slowest drift): the whole record.
     segment_bins(
@@ -308,6 +314,7 @@ fn diff_periodograms(
         dt_s,
         SKIP_BINS.max(2) as f64 / (n as f64 * dt_s),
         record_first,
+        group,
         &mut out,
     );
     Ok(out)
@@ -315,7 +322,7 @@ fn diff_periodograms(
 
 /// Hann-tapered periodogram bins of one stretch of differences, bins ≥ `first` (and below
 /// `below` Hz when it is positive).
-fn segment_bins(d: &[f64], dt_s: f64, below: f64, first: usize, out: &mut Vec<Bin>) {
+fn segment_bins(d: &[f64], dt_s: f64, below: f64, first: usize, group: usize, out: &mut Vec<Bin>) {
     let n = d.len();
     let w: Vec<f64> = (0..n)
         .map(|i| 0.5 - 0.5 * (2.0 * std::f64::consts::PI * i as f64 / n as f64).cos())
@@ -335,6 +342,7 @@ fn segment_bins(d: &[f64], dt_s: f64, below: f64, first: usize, out: &mut Vec<Bi
             f,
             g: [gain(f[0]), gain(f[1]), gain(f[2])],
             i: 2.0 * dt_s * (re * re + im * im) / sw2,
+            group,
         });
     }
 }
@@ -362,6 +370,67 @@ fn filled(placed: &[f64]) -> Vec<f64> {
     x
 }
 
+/// Refits without the line bins at most this many times (the lines found under the previous
+/// fit; a fit inflated by the lines still shows them against their neighbours).
+pub const LINE_PASSES: usize = 3;
+/// Neighbours each side whose median is a bin's local level, bins.
+const LINE_WINDOW: usize = 8;
+/// False-alarm probability of one line bin over the whole likelihood (Bonferroni).
+const LINE_FAP: f64 = 0.01;
+
+/// Indices (ascending) of the bins that are narrow lines, not noise, under the family `p`:
+/// the ratio q = I/E, normalised by its median over the ±[`LINE_WINDOW`] neighbours of the
+/// same periodogram (÷ ln 2: the median of the unit exponential q is under a Gaussian family),
+/// exceeds ln(bins / [`LINE_FAP`]) — for a Gaussian family each bin's q is exponential, so all
+/// the bins of a record pass together with probability 1 − [`LINE_FAP`]. The local median
+/// makes the test see a line against its own neighbours even when the family was inflated by
+/// it. A line bin's two neighbours (the Hann window's main lobe) go with it.
+fn line_bins(bins: &[Bin], p: &[f64; PARAMS]) -> Vec<usize> {
+    let threshold = (bins.len() as f64 / LINE_FAP).ln();
+    let q: Vec<f64> = bins
+        .iter()
+        .map(|b| {
+            let e = b.expected(p);
+            if e > 0.0 && e.is_finite() {
+                b.i / e
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let mut out = std::collections::BTreeSet::new();
+    let mut start = 0;
+    while start < bins.len() {
+        let g = bins[start].group;
+        let end = start + bins[start..].iter().take_while(|b| b.group == g).count();
+        if end - start > 2 * LINE_WINDOW {
+            for k in start..end {
+                let (a, b) = (
+                    k.saturating_sub(LINE_WINDOW).max(start),
+                    (k + LINE_WINDOW + 1).min(end),
+                );
+                let mut w: Vec<f64> = q[a..b].to_vec();
+                w.sort_by(f64::total_cmp);
+                let med = w[w.len() / 2];
+                if med > 0.0 && q[k] * std::f64::consts::LN_2 / med > threshold {
+                    out.extend(k.saturating_sub(1).max(start)..(k + 2).min(end));
+                }
+            }
+        }
+        start = end;
+    }
+    out.into_iter().collect()
+}
+
+/// The bins without those at the (ascending) indices `lines`.
+fn without_lines(bins: &[Bin], lines: &[usize]) -> Vec<Bin> {
+    bins.iter()
+        .enumerate()
+        .filter(|(k, _)| lines.binary_search(k).is_err())
+        .map(|(_, b)| *b)
+        .collect()
+}
+
 /// −ℓ (Whittle) of log parameters `p` on the bins.
 fn whittle(p: &[f64; PARAMS], bins: &[Bin]) -> f64 {
     let mut s = 0.0;
@@ -377,6 +446,14 @@ fn whittle(p: &[f64; PARAMS], bins: &[Bin]) -> f64 {
 
 impl NoiseFamily {
     /// Fits the family to a residual laid on its regular grid (NaN = gap).
+    ///
+    /// Narrow lines (a tide or a periodic disturbance the twin's deterministic part leaves in
+    /// the residual) are not noise: in the Whittle likelihood a bin's cost grows with I/E, so a
+    /// few bins of a strong line pull the coloured terms up by orders of magnitude everywhere
+    /// (a 25-day gMetrology half with its tidal residual: the random walk ×4.6, the members
+    /// ×20–2000 in power below 1 cycle/day). Bins where the periodogram stands out of its
+    /// neighbours beyond what a Gaussian family allows ([`line_bins`]) are left out and the
+    /// family refitted, at most [`LINE_PASSES`] times; the count is reported.
     pub fn fit(placed: &[f64], dt_s: f64) -> Result<NoiseFamily, FamilyError> {
         Self::fit_from_bin(placed, dt_s, RECORD_FIRST_BIN)
     }
@@ -396,21 +473,39 @@ impl NoiseFamily {
         dt_s: f64,
         record_first: usize,
     ) -> Result<NoiseFamily, FamilyError> {
-        let bins = diff_periodograms(placed, dt_s, record_first)?;
-        if bins.len() < 16 {
+        let all = diff_periodograms(placed, dt_s, record_first)?;
+        if all.len() < 16 {
             return Err(FamilyError::TooShort(placed.len()));
         }
-        if bins.iter().all(|b| b.i <= 0.0) {
+        if all.iter().all(|b| b.i <= 0.0) {
             return Err(FamilyError::Constant);
         }
+        let mut fam = Self::fit_bins(&all, dt_s, record_first);
+        for _ in 0..LINE_PASSES {
+            let lines = line_bins(&all, &fam.ln_params);
+            if lines.len() == fam.line_bins {
+                break;
+            }
+            let kept = without_lines(&all, &lines);
+            if kept.len() < 16 {
+                break;
+            }
+            fam = Self::fit_bins(&kept, dt_s, record_first);
+            fam.line_bins = lines.len();
+        }
+        Ok(fam)
+    }
+
+    /// The family's maximum-likelihood fit to the bins.
+    fn fit_bins(bins: &[Bin], dt_s: f64, record_first: usize) -> NoiseFamily {
         let nyq = 0.5 / dt_s;
         let (lo, hi) = ((CORNER_RANGE.0 * nyq).ln(), (CORNER_RANGE.1 * nyq).ln());
         // The profile likelihood in ln f_c (the levels at their maximum for each corner), and
         // without a filter.
         let none = f64::INFINITY;
-        let best = golden_section_min(|v| levels(&bins, v, none).1, lo, hi, GOLDEN_STEPS);
-        let (h_f, nll_f) = levels_best(&bins, best, none);
-        let (h_0, nll_0) = levels_best(&bins, none, none);
+        let best = golden_section_min(|v| levels(bins, v, none).1, lo, hi, GOLDEN_STEPS);
+        let (h_f, nll_f) = levels_best(bins, best, none);
+        let (h_0, nll_0) = levels_best(bins, none, none);
         // The filter is kept when it improves −ℓ by more than FILTER_DELTA (a likelihood-ratio
         // test with one parameter at about 2σ).
         let filtered = nll_0 - nll_f > FILTER_DELTA;
@@ -424,13 +519,13 @@ impl NoiseFamily {
         // resolved and its corner is not at an edge of the range.
         let nll_without_gm = nll;
         let (glo, ghi) = ((GM_RANGE.0 * nyq).ln(), (GM_RANGE.1 * nyq).ln());
-        let fg = golden_section_min(|v| levels(&bins, ln_fc, v).1, glo, ghi, GM_GOLDEN_STEPS);
-        let (h_g, nll_g) = levels_best(&bins, ln_fc, fg);
+        let fg = golden_section_min(|v| levels(bins, ln_fc, v).1, glo, ghi, GM_GOLDEN_STEPS);
+        let (h_g, nll_g) = levels_best(bins, ln_fc, fg);
         let edge = GM_EDGE * (ghi - glo);
         let inside = fg - glo > edge && ghi - fg > edge;
         let mut ln_fg = none;
         if nll - nll_g > FILTER_DELTA && inside && h_g[4] > 0.0 {
-            let (cov, _, _) = covariance(&bins, &h_g, ln_fc, fg);
+            let (cov, _, _) = covariance(bins, &h_g, ln_fc, fg);
             if h_g[4] > RESOLVED_SIGMAS * cov[4][4].max(0.0).sqrt() {
                 (h, nll, ln_fg) = (h_g, nll_g, fg);
             }
@@ -441,8 +536,8 @@ impl NoiseFamily {
             neg_loglik_gain: nll_without_gm - nll_g,
         };
         let ln_params = ln_params_of(&h, ln_fc, ln_fg);
-        let (h_cov, ln_fc_var, ln_fg_var) = covariance(&bins, &h, ln_fc, ln_fg);
-        Ok(NoiseFamily {
+        let (h_cov, ln_fc_var, ln_fg_var) = covariance(bins, &h, ln_fc, ln_fg);
+        NoiseFamily {
             dt_s,
             ln_params,
             h_cov,
@@ -450,9 +545,10 @@ impl NoiseFamily {
             ln_fg_var,
             bins: bins.len(),
             record_first_bin: record_first,
+            line_bins: 0,
             neg_loglik: nll,
             gm_search,
-        })
+        }
     }
 
     /// −ℓ of the family refitted to another series at this fit's corner (the levels at their
@@ -460,7 +556,8 @@ impl NoiseFamily {
     /// as a drift polynomial removed.
     pub fn neg_loglik_of(&self, placed: &[f64]) -> f64 {
         match diff_periodograms(placed, self.dt_s, self.record_first_bin) {
-            Ok(bins) if bins.len() == self.bins => {
+            Ok(all) => {
+                let bins = without_lines(&all, &line_bins(&all, &self.ln_params));
                 levels_best(&bins, self.ln_params[4], self.ln_params[6]).1
             }
             _ => f64::INFINITY,
@@ -809,6 +906,7 @@ mod tests {
             ln_fg_var: 0.0,
             bins: 0,
             record_first_bin: RECORD_FIRST_BIN,
+            line_bins: 0,
             neg_loglik: 0.0,
             gm_search: GaussMarkovSearch {
                 ln_corner: f64::NAN,
@@ -858,6 +956,7 @@ mod tests {
             ln_fg_var: 0.0,
             bins: 0,
             record_first_bin: RECORD_FIRST_BIN,
+            line_bins: 0,
             neg_loglik: 0.0,
             gm_search: GaussMarkovSearch {
                 ln_corner: fg.ln(),

@@ -3,13 +3,19 @@
 //! accepted effect's contribution (its joint-fit columns × coefficients) is then taken out of
 //! the measured residual alone, the views recomputed, and a mismatch counts as explained by the
 //! effect when its excess beyond the envelope (Σ ln(measured / envelope edge) over the range's
-//! points) falls to at most [`EXPLAINED_EXCESS`] of what it was.
+//! points) falls to at most [`EXPLAINED_EXCESS`] of what it was. A run of neighbouring
+//! outside points can hold two causes (a tide's bands beside a hidden line's): when all the
+//! effects taken out together explain it, every effect whose own removal takes at least
+//! [`JOINT_SHARE`] of the excess away is credited with it too.
 
 use super::ensemble::Yardstick;
 use super::mismatch::{Comparison, Quantity};
 
 /// A mismatch is explained when at most this fraction of its excess is left.
 pub const EXPLAINED_EXCESS: f64 = 0.5;
+/// The share of a jointly explained mismatch's excess an effect must take away on its own to
+/// be credited (a lesser share is the views' fluctuation under any change of the residual).
+pub const JOINT_SHARE: f64 = 0.1;
 
 /// Σ ln(beyond edge) of measured values over [a, b) on the mismatch's side.
 fn excess(m: &[f64], lo: &[f64], hi: &[f64], a: usize, b: usize, above: bool) -> f64 {
@@ -34,22 +40,27 @@ pub fn explained_by(
     contributions: &[(String, Vec<f64>)],
 ) -> Vec<(String, Vec<usize>)> {
     let base = excesses(before, &before.measured);
+    let without = |cols: &[&Vec<f64>]| {
+        let r: Vec<f64> = measured_residual
+            .iter()
+            .enumerate()
+            .map(|(i, r)| r - cols.iter().map(|c| c[i]).sum::<f64>())
+            .collect();
+        excesses(before, &yard.views(&yard.detrend(&r)))
+    };
+    let single: Vec<Vec<f64>> = contributions.iter().map(|(_, c)| without(&[c])).collect();
+    let all = without(&contributions.iter().map(|c| &c.1).collect::<Vec<_>>());
+    let explains = |b: f64, a: f64| b > 0.0 && a <= EXPLAINED_EXCESS * b;
     contributions
         .iter()
-        .map(|(name, c)| {
-            let r: Vec<f64> = measured_residual
-                .iter()
-                .zip(c)
-                .map(|(r, c)| r - c)
-                .collect();
-            let v = yard.views(&yard.detrend(&r));
-            let after = excesses(before, &v);
-            let idx = base
-                .iter()
-                .zip(&after)
-                .enumerate()
-                .filter(|(_, (b, a))| **b > 0.0 && **a <= EXPLAINED_EXCESS * **b)
-                .map(|(i, _)| i)
+        .enumerate()
+        .map(|(k, (name, _))| {
+            let idx = (0..base.len())
+                .filter(|&i| {
+                    let b = base[i];
+                    explains(b, single[k][i])
+                        || (explains(b, all[i]) && b - single[k][i] >= JOINT_SHARE * b)
+                })
                 .collect();
             (name.clone(), idx)
         })

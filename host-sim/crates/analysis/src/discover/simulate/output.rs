@@ -88,6 +88,7 @@ pub fn json(s: &Simulation) -> Value {
             "psd": "S(f) = [h0 + h_1/f + h_2/f^2 + h_4/f^4 + q/(1 + (f/fg)^2)] / (1 + (f/fc)^2), one-sided, unit^2/Hz (q, fg: the Gauss-Markov term)",
             "gauss_markov_refused": f.gm_search.refusal(f.resolved(5)),
             "periodogram_bins": f.bins,
+            "line_bins_left_out": f.line_bins,
             "components": f.components(&s.cause.dataset.output_unit).iter().map(|c| json!({
                 "name": c.name,
                 "coefficient": finite(c.coefficient),
@@ -150,8 +151,9 @@ pub fn text(s: &Simulation, unit: &str) -> String {
     if let Some(f) = &s.family {
         let _ = writeln!(
             o,
-            "  noise family (Whittle likelihood on the extended twin's residual, {} bins):",
-            f.bins
+            "  noise family (Whittle likelihood on the extended twin's residual, {} bins; {} bins \
+             of narrow lines left out, not noise):",
+            f.bins, f.line_bins
         );
         for c in f.components(unit) {
             let _ = writeln!(

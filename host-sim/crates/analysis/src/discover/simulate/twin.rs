@@ -6,13 +6,18 @@
 //! the wave-group analysis (jointly with the tide) that the greedy selection did not accept is
 //! added when it is significant (|value| > [`ADMITTANCE_SIGMAS`] σ), named
 //! `pressure_admittance (tidal analysis)` — the catalogue search alone leaves the barometric
-//! signal in the residual when the tide's errors dominate its likelihood.
+//! signal in the residual when the tide's errors dominate its likelihood. Likewise the
+//! wave-group tide when the selection did not accept `tidal_gravity` (its forward chaining can
+//! refuse the in-phase factor of a tide whose error is mostly a phase) but a group's factor
+//! against the twin's tide is significant (> [`TIDE_SIGMAS`] σ), named
+//! `tidal_gravity (tidal analysis)`: left in the residual, the tide's lines are a mismatch of
+//! ×20–40 at 1 and 2 cycles/day on each half of gMetrology.
 
 use super::spectra::RegularGrid;
 use super::{Refused, TwinModel};
 use crate::discover::Discovery;
 use crate::sim::effects::ScenarioEffect;
-use crate::sim::twin::draw::{Drawn, EffectDraws};
+use crate::sim::twin::draw::{Drawn, EffectDraw, EffectDraws};
 use crate::sim::twin::MemberModel;
 use crate::twin::family::NoiseFamily;
 use crate::twin::transients::Transients;
@@ -20,6 +25,29 @@ use crate::twin::{effect_draws, Twin, TwinError};
 
 /// Significance a wave-group analysis admittance needs to be added.
 pub const ADMITTANCE_SIGMAS: f64 = 3.0;
+
+/// Significance a wave-group factor against the twin's tide needs for the groups to be added.
+pub const TIDE_SIGMAS: f64 = 3.0;
+
+/// The name of the wave-group tide added by [`TwinModel::effects_from`].
+const TIDE_NAME: &str = "tidal_gravity (tidal analysis)";
+
+/// Whether the twin takes the wave-group tide: the selection did not accept `tidal_gravity`
+/// and some group's factor against the twin's tide is beyond [`TIDE_SIGMAS`] σ.
+fn significant_tide(d: &Discovery) -> bool {
+    let accepted = d
+        .selection
+        .accepted
+        .iter()
+        .any(|a| a.effect.name() == "tidal_gravity");
+    let significant = d.tidal.as_ref().is_ok_and(|t| {
+        t.groups.iter().any(|g| {
+            let f = &g.amplitude_factor_vs_elastic_model;
+            f.value.is_finite() && f.sigma.is_finite() && f.value.abs() > TIDE_SIGMAS * f.sigma
+        })
+    });
+    !accepted && significant
+}
 
 impl TwinModel for Twin {
     type Effect = ScenarioEffect;
@@ -36,6 +64,12 @@ impl TwinModel for Twin {
         if draws.admittance_per_hpa.is_some() {
             if let Some(last) = names.last_mut() {
                 *last = "pressure_admittance (tidal analysis)".to_owned();
+            }
+        }
+        // The wave-group tide is the only `tidal_gravity` when the selection refused it.
+        if significant_tide(d) {
+            if let Some(n) = names.iter_mut().find(|n| *n == "tidal_gravity") {
+                *n = TIDE_NAME.to_owned();
             }
         }
         // Repeated kinds (steps, lines) get #2, #3 … in order.
@@ -105,10 +139,20 @@ impl TwinModel for Twin {
     }
 }
 
-/// The accepted effects' draws with the wave-group admittance that [`TwinModel::effects_from`]
-/// adds (drawn like the rest, after them).
+/// The accepted effects' draws with the wave-group tide and admittance that
+/// [`TwinModel::effects_from`] adds (drawn like the rest, after them, in that order). The tide
+/// is a `tidal_gravity` entry without parameters of its own: the rule writes it as the
+/// wave-group analysis' groups, so the written twin carries it too.
 fn draws(d: &Discovery) -> EffectDraws {
     let mut e = effect_draws(d);
+    if significant_tide(d) && e.tide_groups.as_ref().is_some_and(|g| !g.is_empty()) {
+        e.effects.push(EffectDraw {
+            kind: "tidal_gravity".to_owned(),
+            channel: None,
+            params: Vec::new(),
+            alternative: None,
+        });
+    }
     let accepted = e.effects.iter().any(|a| a.kind == "pressure_admittance");
     if !accepted {
         if let Ok(Some(a)) = d.tidal.as_ref().map(|t| t.pressure_admittance.as_ref()) {
