@@ -25,7 +25,9 @@
 //! is placed on the grid `t0 + k tau0` (it must lie within `tau0 / 4` of a grid point, one
 //! reading per point) and the empty grid points become gaps (NaN), which the Allan code skips
 //! (never interpolates). A log whose time stamps do not fit a grid gets stability and regression
-//! but no Allan curves, and the report says why.
+//! but no Allan curves, and the report says why. A recorder's log (`accomp record`) is split
+//! into continuous segments instead ([`LogGrid`]): after each `board_reset` or `table_changed`
+//! event line and at each change of sampling phase; no Allan term spans two segments.
 
 use crate::allan::{AllanPoint, Phase, Statistic, TauSet};
 use crate::log::{unit_suffix, Event, Log, LogError, TIME_COLUMN};
