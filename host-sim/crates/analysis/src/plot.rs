@@ -223,12 +223,12 @@ pub struct PlotOutcome {
 pub fn plot_log(log: &Log, opts: &PlotOptions) -> Result<PlotOutcome, PlotError> {
     let mut out = PlotOutcome::default();
     let grid = LogGrid::of(log);
-    out.notes
-        .extend(segment_note(log.time_s(), &grid.segments).map(|n| {
-            format!(
-            "{n} (the time figures mark each new segment with a dashed line labelled by its cause)"
-        )
-        }));
+    if let Some(n) = segment_note(log.time_s(), &grid.segments) {
+        out.notes.push(format!(
+            "{n} (the time figures mark where each segment starts with a dashed line, labelled by \
+             its cause)"
+        ));
+    }
     let mut figures = Vec::new();
     if opts.kind == Kind::All {
         let output_kind = if is_zero_g(log)? {
