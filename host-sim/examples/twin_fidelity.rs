@@ -9,15 +9,12 @@ use accomp_host::discover::select;
 use accomp_host::discover::simulate::simulate_dataset;
 use accomp_host::discover::simulate::spectra::RegularGrid;
 
+#[path = "common/record.rs"]
+mod record;
+
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().collect();
-    let path = args.get(1).cloned().unwrap_or_else(|| {
-        concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/../data/measured/gmetrology_relative_gravimeter_2021-06-08_51d.tsf"
-        )
-        .to_owned()
-    });
+    let path = record::path_arg(&args);
     let members = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(20);
     let (log, _) = load(std::path::Path::new(&path), Format::Auto)?;
     let mut ds = dataset_from_log(&log, &DatasetOptions::default())?;

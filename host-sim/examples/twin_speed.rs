@@ -7,15 +7,12 @@ use std::time::Instant;
 use accomp_host::discover::import::{dataset_from_log, load, DatasetOptions, Format};
 use accomp_host::twin::Twin;
 
+#[path = "common/record.rs"]
+mod record;
+
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().collect();
-    let path = args.get(1).cloned().unwrap_or_else(|| {
-        concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/../data/measured/gmetrology_relative_gravimeter_2021-06-08_51d.tsf"
-        )
-        .to_owned()
-    });
+    let path = record::path_arg(&args);
     let max_points = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(50_000);
     let t = Instant::now();
     let (log, _) = load(std::path::Path::new(&path), Format::Auto)?;

@@ -316,19 +316,6 @@ fn assert_refused_before_sending(o: &Output, state: &Path, what: &str) {
     assert!(!e.contains("verified"), "{e}");
 }
 
-/// `accomp-qemu-<pid>-*` folders in the temp dir.
-fn temp_dirs_of(pid: u32) -> Vec<PathBuf> {
-    let prefix = format!("accomp-qemu-{pid}-");
-    std::fs::read_dir(std::env::temp_dir())
-        .map(|r| {
-            r.flatten()
-                .filter(|e| e.file_name().to_string_lossy().starts_with(&prefix))
-                .map(|e| e.path())
-                .collect()
-        })
-        .unwrap_or_default()
-}
-
 #[test]
 fn a_state_path_under_a_regular_file_is_named_and_leaves_no_temporary_folder() {
     let work = Scratch::new("board-state-badpath");
@@ -352,7 +339,11 @@ fn a_state_path_under_a_regular_file_is_named_and_leaves_no_temporary_folder() {
         !e.contains("qemu-system-arm"),
         "blamed on the emulator: {e}"
     );
-    assert!(temp_dirs_of(pid).is_empty(), "{:?} left", temp_dirs_of(pid));
+    assert!(
+        qemu::temp_dirs_of(pid).is_empty(),
+        "{:?} left",
+        qemu::temp_dirs_of(pid)
+    );
 }
 
 /// Direct children of `pid`.
@@ -431,7 +422,7 @@ fn kill_9_of_accomp_leaves_no_emulator_and_the_next_run_reclaims_its_folder() {
     // SIGKILL leaves no chance to remove the folder: the next launch reclaims it, and the
     // board's lock died with the process.
     assert!(
-        !temp_dirs_of(pid).is_empty(),
+        !qemu::temp_dirs_of(pid).is_empty(),
         "no folder left: nothing to reclaim was tested"
     );
     let o = accomp(
@@ -440,9 +431,9 @@ fn kill_9_of_accomp_leaves_no_emulator_and_the_next_run_reclaims_its_folder() {
     );
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(
-        temp_dirs_of(pid).is_empty(),
+        qemu::temp_dirs_of(pid).is_empty(),
         "{:?} not reclaimed",
-        temp_dirs_of(pid)
+        qemu::temp_dirs_of(pid)
     );
 }
 

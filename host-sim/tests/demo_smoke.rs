@@ -13,10 +13,11 @@ fn table1() -> PathBuf {
         .join("../data/jn06_a12124_coefficients_vs_temperature.csv")
 }
 
-fn out_dir() -> PathBuf {
-    let d = std::env::temp_dir().join(format!("accomp-demo-smoke-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    d
+#[path = "common/scratch.rs"]
+mod scratch;
+
+fn out_dir() -> scratch::Scratch {
+    scratch::Scratch::new("demo-smoke")
 }
 
 fn num(v: &serde_json::Value, key: &str) -> f64 {
@@ -129,5 +130,4 @@ fn a_short_demo_reports_both_experiments_and_compensation_improves_the_1g_stabil
         after < 3.0 * floor,
         "1 g: after {after:e} g far above the floor {floor:e} g"
     );
-    let _ = std::fs::remove_dir_all(&out);
 }

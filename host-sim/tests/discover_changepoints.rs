@@ -44,17 +44,7 @@ fn flip_series(t_s: &[f64], fl: &[(f64, f64)]) -> Vec<f64> {
 
 /// (flips found, accepted effects that are not a found flip nor in `known`).
 fn score(d: &Discovery, fl: &[(f64, f64)], known: &[&str]) -> (usize, usize) {
-    let steps: Vec<(f64, f64, f64)> = d
-        .selection
-        .accepted
-        .iter()
-        .filter(|a| a.effect.name() == "step")
-        .map(|a| {
-            let size = a.params.iter().find(|(k, _)| k == "size").map(|(_, p)| *p);
-            let size = size.expect("size");
-            (hidden::param_value(a, "time_s"), size.value, size.sigma)
-        })
-        .collect();
+    let steps = hidden::accepted_steps(d);
     let mut used = vec![false; steps.len()];
     let mut found = 0;
     for &(t, s) in fl {

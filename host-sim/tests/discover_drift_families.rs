@@ -34,8 +34,7 @@ mod real;
 #[path = "common/synth.rs"]
 mod synth;
 
-use accomp_host::discover::import::DatasetOptions;
-use accomp_host::discover::{self as disc, select};
+use accomp_host::discover as disc;
 use accomp_host::log::Log;
 use drift::Family;
 use rand::Rng;
@@ -213,14 +212,7 @@ fn real_log(t: &[f64], y: Vec<f64>) -> Log {
 }
 
 fn run(log: &Log) -> disc::Discovery {
-    disc::discover_log(
-        log.clone(),
-        &[],
-        &DatasetOptions::default(),
-        None,
-        &select::Config::default(),
-    )
-    .expect("discover")
+    synth::discover(log.clone(), None)
 }
 
 /// Ideal χ² of the drifts injected into the real residual, against the window's Allan levels.

@@ -288,14 +288,7 @@ fn parameters_ok(h: &Hidden, a: &select::Accepted, k1: f64) -> bool {
     }
 }
 
-struct Outcome {
-    hidden: Hidden,
-    named: bool,
-    params_ok: bool,
-    accepted: Vec<String>,
-}
-
-fn run_one(unit: &Hidden, snr: f64, seed: u64) -> Outcome {
+fn run_one(unit: &Hidden, snr: f64, seed: u64) -> hidden::Outcome<Hidden> {
     let (log, hidden) = simulate(unit, snr, seed);
     let k1 = hidden::k1_of(&log);
     let (_, d) = hidden::discover_blind(&log);
@@ -309,10 +302,11 @@ fn run_one(unit: &Hidden, snr: f64, seed: u64) -> Outcome {
             (true, ok)
         }
     };
-    Outcome {
+    hidden::Outcome {
         hidden,
         named,
         params_ok,
+        gain_ok: None,
         accepted: hidden::accepted_names(&d),
     }
 }
@@ -324,18 +318,7 @@ const SEED: u64 = 20_240_610;
 fn hidden_0g_tilt_effects_are_named_with_their_parameters() {
     let mut rng = ChaCha8Rng::seed_from_u64(SEED);
     const HIDDEN_DRAWS: usize = 25;
-    let mut tally = hidden::Tally::default();
-    for i in 0..HIDDEN_DRAWS {
-        let (h, snr) = draw(&mut rng);
-        let seed = rng.random::<u64>();
-        let o = run_one(&h, snr, seed);
-        eprintln!(
-            "0 g draw {i}: hidden {:?} at SNR {snr:.1}: accepted {:?} named={} params={}",
-            o.hidden, o.accepted, o.named, o.params_ok
-        );
-        tally.add(o.hidden.name(), o.named, o.params_ok, false);
-    }
-    tally.print("0 g", false);
+    let tally = hidden::tally_draws("0 g", &mut rng, HIDDEN_DRAWS, draw, run_one, Hidden::name);
     let (named, params) = (tally.named, tally.params);
     hidden::assert_at_least_percent(named, HIDDEN_DRAWS, 80, "0 g detection rate");
     hidden::assert_at_least_percent(

@@ -8,6 +8,9 @@
 //!   (obtained from NEWTON-g/AQG2MSEED, see data/README.md). Run by hand without it, it fails
 //!   and says so.
 
+#[path = "common/hidden.rs"]
+mod hidden;
+
 use accomp_host::discover::import::{BadRow, DatasetOptions, Format};
 use accomp_host::discover::select::Accepted;
 use accomp_host::discover::{discover_path, select, Discovery};
@@ -59,8 +62,8 @@ fn discover_default(path: &Path) -> (Discovery, Vec<BadRow>) {
 
 fn tidal_factor(d: &Discovery) -> Option<(f64, f64)> {
     tide(d)
-        .and_then(|a| a.params.iter().find(|(k, _)| k == "amplitude_factor"))
-        .map(|(_, p)| (p.value, p.sigma))
+        .and_then(|a| hidden::param(a, "amplitude_factor"))
+        .map(|p| (p.value, p.sigma))
 }
 
 #[test]
@@ -94,12 +97,7 @@ fn gmetrology_record_names_the_earth_tide_with_a_gravimetric_factor_near_one() {
     // The instrument delay refitted in the joint fit (one delay of the whole tide, with the
     // warm-up and the drift) agrees with the one the wave-group analysis reads from the group
     // phases — two different estimates of the same lag.
-    let joint = tide
-        .params
-        .iter()
-        .find(|(k, _)| k == "delay_s")
-        .map(|(_, p)| *p)
-        .expect("delay_s in the joint fit");
+    let joint = hidden::param(tide, "delay_s").expect("delay_s in the joint fit");
     let groups = &t["delay"]["delay_s"];
     let (g, gs) = (
         groups["value"].as_f64().expect("delay"),
@@ -123,10 +121,10 @@ fn gmetrology_record_names_the_earth_tide_with_a_gravimetric_factor_near_one() {
         .iter()
         .filter(|a| a.effect.name() == "step")
     {
-        let t = hidden_free_param(a, "time_s");
-        let size = hidden_free_param(a, "size");
+        let t = hidden::param_value(a, "time_s");
+        let size = hidden::param_value(a, "size");
         // A step that takes time: the jump is measured across its whole transition.
-        let half = 0.5 * hidden_free_param(a, "duration_s").max(0.0);
+        let half = 0.5 * hidden::param_value(a, "duration_s").max(0.0);
         let r = &d.selection.baseline_residual;
         let ts = &d.dataset.t_s;
         let j = ts.iter().position(|&x| x > t - half).expect("step inside");
@@ -139,13 +137,6 @@ fn gmetrology_record_names_the_earth_tide_with_a_gravimetric_factor_near_one() {
             "step at {t} s of {size}: the record jumps only {jump} there"
         );
     }
-}
-
-fn hidden_free_param(a: &accomp_host::discover::select::Accepted, key: &str) -> f64 {
-    a.params
-        .iter()
-        .find(|(k, _)| k == key)
-        .map_or(f64::NAN, |(_, p)| p.value)
 }
 
 /// Both noise models (baseline, final) come from the likelihood fit and no warning says

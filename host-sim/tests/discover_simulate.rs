@@ -15,6 +15,9 @@ use accomp_host::discover::simulate::Simulation;
 use accomp_host::discover::simulate::{simulate_dataset, write_scenario};
 use std::path::Path;
 
+#[path = "common/scratch.rs"]
+mod scratch;
+
 const GMETROLOGY: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
     "/../data/measured/gmetrology_relative_gravimeter_2021-06-08_51d.tsf"
@@ -127,9 +130,8 @@ fn hidden_wave_in_the_real_record_is_a_mismatch_in_its_band_that_the_extension_r
     );
     // The gain: lower out-of-sample residual after.
     assert!(s.after_scores.residual_std_out_of_sample < s.before_scores.residual_std_out_of_sample);
-    // The extended scenario is written and `accomp simulate` runs it as is; it holds the line.
-    let dir = std::env::temp_dir().join(format!("accomp-discover-simulate-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    // The extended twin is written and `accomp simulate` runs a member of it; it holds the line.
+    let dir = scratch::Scratch::new("discover-simulate");
     let toml = dir.join("extended.toml");
     let mut s = s;
     write_scenario(&mut s, Some(&toml)).expect("write scenario");
@@ -140,17 +142,16 @@ fn hidden_wave_in_the_real_record_is_a_mismatch_in_its_band_that_the_extension_r
             if (period_s / HIDDEN_PERIOD_S - 1.0).abs() < 0.02)));
     let out = dir.join("extended.csv");
     let st = std::process::Command::new(env!("CARGO_BIN_EXE_accomp"))
-        .args(["simulate", toml.to_str().unwrap(), "--days", "0.5", "-o"])
+        .args(["simulate", toml.to_str().unwrap(), "-o"])
         .arg(&out)
         .status()
         .expect("accomp simulate");
     assert!(st.success(), "accomp simulate refused the written scenario");
     let log = std::fs::read_to_string(&out).unwrap();
     assert!(
-        log.lines().any(|l| l.starts_with("time_s,gravity_mgal")),
+        log.lines().any(|l| l.starts_with("t_s,gravity_mgal")),
         "no gravity column"
     );
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]

@@ -4,6 +4,9 @@
 //! `duration_s` s), and the discovered steps, turned back into scenario effects, are the
 //! injected ones within the stated tolerances.
 
+#[path = "common/hidden.rs"]
+mod hidden;
+
 use accomp_host::discover::import::{dataset_from_log, DatasetOptions};
 use accomp_host::discover::{self as disc, select};
 use accomp_host::log::Log;
@@ -93,16 +96,7 @@ fn several_unequal_steps_injected_from_a_scenario_are_reported_and_written_back(
         assert_eq!(keys, EffectKind::Step.parameter_names());
     }
     // Each injected step among the reported ones, with the reported σ of its size.
-    let reported: Vec<(f64, f64, f64)> = d
-        .selection
-        .accepted
-        .iter()
-        .filter(|a| a.effect.name() == "step")
-        .filter_map(|a| {
-            let p = |k: &str| a.params.iter().find(|(n, _)| n == k).map(|(_, v)| *v);
-            Some((p("time_s")?.value, p("size")?.value, p("size")?.sigma))
-        })
-        .collect();
+    let reported = hidden::accepted_steps(&d);
     for (t, s, _) in injected {
         let hit = reported.iter().find(|f| {
             (f.0 - t).abs() <= TIME_TOL_S

@@ -8,14 +8,16 @@
 //! and reading noise) with the output the true table's eq. (1) predicts at the true temperature
 //! (the core's model, which is what a table means).
 
+#[path = "common/scratch.rs"]
+mod scratch;
 #[path = "common/synth.rs"]
 mod synth;
 
 use accomp::table::CalibrationTable;
 use accomp::units::{Celsius, Gs};
-use accomp_host::discover::import::DatasetOptions;
-use accomp_host::discover::{self as disc, select, Discovery};
+use accomp_host::discover::{self as disc, Discovery};
 use accomp_host::log::Log;
+use rand_chacha::ChaCha8Rng;
 use std::process::Command;
 
 /// Three days at one row a minute.
@@ -28,17 +30,35 @@ const DRIFT_G_PER_C: f64 = 3.0e-6;
 fn record(seed: u64) -> (Log, CalibrationTable) {
     let mut rng = synth::rng(seed);
     let st = synth::station(ROWS, DT_S, synth::EIGHT_HOUR_CYCLE, &mut rng);
+    let truth = paper_table_at_mean(&st);
+    (record_through(&truth, &st, &mut rng, |_| 0.0), truth)
+}
+
+/// The paper's order-2 table with T0 at the station's mean true temperature (rounded).
+fn paper_table_at_mean(st: &synth::Station) -> CalibrationTable {
     let mean = st.temp_true_c.iter().sum::<f64>() / ROWS as f64;
-    let mut truth = accomp::reference::paper_order2_table();
-    truth.thermal = accomp::reference::paper_order2_models(Celsius(mean.round()));
-    let noise = synth::sensor_noise(ROWS, DT_S, 2.0e-6, 0.5e-6, 3.0e-9, &mut rng);
+    let mut table = accomp::reference::paper_order2_table();
+    table.thermal = accomp::reference::paper_order2_models(Celsius(mean.round()));
+    table
+}
+
+/// The record of a 1 g input read through `table`'s eq. (1) at the station's true temperatures,
+/// with `error(T)` (g) and the sensor noise (drawn from `rng`) added: time, the output in g and
+/// the measured temperature.
+fn record_through(
+    table: &CalibrationTable,
+    st: &synth::Station,
+    rng: &mut ChaCha8Rng,
+    error: impl Fn(f64) -> f64,
+) -> Log {
+    let noise = synth::sensor_noise(ROWS, DT_S, 2.0e-6, 0.5e-6, 3.0e-9, rng);
     let y: Vec<f64> = st
         .temp_true_c
         .iter()
         .zip(&noise)
         .map(|(&t, e)| {
-            let (k, _) = truth.thermal.coefficients_at(Celsius(t)).expect("in range");
-            k.output(Gs(1.0), truth.orientation.cross).0 / k.scale_factor_v_per_g + e
+            let (k, _) = table.thermal.coefficients_at(Celsius(t)).expect("in range");
+            k.output(Gs(1.0), table.orientation.cross).0 / k.scale_factor_v_per_g + error(t) + e
         })
         .collect();
     let mut log = Log::with_time(st.t_s.clone()).expect("time");
@@ -46,7 +66,7 @@ fn record(seed: u64) -> (Log, CalibrationTable) {
     log.push_column("output_g", y).expect("column");
     log.push_column("temperature_c", st.temp_meas_c.clone())
         .expect("column");
-    (log, truth)
+    log
 }
 
 /// The table as it would be after its bias temperature coefficient drifted by `DRIFT_G_PER_C`:
@@ -63,14 +83,7 @@ fn drifted(truth: &CalibrationTable) -> CalibrationTable {
 }
 
 fn run(log: &Log, table: &CalibrationTable) -> Discovery {
-    disc::discover_log(
-        log.clone(),
-        &[],
-        &DatasetOptions::default(),
-        Some(table),
-        &select::Config::default(),
-    )
-    .expect("discover")
+    synth::discover(log.clone(), Some(table))
 }
 
 fn named(d: &Discovery) -> Vec<&'static str> {
@@ -81,14 +94,29 @@ fn named(d: &Discovery) -> Vec<&'static str> {
         .collect()
 }
 
+/// Discovers `log` against `given`, prints the table check and what was accepted, and asserts
+/// that neither a thermal lag nor a hysteresis took the table's error.
+fn run_checked(log: &Log, given: &CalibrationTable) -> Discovery {
+    let d = run(log, given);
+    let check = d.table_check.as_ref().expect("a calibration was given");
+    print!("{}", disc::table_error::text_of(check, "g"));
+    println!("accepted: {:?}", named(&d));
+    assert!(
+        !named(&d)
+            .iter()
+            .any(|n| matches!(*n, "thermal_lag" | "thermal_hysteresis")),
+        "{:?}",
+        named(&d)
+    );
+    d
+}
+
 #[test]
 fn a_drifted_bias_tempco_is_named_as_the_table_error_and_the_corrected_table_removes_it() {
     let (log, truth) = record(3);
     let given = drifted(&truth);
-    let d = run(&log, &given);
+    let d = run_checked(&log, &given);
     let check = d.table_check.as_ref().expect("a calibration was given");
-    print!("{}", disc::table_error::text_of(check, "g"));
-    println!("accepted: {:?}", named(&d));
     let t = check.terms.first().expect("a table error");
     assert_eq!((t.symbol, t.power), ("K0", 1), "{t:?}");
     // The table must lose the drift: its change is −δ.
@@ -98,13 +126,6 @@ fn a_drifted_bias_tempco_is_named_as_the_table_error_and_the_corrected_table_rem
         "change {:e} ± {:e} for a drift of {DRIFT_G_PER_C:e}",
         t.change,
         t.sigma
-    );
-    assert!(
-        !named(&d)
-            .iter()
-            .any(|n| matches!(*n, "thermal_lag" | "thermal_hysteresis")),
-        "{:?}",
-        named(&d)
     );
     // The corrected table, through the file format and the core's validator, loaded again.
     let corrected = check.corrected.expect("a corrected table");
@@ -130,9 +151,7 @@ fn a_drifted_bias_tempco_is_named_as_the_table_error_and_the_corrected_table_rem
 #[test]
 fn write_table_writes_the_corrected_table_and_refuses_when_there_is_nothing_to_correct() {
     let (log, truth) = record(5);
-    let dir = std::env::temp_dir().join(format!("accomp-table-error-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).expect("dir");
+    let dir = scratch::Scratch::new("table-error");
     let csv = dir.join("log.csv");
     log.write_to(std::fs::File::create(&csv).expect("create"))
         .expect("write log");
@@ -175,7 +194,6 @@ fn write_table_writes_the_corrected_table_and_refuses_when_there_is_nothing_to_c
     let err = String::from_utf8_lossy(&r.stderr);
     assert!(err.contains("nothing written"), "{err}");
     assert!(!out.exists());
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// A bias error the table cannot hold exactly — ε·sign(T − T0)·|T − T0|^1.5, no coefficient
@@ -186,50 +204,19 @@ fn write_table_writes_the_corrected_table_and_refuses_when_there_is_nothing_to_c
 fn a_bias_error_of_power_one_and_a_half_is_corrected_by_the_nearest_table() {
     let mut rng = synth::rng(17);
     let st = synth::station(ROWS, DT_S, synth::EIGHT_HOUR_CYCLE, &mut rng);
-    let mean = st.temp_true_c.iter().sum::<f64>() / ROWS as f64;
-    let mut given = accomp::reference::paper_order2_table();
-    given.thermal = accomp::reference::paper_order2_models(Celsius(mean.round()));
+    let given = paper_table_at_mean(&st);
     given.validate().expect("a valid table");
     let t0 = given.thermal.reference.0;
     // 10 µg at 1 °C from T0: ≈ 3.5 µg over the ±0.5 °C cycle.
     let eps = 1.0e-5;
     let error = |t: f64| eps * (t - t0).signum() * (t - t0).abs().powf(1.5);
-    let noise = synth::sensor_noise(ROWS, DT_S, 2.0e-6, 0.5e-6, 3.0e-9, &mut rng);
-    let y: Vec<f64> = st
-        .temp_true_c
-        .iter()
-        .zip(&noise)
-        .map(|(&t, e)| {
-            let (k, _) = given.thermal.coefficients_at(Celsius(t)).expect("in range");
-            k.output(Gs(1.0), given.orientation.cross).0 / k.scale_factor_v_per_g + error(t) + e
-        })
-        .collect();
-    let mut log = Log::with_time(st.t_s.clone()).expect("time");
-    log.set_meta("input_g", "1").expect("meta");
-    log.push_column("output_g", y).expect("column");
-    log.push_column("temperature_c", st.temp_meas_c.clone())
-        .expect("column");
-    let d = run(&log, &given);
+    let log = record_through(&given, &st, &mut rng, error);
+    let d = run_checked(&log, &given);
     let check = d.table_check.as_ref().expect("a calibration was given");
-    print!("{}", disc::table_error::text_of(check, "g"));
-    println!("accepted: {:?}", named(&d));
     let first = check.terms.first().expect("a table error");
     assert_eq!(first.symbol, "K0", "{:?}", check.terms);
-    assert!(
-        !named(&d)
-            .iter()
-            .any(|n| matches!(*n, "thermal_lag" | "thermal_hysteresis")),
-        "{:?}",
-        named(&d)
-    );
     let corrected = check.corrected.expect("a corrected table");
-    let bias = |tab: &CalibrationTable, t: f64| {
-        tab.thermal
-            .coefficients_at(Celsius(t))
-            .expect("in range")
-            .0
-            .bias_g
-    };
+    let bias = synth::bias_g_at;
     let (mut err2, mut true2) = (0.0, 0.0);
     for &t in &st.temp_true_c {
         err2 += (bias(&corrected, t) - bias(&given, t) - error(t)).powi(2);

@@ -9,9 +9,8 @@
 #[path = "common/synth.rs"]
 mod synth;
 
-use accomp_host::discover::import::DatasetOptions;
 use accomp_host::discover::unexplained::Structure;
-use accomp_host::discover::{self as disc, select, Discovery};
+use accomp_host::discover::{self as disc, Discovery};
 
 /// Four days at one row a minute.
 const ROWS: usize = 4 * 1440;
@@ -47,14 +46,7 @@ fn discover(seed: u64, hidden: Option<(f64, f64)>) -> Discovery {
         None => vec![0.0; ROWS],
     };
     let y = synth::output_g(&st, &noise, &extra, &mut rng);
-    disc::discover_log(
-        synth::log_of(&st, y),
-        &[],
-        &DatasetOptions::default(),
-        None,
-        &select::Config::default(),
-    )
-    .expect("discover")
+    synth::discover(synth::log_of(&st, y), None)
 }
 
 /// Whether a reported structure sits at `period_s`: a line within ±25 %, or an Allan range

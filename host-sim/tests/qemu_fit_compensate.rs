@@ -7,27 +7,23 @@ use accomp::model::CrossAxis;
 use accomp::table::CalibrationTable;
 use accomp::units::{Celsius, Gs};
 use accomp_host::device::firmware_path;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 #[path = "common/cli.rs"]
 mod cli;
+#[path = "common/scratch.rs"]
+mod scratch;
 
 const TABLE1: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
     "/../data/jn06_a12124_coefficients_vs_temperature.csv"
 );
 
-fn accomp(args: &[&str]) -> String {
+fn accomp(dir: &Path, args: &[&str]) -> String {
     // This test's own emulated board, not the user's persistent one.
-    let board = tmp("board");
+    let board = dir.join("board");
     let out = cli::accomp_ok(args, &[(accomp_host::device::qemu::STATE_ENV, &board)]);
     String::from_utf8_lossy(&out.stdout).into_owned()
-}
-
-fn tmp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("accomp-fit-compensate-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).expect("temp dir");
-    dir.join(name)
 }
 
 /// Column `name` of a CSV written by `accomp compensate`.
@@ -53,15 +49,19 @@ fn a_table_fitted_from_table_1_is_loaded_into_qemu_and_used_by_compensate() {
         elf.display()
     );
 
-    let cal = tmp("jn06.acal");
-    accomp(&[
-        "fit",
-        TABLE1,
-        "-o",
-        cal.to_str().unwrap(),
-        "--date",
-        "2026-11-21",
-    ]);
+    let dir = scratch::Scratch::new("fit-compensate");
+    let cal = dir.join("jn06.acal");
+    accomp(
+        &dir,
+        &[
+            "fit",
+            TABLE1,
+            "-o",
+            cal.to_str().unwrap(),
+            "--date",
+            "2026-11-21",
+        ],
+    );
     let table =
         CalibrationTable::decode(&std::fs::read(&cal).unwrap()).expect("fit writes a valid table");
 
@@ -74,27 +74,30 @@ fn a_table_fitted_from_table_1_is_loaded_into_qemu_and_used_by_compensate() {
         let e = k.output(Gs(1.0), CrossAxis::default());
         csv += &format!("{},{:.12},{t},0.0\n", i as f64 * 60.0, e.0);
     }
-    let input = tmp("samples.csv");
+    let input = dir.join("samples.csv");
     std::fs::write(&input, csv).unwrap();
 
     let run = |target: &str, out: &Path| {
-        accomp(&[
-            "compensate",
-            "--target",
-            target,
-            "--calibration",
-            cal.to_str().unwrap(),
-            "--input",
-            input.to_str().unwrap(),
-            "--output",
-            out.to_str().unwrap(),
-            "--firmware",
-            elf.to_str().unwrap(),
-        ]);
+        accomp(
+            &dir,
+            &[
+                "compensate",
+                "--target",
+                target,
+                "--calibration",
+                cal.to_str().unwrap(),
+                "--input",
+                input.to_str().unwrap(),
+                "--output",
+                out.to_str().unwrap(),
+                "--firmware",
+                elf.to_str().unwrap(),
+            ],
+        );
         std::fs::read_to_string(out).unwrap()
     };
-    let qemu = run("qemu", &tmp("qemu.csv"));
-    let host = run("host", &tmp("host.csv"));
+    let qemu = run("qemu", &dir.join("qemu.csv"));
+    let host = run("host", &dir.join("host.csv"));
 
     let a_qemu = column(&qemu, "a_i_exact_g");
     assert_eq!(a_qemu.len(), temps.len());
@@ -111,6 +114,4 @@ fn a_table_fitted_from_table_1_is_loaded_into_qemu_and_used_by_compensate() {
         // (the bias alone moves 5e-5 g per °C).
         assert!((a - 1.0).abs() < 2e-8, "T = {t} °C: a_i = {a}");
     }
-    // Passed: nothing of it is left in the temp dir (a failure keeps the files to look at).
-    std::fs::remove_dir_all(cal.parent().expect("the test's own dir")).expect("temp dir removed");
 }

@@ -5,7 +5,7 @@
 //! the old or the new table active at the next boot, never neither, with the right rollback
 //! table. Also #15.8: no `/tmp/accomp-qemu-*` folder is left after a QEMU launch.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
 
@@ -33,19 +33,6 @@ fn table(day: u8) -> CalibrationTable {
 /// A fresh folder, removed when the test passes.
 fn fresh_dir(name: &str) -> Scratch {
     Scratch::new(&format!("persist-test-{name}"))
-}
-
-/// `/tmp/accomp-qemu-<pid>-*` folders of process `pid`.
-fn qemu_dirs_of(pid: u32) -> Vec<PathBuf> {
-    let prefix = format!("accomp-qemu-{pid}-");
-    std::fs::read_dir(std::env::temp_dir())
-        .map(|r| {
-            r.filter_map(|e| e.ok())
-                .filter(|e| e.file_name().to_string_lossy().starts_with(&prefix))
-                .map(|e| e.path())
-                .collect()
-        })
-        .unwrap_or_default()
 }
 
 fn accomp(state: &Path, args: &[&str]) -> std::process::Output {
@@ -94,7 +81,11 @@ fn load_then_table_get_round_trip_across_two_qemu_runs_and_leave_no_temp_folder(
     let pid = out.id();
     let status = out.wait_with_output().expect("wait").status;
     assert!(status.success());
-    assert!(qemu_dirs_of(pid).is_empty(), "{:?} left", qemu_dirs_of(pid));
+    assert!(
+        qemu::temp_dirs_of(pid).is_empty(),
+        "{:?} left",
+        qemu::temp_dirs_of(pid)
+    );
     // And a launch in this process: its temporary folder goes with the Qemu.
     let (q, _c) = qemu::boot();
     let dir = q.log_dir.clone();
@@ -131,10 +122,10 @@ fn sigterm_stops_qemu_and_removes_its_temporary_folder() {
     let pid = child.id();
     // Wait until its QEMU runs (its temp folder exists), then a little longer.
     let deadline = std::time::Instant::now() + Duration::from_secs(60);
-    while qemu_dirs_of(pid).is_empty() && std::time::Instant::now() < deadline {
+    while qemu::temp_dirs_of(pid).is_empty() && std::time::Instant::now() < deadline {
         std::thread::sleep(Duration::from_millis(50));
     }
-    assert!(!qemu_dirs_of(pid).is_empty(), "QEMU never started");
+    assert!(!qemu::temp_dirs_of(pid).is_empty(), "QEMU never started");
     // Streaming (#15.8): rows are on disk while the run goes on.
     let out_csv = work.join("out.csv");
     let deadline = std::time::Instant::now() + Duration::from_secs(60);
@@ -166,7 +157,7 @@ fn sigterm_stops_qemu_and_removes_its_temporary_folder() {
         .unwrap();
     let status = child.wait().unwrap();
     assert!(!status.success());
-    assert!(qemu_dirs_of(pid).is_empty(), "temp folder left");
+    assert!(qemu::temp_dirs_of(pid).is_empty(), "temp folder left");
     for q in qemu_pids {
         assert!(
             !Path::new(&format!("/proc/{q}")).exists()

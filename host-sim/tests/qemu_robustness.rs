@@ -17,6 +17,8 @@ use accomp_host::device::{paper_table, ClientError};
 
 #[path = "common/qemu.rs"]
 mod qemu;
+#[path = "common/scratch.rs"]
+mod scratch;
 use qemu::{boot_loaded, Rng};
 
 fn raw_at(t: &CalibrationTable, volts: f64, temp_c: f64) -> RawSample {
@@ -210,15 +212,16 @@ fn garbage_on_the_line_mid_stream_costs_at_most_the_frame_it_hits() {
 
 #[test]
 fn load_without_local_check_shows_the_device_error() {
-    let dir = std::env::temp_dir().join(format!("accomp-load-nlc-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch::Scratch::new("load-nlc");
     let mut nan = paper_table();
     nan.thermal.models.bias_g.coeffs[1] = f64::NAN;
     let file = dir.join("nan.cal");
     std::fs::write(&file, nan.encode()).unwrap();
     let elf = qemu::elf();
     let run = |extra: &[&str]| {
+        // This test's own emulated board, not the user's persistent one.
         let out = Command::new(env!("CARGO_BIN_EXE_accomp"))
+            .env(accomp_host::device::qemu::STATE_ENV, dir.join("board"))
             .args(["load", "--target", "qemu", "--firmware"])
             .arg(&elf)
             .args(extra)
@@ -245,5 +248,4 @@ fn load_without_local_check_shows_the_device_error() {
             && stderr.contains("detail 10"),
         "{stderr}"
     );
-    std::fs::remove_dir_all(&dir).ok();
 }

@@ -18,11 +18,13 @@ use accomp_host::sim::scenario::Scenario;
 
 const BIN: &str = env!("CARGO_BIN_EXE_accomp");
 
-fn temp_dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("accomp-record-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+#[path = "common/scratch.rs"]
+mod scratch;
+use scratch::Scratch;
+
+/// The test's own folder (the board's pty link, the table, the record), removed on drop.
+fn temp_dir(name: &str) -> Scratch {
+    Scratch::new(&format!("record-{name}"))
 }
 
 /// A running `accomp board-sim`, killed on drop.
@@ -122,7 +124,7 @@ fn load_table(dir: &Path) {
 
 /// A fresh directory `name`, a board in it at `speed`× with the paper's table loaded, and the
 /// path the record goes to.
-fn board_with_table(name: &str, speed: u32, seed: u64) -> (PathBuf, BoardSim, PathBuf) {
+fn board_with_table(name: &str, speed: u32, seed: u64) -> (Scratch, BoardSim, PathBuf) {
     let dir = temp_dir(name);
     let board = BoardSim::start(&dir, speed, seed);
     load_table(&dir);
@@ -148,10 +150,25 @@ fn record_cmd(dir: &Path, out: &Path, extra: &[&str]) -> Command {
 
 /// The rows of a record: (time_s, seq, board_time_us, output_v, rtd_ohms, tilt_arcsec,
 /// status) and its event lines (kind, details).
+/// A row of the record: time_s, seq, board µs, the columns 4, 6 and 7 as numbers, status.
+type Row = (f64, u32, u64, f64, f64, f64, String);
+
 struct Rec {
-    rows: Vec<(f64, u32, u64, f64, f64, f64, String)>,
+    rows: Vec<Row>,
     events: Vec<(String, String)>,
     headers: usize,
+}
+
+impl Rec {
+    /// The rows either side of the first place where seq does not grow by one.
+    fn around_seq_jump(&self) -> (&Row, &Row) {
+        let at = self
+            .rows
+            .windows(2)
+            .position(|w| w[1].1 != w[0].1 + 1)
+            .expect("a jump in seq");
+        (&self.rows[at], &self.rows[at + 1])
+    }
 }
 
 fn read_rec(path: &Path) -> Rec {
@@ -406,12 +423,7 @@ fn an_unplugged_link_keeps_the_boot_and_flag_changes_are_events() {
         .iter()
         .any(|row| row.6.contains("RTD_OPEN") && row.4.is_nan()));
     // One boot: seq only grows, and across the gap time_s follows the board clock.
-    let gap = r
-        .rows
-        .windows(2)
-        .position(|w| w[1].1 != w[0].1 + 1)
-        .unwrap();
-    let (a, b) = (&r.rows[gap], &r.rows[gap + 1]);
+    let (a, b) = r.around_seq_jump();
     assert!(b.1 > a.1);
     assert!(((b.0 - a.0) - (b.2 - a.2) as f64 * 1e-6).abs() < 1e-3);
     let lost = details(&r, "seq_gap")[0];
@@ -441,12 +453,7 @@ fn a_reset_while_unplugged_is_a_new_boot_though_its_clock_and_seq_passed_the_old
     assert!(reset.contains("boot id 0x"), "{reset:?}");
     // The jump in seq is where the new boot starts, and the new boot's rows really are far
     // past the old boot in seq and board time (what made the uptime test alone fail).
-    let jump = r
-        .rows
-        .windows(2)
-        .position(|w| w[1].1 != w[0].1 + 1)
-        .unwrap();
-    let (a, b) = (&r.rows[jump], &r.rows[jump + 1]);
+    let (a, b) = r.around_seq_jump();
     assert!(
         b.1 > a.1 && b.2 > a.2,
         "seq {} → {}, board µs {} → {}",

@@ -8,6 +8,9 @@ use accomp_host::fit;
 use accomp_host::tumble::{self, TumbleOptions};
 use accomp_host::tumble_sim::{simulate_tumble, TumbleSimConfig};
 
+#[path = "common/scratch.rs"]
+mod scratch;
+
 /// True values of the four table columns at T, from the generator's models.
 fn truth_at(cfg: &TumbleSimConfig, t: f64) -> [f64; 4] {
     let (k, _) = cfg.models.coefficients_at(Celsius(t)).unwrap();
@@ -243,8 +246,7 @@ fn repeated_tests_give_the_bias_drift_within_its_slope_uncertainty() {
 
 #[test]
 fn the_cli_chain_simulate_tumble_fit_runs_and_fit_reads_the_table() {
-    let dir = std::env::temp_dir().join(format!("accomp-tumble-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch::Scratch::new("tumble");
     let log = dir.join("tumble.csv");
     let table = dir.join("coefficients.csv");
     let exe = env!("CARGO_BIN_EXE_accomp");
@@ -298,5 +300,4 @@ fn the_cli_chain_simulate_tumble_fit_runs_and_fit_reads_the_table() {
         .unwrap();
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("line 4"));
-    let _ = std::fs::remove_dir_all(&dir);
 }

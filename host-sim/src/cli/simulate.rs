@@ -1,14 +1,16 @@
 //! `accomp simulate`: run a scenario (file or preset) and write its log (the simulator is
 //! [`crate::sim`]).
 
+use std::fmt::Write as _;
 use std::fs::File;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::sim::scenario::{self, Scenario, PRESETS};
+use crate::sim::twin::MemberModel;
 use crate::sim::{simulate, Options};
 
 /// Arguments of `accomp simulate`.
@@ -86,6 +88,36 @@ fn check_size(sc: &Scenario, seed: u64, codes: bool, allow_large: bool) -> anyho
     Ok(())
 }
 
+/// Member `seed` of a written twin (the scenario's `[twin]` section and its driver file) at the
+/// record's instants, written as CSV `t_s,<output>` with numbers in their shortest round-trip
+/// form (docs/simulator.md, "The written twin").
+fn run_twin_member(sc: &Scenario, path: &Path, seed: u64, output: &Path) -> anyhow::Result<()> {
+    let started = std::time::Instant::now();
+    let model = MemberModel::load(sc, path)?;
+    let y = model.member(seed)?;
+    let spec = sc.twin.as_ref().context("not a written twin")?;
+    let mut text = String::with_capacity(40 * y.len());
+    let _ = writeln!(
+        text,
+        "# accomp simulate: member {seed} of the written twin {:?} ({}, {})",
+        sc.name, spec.output_name, spec.output_unit
+    );
+    let _ = writeln!(text, "t_s,{}", spec.output_name);
+    for (t, v) in model.record.t_s.iter().zip(&y) {
+        let _ = writeln!(text, "{t:?},{v:?}");
+    }
+    crate::outputs::write_file(output, text.as_bytes())
+        .with_context(|| format!("writing {}", output.display()))?;
+    eprintln!(
+        "simulated member {seed} of the twin {} ({} points) in {:.1} s → {}",
+        sc.name,
+        y.len(),
+        started.elapsed().as_secs_f64(),
+        output.display()
+    );
+    Ok(())
+}
+
 /// Runs the subcommand.
 pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
     if let Some(name) = &args.print_preset {
@@ -98,6 +130,15 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
     };
     crate::outputs::check_file(output)?;
     let mut sc = scenario::load(arg)?;
+    if sc.twin.is_some() {
+        if args.interval.is_some() || args.days.is_some() || args.codes {
+            anyhow::bail!(
+                "{arg} is a written twin (it has a [twin] section): a member is computed at the \
+                 record's own instants, so --interval, --days and --codes do not apply"
+            );
+        }
+        return run_twin_member(&sc, Path::new(arg), args.seed, output);
+    }
     if let Some(dt) = args.interval {
         sc.run.interval_s = dt;
     }

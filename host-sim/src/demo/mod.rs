@@ -70,26 +70,37 @@ const DEMO_DATE: CalibrationDate = CalibrationDate {
     day: 1,
 };
 
-/// What `accomp demo` runs and where it writes (the command's flags: [`crate::cli::demo`]).
-#[derive(Debug, Clone)]
+/// What `accomp demo` runs and where it writes: the command's flags (`accomp demo --help`), also
+/// the options of [`run_demo`].
+#[derive(Debug, Clone, clap::Args)]
 pub struct DemoOptions {
-    /// Table 1 CSV (`None`: the repository's `data/` copy, [`TABLE1_FILE`]).
+    /// Table 1 CSV (default: data/jn06_a12124_coefficients_vs_temperature.csv of the repository
+    /// the binary was built from).
+    #[arg(long)]
     pub table1: Option<PathBuf>,
     /// Where the log, figures, tables and report are written.
+    #[arg(short, long, default_value = "target/demo")]
     pub out_dir: PathBuf,
     /// Seed of the simulation (both experiments).
+    #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Sample interval of paper-1g, s.
+    /// Sample interval of paper-1g, s (600 s: 5 904 samples over 41 days).
+    #[arg(long, default_value_t = 600.0)]
     pub interval_1g: f64,
-    /// Sample interval of paper-0g, s.
+    /// Sample interval of paper-0g, s (30 s: 2 880 samples over 1 day).
+    #[arg(long, default_value_t = 30.0)]
     pub interval_0g: f64,
-    /// Duration of paper-1g, days (`None`: the preset's 41).
+    /// Override the duration of paper-1g, days (default: the preset's 41).
+    #[arg(long)]
     pub days_1g: Option<f64>,
-    /// Duration of paper-0g, days (`None`: the preset's 1).
+    /// Override the duration of paper-0g, days (default: the preset's 1).
+    #[arg(long)]
     pub days_0g: Option<f64>,
-    /// Firmware ELF (`None`: `device::firmware_path`'s default).
+    /// Firmware ELF (default: $ACCOMP_FIRMWARE_ELF, else target/thumbv7em-none-eabihf/release/accomp-fw).
+    #[arg(long)]
     pub firmware: Option<PathBuf>,
     /// Skip the figures.
+    #[arg(long)]
     pub no_plots: bool,
 }
 

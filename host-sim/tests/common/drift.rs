@@ -12,6 +12,7 @@
 // Each test crate uses a different subset of this module.
 #![allow(dead_code)]
 
+use accomp_host::allan::detrend_linear;
 use accomp_host::discover::effects::Param;
 use accomp_host::discover::select::Accepted;
 use accomp_host::discover::Discovery;
@@ -112,24 +113,6 @@ pub fn reported_curve(name: &str, shape_param: f64, t_s: &[f64]) -> Option<Vec<f
     Some(t_s.iter().map(|t| f(t - t0)).collect())
 }
 
-/// The part of `x` orthogonal to an offset and a linear drift (what the baseline leaves).
-pub fn detrended(x: &[f64]) -> Vec<f64> {
-    let n = x.len() as f64;
-    let tm = (n - 1.0) / 2.0;
-    let xm = x.iter().sum::<f64>() / n;
-    let (mut sxy, mut sxx) = (0.0, 0.0);
-    for (i, v) in x.iter().enumerate() {
-        let d = i as f64 - tm;
-        sxy += d * (v - xm);
-        sxx += d * d;
-    }
-    let b = sxy / sxx;
-    x.iter()
-        .enumerate()
-        .map(|(i, v)| v - xm - b * (i as f64 - tm))
-        .collect()
-}
-
 fn rms(x: &[f64]) -> f64 {
     (x.iter().map(|v| v * v).sum::<f64>() / x.len().max(1) as f64).sqrt()
 }
@@ -199,7 +182,7 @@ pub fn verdict(d: &Discovery, t_s: &[f64], shape: &[f64], family: Family) -> Ver
         }
     }
     let diff: Vec<f64> = shape.iter().zip(&fit).map(|(s, f)| s - f).collect();
-    let mismatch = rms(&detrended(&diff)) / rms(&detrended(shape));
+    let mismatch = rms(&detrend_linear(&diff)) / rms(&detrend_linear(shape));
     Verdict {
         named: Some(name),
         or,

@@ -23,6 +23,7 @@
 // Each test crate uses a different subset of this module.
 #![allow(dead_code)]
 
+use accomp_host::discover::effects::Param;
 use accomp_host::discover::import::{dataset_from_log, Dataset, DatasetOptions};
 use accomp_host::discover::select::{self, Accepted};
 use accomp_host::discover::{self as disc, Discovery};
@@ -60,6 +61,25 @@ pub fn start_unix_s(meta: &[(String, String)]) -> f64 {
         .find(|(k, _)| k == "start_utc")
         .and_then(|(_, v)| accomp_host::discover::import::parse_utc(v))
         .expect("start_utc")
+}
+
+/// An accepted effect's parameter `key` (value and σ).
+pub fn param(a: &Accepted, key: &str) -> Option<Param> {
+    a.params.iter().find(|(k, _)| k == key).map(|(_, p)| *p)
+}
+
+/// The accepted steps as (time_s, size, σ of the size).
+pub fn accepted_steps(d: &Discovery) -> Vec<(f64, f64, f64)> {
+    d.selection
+        .accepted
+        .iter()
+        .filter(|a| a.effect.name() == "step")
+        .map(|a| {
+            let size = param(a, "size").expect("a step has a size");
+            let time = param(a, "time_s").expect("a step has a time");
+            (time.value, size.value, size.sigma)
+        })
+        .collect()
 }
 
 /// The value of an accepted effect's parameter (NaN when it has no such key).
@@ -120,6 +140,41 @@ pub fn accepted_with_params(d: &Discovery) -> Vec<String> {
         .collect()
 }
 
+/// The accepted effect named `name`, quietly (see [`find_named`]).
+pub fn accepted<'d>(d: &'d Discovery, name: &str) -> Option<&'d Accepted> {
+    d.selection
+        .accepted
+        .iter()
+        .find(|a| a.effect.name() == name)
+}
+
+/// Asserts a lag of the temperature was named with the delay `true_delay_s` (within a factor
+/// e^0.5) and the coefficient `true_coefficient` (within 40 %): the delay of the fitted transfer
+/// function is τ of a `thermal_lag`, 2τ of a `lag2_coupling` of two equal stages.
+pub fn assert_temperature_lag(d: &Discovery, true_delay_s: f64, true_coefficient: f64) {
+    let (a, delay) = match (accepted(d, "thermal_lag"), accepted(d, "lag2_coupling")) {
+        (Some(a), _) => (a, param_value(a, "tau_s")),
+        (None, Some(a)) => {
+            assert_eq!(a.effect.channel(), Some("temperature_c"));
+            (a, 2.0 * param_value(a, "tau_s"))
+        }
+        _ => panic!(
+            "no lag of the temperature named: {:?}; refused {:?}",
+            accepted_with_params(d),
+            d.selection.refused
+        ),
+    };
+    assert!(
+        (delay / true_delay_s).ln().abs() < 0.5,
+        "delay {delay:.0} s against {true_delay_s:.0} s"
+    );
+    let c = param_value(a, "coefficient");
+    assert!(
+        (c / true_coefficient - 1.0).abs() < 0.4,
+        "coefficient {c:.3e} against {true_coefficient:.3e}"
+    );
+}
+
 /// The accepted effect named `name`; when there is none (and something was hidden), prints
 /// the last round's ΔBIC so a miss can be read from the log.
 pub fn find_named<'d>(d: &'d Discovery, name: &str) -> Option<&'d Accepted> {
@@ -178,6 +233,56 @@ impl Tally {
             self.named, self.draws, self.params
         );
     }
+}
+
+/// What one hidden-effect draw came to: the effect as drawn, whether it was named, whether its
+/// parameters (and, where the test checks it, its gain) came out within tolerance, and all that
+/// was accepted.
+pub struct Outcome<H> {
+    /// The hidden effect with its drawn parameters.
+    pub hidden: H,
+    /// The discovery named it.
+    pub named: bool,
+    /// Named with its parameters within tolerance.
+    pub params_ok: bool,
+    /// Named with its out-of-sample gain close to the true-parameter gain (`None`: not checked).
+    pub gain_ok: Option<bool>,
+    /// Names of all accepted effects.
+    pub accepted: Vec<String>,
+}
+
+/// Runs `draws` hidden-effect draws from `rng` — each an effect and its SNR (`draw`), then the
+/// seed of its log — through `run_one`, prints every outcome and the rates under `label`, and
+/// returns the tally.
+pub fn tally_draws<H: std::fmt::Debug>(
+    label: &str,
+    rng: &mut ChaCha8Rng,
+    draws: usize,
+    mut draw: impl FnMut(&mut ChaCha8Rng) -> (H, f64),
+    mut run_one: impl FnMut(&H, f64, u64) -> Outcome<H>,
+    name: impl Fn(&H) -> &'static str,
+) -> Tally {
+    let mut tally = Tally::default();
+    let mut with_gain = false;
+    for i in 0..draws {
+        let (h, snr) = draw(rng);
+        let seed = rng.random::<u64>();
+        let o = run_one(&h, snr, seed);
+        let gain = o.gain_ok.map_or(String::new(), |g| format!(" gain={g}"));
+        eprintln!(
+            "{label} draw {i}: hidden {:?} at SNR {snr:.1}: accepted {:?} named={} params={}{gain}",
+            o.hidden, o.accepted, o.named, o.params_ok
+        );
+        with_gain |= o.gain_ok.is_some();
+        tally.add(
+            name(&o.hidden),
+            o.named,
+            o.params_ok,
+            o.gain_ok.unwrap_or(false),
+        );
+    }
+    tally.print(label, with_gain);
+    tally
 }
 
 /// Bouc–Wen hysteresis of a temperature series, a differential model of stick–slip (used for

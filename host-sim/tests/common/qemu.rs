@@ -71,3 +71,17 @@ impl Rng {
         (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
     }
 }
+
+/// The temporary folders (`accomp-qemu-<pid>-*` in the temp dir) of the QEMUs that process
+/// `pid` runs.
+pub fn temp_dirs_of(pid: u32) -> Vec<PathBuf> {
+    let prefix = format!("{}{pid}-", accomp_host::device::qemu::TEMP_PREFIX);
+    std::fs::read_dir(std::env::temp_dir())
+        .map(|r| {
+            r.flatten()
+                .filter(|e| e.file_name().to_string_lossy().starts_with(&prefix))
+                .map(|e| e.path())
+                .collect()
+        })
+        .unwrap_or_default()
+}

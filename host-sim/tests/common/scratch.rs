@@ -1,6 +1,7 @@
 //! A test's scratch folder under the system temp dir, `accomp-<name>-<pid>-<n>`: fresh when made,
-//! removed when the test passes and kept (its path printed) when the test fails, for a look at
-//! what was written. Used by the CLI tests (`#[path = "common/scratch.rs"] mod scratch;`) and by
+//! removed when dropped, whether the test passes or fails, so no test run leaves files behind. To
+//! look at what a failing test wrote, run it with `ACCOMP_KEEP_TEST_FILES=1`: the folder is then
+//! kept and its path printed. Used by the CLI tests (`#[path = "common/scratch.rs"] mod scratch;`) and by
 //! the plot module's unit tests (through a `#[path]` from `src/plot/tests.rs`).
 #![allow(dead_code)]
 
@@ -8,7 +9,10 @@ use std::ops::Deref;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-/// One test's folder; dereferences to its path.
+/// Set (to anything) to keep the scratch folders instead of removing them.
+pub const KEEP_ENV: &str = "ACCOMP_KEEP_TEST_FILES";
+
+/// One test's folder; dereferences to its path; removed on drop (also when the test panics).
 #[derive(Debug)]
 pub struct Scratch {
     dir: PathBuf,
@@ -59,6 +63,12 @@ impl Deref for Scratch {
     }
 }
 
+impl AsRef<std::ffi::OsStr> for Scratch {
+    fn as_ref(&self) -> &std::ffi::OsStr {
+        self.dir.as_os_str()
+    }
+}
+
 impl AsRef<Path> for Scratch {
     fn as_ref(&self) -> &Path {
         &self.dir
@@ -67,8 +77,11 @@ impl AsRef<Path> for Scratch {
 
 impl Drop for Scratch {
     fn drop(&mut self) {
-        if std::thread::panicking() {
-            eprintln!("test failed: its files are kept in {}", self.dir.display());
+        if std::env::var_os(KEEP_ENV).is_some() {
+            eprintln!(
+                "{KEEP_ENV} is set: the test's files are kept in {}",
+                self.dir.display()
+            );
         } else {
             let _ = std::fs::remove_dir_all(&self.dir);
         }

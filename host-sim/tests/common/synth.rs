@@ -17,6 +17,10 @@
 
 #![allow(dead_code)]
 
+use accomp::table::CalibrationTable;
+use accomp::units::Celsius;
+use accomp_host::discover::import::DatasetOptions;
+use accomp_host::discover::{self as disc, select, Discovery};
 use accomp_host::log::Log;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -347,11 +351,16 @@ pub fn draw_noise(rng: &mut ChaCha8Rng) -> SensorNoise {
 
 /// The rate of change of the true temperature, °C/s: central differences, one-sided at the ends.
 pub fn true_rate_c_per_s(st: &Station) -> Vec<f64> {
-    let n = st.temp_true_c.len();
+    central_diff(&st.temp_true_c, st.dt_s)
+}
+
+/// Central differences of `x` sampled every `dt_s` (one-sided at the two ends), per second.
+pub fn central_diff(x: &[f64], dt_s: f64) -> Vec<f64> {
+    let n = x.len();
     (0..n)
         .map(|i| {
             let (a, b) = (i.saturating_sub(1), (i + 1).min(n - 1));
-            (st.temp_true_c[b] - st.temp_true_c[a]) / ((b - a) as f64 * st.dt_s)
+            (x[b] - x[a]) / ((b - a) as f64 * dt_s)
         })
         .collect()
 }
@@ -467,6 +476,28 @@ pub fn binomial_upper(k: usize, n: usize, alpha: f64) -> f64 {
         }
     }
     hi
+}
+
+/// The bias K0 (g) of `table`'s thermal models at `t_c` (inside the table's range).
+pub fn bias_g_at(table: &CalibrationTable, t_c: f64) -> f64 {
+    table
+        .thermal
+        .coefficients_at(Celsius(t_c))
+        .expect("in range")
+        .0
+        .bias_g
+}
+
+/// Runs the discovery on `log` with the default options, given the calibration `table` (if any).
+pub fn discover(log: Log, table: Option<&CalibrationTable>) -> Discovery {
+    disc::discover_log(
+        log,
+        &[],
+        &DatasetOptions::default(),
+        table,
+        &select::Config::default(),
+    )
+    .expect("discover")
 }
 
 #[cfg(test)]

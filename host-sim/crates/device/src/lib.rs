@@ -10,6 +10,11 @@ pub mod record;
 pub mod samples_csv;
 pub mod transport;
 
+/// Unit tests' scratch folders, removed on drop (the integration tests' own helper).
+#[cfg(test)]
+#[path = "../../../tests/common/scratch.rs"]
+mod scratch;
+
 pub use client::{Client, ClientError};
 pub use error::DeviceError;
 pub use qemu::{Qemu, QemuError};

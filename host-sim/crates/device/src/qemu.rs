@@ -451,7 +451,7 @@ impl Qemu {
 }
 
 /// Name prefix of the temporary folders, `accomp-qemu-<pid>-<random>` in the system temp dir.
-const TEMP_PREFIX: &str = "accomp-qemu-";
+pub const TEMP_PREFIX: &str = "accomp-qemu-";
 
 /// Removes a temporary folder when dropped, unless emptied first.
 struct DirGuard(Option<PathBuf>);

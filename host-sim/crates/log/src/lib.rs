@@ -49,6 +49,11 @@ pub mod outputs;
 pub mod reader;
 pub mod time;
 pub mod writer;
+
+/// Unit tests' scratch folders, removed on drop (the integration tests' own helper).
+#[cfg(test)]
+#[path = "../../../tests/common/scratch.rs"]
+mod scratch;
 use reader::{ReadError, Records};
 
 /// Whether a record file is gzip-compressed (`.gz`, as `rec.csv.gz`): it is decompressed as it
@@ -952,11 +957,8 @@ mod tests {
         e.finish().unwrap()
     }
 
-    fn scratch(name: &str) -> std::path::PathBuf {
-        let d = std::env::temp_dir().join(format!("accomp-log-{name}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&d);
-        std::fs::create_dir_all(&d).unwrap();
-        d
+    fn scratch(name: &str) -> crate::scratch::Scratch {
+        crate::scratch::Scratch::new(&format!("log-{name}"))
     }
 
     #[test]
@@ -979,7 +981,6 @@ mod tests {
         let full = gzip(GOOD.as_bytes());
         std::fs::write(d.join("cut.csv.gz"), &full[..full.len() - 12]).unwrap();
         assert!(Log::read_path(d.join("cut.csv.gz")).is_err());
-        let _ = std::fs::remove_dir_all(&d);
     }
 
     #[test]
@@ -999,7 +1000,6 @@ mod tests {
             ),
             other => panic!("expected the day twice refused, got {other:?}"),
         }
-        let _ = std::fs::remove_dir_all(&d);
     }
 
     #[test]

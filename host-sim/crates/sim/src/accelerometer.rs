@@ -399,8 +399,8 @@ mod tests {
             },
             thermal,
         );
-        let path =
-            std::env::temp_dir().join(format!("accomp-sim-table-{}.bin", std::process::id()));
+        let dir = crate::scratch::Scratch::new("sim-table");
+        let path = dir.join("table.bin");
         std::fs::write(&path, table.encode()).unwrap();
         let toml_text = format!(
             "source = \"table-file\"\npath = {:?}\n",
@@ -408,7 +408,6 @@ mod tests {
         );
         let source: CalibrationSource = toml::from_str(&toml_text).unwrap();
         let loaded = source.load(60.0).unwrap();
-        let _ = std::fs::remove_file(&path);
         // The table's own T0 (55 °C) is kept, not the scenario's set point.
         assert_eq!(loaded, thermal);
         let bad = CalibrationSource::TableFile {

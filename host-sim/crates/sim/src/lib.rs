@@ -29,6 +29,12 @@ pub mod scenario;
 pub mod thermostat;
 pub mod tide;
 pub mod tilt;
+pub mod twin;
+
+/// Unit tests' scratch folders, removed on drop (the integration tests' own helper).
+#[cfg(test)]
+#[path = "../../../tests/common/scratch.rs"]
+mod scratch;
 pub use accomp_log::{time, writer};
 
 use std::io::Write;

@@ -71,6 +71,11 @@ pub struct Scenario {
     /// none.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub effects: Vec<ScenarioEffect>,
+    /// A written twin of a measured record (`[twin]`, docs/simulator.md "The written twin"):
+    /// `accomp simulate` then computes one member of the twin at the record's instants instead
+    /// of running the station; absent: a station scenario.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub twin: Option<crate::twin::TwinSpec>,
 }
 
 /// Why a scenario is refused.
@@ -217,6 +222,10 @@ impl Scenario {
         }
         for (i, e) in self.effects.iter().enumerate() {
             e.validate(i)?;
+        }
+        if let Some(t) = &self.twin {
+            t.validate(self.effects.len())
+                .map_err(|why| ScenarioError::Invalid(format!("[twin]: {why}")))?;
         }
         Ok(())
     }
@@ -579,6 +588,7 @@ fn paper_1g() -> Scenario {
         barometer: barometer(),
         instrument: None,
         effects: Vec::new(),
+        twin: None,
     }
 }
 
@@ -643,6 +653,7 @@ fn paper_0g() -> Scenario {
         barometer: barometer(),
         instrument: None,
         effects: Vec::new(),
+        twin: None,
     }
 }
 

@@ -68,8 +68,7 @@ mod overlapping;
 mod tests;
 
 pub use confidence::{chi2_interval, chi2_quantile, edf_oadev_simple, ONE_SIGMA_TAIL};
-pub(crate) use noise_id::detrend_linear;
-pub use noise_id::{lag1_autocorrelation, noise_id_lag1};
+pub use noise_id::{detrend_linear, lag1_autocorrelation, noise_id_lag1};
 use overlapping::oadev_sums_gapless;
 
 /// Noise identification uses at most this many block means (the first ones of the record).

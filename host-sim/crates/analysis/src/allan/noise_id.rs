@@ -161,8 +161,9 @@ pub fn lag1_autocorrelation(z: &[f64]) -> Option<f64> {
     Some(num / den)
 }
 
-/// `z` less its least-squares line in the index.
-pub(crate) fn detrend_linear(z: &[f64]) -> Vec<f64> {
+/// `z` less its least-squares line in the index (what a baseline of an offset and a linear drift
+/// leaves).
+pub fn detrend_linear(z: &[f64]) -> Vec<f64> {
     let n = z.len() as f64;
     let tm = (n - 1.0) / 2.0;
     let zm = z.iter().sum::<f64>() / n;

@@ -43,20 +43,6 @@ pub(super) fn scaled(p: &AllanParams, k: f64) -> AllanParams {
     }
 }
 
-/// Linear interpolation of a regular series (first value at t = 0, spacing `h`) at `t`.
-pub(super) fn interp(v: &[f64], h: f64, t: f64) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    let x = (t / h).max(0.0);
-    let k = (x.floor() as usize).min(v.len() - 1);
-    let f = x - k as f64;
-    match v.get(k + 1) {
-        Some(b) => v[k] + f.min(1.0) * (b - v[k]),
-        None => v[k],
-    }
-}
-
 pub(super) fn centred(v: &[f64]) -> Vec<f64> {
     let m = v.iter().sum::<f64>() / v.len().max(1) as f64;
     v.iter().map(|x| x - m).collect()
@@ -258,53 +244,19 @@ impl Twin {
         };
         s.validate().map_err(SimError::from)?;
         let drivers = drivers(ds, &s, &mut prov)?;
-        let start = Utc::parse(&s.run.start_utc)?;
-        let base = instrument_output(&s, start, &t_s, &drivers, out_scale)?;
-        let mut twin = Twin {
+        let effects = std::mem::take(&mut s.effects);
+        let (rec, _) = TwinRecord::new(s, t_s, drivers, rec_per_g, out_scale)?;
+        let twin = Twin {
             noise: scaled(&inst_noise, out_scale),
             noise_model: noise.cloned(),
             family: None,
-            out_scale,
-            unit_per_g: rec_per_g,
+            drift: None,
             dt_s: ds.dt_s,
-            det: Vec::new(),
-            base,
-            drivers,
-            t_s,
+            rec,
             provenance: prov,
-            scenario: s,
         };
-        let effects = std::mem::take(&mut twin.scenario.effects);
-        twin.det = twin.base.clone();
         Ok(twin.extended(&effects))
     }
-}
-
-/// The station's drivers from a run of `s` (tide off, no effects, accelerometer instrument) with
-/// `seed`, at its own steps.
-pub(super) fn station_series(s: &Scenario, seed: u64) -> Result<StationSeries, TwinError> {
-    let mut sim = Simulator::new(s, seed)?;
-    let steps = sim.samples() as usize + 1;
-    let mut o = StationSeries {
-        temperature_c: Vec::with_capacity(steps),
-        tilt_rad: Vec::with_capacity(steps),
-        pressure_dev_pa: Vec::with_capacity(steps),
-        room_c: Vec::with_capacity(steps),
-        board_c: Vec::with_capacity(steps),
-    };
-    let room_mean = s.room.mean_c;
-    let p_mean =
-        crate::sim::barometer::mean_pressure_hpa(s.barometer.sea_level_hpa, s.site.height_m);
-    for _ in 0..steps {
-        let x = sim.step()?;
-        o.temperature_c.push(x.truth_mount_temperature_c);
-        o.tilt_rad.push(x.truth_tilt_arcsec * RAD_PER_ARCSEC);
-        o.pressure_dev_pa
-            .push((x.truth_pressure_hpa - p_mean) * 100.0);
-        o.room_c.push(x.truth_room_c - room_mean);
-        o.board_c.push(x.truth_board_c - room_mean);
-    }
-    Ok(o)
 }
 
 /// The drivers at the record's instants: measured channels where present, the quiet
@@ -444,61 +396,4 @@ pub(super) fn drivers(
         tide_tilt_rad,
         simulated,
     })
-}
-
-/// The instrument's deterministic output at the record's instants, record unit.
-pub(super) fn instrument_output(
-    s: &Scenario,
-    start: Utc,
-    t_s: &[f64],
-    d: &Drivers,
-    out_scale: f64,
-) -> Result<Vec<f64>, TwinError> {
-    if let Some(g) = s.gravimeter() {
-        let per_nm = g
-            .unit_per_nm_s2()
-            .ok_or_else(|| TwinError::UnknownGravityUnit {
-                unit: g.unit.clone(),
-                known: UNITS.join(", "),
-            })?;
-        // The delayed tide: its own sampler (the undelayed series is in the drivers).
-        let tide = if g.tide_delay_s != 0.0 && s.tide.enabled {
-            let mut sm = TideSampler::new(
-                Some(TideModel::new(&s.site, s.tide.tilt_azimuth_deg).map_err(SimError::from)?),
-                start,
-                s.tide.step_s,
-            );
-            t_s.iter()
-                .map(|&t| sm.at(t - g.tide_delay_s).gravity_nm_s2)
-                .collect()
-        } else {
-            d.tide_nm_s2.clone()
-        };
-        return Ok(t_s
-            .iter()
-            .enumerate()
-            .map(|(i, &t)| {
-                out_scale
-                    * (g.offset
-                        + g.drift_per_day * t / 86_400.0
-                        + g.tide_factor * tide[i] * per_nm
-                        + g.pressure_admittance_per_hpa * d.pressure_dev_pa[i] / 100.0)
-            })
-            .collect());
-    }
-    let models = s
-        .accelerometer
-        .calibration
-        .load(s.thermostat.setpoint_c)
-        .map_err(SimError::from)?;
-    let o = &s.accelerometer.orientation;
-    Ok((0..t_s.len())
-        .map(|i| {
-            let a = d.input_g[i].clamp(-1.0, 1.0);
-            let g = 1.0 + d.tide_nm_s2[i] * 1e-9 / STANDARD_GRAVITY_M_S2;
-            let (a_i, cross) = axes(o.spindle_axis, o.cross_sign, a.asin() + d.tilt_rad[i], g);
-            let k = true_coefficients(&models, d.temperature_c[i]);
-            k.output(a_i, cross).0 * out_scale
-        })
-        .collect())
 }

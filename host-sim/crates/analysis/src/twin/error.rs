@@ -32,6 +32,9 @@ pub enum TwinError {
     /// The simulator refused the scenario or failed while running it.
     #[error(transparent)]
     Sim(#[from] SimError),
+    /// The simulator's member model failed.
+    #[error(transparent)]
+    Run(#[from] crate::sim::twin::TwinRunError),
     /// An effect the scenario holds cannot be built into the chain.
     #[error(transparent)]
     Effect(#[from] crate::sim::effects::EffectError),

@@ -3,13 +3,16 @@
 //!
 //! One-sided power spectral density of the record's grid series (output unit²/Hz):
 //!
-//! S(f) = [h₀ + h₋₁/f + h₋₂/f² + h₋₄/f⁴] / (1 + (f/f_c)²)
+//! S(f) = [h₀ + h₋₁/f + h₋₂/f² + h₋₄/f⁴ + q / (1 + (f/f_g)²)] / (1 + (f/f_c)²)
 //!
 //! white (h₀), flicker (h₋₁), random walk (h₋₂), drift-rate random walk (h₋₄: the drift rate
 //! itself wanders, what a spring's or a proof mass's slow non-linear drift looks like over a
-//! record) and the instrument's output filter (a first-order low-pass with corner f_c: averaging
-//! or an anti-alias filter lowers the power towards Nyquist). The linear drift is not in S: the
-//! level and the drift rate are calibration constants that every comparison removes.
+//! record), a Gauss–Markov process (first-order Markov, Lorentzian: level q, corner f_g,
+//! correlation time 1/(2π f_g) — a disturbance with a memory of hours, such as the room's or the
+//! instrument's thermal regulation, which no power law has) and the instrument's output filter
+//! (a first-order low-pass with corner f_c: averaging or an anti-alias filter lowers the power
+//! towards Nyquist). The linear drift is not in S: the level and the drift rate are calibration
+//! constants that every comparison removes.
 //!
 //! Fit: the Whittle likelihood −ℓ = Σ_k [ln E_k + I_k / E_k] of Hann-tapered periodograms I_k
 //! of the record's first differences (differencing takes 40 dB of dynamic range off an f⁻⁴
@@ -21,22 +24,27 @@
 //! Fisher scoring (iteratively reweighted least squares; every subset of the coloured terms is
 //! tried, the best with all levels positive is taken); the corner by the toolkit's
 //! golden-section search on that profile likelihood, kept only when it improves −ℓ by more than
-//! [`FILTER_DELTA`]. Uncertainties: the inverse Fisher information (levels and ln f_c jointly)
+//! [`FILTER_DELTA`]. The Gauss–Markov corner likewise, with the filter held: kept when it
+//! lowers −ℓ by more than [`FILTER_DELTA`], q is resolved and the corner is not within
+//! [`GM_EDGE`] of an end of its range [`GM_RANGE`] (a corner at an edge is the fit wanting a
+//! process outside the record's band, not a finding). Uncertainties: the inverse Fisher
+//! information (levels, ln f_c and ln f_g jointly)
 //! × the Hann window's equivalent noise bandwidth (1.5 bins: neighbouring tapered bins are not
 //! independent). A level within [`RESOLVED_SIGMAS`] σ of zero is reported as not resolved.
 //!
-//! Members: spectral synthesis on the record's grid (Gaussian Fourier coefficients with variance
-//! from S, inverse real FFT over 4 × the record's length so that the lowest frequencies are not
-//! forced periodic), after drawing the member's own parameters from the fit's covariance.
+//! Members: [`NoiseFamily::spec`] hands the fit to the simulator (`accomp-sim`, `twin::family`),
+//! which draws each member's own parameters from the fit's covariance and synthesises its noise
+//! on the record's grid.
 
-// Index loops over the four levels and the 3-bin window read as the formulas do.
+// Index loops over the five levels and the 3-bin window read as the formulas do.
 #![allow(clippy::needless_range_loop)]
 
 use crate::numerics::optimize::golden_section_min;
-use crate::sim::noise::{gauss, SimRng};
+#[cfg(test)]
+use crate::sim::noise::gauss;
 
-/// Number of parameters: ln h₀, ln h₋₁, ln h₋₂, ln h₋₄, ln f_c.
-pub const PARAMS: usize = 5;
+/// Number of parameters: ln h₀, ln h₋₁, ln h₋₂, ln h₋₄, ln f_c, ln q, ln f_g.
+pub const PARAMS: usize = 7;
 /// Names of the parameters, in order.
 pub const NAMES: [&str; PARAMS] = [
     "white",
@@ -44,7 +52,20 @@ pub const NAMES: [&str; PARAMS] = [
     "random_walk",
     "drift_rate_random_walk",
     "filter_corner",
+    "gauss_markov",
+    "gauss_markov_corner",
 ];
+/// Levels (linear in S): the four power laws and the Gauss–Markov level q.
+const LEVELS: usize = 5;
+/// Index in the parameters of each level.
+const LEVEL_PARAM: [usize; LEVELS] = [0, 1, 2, 3, 5];
+/// The Gauss–Markov corner's search range, × the record's Nyquist frequency (from about 20
+/// cycles over a 50 000-cell record up to a fifth of Nyquist).
+const GM_RANGE: (f64, f64) = (1e-3, 0.2);
+/// A Gauss–Markov corner within this fraction of the (log) range of an end is at the edge.
+const GM_EDGE: f64 = 0.02;
+/// Golden-section steps over ln f_g.
+const GM_GOLDEN_STEPS: usize = 30;
 /// Power-law exponents of the four noise terms.
 const ALPHA: [i32; 4] = [0, -1, -2, -4];
 /// Lowest periodogram bins of a segment left out of the likelihood (bin 1 mixes in bin 0,
@@ -52,8 +73,18 @@ const ALPHA: [i32; 4] = [0, -1, -2, -4];
 pub const SKIP_BINS: usize = 2;
 /// The whole record's lowest bin in the likelihood: bin 1, the slowest wander of the drift
 /// (one cycle over the record). It mixes in bin 0, the differences' mean, which the comparison's
-/// detrending removes (its power is taken as zero).
+/// detrending removes (its power is taken as zero). A residual with a drift polynomial of
+/// order N removed starts at bin ⌈(N + 1)/2⌉ instead ([`NoiseFamily::fit_after_drift`]).
 const RECORD_FIRST_BIN: usize = 1;
+
+/// The whole record's lowest bin in the likelihood of a residual from which a polynomial of
+/// `order` was removed: ⌈(order + 1)/2⌉ (at least bin 1). The polynomial has `order` zeros, so
+/// it takes out about the record's lowest (order + 1)/2 cycles along with the drift; fitted with
+/// those bins in, the family would carry their removal into the members, which the comparison
+/// then removes the polynomial from again — the slowest power lost twice.
+pub fn record_first_bin(order: usize) -> usize {
+    (order + 2) / 2
+}
 /// The record is cut into this many segments overlapping by half.
 pub const SEGMENTS_PER_RECORD: usize = 7;
 /// Equivalent noise bandwidth of the Hann window, bins.
@@ -67,8 +98,6 @@ const SCORING_ITERS: usize = 30;
 const FILTER_DELTA: f64 = 3.0 * HANN_ENBW;
 /// A level is resolved when it is more than this many σ above zero.
 const RESOLVED_SIGMAS: f64 = 2.0;
-/// Synthesis length: this many times the record's grid (rounded up to a power of two).
-const SYNTHESIS_FACTOR: usize = 4;
 /// The filter corner's range, × Nyquist.
 const CORNER_RANGE: (f64, f64) = (0.05, 50.0);
 
@@ -108,16 +137,57 @@ pub struct Component {
 pub struct NoiseFamily {
     /// Grid spacing, s.
     pub dt_s: f64,
-    /// ln h₀, ln h₋₁, ln h₋₂, ln h₋₄ (−∞: the term is absent), ln f_c (+∞: no filter).
+    /// ln h₀, ln h₋₁, ln h₋₂, ln h₋₄ (−∞: the term is absent), ln f_c (+∞: no filter), ln q
+    /// (−∞: no Gauss–Markov term), ln f_g (+∞: none).
     pub ln_params: [f64; PARAMS],
-    /// Covariance of h₀, h₋₁, h₋₂, h₋₄ (inverse Fisher information × the Hann ENBW).
-    pub h_cov: [[f64; 4]; 4],
+    /// Covariance of h₀, h₋₁, h₋₂, h₋₄, q (inverse Fisher information × the Hann ENBW).
+    pub h_cov: [[f64; LEVELS]; LEVELS],
     /// Variance of ln f_c (curvature of the profile likelihood; 0 without a filter).
     pub ln_fc_var: f64,
+    /// Variance of ln f_g (0 without a Gauss–Markov term).
+    pub ln_fg_var: f64,
     /// Periodogram bins in the likelihood.
     pub bins: usize,
+    /// The whole record's lowest bin in the likelihood.
+    pub record_first_bin: usize,
     /// −ℓ at the optimum.
     pub neg_loglik: f64,
+    /// The Gauss–Markov term's search, kept or not.
+    pub gm_search: GaussMarkovSearch,
+}
+
+/// What the search for a Gauss–Markov term found (for the report, also when it was refused).
+#[derive(Debug, Clone, PartialEq)]
+pub struct GaussMarkovSearch {
+    /// ln of the best corner, Hz.
+    pub ln_corner: f64,
+    /// Whether that corner is at an edge of [`GM_RANGE`] (then refused).
+    pub at_edge: bool,
+    /// −ℓ without the term minus −ℓ with it (kept when above [`FILTER_DELTA`]).
+    pub neg_loglik_gain: f64,
+}
+
+impl GaussMarkovSearch {
+    /// Why the term is not in the family (None: it is).
+    pub fn refusal(&self, kept: bool) -> Option<String> {
+        if kept {
+            return None;
+        }
+        let fg = self.ln_corner.exp();
+        Some(if self.at_edge {
+            format!(
+                "best corner {fg:.3e} Hz at the edge of its search range: a process outside the \
+                 record's band, not a finding"
+            )
+        } else if self.neg_loglik_gain <= FILTER_DELTA {
+            format!(
+                "best corner {fg:.3e} Hz improves −ℓ by {:.1} (needs > {FILTER_DELTA})",
+                self.neg_loglik_gain
+            )
+        } else {
+            format!("best corner {fg:.3e} Hz: its level is not resolved")
+        })
+    }
 }
 
 /// PSD of the family with log parameters `p` at frequency `f` (Hz).
@@ -125,6 +195,9 @@ pub fn psd(p: &[f64; PARAMS], f: f64) -> f64 {
     let mut s = 0.0;
     for (i, a) in ALPHA.iter().enumerate() {
         s += p[i].exp() * f.powi(*a);
+    }
+    if p[5].is_finite() {
+        s += p[5].exp() / (1.0 + (f / p[6].exp()).powi(2));
     }
     s / (1.0 + (f / p[4].exp()).powi(2))
 }
@@ -143,9 +216,10 @@ struct Bin {
 const HANN_MIX: [f64; 3] = [1.0 / 6.0, 2.0 / 3.0, 1.0 / 6.0];
 
 impl Bin {
-    /// The expected periodogram's columns: one per noise term, at the corner `fc`.
-    fn cols(&self, fc: f64) -> [f64; 4] {
-        let mut c = [0.0; 4];
+    /// The expected periodogram's columns: one per level, at the corners `fc` (filter) and
+    /// `fg` (Gauss–Markov; +∞: none, its column is zero).
+    fn cols(&self, fc: f64, fg: f64) -> [f64; LEVELS] {
+        let mut c = [0.0; LEVELS];
         for j in 0..3 {
             let f = self.f[j];
             if f <= 0.0 {
@@ -156,6 +230,9 @@ impl Bin {
             c[1] += l / f;
             c[2] += l / (f * f);
             c[3] += l / (f * f * f * f);
+            if fg.is_finite() {
+                c[4] += l / (1.0 + (f / fg).powi(2));
+            }
         }
         c
     }
@@ -169,14 +246,30 @@ impl Bin {
     }
 
     /// ∂E/∂ln f_c with levels `h`.
-    fn d_ln_fc(&self, h: &[f64; 4], fc: f64) -> f64 {
+    fn d_ln_fc(&self, h: &[f64; LEVELS], fc: f64, fg: f64) -> f64 {
         (0..3)
             .filter(|&j| self.f[j] > 0.0)
             .map(|j| {
                 let f = self.f[j];
                 let u = (f / fc).powi(2);
-                let s = h[0] + h[1] / f + h[2] / (f * f) + h[3] / (f * f * f * f);
+                let mut s = h[0] + h[1] / f + h[2] / (f * f) + h[3] / (f * f * f * f);
+                if fg.is_finite() {
+                    s += h[4] / (1.0 + (f / fg).powi(2));
+                }
                 HANN_MIX[j] * self.g[j] * s / (1.0 + u) * 2.0 * u / (1.0 + u)
+            })
+            .sum()
+    }
+
+    /// ∂E/∂ln f_g with levels `h`.
+    fn d_ln_fg(&self, h: &[f64; LEVELS], fc: f64, fg: f64) -> f64 {
+        (0..3)
+            .filter(|&j| self.f[j] > 0.0)
+            .map(|j| {
+                let f = self.f[j];
+                let v = (f / fg).powi(2);
+                HANN_MIX[j] * self.g[j] / (1.0 + (f / fc).powi(2)) * h[4] * 2.0 * v
+                    / (1.0 + v).powi(2)
             })
             .sum()
     }
@@ -186,7 +279,11 @@ impl Bin {
 /// transform) in [`SEGMENTS_PER_RECORD`]-th segments overlapping by half, Hann taper: every
 /// part of the record weighs about the same (a non-stationary record, noisier at its start or
 /// with a glitch near an end, is fitted as the comparison's ADEV and Welch PSD see it).
-fn diff_periodograms(placed: &[f64], dt_s: f64) -> Result<Vec<Bin>, FamilyError> {
+fn diff_periodograms(
+    placed: &[f64],
+    dt_s: f64,
+    record_first: usize,
+) -> Result<Vec<Bin>, FamilyError> {
     let x = filled(placed);
     let finite = placed.iter().filter(|v| v.is_finite()).count();
     if finite < 64 || x.len() < 65 {
@@ -210,7 +307,7 @@ fn diff_periodograms(placed: &[f64], dt_s: f64) -> Result<Vec<Bin>, FamilyError>
         &d,
         dt_s,
         SKIP_BINS.max(2) as f64 / (n as f64 * dt_s),
-        RECORD_FIRST_BIN,
+        record_first,
         &mut out,
     );
     Ok(out)
@@ -281,7 +378,25 @@ fn whittle(p: &[f64; PARAMS], bins: &[Bin]) -> f64 {
 impl NoiseFamily {
     /// Fits the family to a residual laid on its regular grid (NaN = gap).
     pub fn fit(placed: &[f64], dt_s: f64) -> Result<NoiseFamily, FamilyError> {
-        let bins = diff_periodograms(placed, dt_s)?;
+        Self::fit_from_bin(placed, dt_s, RECORD_FIRST_BIN)
+    }
+
+    /// Fits the family to a residual from which a drift polynomial of `order` was removed: the
+    /// whole record's bins from [`record_first_bin`]`(order)` up.
+    pub fn fit_after_drift(
+        placed: &[f64],
+        dt_s: f64,
+        order: usize,
+    ) -> Result<NoiseFamily, FamilyError> {
+        Self::fit_from_bin(placed, dt_s, record_first_bin(order))
+    }
+
+    fn fit_from_bin(
+        placed: &[f64],
+        dt_s: f64,
+        record_first: usize,
+    ) -> Result<NoiseFamily, FamilyError> {
+        let bins = diff_periodograms(placed, dt_s, record_first)?;
         if bins.len() < 16 {
             return Err(FamilyError::TooShort(placed.len()));
         }
@@ -292,26 +407,51 @@ impl NoiseFamily {
         let (lo, hi) = ((CORNER_RANGE.0 * nyq).ln(), (CORNER_RANGE.1 * nyq).ln());
         // The profile likelihood in ln f_c (the levels at their maximum for each corner), and
         // without a filter.
-        let best = golden_section_min(|v| levels(&bins, v).1, lo, hi, GOLDEN_STEPS);
-        let (h_f, nll_f) = levels_best(&bins, best);
-        let (h_0, nll_0) = levels_best(&bins, f64::INFINITY);
+        let none = f64::INFINITY;
+        let best = golden_section_min(|v| levels(&bins, v, none).1, lo, hi, GOLDEN_STEPS);
+        let (h_f, nll_f) = levels_best(&bins, best, none);
+        let (h_0, nll_0) = levels_best(&bins, none, none);
         // The filter is kept when it improves −ℓ by more than FILTER_DELTA (a likelihood-ratio
         // test with one parameter at about 2σ).
         let filtered = nll_0 - nll_f > FILTER_DELTA;
-        let (h, ln_fc, nll) = if filtered {
+        let (mut h, ln_fc, mut nll) = if filtered {
             (h_f, best, nll_f)
         } else {
-            (h_0, f64::INFINITY, nll_0)
+            (h_0, none, nll_0)
         };
-        let ln_params = ln_params_of(&h, ln_fc);
-        let (h_cov, ln_fc_var) = covariance(&bins, &h, ln_fc);
+        // The Gauss–Markov term: its corner by golden section on the profile likelihood (the
+        // filter held), kept when it improves −ℓ by more than FILTER_DELTA, its level is
+        // resolved and its corner is not at an edge of the range.
+        let nll_without_gm = nll;
+        let (glo, ghi) = ((GM_RANGE.0 * nyq).ln(), (GM_RANGE.1 * nyq).ln());
+        let fg = golden_section_min(|v| levels(&bins, ln_fc, v).1, glo, ghi, GM_GOLDEN_STEPS);
+        let (h_g, nll_g) = levels_best(&bins, ln_fc, fg);
+        let edge = GM_EDGE * (ghi - glo);
+        let inside = fg - glo > edge && ghi - fg > edge;
+        let mut ln_fg = none;
+        if nll - nll_g > FILTER_DELTA && inside && h_g[4] > 0.0 {
+            let (cov, _, _) = covariance(&bins, &h_g, ln_fc, fg);
+            if h_g[4] > RESOLVED_SIGMAS * cov[4][4].max(0.0).sqrt() {
+                (h, nll, ln_fg) = (h_g, nll_g, fg);
+            }
+        }
+        let gm_search = GaussMarkovSearch {
+            ln_corner: fg,
+            at_edge: !inside,
+            neg_loglik_gain: nll_without_gm - nll_g,
+        };
+        let ln_params = ln_params_of(&h, ln_fc, ln_fg);
+        let (h_cov, ln_fc_var, ln_fg_var) = covariance(&bins, &h, ln_fc, ln_fg);
         Ok(NoiseFamily {
             dt_s,
             ln_params,
             h_cov,
             ln_fc_var,
+            ln_fg_var,
             bins: bins.len(),
+            record_first_bin: record_first,
             neg_loglik: nll,
+            gm_search,
         })
     }
 
@@ -319,8 +459,10 @@ impl NoiseFamily {
     /// maximum, the corner held): the profile likelihood of a change to the series' mean, such
     /// as a drift polynomial removed.
     pub fn neg_loglik_of(&self, placed: &[f64]) -> f64 {
-        match diff_periodograms(placed, self.dt_s) {
-            Ok(bins) if bins.len() == self.bins => levels_best(&bins, self.ln_params[4]).1,
+        match diff_periodograms(placed, self.dt_s, self.record_first_bin) {
+            Ok(bins) if bins.len() == self.bins => {
+                levels_best(&bins, self.ln_params[4], self.ln_params[6]).1
+            }
             _ => f64::INFINITY,
         }
     }
@@ -328,11 +470,13 @@ impl NoiseFamily {
     /// Whether parameter `i` is resolved (above the bottom of its range; the filter: below the
     /// top, i.e. a corner inside the record's band).
     pub fn resolved(&self, i: usize) -> bool {
-        if i == 4 {
-            self.ln_params[4].is_finite()
-        } else {
-            let h = self.ln_params[i].exp();
-            h > RESOLVED_SIGMAS * self.h_cov[i][i].max(0.0).sqrt()
+        match i {
+            4 | 6 => self.ln_params[i].is_finite(),
+            _ => {
+                let l = LEVEL_PARAM.iter().position(|&p| p == i).unwrap_or(0);
+                let h = self.ln_params[i].exp();
+                h > RESOLVED_SIGMAS * self.h_cov[l][l].max(0.0).sqrt()
+            }
         }
     }
 
@@ -347,20 +491,26 @@ impl NoiseFamily {
         (0..PARAMS)
             .map(|i| {
                 let c = self.ln_params[i].exp();
-                let sigma = if i < 4 {
-                    self.h_cov[i][i].max(0.0).sqrt()
-                } else {
-                    c * self.ln_fc_var.max(0.0).sqrt()
+                let level_index = LEVEL_PARAM.iter().position(|&p| p == i);
+                let sigma = match (i, level_index) {
+                    (_, Some(l)) => self.h_cov[l][l].max(0.0).sqrt(),
+                    (4, _) => c * self.ln_fc_var.max(0.0).sqrt(),
+                    _ => c * self.ln_fg_var.max(0.0).sqrt(),
                 };
-                // Each level is √(k·c): its σ is half the coefficient's relative σ.
+                // Each level is √(k·c): its σ is half the coefficient's relative σ. The
+                // Gauss–Markov level: the process' σ, √(q · f_g · π/2).
                 let (k, level_unit) = match i {
                     0 => (1.0 / (2.0 * self.dt_s), format!("{unit} per point")),
                     1 => (2.0 * std::f64::consts::LN_2, format!("{unit} (ADEV floor)")),
                     2 => (2.0 * pi2, format!("{unit}/√s")),
                     3 => (8.0 * pi2 * pi2, format!("{unit}/s^1.5")),
+                    5 => (
+                        self.ln_params[6].exp() * std::f64::consts::FRAC_PI_2,
+                        format!("{unit} (process σ)"),
+                    ),
                     _ => (f64::NAN, "Hz".to_owned()),
                 };
-                let (level, level_sigma) = if i < 4 {
+                let (level, level_sigma) = if level_index.is_some() {
                     let l = (k * c).sqrt();
                     (
                         l,
@@ -386,74 +536,75 @@ impl NoiseFamily {
             .collect()
     }
 
-    /// A member's parameters: the levels drawn from their covariance (a draw below zero is
-    /// held at zero), the corner from its log-normal.
-    pub fn drawn(&self, rng: &mut SimRng) -> NoiseFamily {
-        let l = cholesky4(&self.h_cov);
-        let z: Vec<f64> = (0..4).map(|_| gauss(rng)).collect();
-        let zf = gauss(rng);
-        let mut f = self.clone();
-        for i in 0..4 {
-            let h = self.ln_params[i].exp();
-            let d: f64 = (0..=i).map(|j| l[i][j] * z[j]).sum();
-            let v = h + d;
-            f.ln_params[i] = if v > 0.0 { v.ln() } else { f64::NEG_INFINITY };
+    /// The family as the simulator's description (`accomp-sim`, `twin::family`), which draws
+    /// the members' parameters and synthesises their noise: the four power laws (and the
+    /// Gauss–Markov term, white with its own corner, when fitted) with their covariance and the
+    /// first-order output filter (`corner_hz = 0`: none).
+    pub fn spec(&self) -> crate::sim::twin::family::NoiseFamily {
+        use crate::sim::twin::family::{NoiseFamily as Spec, NoiseFilter, PowerLaw};
+        // The Gauss–Markov term is a fifth term only when fitted (a family without it is
+        // written, and drawn, as the four power laws).
+        let gm = self.ln_params[5].is_finite() && self.ln_params[6].is_finite();
+        let terms = if gm { LEVELS } else { 4 };
+        Spec {
+            grid_interval_s: self.dt_s,
+            terms: (0..4)
+                .map(|i| PowerLaw {
+                    name: NAMES[i].to_owned(),
+                    alpha: ALPHA[i],
+                    coefficient: self.ln_params[i].exp(),
+                    corner_hz: 0.0,
+                    ln_corner_sigma: 0.0,
+                })
+                .chain(gm.then(|| PowerLaw {
+                    name: NAMES[5].to_owned(),
+                    alpha: 0,
+                    coefficient: self.ln_params[5].exp(),
+                    corner_hz: self.ln_params[6].exp(),
+                    ln_corner_sigma: self.ln_fg_var.max(0.0).sqrt(),
+                }))
+                .collect(),
+            covariance: self.h_cov[..terms]
+                .iter()
+                .map(|r| r[..terms].to_vec())
+                .collect(),
+            filters: vec![NoiseFilter::FirstOrderLowPass {
+                corner_hz: if self.ln_params[4].is_finite() {
+                    self.ln_params[4].exp()
+                } else {
+                    0.0
+                },
+                ln_corner_sigma: self.ln_fc_var.max(0.0).sqrt(),
+            }],
         }
-        if self.ln_params[4].is_finite() {
-            f.ln_params[4] += self.ln_fc_var.max(0.0).sqrt() * zf;
-        }
-        f
-    }
-
-    /// One draw of the noise on a grid of `cells` cells (spacing `dt_s`).
-    pub fn synthesise(&self, cells: usize, rng: &mut SimRng) -> Vec<f64> {
-        if cells == 0 {
-            return Vec::new();
-        }
-        let len = (SYNTHESIS_FACTOR * cells).next_power_of_two().max(4);
-        let dt = self.dt_s;
-        let mut spec = vec![(0.0, 0.0); len / 2 + 1];
-        // E|X_k|² = len · S(f_k) / (4Δ) per real and imaginary part, so that the series' one-sided
-        // PSD is S; the Nyquist bin is real.
-        for (k, c) in spec.iter_mut().enumerate() {
-            if k == 0 {
-                continue;
-            }
-            let f = k as f64 / (len as f64 * dt);
-            let sd = (len as f64 * self.psd(f) / (4.0 * dt)).sqrt();
-            if k == len / 2 {
-                c.0 = sd * std::f64::consts::SQRT_2 * gauss(rng);
-                c.1 = 0.0;
-            } else {
-                c.0 = sd * gauss(rng);
-                c.1 = sd * gauss(rng);
-            }
-        }
-        let mut out = crate::numerics::fft::real_from_half_spectrum(&spec);
-        out.truncate(cells);
-        for v in &mut out {
-            *v /= len as f64;
-        }
-        out
     }
 }
 
-/// The levels h₀, h₋₁, h₋₂, h₋₄ that maximise the Whittle likelihood at the corner
-/// e^`ln_fc`, and −ℓ there. The spectrum is linear in the levels, so Fisher scoring is
-/// iteratively reweighted least squares: h ← (XᵀWX)⁻¹XᵀW I with W = 1/E², columns scaled to
-/// unit weight; a level a step takes below zero shrinks ×0.1 per step instead.
-fn levels(bins: &[Bin], ln_fc: f64) -> ([f64; 4], f64) {
-    scoring(bins, ln_fc, [true; 4], false)
+/// The levels h₀, h₋₁, h₋₂, h₋₄ (and q when `ln_fg` is finite) that maximise the Whittle
+/// likelihood at the corners e^`ln_fc` and e^`ln_fg`, and −ℓ there. The spectrum is linear in
+/// the levels, so Fisher scoring is iteratively reweighted least squares: h ← (XᵀWX)⁻¹XᵀW I
+/// with W = 1/E², columns scaled to unit weight; a level a step takes below zero shrinks ×0.1
+/// per step instead.
+fn levels(bins: &[Bin], ln_fc: f64, ln_fg: f64) -> ([f64; LEVELS], f64) {
+    let gm = ln_fg.is_finite();
+    scoring(bins, ln_fc, ln_fg, [true, true, true, true, gm], false)
 }
 
 /// The best of the term subsets (white always in): each fitted by [`scoring`] with its terms
 /// held positive at convergence (a subset whose unconstrained optimum puts a term below zero
 /// is not a candidate), the largest likelihood taken — the constrained maximum.
-fn levels_best(bins: &[Bin], ln_fc: f64) -> ([f64; 4], f64) {
-    let mut best = levels(bins, ln_fc);
-    for mask in 0..8u32 {
-        let active = [true, mask & 1 != 0, mask & 2 != 0, mask & 4 != 0];
-        let c = scoring(bins, ln_fc, active, true);
+fn levels_best(bins: &[Bin], ln_fc: f64, ln_fg: f64) -> ([f64; LEVELS], f64) {
+    let mut best = levels(bins, ln_fc, ln_fg);
+    let masks = if ln_fg.is_finite() { 16u32 } else { 8 };
+    for mask in 0..masks {
+        let active = [
+            true,
+            mask & 1 != 0,
+            mask & 2 != 0,
+            mask & 4 != 0,
+            mask & 8 != 0,
+        ];
+        let c = scoring(bins, ln_fc, ln_fg, active, true);
         if c.1 < best.1 {
             best = c;
         }
@@ -463,10 +614,16 @@ fn levels_best(bins: &[Bin], ln_fc: f64) -> ([f64; 4], f64) {
 
 /// Fisher scoring of the `active` levels at the corner e^`ln_fc`; `strict`: −ℓ = +∞ when the
 /// converged step still puts an active level at or below zero.
-fn scoring(bins: &[Bin], ln_fc: f64, active: [bool; 4], strict: bool) -> ([f64; 4], f64) {
+fn scoring(
+    bins: &[Bin],
+    ln_fc: f64,
+    ln_fg: f64,
+    active: [bool; LEVELS],
+    strict: bool,
+) -> ([f64; LEVELS], f64) {
     let mut negative = false;
-    let fc = ln_fc.exp();
-    let cols: Vec<[f64; 4]> = bins.iter().map(|b| b.cols(fc)).collect();
+    let (fc, fg) = (ln_fc.exp(), ln_fg.exp());
+    let cols: Vec<[f64; LEVELS]> = bins.iter().map(|b| b.cols(fc, fg)).collect();
     // Start: the white level alone from the highest frequencies.
     let f_max = bins.iter().map(|b| b.f[1]).fold(0.0, f64::max);
     let upper: Vec<f64> = bins
@@ -476,16 +633,16 @@ fn scoring(bins: &[Bin], ln_fc: f64, active: [bool; 4], strict: bool) -> ([f64; 
         .map(|(b, c)| b.i / c[0])
         .collect();
     let w0 = upper.iter().sum::<f64>() / upper.len().max(1) as f64;
-    let mut h = [w0.max(f64::MIN_POSITIVE), 0.0, 0.0, 0.0];
+    let mut h = [w0.max(f64::MIN_POSITIVE), 0.0, 0.0, 0.0, 0.0];
     for _ in 0..SCORING_ITERS {
         let e: Vec<f64> = cols
             .iter()
-            .map(|c| (0..4).map(|a| c[a] * h[a]).sum::<f64>())
+            .map(|c| (0..LEVELS).map(|a| c[a] * h[a]).sum::<f64>())
             .collect();
         if e.iter().any(|v| v.is_nan() || *v <= 0.0) {
             break;
         }
-        let idx: Vec<usize> = (0..4).filter(|&a| active[a]).collect();
+        let idx: Vec<usize> = (0..LEVELS).filter(|&a| active[a]).collect();
         let scale: Vec<f64> = idx
             .iter()
             .map(|&a| {
@@ -539,42 +696,66 @@ fn scoring(bins: &[Bin], ln_fc: f64, active: [bool; 4], strict: bool) -> ([f64; 
     if strict && negative {
         return (h, f64::INFINITY);
     }
-    (h, whittle(&ln_params_of(&h, ln_fc), bins))
+    (h, whittle(&ln_params_of(&h, ln_fc, ln_fg), bins))
 }
 
 /// The parameters in logs: ln of each level (−∞ for a level at zero) and ln f_c.
-fn ln_params_of(h: &[f64; 4], ln_fc: f64) -> [f64; PARAMS] {
+fn ln_params_of(h: &[f64; LEVELS], ln_fc: f64, ln_fg: f64) -> [f64; PARAMS] {
     let mut p = [0.0; PARAMS];
-    for (pa, &ha) in p.iter_mut().zip(h) {
-        *pa = if ha > 0.0 { ha.ln() } else { f64::NEG_INFINITY };
+    for (&i, &ha) in LEVEL_PARAM.iter().zip(h) {
+        p[i] = if ha > 0.0 { ha.ln() } else { f64::NEG_INFINITY };
     }
     p[4] = ln_fc;
+    // Without a Gauss–Markov level its corner is absent too.
+    p[6] = if p[5].is_finite() {
+        ln_fg
+    } else {
+        f64::INFINITY
+    };
     p
 }
 
-/// Covariance of the levels and of ln f_c: the inverse Fisher information of the Whittle
-/// likelihood, Σ ∂E/∂a · ∂E/∂b / E², over the levels that are not zero and ln f_c when there is
-/// a filter (so the levels' σ include their trade-off with the corner), × the Hann ENBW.
-fn covariance(bins: &[Bin], h: &[f64; 4], ln_fc: f64) -> ([[f64; 4]; 4], f64) {
-    let fc = ln_fc.exp();
-    // Parameters: the non-zero levels (scaled by their value) and ln f_c (index 4).
-    let mut idx: Vec<usize> = (0..4).filter(|&a| h[a] > 0.0).collect();
+/// Covariance of the levels and of ln f_c, ln f_g: the inverse Fisher information of the
+/// Whittle likelihood, Σ ∂E/∂a · ∂E/∂b / E², over the levels that are not zero, ln f_c when
+/// there is a filter and ln f_g when there is a Gauss–Markov term (so the levels' σ include
+/// their trade-off with the corners), × the Hann ENBW.
+fn covariance(
+    bins: &[Bin],
+    h: &[f64; LEVELS],
+    ln_fc: f64,
+    ln_fg: f64,
+) -> ([[f64; LEVELS]; LEVELS], f64, f64) {
+    const FC: usize = LEVELS;
+    const FG: usize = LEVELS + 1;
+    let (fc, fg) = (ln_fc.exp(), ln_fg.exp());
+    let gm = ln_fg.is_finite() && h[4] > 0.0;
+    // Parameters: the non-zero levels (scaled by their value), ln f_c and ln f_g.
+    let mut idx: Vec<usize> = (0..LEVELS)
+        .filter(|&a| h[a] > 0.0 && (a < 4 || gm))
+        .collect();
     if ln_fc.is_finite() {
-        idx.push(4);
+        idx.push(FC);
+    }
+    if gm {
+        idx.push(FG);
     }
     let m = idx.len();
     let scale: Vec<f64> = idx
         .iter()
-        .map(|&a| if a < 4 { h[a] } else { 1.0 })
+        .map(|&a| if a < LEVELS { h[a] } else { 1.0 })
         .collect();
     let mut info = vec![vec![0.0; m]; m];
     for b in bins {
-        let x = b.cols(fc);
-        let e: f64 = (0..4).map(|a| x[a] * h[a]).sum();
+        let x = b.cols(fc, fg);
+        let e: f64 = (0..LEVELS).map(|a| x[a] * h[a]).sum();
         let d: Vec<f64> = idx
             .iter()
             .zip(&scale)
-            .map(|(&a, s)| if a < 4 { x[a] * s } else { b.d_ln_fc(h, fc) })
+            .map(|(&a, s)| match a {
+                FC => b.d_ln_fc(h, fc, fg),
+                FG => b.d_ln_fg(h, fc, fg),
+                _ => x[a] * s,
+            })
             .collect();
         for p in 0..m {
             for q in 0..m {
@@ -582,8 +763,8 @@ fn covariance(bins: &[Bin], h: &[f64; 4], ln_fc: f64) -> ([[f64; 4]; 4], f64) {
             }
         }
     }
-    let mut cov = [[0.0; 4]; 4];
-    let mut var_fc = 0.0;
+    let mut cov = [[0.0; LEVELS]; LEVELS];
+    let (mut var_fc, mut var_fg) = (0.0, 0.0);
     for q in 0..m {
         let mut e = vec![0.0; m];
         e[q] = 1.0;
@@ -591,31 +772,15 @@ fn covariance(bins: &[Bin], h: &[f64; 4], ln_fc: f64) -> ([[f64; 4]; 4], f64) {
             for p in 0..m {
                 let v = HANN_ENBW * col[p] * scale[p] * scale[q];
                 match (idx[p], idx[q]) {
-                    (4, 4) => var_fc = v,
-                    (a, b) if a < 4 && b < 4 => cov[a][b] = v,
+                    (FC, FC) => var_fc = v,
+                    (FG, FG) => var_fg = v,
+                    (a, b) if a < LEVELS && b < LEVELS => cov[a][b] = v,
                     _ => {}
                 }
             }
         }
     }
-    (cov, var_fc)
-}
-
-/// Lower Cholesky factor (a non-positive pivot zeroes its column: that direction is held).
-fn cholesky4(a: &[[f64; 4]; 4]) -> [[f64; 4]; 4] {
-    let mut l = [[0.0; 4]; 4];
-    for i in 0..4 {
-        for j in 0..=i {
-            let s: f64 = (0..j).map(|k| l[i][k] * l[j][k]).sum();
-            if i == j {
-                let d = a[i][i] - s;
-                l[i][j] = if d > 0.0 { d.sqrt() } else { 0.0 };
-            } else if l[j][j] > 0.0 {
-                l[i][j] = (a[i][j] - s) / l[j][j];
-            }
-        }
-    }
-    l
+    (cov, var_fc, var_fg)
 }
 
 #[cfg(test)]
@@ -636,23 +801,79 @@ mod tests {
                 (1e-11f64).ln(),
                 (1e-22f64).ln(),
                 (0.3 * 0.5 / dt).ln(),
+                f64::NEG_INFINITY,
+                f64::INFINITY,
             ],
-            h_cov: [[0.0; 4]; 4],
+            h_cov: [[0.0; LEVELS]; LEVELS],
             ln_fc_var: 0.0,
+            ln_fg_var: 0.0,
             bins: 0,
+            record_first_bin: RECORD_FIRST_BIN,
             neg_loglik: 0.0,
+            gm_search: GaussMarkovSearch {
+                ln_corner: f64::NAN,
+                at_edge: false,
+                neg_loglik_gain: 0.0,
+            },
         };
         let mut rng = stream(11, 0);
-        let x = truth.synthesise(20_000, &mut rng);
+        let x = truth.spec().synthesise(20_000, &mut rng);
         let fit = NoiseFamily::fit(&x, dt).expect("fit");
         let c = fit.components("u");
-        for i in 0..PARAMS {
+        // No Gauss–Markov term where there is none.
+        assert!(!fit.resolved(5) && !fit.resolved(6), "{:?}", &c[5..]);
+        for i in 0..5 {
             let truth_c = truth.ln_params[i].exp();
             let z = (c[i].coefficient - truth_c) / c[i].sigma;
             let must_resolve = [0, 1, 4].contains(&i);
             assert!(
                 z.abs() < 4.0 && (!must_resolve || (c[i].resolved && c[i].sigma < 0.3 * truth_c)),
                 "{}: fitted {:.3e} ± {:.1e}, truth {truth_c:.3e}",
+                NAMES[i],
+                c[i].coefficient,
+                c[i].sigma
+            );
+        }
+    }
+
+    /// White noise plus a Gauss–Markov process of 2 h correlation time: the term is found, its
+    /// level and corner within 4σ of the truth; drawn through the simulator's spec.
+    #[test]
+    fn a_gauss_markov_process_is_found_with_its_corner() {
+        let dt = 60.0;
+        let fg = 1.0 / (2.0 * std::f64::consts::PI * 7200.0);
+        let truth = NoiseFamily {
+            dt_s: dt,
+            ln_params: [
+                (1e-2f64).ln(),
+                f64::NEG_INFINITY,
+                f64::NEG_INFINITY,
+                f64::NEG_INFINITY,
+                f64::INFINITY,
+                (0.5f64).ln(),
+                fg.ln(),
+            ],
+            h_cov: [[0.0; LEVELS]; LEVELS],
+            ln_fc_var: 0.0,
+            ln_fg_var: 0.0,
+            bins: 0,
+            record_first_bin: RECORD_FIRST_BIN,
+            neg_loglik: 0.0,
+            gm_search: GaussMarkovSearch {
+                ln_corner: fg.ln(),
+                at_edge: false,
+                neg_loglik_gain: 0.0,
+            },
+        };
+        let x = truth.spec().synthesise(30_000, &mut stream(5, 0));
+        let fit = NoiseFamily::fit(&x, dt).expect("fit");
+        let c = fit.components("u");
+        assert!(fit.resolved(5) && fit.resolved(6), "{:?}", fit.gm_search);
+        for (i, want) in [(5, 0.5), (6, fg)] {
+            let z = (c[i].coefficient - want) / c[i].sigma;
+            assert!(
+                z.abs() < 4.0 && c[i].sigma < 0.5 * want,
+                "{}: fitted {:.3e} ± {:.1e}, truth {want:.3e}",
                 NAMES[i],
                 c[i].coefficient,
                 c[i].sigma
@@ -676,6 +897,7 @@ mod tests {
         // No coloured term is resolved; together they carry under 30 % of the power a decade
         // above the lowest bins.
         assert!(c[1..4].iter().all(|c| !c.resolved), "{c:?}");
+        assert!(!fit.resolved(5) && !fit.resolved(6), "{:?}", fit.gm_search);
         let f = 40.0 / 8192.0;
         let white = fit.ln_params[0].exp();
         assert!(fit.psd(f) < 1.3 * white, "{} vs {white}", fit.psd(f));

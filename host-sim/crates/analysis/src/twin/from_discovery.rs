@@ -2,9 +2,79 @@
 
 use super::*;
 
-/// The accepted effects of a discovery as scenario entries, with their joint-fit parameters
-/// (`select::Accepted::params`, which the final joint fit wrote), and the effects that cannot
-/// be expressed, each with why.
+use crate::sim::twin::draw::{
+    Alternative, Drawn, EffectDraw, EffectDraws, NamedParam, TideGroupDraw,
+};
+
+/// A fitted parameter as the simulator's [`Drawn`]; a σ that is not a finite number is 0
+/// (the rule does not draw either: the scenario holds finite numbers only).
+fn drawn_of(p: &crate::discover::effects::Param) -> Drawn {
+    Drawn {
+        value: p.value,
+        sigma: if p.sigma.is_finite() { p.sigma } else { 0.0 },
+    }
+}
+
+/// Named fitted parameters as the simulator's; a parameter whose value is not finite is left
+/// out (the rule treats both as missing).
+fn named(params: &[(String, crate::discover::effects::Param)]) -> Vec<NamedParam> {
+    params
+        .iter()
+        .filter(|(_, p)| p.value.is_finite())
+        .map(|(name, p)| NamedParam {
+            name: name.clone(),
+            drawn: drawn_of(p),
+        })
+        .collect()
+}
+
+/// The accepted effects of a discovery with their joint-fit parameters
+/// (`select::Accepted::params`, which the final joint fit wrote) and σ, the other cause of each
+/// ambiguous pair, the wave-group analysis' groups and what the rule needs of the record: the
+/// simulator's description, from which it makes the nominal scenario entries and each member's
+/// draw (`accomp-sim`, `twin::draw`).
+pub fn effect_draws(d: &crate::discover::Discovery) -> EffectDraws {
+    EffectDraws {
+        record_start_s: d.dataset.t_s.first().copied().unwrap_or(0.0),
+        record_interval_s: d.dataset.dt_s,
+        record_channels: d.dataset.channels.iter().map(|c| c.name.clone()).collect(),
+        tide_groups: match &d.tidal {
+            Ok(t) if !t.groups.is_empty() => Some(
+                t.groups
+                    .iter()
+                    .filter(|g| {
+                        g.amplitude_factor_vs_elastic_model.value.is_finite()
+                            && g.phase_vs_elastic_model_deg.value.is_finite()
+                    })
+                    .map(|g| TideGroupDraw {
+                        name: g.name.clone(),
+                        factor: drawn_of(&g.amplitude_factor_vs_elastic_model),
+                        phase_deg: drawn_of(&g.phase_vs_elastic_model_deg),
+                    })
+                    .collect(),
+            ),
+            _ => None,
+        },
+        effects: d
+            .selection
+            .accepted
+            .iter()
+            .map(|a| EffectDraw {
+                kind: a.effect.name().to_owned(),
+                channel: a.effect.channel().map(str::to_owned),
+                params: named(&a.params),
+                alternative: a.ambiguous_with.as_ref().map(|amb| Alternative {
+                    kind: amb.other.clone(),
+                    params: named(&amb.other_parameters),
+                }),
+            })
+            .collect(),
+        admittance_per_hpa: None,
+    }
+}
+
+/// The accepted effects of a discovery as scenario entries, with their joint-fit parameters,
+/// and the effects that cannot be expressed, each with why.
 ///
 /// `tidal_gravity` is written from the wave-group analysis when the discovery has one (a
 /// factor and a phase per group against the model's elastic tide: the delay is in the phases),
@@ -13,221 +83,14 @@ use super::*;
 pub fn scenario_effects_from_discovery(
     d: &crate::discover::Discovery,
 ) -> (Vec<ScenarioEffect>, Vec<(String, String)>) {
-    let mut out = Vec::new();
-    let mut refused = Vec::new();
-    for a in &d.selection.accepted {
-        let name = a.effect.name();
-        let e = scenario_effect(a.effect.kind(), a.effect.channel(), &a.params, d, None);
-        match e.and_then(|e| {
-            let i = out.len();
-            e.validate(i).map(|()| e).map_err(|x| x.to_string())
-        }) {
-            Ok(e) => out.push(e),
-            Err(why) => refused.push((name.to_owned(), why)),
-        }
-    }
-    (out, refused)
+    effect_draws(d).nominal()
 }
 
 /// One ensemble member's version of [`scenario_effects_from_discovery`]: every parameter drawn
-/// from its fitted value and σ (Gaussian; a draw the scenario refuses, such as a negative time
-/// constant, falls back to the fitted value), and for an effect the discovery called ambiguous
-/// ("A or B"), odd members take the other cause with its own fitted parameters, so the
-/// ensemble draws from both. Effects the scenario cannot express are left out, as there.
-pub fn scenario_effects_drawn(
-    d: &crate::discover::Discovery,
-    rng: &mut crate::sim::noise::SimRng,
-    member: u64,
-) -> Vec<ScenarioEffect> {
-    let mut out = Vec::new();
-    for a in &d.selection.accepted {
-        let other = a.ambiguous_with.as_ref().and_then(|amb| {
-            EffectKind::from_name(&amb.other).map(|k| (k, amb.other_parameters.as_slice()))
-        });
-        let (kind, params) = match other {
-            Some(o) if member % 2 == 1 => o,
-            _ => (a.effect.kind(), a.params.as_slice()),
-        };
-        let drawn = scenario_effect(kind, a.effect.channel(), params, d, Some(rng));
-        let i = out.len();
-        let ok = |e: Result<ScenarioEffect, String>| e.ok().filter(|e| e.validate(i).is_ok());
-        if let Some(e) =
-            ok(drawn).or_else(|| ok(scenario_effect(kind, a.effect.channel(), params, d, None)))
-        {
-            out.push(e);
-        }
-    }
-    out
-}
-
-/// One effect as a scenario entry from its kind, channel and fitted parameters; with `draw`,
-/// each parameter is drawn as value + σ·N(0, 1).
-fn scenario_effect(
-    kind: EffectKind,
-    channel: Option<&str>,
-    params: &[(String, crate::discover::effects::Param)],
-    d: &crate::discover::Discovery,
-    draw: Option<&mut crate::sim::noise::SimRng>,
-) -> Result<ScenarioEffect, String> {
-    let t0 = d.dataset.t_s.first().copied().unwrap_or(0.0);
-    let draw = std::cell::RefCell::new(draw);
-    let drawn = |v: &crate::discover::effects::Param| -> f64 {
-        match draw.borrow_mut().as_mut() {
-            Some(rng) if v.sigma.is_finite() && v.sigma > 0.0 => v.value + v.sigma * gauss(rng),
-            _ => v.value,
-        }
-    };
-    {
-        let a = Accepted { params, channel };
-        let p = |key: &str| -> Option<f64> {
-            a.params
-                .iter()
-                .find(|(k, _)| k == key)
-                .map(|(_, v)| drawn(v))
-                .filter(|v| v.is_finite())
-        };
-        let need =
-            |key: &str| p(key).ok_or_else(|| format!("parameter {key} missing or not finite"));
-        let e: Result<ScenarioEffect, String> = (|| {
-            Ok(match kind {
-                EffectKind::ThermalLag => ScenarioEffect::ThermalLag {
-                    tau_s: need("tau_s")?,
-                    coefficient: need("coefficient")?,
-                },
-                EffectKind::ThermalHysteresis => ScenarioEffect::ThermalHysteresis {
-                    half_width: need("half_width")?,
-                    play_half_width_c: need("play_half_width_c")?,
-                },
-                EffectKind::SelfHeating => ScenarioEffect::SelfHeating {
-                    tau_s: need("tau_s")?,
-                    coefficient: need("coefficient")?,
-                },
-                EffectKind::Warmup => {
-                    let tau_s = need("tau_s")?;
-                    ScenarioEffect::Warmup {
-                        tau_s,
-                        amplitude: need("amplitude")? * (t0 / tau_s).exp(),
-                    }
-                }
-                EffectKind::AgingDrift => ScenarioEffect::AgingDrift {
-                    tau_s: need("tau_s")?,
-                    amplitude: need("amplitude")?,
-                },
-                EffectKind::Step => ScenarioEffect::Step {
-                    time_s: need("time_s")?,
-                    size: need("size")?,
-                    duration_s: p("duration_s").unwrap_or(0.0),
-                },
-                EffectKind::TidalGravity => match &d.tidal {
-                    Ok(t) if !t.groups.is_empty() => ScenarioEffect::TidalGravity {
-                        amplitude_factor: 0.0,
-                        delay_s: 0.0,
-                        groups: t
-                            .groups
-                            .iter()
-                            .filter(|g| {
-                                g.amplitude_factor_vs_elastic_model.value.is_finite()
-                                    && g.phase_vs_elastic_model_deg.value.is_finite()
-                            })
-                            .map(|g| crate::sim::effects::TideGroupTerm {
-                                name: g.name.clone(),
-                                factor: drawn(&g.amplitude_factor_vs_elastic_model),
-                                phase_deg: drawn(&g.phase_vs_elastic_model_deg),
-                            })
-                            .collect(),
-                    },
-                    _ => ScenarioEffect::TidalGravity {
-                        amplitude_factor: need("amplitude_factor")?,
-                        delay_s: 0.0,
-                        groups: Vec::new(),
-                    },
-                },
-                EffectKind::TidalTilt => ScenarioEffect::TidalTilt {
-                    amplitude_factor: need("amplitude_factor")?,
-                    azimuth_deg: need("azimuth_deg")?,
-                },
-                EffectKind::BuildingTilt => ScenarioEffect::BuildingTilt {
-                    amplitude: need("amplitude")?,
-                    phase_rad: need("phase_rad")?,
-                },
-                EffectKind::TiltCoupling => ScenarioEffect::TiltCoupling {
-                    gain: need("gain")?,
-                },
-                EffectKind::AmbientCoupling => {
-                    let channel = a.channel.unwrap_or_default().to_owned();
-                    let in_record = d.dataset.channels.iter().any(|c| c.name == channel);
-                    if !in_record && !SIMULATED_AMBIENT.contains(&channel.as_str()) {
-                        return Err(format!(
-                            "channel {channel:?} is neither in the record nor simulated"
-                        ));
-                    }
-                    ScenarioEffect::AmbientCoupling {
-                        channel,
-                        coefficient: need("coefficient")?,
-                        lag_s: p("lag_s").unwrap_or(0.0).max(0.0),
-                    }
-                }
-                EffectKind::PressureAdmittance => ScenarioEffect::PressureAdmittance {
-                    coefficient: need("coefficient")?,
-                },
-                EffectKind::Periodic => ScenarioEffect::Periodic {
-                    period_s: need("period_s")?,
-                    amplitude: need("amplitude")?,
-                    phase_rad: need("phase_rad")?,
-                },
-                EffectKind::RateCoupling | EffectKind::Lag2Coupling => {
-                    let channel = a.channel.unwrap_or_default().to_owned();
-                    let drives = channel == "temperature_c"
-                        || channel.starts_with("pressure")
-                        || d.dataset.channels.iter().any(|c| c.name == channel)
-                        || SIMULATED_AMBIENT.contains(&channel.as_str());
-                    if !drives {
-                        return Err(format!("channel {channel:?} is not a driver of the twin"));
-                    }
-                    if kind == EffectKind::RateCoupling {
-                        ScenarioEffect::RateCoupling {
-                            channel,
-                            coefficient: need("coefficient")?,
-                        }
-                    } else {
-                        ScenarioEffect::Lag2Coupling {
-                            channel,
-                            tau_s: need("tau_s")?,
-                            coefficient: need("coefficient")?,
-                        }
-                    }
-                }
-                // The discovery's creep starts at the record's first instant, the scenario's at
-                // t = 0: the same curve only when they coincide.
-                EffectKind::CreepDrift if t0.abs() > d.dataset.dt_s => {
-                    return Err(format!(
-                        "the record starts at t = {t0:.0} s and a power law cannot be moved to \
-                         t = 0 exactly"
-                    ))
-                }
-                EffectKind::CreepDrift => ScenarioEffect::CreepDrift {
-                    exponent: need("exponent")?,
-                    amplitude: need("amplitude")?,
-                },
-                EffectKind::ChannelNoise => {
-                    let channel = a.channel.unwrap_or_default().to_owned();
-                    ScenarioEffect::ChannelNoise {
-                        channel,
-                        noise: p("noise")
-                            .or_else(|| p("level"))
-                            .ok_or("parameter noise missing")?,
-                    }
-                }
-            })
-        })();
-        e
-    }
-}
-
-/// What [`scenario_effect`] reads of an accepted effect.
-struct Accepted<'a> {
-    params: &'a [(String, crate::discover::effects::Param)],
-    channel: Option<&'a str>,
+/// from its fitted value and σ, the other cause of an ambiguous pair in odd members
+/// (`accomp-sim`, `twin::draw::EffectDraws::drawn`, stream `EFFECT_DRAW_STREAM`).
+pub fn scenario_effects_drawn(d: &crate::discover::Discovery, member: u64) -> Vec<ScenarioEffect> {
+    effect_draws(d).drawn(member)
 }
 
 #[cfg(test)]

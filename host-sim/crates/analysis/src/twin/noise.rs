@@ -2,6 +2,9 @@
 
 use super::*;
 
+/// Random stream of the twin's instrument noise (the simulator's member noise stream).
+const TWIN_NOISE_STREAM: u64 = crate::sim::twin::NOISE_STREAM;
+
 /// Adds one draw of the fitted noise model at the instants `t` (white per point, each flicker
 /// component an OU process advanced over the actual spacing, the random walk).
 pub(super) fn add_model_noise(out: &mut [f64], t: &[f64], m: &NoiseModel, seed: u64) {

@@ -1,5 +1,6 @@
 //! The twin against the simulator: its prediction, members and scenario.
 
+use super::build::line_fit;
 use super::*;
 use crate::discover::import::{dataset_from_log, DatasetOptions};
 use crate::log::Log;

@@ -560,8 +560,7 @@ mod tests {
 
     #[test]
     fn a_cut_last_line_is_trimmed_and_the_last_row_found_past_event_lines() {
-        let dir = std::env::temp_dir().join(format!("accomp-rec-file-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = crate::scratch::Scratch::new("rec-file");
         let p = dir.join("r.csv");
         let names: Vec<&str> = COLUMNS.iter().map(|c| c.0).collect();
         let row =
@@ -584,7 +583,6 @@ mod tests {
         assert!(std::fs::read_to_string(&p)
             .unwrap()
             .ends_with("link_lost x\n"));
-        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]
@@ -602,13 +600,12 @@ mod tests {
         );
     }
 
-    /// A daily record started at `start_utc` in a fresh folder `accomp-rec-<name>-<pid>`.
-    fn daily_record(name: &str, start_utc: &str) -> (PathBuf, f64, RecordFile) {
-        let dir = std::env::temp_dir().join(format!("accomp-rec-{name}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
+    /// A daily record started at `start_utc` in a fresh scratch folder (removed on drop).
+    fn daily_record(name: &str, start_utc: &str) -> (crate::scratch::Scratch, f64, RecordFile) {
+        let dir = crate::scratch::Scratch::new(&format!("rec-{name}"));
         let start = Utc::parse(start_utc).unwrap().0;
         let meta = vec![("start_utc".to_string(), Utc(start).to_string())];
-        let f = RecordFile::create(Layout::Daily(dir.clone()), meta, start, false).unwrap();
+        let f = RecordFile::create(Layout::Daily(dir.to_path_buf()), meta, start, false).unwrap();
         (dir, start, f)
     }
 
@@ -657,7 +654,6 @@ mod tests {
         // An open RTD's infinite resistance is written as a gap.
         assert!(log.column("rtd_ohms").unwrap().iter().all(|v| v.is_nan()));
         assert_eq!(log.column("seq").unwrap(), &[0.0, 1.0, 2.0, 3.0]);
-        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]
@@ -678,7 +674,6 @@ mod tests {
         );
         let log = accomp_log::Log::read_path(&dir).unwrap();
         assert_eq!(log.time_s(), &[0.0, 1.0, 86_401.0]);
-        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]

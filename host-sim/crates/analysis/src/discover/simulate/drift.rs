@@ -21,30 +21,9 @@ pub const MAX_ORDER: usize = 6;
 /// Records shorter than this keep the linear drift (a curve over a few days is the noise's).
 pub const MIN_SPAN_S: f64 = 7.0 * 86_400.0;
 
-/// Legendre polynomials P₀…P_order at `u` ∈ [−1, 1].
-pub fn legendre(u: f64, order: usize) -> Vec<f64> {
-    let mut p = vec![1.0; order + 1];
-    if order >= 1 {
-        p[1] = u;
-    }
-    for n in 1..order {
-        let nf = n as f64;
-        p[n + 1] = ((2.0 * nf + 1.0) * u * p[n] - nf * p[n - 1]) / (nf + 1.0);
-    }
-    p
-}
-
-/// The record's time mapped onto [−1, 1].
-pub fn unit_time(t: &[f64]) -> Vec<f64> {
-    let (a, b) = (
-        t.first().copied().unwrap_or(0.0),
-        t.last().copied().unwrap_or(0.0),
-    );
-    let h = 0.5 * (b - a);
-    t.iter()
-        .map(|&x| if h > 0.0 { (x - a) / h - 1.0 } else { 0.0 })
-        .collect()
-}
+// The polynomials and the time mapping are the simulator's: a written twin's members add the
+// drift with the same code (`accomp-sim`, `twin::drift`).
+pub use crate::sim::twin::drift::{legendre, unit_time};
 
 /// Least-squares coefficients of P₀…P_order fitted to `r` at unit times `u`, and `r` minus the
 /// fit. A singular system (fewer points than coefficients) removes nothing.

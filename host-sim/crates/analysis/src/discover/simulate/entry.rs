@@ -40,11 +40,25 @@ pub fn simulate_dataset(
     .map_err(DiscoverError::Simulate)
 }
 
-/// Writes the extended scenario, if asked.
+/// Writes the extended scenario, if asked. With a noise family it is the written twin: the
+/// scenario with its `[twin]` section, and beside it the driver file `<stem>.drivers.csv`
+/// (`accomp simulate FILE --seed k` then computes member k of the extended ensemble).
 pub fn write_scenario(s: &mut Simulation, path: Option<&Path>) -> Result<(), DiscoverError> {
     let Some(path) = path else {
         return Ok(());
     };
+    if let Some(m) = &s.written_twin {
+        let stem = path
+            .file_stem()
+            .map_or_else(|| "twin".to_owned(), |x| x.to_string_lossy().into_owned());
+        let drivers_name = format!("{stem}.drivers.csv");
+        let ds = &s.cause.dataset;
+        let (scenario, drivers) = m.written(&drivers_name, &ds.output_name, &ds.output_unit);
+        crate::log::outputs::write_file(&path.with_file_name(&drivers_name), drivers.as_bytes())?;
+        crate::log::outputs::write_file(path, scenario.to_toml().as_bytes())?;
+        s.extended_path = Some(path.to_path_buf());
+        return Ok(());
+    }
     let Some(toml) = &s.extended_toml else {
         return Err(DiscoverError::NoScenario {
             path: path.to_path_buf(),

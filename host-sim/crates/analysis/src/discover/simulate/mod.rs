@@ -88,10 +88,17 @@ pub trait TwinModel: Sync + Sized {
     fn with_family(&self, family: &NoiseFamily, grid: &spectra::RegularGrid) -> Self;
     /// The twin whose members also draw the record's transient disturbances.
     fn with_transients(&self, found: &Transients) -> Self;
+    /// The twin whose members also carry the record's drift polynomial (Legendre coefficients
+    /// with their 1σ, see [`drift`]).
+    fn with_drift(&self, coefficients: &[(f64, f64)]) -> Self;
     /// What came from the record and what from defaults.
     fn provenance(&self) -> Vec<String>;
     /// The scenario as TOML (`accomp simulate` runs it), if the twin has one.
     fn scenario_toml(&self) -> Option<String>;
+    /// The simulator's model of this twin's members with the discovery's accepted effects
+    /// drawn (what `--write-scenario` writes and the extended ensemble runs), when the twin has
+    /// a noise family and is the simulator.
+    fn written_twin(&self, d: &Discovery) -> Option<crate::sim::twin::MemberModel>;
     /// Whether this is the station simulator (false: a stand-in, announced).
     fn is_simulator(&self) -> bool;
 }
@@ -127,8 +134,18 @@ pub struct Simulation {
     pub explained_by: Vec<(String, Vec<usize>)>,
     /// Effects the extended scenario could not express (name, why).
     pub refused: Vec<(String, String)>,
-    /// The extended scenario's TOML, if the twin has a scenario.
+    /// The extended scenario's TOML, if the twin has a scenario (without the `[twin]` section:
+    /// a station scenario).
     pub extended_toml: Option<String>,
+    /// The extended twin's member model, when the members draw from the noise family: what
+    /// `--write-scenario` writes (the scenario with its `[twin]` section and driver file), the
+    /// same model the extended ensemble ran.
+    pub written_twin: Option<crate::sim::twin::MemberModel>,
+    /// The extended twin's deterministic part at the record's instants (members' residuals are
+    /// taken from it).
+    pub det_after: Vec<f64>,
+    /// Each member's views of the extended ensemble (member k at index k − 1).
+    pub members_after: Vec<spectra::Views>,
     /// Where it was written.
     pub extended_path: Option<std::path::PathBuf>,
     /// The catalogue search on measured − twin.
@@ -338,33 +355,37 @@ where
     // The members' noise: the family (white, flicker, random walk, drift-rate walk, output
     // filter) fitted by Whittle likelihood to what the extended twin leaves, the drift kept —
     // the comparison keeps it, so the members must carry it.
-    let family = match NoiseFamily::fit(&clean(&r_after), yard.grid.dt_s) {
-        // Every instrument has a white floor: a fit that does not resolve one has traded it
-        // for other terms (a filter corner with a random walk mimics it) and is not used.
-        Ok(f) if !f.resolved(0) => {
-            warnings.push(
+    let family =
+        match NoiseFamily::fit_after_drift(&clean(&r_after), yard.grid.dt_s, drift_order.order) {
+            // Every instrument has a white floor: a fit that does not resolve one has traded it
+            // for other terms (a filter corner with a random walk mimics it) and is not used.
+            Ok(f) if !f.resolved(0) => {
+                warnings.push(
                 "the noise family's white level is not resolved (a degenerate fit): the members \
                  draw from the likelihood noise model instead"
                     .to_owned(),
             );
-            None
-        }
-        Ok(f) => Some(f),
-        Err(e) => {
-            warnings.push(format!(
-                "the noise family could not be fitted ({e}): the members draw from the \
+                None
+            }
+            Ok(f) => Some(f),
+            Err(e) => {
+                warnings.push(format!(
+                    "the noise family could not be fitted ({e}): the members draw from the \
                  likelihood noise model instead"
-            ));
-            None
-        }
-    };
+                ));
+                None
+            }
+        };
     lap("noise family");
     // 4. Ensembles and comparisons, before and after. Members of the extended twin draw the
     //    accepted effects' parameters (and the other cause of an ambiguous pair) as well as the
     //    noise's.
     let mut twin = build(Some(&noise)).map_err(SimulateError::twin)?;
     if let Some(f) = &family {
-        twin = twin.with_family(f, &yard.grid).with_transients(&transients);
+        twin = twin
+            .with_family(f, &yard.grid)
+            .with_transients(&transients)
+            .with_drift(&drift_coefficients);
     }
     let ext = twin.extended(&effects.iter().map(|e| e.1.clone()).collect::<Vec<_>>());
     let mut provenance = ext.provenance();
@@ -393,11 +414,16 @@ where
     )?;
     let before = mismatch::compare(yard.views(&r_before), &members, &freqs, &channels);
     let explained_by = cause::explained_by(&yard, &before, &r_before, &contrib);
+    // With a noise family, the members are the simulator's member model of the extended
+    // twin: the same model `--write-scenario` writes and `accomp simulate` runs.
+    let written_twin = twin.written_twin(&cause);
     let members_ext = ensemble::run(
-        |k| {
-            twin.extended(&quiet.effects_drawn(&cause, k))
+        |k| match &written_twin {
+            Some(m) => m.member(k).map_err(SimulateError::twin),
+            None => twin
+                .extended(&quiet.effects_drawn(&cause, k))
                 .run(Some(k))
-                .map_err(SimulateError::twin)
+                .map_err(SimulateError::twin),
         },
         &det_ext,
         ensemble,
@@ -405,6 +431,7 @@ where
         "extended",
     )?;
     let mut after = mismatch::compare(yard.views(&r_after), &members_ext, &freqs, &channels);
+    let members_after = members_ext;
     // What the extended twin still gets wrong is named: unmodelled, with its likely cause.
     let nyquist_cpd = 0.5 / yard.grid.dt_s * 86_400.0;
     for m in &mut after.mismatches {
@@ -446,6 +473,9 @@ where
         refused,
         extended_toml: ext.scenario_toml(),
         extended_path: None,
+        written_twin,
+        det_after: det_ext,
+        members_after,
         cause,
         frequencies_hz: freqs,
         channels,
@@ -459,6 +489,16 @@ where
         drift_coefficients,
         transients,
     })
+}
+
+impl Simulation {
+    /// The views of a series at the record's instants as the extended ensemble's members are
+    /// seen: minus the extended twin's deterministic part, the drift polynomial of the selected
+    /// order removed (`ds`: the record the comparison ran on).
+    pub fn member_views(&self, ds: &Dataset, series: &[f64]) -> spectra::Views {
+        let yard = Yardstick::new(ds).with_drift_order(self.drift.order);
+        yard.views(&yard.detrend(&sub(series, &self.det_after)))
+    }
 }
 
 /// A spinner with the elapsed time on stderr for a stage without countable steps (drawn only

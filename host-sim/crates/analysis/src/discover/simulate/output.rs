@@ -85,7 +85,8 @@ pub fn json(s: &Simulation) -> Value {
         },
         "noise_family": s.family.as_ref().map(|f| json!({
             "method": "Whittle likelihood on the periodogram of the extended twin's residual (first differences, Hann taper), the drift polynomial and the transients removed",
-            "psd": "S(f) = [h0 + h_1/f + h_2/f^2 + h_4/f^4] / (1 + (f/fc)^2), one-sided, unit^2/Hz",
+            "psd": "S(f) = [h0 + h_1/f + h_2/f^2 + h_4/f^4 + q/(1 + (f/fg)^2)] / (1 + (f/fc)^2), one-sided, unit^2/Hz (q, fg: the Gauss-Markov term)",
+            "gauss_markov_refused": f.gm_search.refusal(f.resolved(5)),
             "periodogram_bins": f.bins,
             "components": f.components(&s.cause.dataset.output_unit).iter().map(|c| json!({
                 "name": c.name,
@@ -162,6 +163,9 @@ pub fn text(s: &Simulation, unit: &str) -> String {
                 c.level_unit,
                 if c.resolved { "" } else { " (not resolved)" }
             );
+        }
+        if let Some(why) = f.gm_search.refusal(f.resolved(5)) {
+            let _ = writeln!(o, "    gauss_markov refused: {why}");
         }
     }
     let _ = writeln!(

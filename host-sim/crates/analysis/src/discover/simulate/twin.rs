@@ -12,19 +12,14 @@ use super::spectra::RegularGrid;
 use super::{Refused, TwinModel};
 use crate::discover::Discovery;
 use crate::sim::effects::ScenarioEffect;
-use crate::sim::noise::{gauss, stream};
+use crate::sim::twin::draw::{Drawn, EffectDraws};
+use crate::sim::twin::MemberModel;
 use crate::twin::family::NoiseFamily;
 use crate::twin::transients::Transients;
-use crate::twin::{scenario_effects_drawn, scenario_effects_from_discovery, Twin, TwinError};
-
-/// Random stream of a member's draw of the effects' parameters (not the noise's stream).
-const EFFECT_DRAW_STREAM: u64 = 5;
+use crate::twin::{effect_draws, Twin, TwinError};
 
 /// Significance a wave-group analysis admittance needs to be added.
 pub const ADMITTANCE_SIGMAS: f64 = 3.0;
-
-/// Pascals per hectopascal.
-const PA_PER_HPA: f64 = 100.0;
 
 impl TwinModel for Twin {
     type Effect = ScenarioEffect;
@@ -35,20 +30,12 @@ impl TwinModel for Twin {
     }
 
     fn effects_from(&self, d: &Discovery) -> (Vec<(String, ScenarioEffect)>, Refused) {
-        let (mut effects, refused) = scenario_effects_from_discovery(d);
+        let draws = draws(d);
+        let (effects, refused) = draws.nominal();
         let mut names: Vec<String> = effects.iter().map(|e| e.name().to_owned()).collect();
-        if !names.iter().any(|n| n == "pressure_admittance") {
-            if let Ok(Some(a)) = d.tidal.as_ref().map(|t| t.pressure_admittance.as_ref()) {
-                let p = &a.per_hpa;
-                if p.value.is_finite()
-                    && p.sigma.is_finite()
-                    && p.value.abs() > ADMITTANCE_SIGMAS * p.sigma
-                {
-                    effects.push(ScenarioEffect::PressureAdmittance {
-                        coefficient: p.value / PA_PER_HPA,
-                    });
-                    names.push("pressure_admittance (tidal analysis)".to_owned());
-                }
+        if draws.admittance_per_hpa.is_some() {
+            if let Some(last) = names.last_mut() {
+                *last = "pressure_admittance (tidal analysis)".to_owned();
             }
         }
         // Repeated kinds (steps, lines) get #2, #3 … in order.
@@ -67,22 +54,12 @@ impl TwinModel for Twin {
     }
 
     fn effects_drawn(&self, d: &Discovery, member: u64) -> Vec<ScenarioEffect> {
-        let mut rng = stream(member, EFFECT_DRAW_STREAM);
-        let mut effects = scenario_effects_drawn(d, &mut rng, member);
-        // The wave-group admittance, drawn like the rest, when `effects_from` adds it.
-        let (nominal, _) = self.effects_from(d);
-        if nominal
-            .iter()
-            .any(|(n, _)| n == "pressure_admittance (tidal analysis)")
-        {
-            if let Ok(Some(a)) = d.tidal.as_ref().map(|t| t.pressure_admittance.as_ref()) {
-                let p = &a.per_hpa;
-                effects.push(ScenarioEffect::PressureAdmittance {
-                    coefficient: (p.value + p.sigma * gauss(&mut rng)) / PA_PER_HPA,
-                });
-            }
-        }
-        effects
+        draws(d).drawn(member)
+    }
+
+    fn written_twin(&self, d: &Discovery) -> Option<MemberModel> {
+        self.grid_noise()
+            .map(|g| Twin::member_model(self, g.clone(), Some(draws(d))))
     }
 
     fn extended(&self, effects: &[ScenarioEffect]) -> Self {
@@ -95,6 +72,10 @@ impl TwinModel for Twin {
 
     fn with_transients(&self, found: &Transients) -> Self {
         Twin::with_transients(self, found)
+    }
+
+    fn with_drift(&self, coefficients: &[(f64, f64)]) -> Self {
+        Twin::with_drift(self, coefficients)
     }
 
     fn provenance(&self) -> Vec<String> {
@@ -122,4 +103,26 @@ impl TwinModel for Twin {
     fn is_simulator(&self) -> bool {
         true
     }
+}
+
+/// The accepted effects' draws with the wave-group admittance that [`TwinModel::effects_from`]
+/// adds (drawn like the rest, after them).
+fn draws(d: &Discovery) -> EffectDraws {
+    let mut e = effect_draws(d);
+    let accepted = e.effects.iter().any(|a| a.kind == "pressure_admittance");
+    if !accepted {
+        if let Ok(Some(a)) = d.tidal.as_ref().map(|t| t.pressure_admittance.as_ref()) {
+            let p = &a.per_hpa;
+            if p.value.is_finite()
+                && p.sigma.is_finite()
+                && p.value.abs() > ADMITTANCE_SIGMAS * p.sigma
+            {
+                e.admittance_per_hpa = Some(Drawn {
+                    value: p.value,
+                    sigma: p.sigma,
+                });
+            }
+        }
+    }
+    e
 }

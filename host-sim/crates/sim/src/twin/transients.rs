@@ -10,9 +10,15 @@
 //! fitted to the residual with the events replaced by that line. Members draw a Poisson number
 //! of events with the record's count as mean, each a shape of the record's (drawn with
 //! replacement) at a uniformly drawn cell: the record's own disturbances, at its rate.
+//!
+//! The events live here, in the simulator, so that a written twin's `[twin.transients]` (one
+//! `[[twin.transients.events]]` per event: first cell and shape) is drawn by `accomp simulate`
+//! with the same code as the ensemble of `accomp discover --simulate`.
 
-use crate::sim::noise::{gauss, SimRng};
 use rand::Rng;
+use serde::{Deserialize, Serialize};
+
+use crate::noise::{gauss, SimRng};
 
 /// A first difference beyond this many robust σ starts an event (Gaussian noise: never in 10¹⁹
 /// differences).
@@ -21,7 +27,8 @@ pub const THRESHOLD_SIGMAS: f64 = 10.0;
 pub const JOIN_CELLS: usize = 4;
 
 /// The record's transient events on its grid.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(from = "TransientsFile", into = "TransientsFile")]
 pub struct Transients {
     /// Each event: first cell and its shape (excursion from the local line), output unit.
     pub events: Vec<(usize, Vec<f64>)>,
@@ -33,7 +40,71 @@ pub struct Transients {
     pub dt_s: f64,
 }
 
+/// One event as a written twin holds it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct EventFile {
+    /// First grid cell.
+    cell: usize,
+    /// Excursion from the local line at that cell and the following ones, output unit.
+    shape: Vec<f64>,
+}
+
+/// [`Transients`] as a written twin holds it (named fields instead of tuples).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct TransientsFile {
+    sigma_diff: f64,
+    cells: usize,
+    dt_s: f64,
+    events: Vec<EventFile>,
+}
+
+impl From<TransientsFile> for Transients {
+    fn from(f: TransientsFile) -> Self {
+        Transients {
+            events: f.events.into_iter().map(|e| (e.cell, e.shape)).collect(),
+            sigma_diff: f.sigma_diff,
+            cells: f.cells,
+            dt_s: f.dt_s,
+        }
+    }
+}
+
+impl From<Transients> for TransientsFile {
+    fn from(t: Transients) -> Self {
+        TransientsFile {
+            sigma_diff: t.sigma_diff,
+            cells: t.cells,
+            dt_s: t.dt_s,
+            events: t
+                .events
+                .into_iter()
+                .map(|(cell, shape)| EventFile { cell, shape })
+                .collect(),
+        }
+    }
+}
+
 impl Transients {
+    /// Checks a written twin's events: shapes of finite numbers, first cells on the grid of
+    /// `grid_cells` cells.
+    pub fn validate(&self, grid_cells: usize) -> Result<(), String> {
+        for (i, (cell, shape)) in self.events.iter().enumerate() {
+            if *cell >= grid_cells {
+                return Err(format!(
+                    "transients event {i}: cell {cell} is not a cell of the {grid_cells}-cell grid"
+                ));
+            }
+            if shape.is_empty() || shape.iter().any(|v| !v.is_finite()) {
+                return Err(format!(
+                    "transients event {i}: the shape must be finite numbers (at least one)"
+                ));
+            }
+        }
+        Ok(())
+    }
+
     /// Finds the events of a placed residual (NaN = gap).
     pub fn find(placed: &[f64], dt_s: f64) -> Transients {
         let d: Vec<(usize, f64)> = placed
@@ -183,7 +254,7 @@ fn poisson(mean: f64, rng: &mut SimRng) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sim::noise::stream;
+    use crate::noise::stream;
 
     #[test]
     fn a_spike_in_gaussian_noise_is_found_removed_and_redrawn_at_its_rate() {

@@ -1,0 +1,310 @@
+//! The effects a twin's members draw: each accepted effect with its fitted parameters and their
+//! σ, in the catalogue's own parameters, and the rule that makes a member's scenario entries of
+//! them (the same rule makes the nominal entries, without drawing).
+
+use serde::{Deserialize, Serialize};
+
+use crate::catalogue::EffectKind;
+use crate::effects::{ScenarioEffect, TideGroupTerm, SIMULATED_AMBIENT};
+use crate::noise::{gauss, stream, SimRng};
+
+/// Random stream of a member's draw of the effects' parameters (not the noise's stream).
+pub const EFFECT_DRAW_STREAM: u64 = 5;
+
+/// Pascals per hectopascal.
+const PA_PER_HPA: f64 = 100.0;
+
+/// A fitted value and its 1σ.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Drawn {
+    /// Fitted value.
+    pub value: f64,
+    /// 1σ (0 or not finite: not drawn).
+    pub sigma: f64,
+}
+
+/// One catalogue parameter by name.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NamedParam {
+    /// The catalogue's parameter name (`tau_s`, `amplitude`, …).
+    pub name: String,
+    /// Value and σ.
+    #[serde(flatten)]
+    pub drawn: Drawn,
+}
+
+/// The other cause of an ambiguous pair, with its own fitted parameters.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Alternative {
+    /// Catalogue name.
+    pub kind: String,
+    /// Its parameters.
+    pub params: Vec<NamedParam>,
+}
+
+/// One accepted effect.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EffectDraw {
+    /// Catalogue name.
+    pub kind: String,
+    /// The channel it acts through, if any.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub channel: Option<String>,
+    /// Its fitted parameters.
+    pub params: Vec<NamedParam>,
+    /// The other cause of an ambiguous pair: odd members take it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub alternative: Option<Alternative>,
+}
+
+/// One tidal wave group's factor and phase against the model's elastic tide.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TideGroupDraw {
+    /// Group name.
+    pub name: String,
+    /// Amplitude factor.
+    pub factor: Drawn,
+    /// Phase, degrees.
+    pub phase_deg: Drawn,
+}
+
+/// Every accepted effect with what the rule needs of the record.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EffectDraws {
+    /// The record's first instant, s (a warm-up's amplitude is moved from there to t = 0).
+    pub record_start_s: f64,
+    /// The record's spacing, s.
+    pub record_interval_s: f64,
+    /// The record's channels (an ambient coupling or a transfer function needs its channel).
+    pub record_channels: Vec<String>,
+    /// The wave-group analysis' groups (finite ones), when it ran: `tidal_gravity` is written
+    /// as them; absent: as its single `amplitude_factor`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tide_groups: Option<Vec<TideGroupDraw>>,
+    /// The accepted effects, in order.
+    pub effects: Vec<EffectDraw>,
+    /// A pressure admittance per hPa from the wave-group analysis, added after the effects.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub admittance_per_hpa: Option<Drawn>,
+}
+
+impl EffectDraws {
+    /// The nominal entries (fitted values) and the effects that cannot be expressed, each with
+    /// why.
+    pub fn nominal(&self) -> (Vec<ScenarioEffect>, Vec<(String, String)>) {
+        let mut out = Vec::new();
+        let mut refused = Vec::new();
+        for a in &self.effects {
+            let kind = EffectKind::from_name(&a.kind);
+            let e = kind
+                .ok_or_else(|| format!("{:?} is not in the catalogue", a.kind))
+                .and_then(|k| self.entry(k, a.channel.as_deref(), &a.params, None));
+            match e.and_then(|e| {
+                let i = out.len();
+                e.validate(i).map(|()| e).map_err(|x| x.to_string())
+            }) {
+                Ok(e) => out.push(e),
+                Err(why) => refused.push((a.kind.clone(), why)),
+            }
+        }
+        if let Some(p) = &self.admittance_per_hpa {
+            out.push(ScenarioEffect::PressureAdmittance {
+                coefficient: p.value / PA_PER_HPA,
+            });
+        }
+        (out, refused)
+    }
+
+    /// Member `member`'s entries: every parameter drawn from its value and σ (Gaussian, stream
+    /// [`EFFECT_DRAW_STREAM`]; a draw the scenario refuses, such as a negative time constant,
+    /// falls back to the fitted value); for an ambiguous effect odd members take the other
+    /// cause with its own parameters. Effects that cannot be expressed are left out.
+    pub fn drawn(&self, member: u64) -> Vec<ScenarioEffect> {
+        let mut rng = stream(member, EFFECT_DRAW_STREAM);
+        let mut out = Vec::new();
+        for a in &self.effects {
+            let other = a
+                .alternative
+                .as_ref()
+                .and_then(|o| EffectKind::from_name(&o.kind).map(|k| (k, o.params.as_slice())));
+            let (kind, params) = match other {
+                Some(o) if member % 2 == 1 => o,
+                _ => match EffectKind::from_name(&a.kind) {
+                    Some(k) => (k, a.params.as_slice()),
+                    None => continue,
+                },
+            };
+            let ch = a.channel.as_deref();
+            let drawn = self.entry(kind, ch, params, Some(&mut rng));
+            let i = out.len();
+            let ok = |e: Result<ScenarioEffect, String>| e.ok().filter(|e| e.validate(i).is_ok());
+            if let Some(e) = ok(drawn).or_else(|| ok(self.entry(kind, ch, params, None))) {
+                out.push(e);
+            }
+        }
+        if let Some(p) = &self.admittance_per_hpa {
+            out.push(ScenarioEffect::PressureAdmittance {
+                coefficient: (p.value + p.sigma * gauss(&mut rng)) / PA_PER_HPA,
+            });
+        }
+        out
+    }
+
+    /// One effect as a scenario entry; with `draw`, each parameter drawn as value + σ·N(0, 1).
+    fn entry(
+        &self,
+        kind: EffectKind,
+        channel: Option<&str>,
+        params: &[NamedParam],
+        draw: Option<&mut SimRng>,
+    ) -> Result<ScenarioEffect, String> {
+        let t0 = self.record_start_s;
+        let draw = std::cell::RefCell::new(draw);
+        let drawn = |v: &Drawn| -> f64 {
+            match draw.borrow_mut().as_mut() {
+                Some(rng) if v.sigma.is_finite() && v.sigma > 0.0 => v.value + v.sigma * gauss(rng),
+                _ => v.value,
+            }
+        };
+        let p = |key: &str| -> Option<f64> {
+            params
+                .iter()
+                .find(|q| q.name == key)
+                .map(|q| drawn(&q.drawn))
+                .filter(|v| v.is_finite())
+        };
+        let need =
+            |key: &str| p(key).ok_or_else(|| format!("parameter {key} missing or not finite"));
+        let in_record = |c: &str| self.record_channels.iter().any(|n| n == c);
+        Ok(match kind {
+            EffectKind::ThermalLag => ScenarioEffect::ThermalLag {
+                tau_s: need("tau_s")?,
+                coefficient: need("coefficient")?,
+            },
+            EffectKind::ThermalHysteresis => ScenarioEffect::ThermalHysteresis {
+                half_width: need("half_width")?,
+                play_half_width_c: need("play_half_width_c")?,
+            },
+            EffectKind::SelfHeating => ScenarioEffect::SelfHeating {
+                tau_s: need("tau_s")?,
+                coefficient: need("coefficient")?,
+            },
+            EffectKind::Warmup => {
+                let tau_s = need("tau_s")?;
+                ScenarioEffect::Warmup {
+                    tau_s,
+                    amplitude: need("amplitude")? * (t0 / tau_s).exp(),
+                }
+            }
+            EffectKind::AgingDrift => ScenarioEffect::AgingDrift {
+                tau_s: need("tau_s")?,
+                amplitude: need("amplitude")?,
+            },
+            EffectKind::Step => ScenarioEffect::Step {
+                time_s: need("time_s")?,
+                size: need("size")?,
+                duration_s: p("duration_s").unwrap_or(0.0),
+            },
+            EffectKind::TidalGravity => match &self.tide_groups {
+                Some(groups) => ScenarioEffect::TidalGravity {
+                    amplitude_factor: 0.0,
+                    delay_s: 0.0,
+                    groups: groups
+                        .iter()
+                        .map(|g| TideGroupTerm {
+                            name: g.name.clone(),
+                            factor: drawn(&g.factor),
+                            phase_deg: drawn(&g.phase_deg),
+                        })
+                        .collect(),
+                },
+                None => ScenarioEffect::TidalGravity {
+                    amplitude_factor: need("amplitude_factor")?,
+                    delay_s: 0.0,
+                    groups: Vec::new(),
+                },
+            },
+            EffectKind::TidalTilt => ScenarioEffect::TidalTilt {
+                amplitude_factor: need("amplitude_factor")?,
+                azimuth_deg: need("azimuth_deg")?,
+            },
+            EffectKind::BuildingTilt => ScenarioEffect::BuildingTilt {
+                amplitude: need("amplitude")?,
+                phase_rad: need("phase_rad")?,
+            },
+            EffectKind::TiltCoupling => ScenarioEffect::TiltCoupling {
+                gain: need("gain")?,
+            },
+            EffectKind::AmbientCoupling => {
+                let channel = channel.unwrap_or_default().to_owned();
+                if !in_record(&channel) && !SIMULATED_AMBIENT.contains(&channel.as_str()) {
+                    return Err(format!(
+                        "channel {channel:?} is neither in the record nor simulated"
+                    ));
+                }
+                ScenarioEffect::AmbientCoupling {
+                    channel,
+                    coefficient: need("coefficient")?,
+                    lag_s: p("lag_s").unwrap_or(0.0).max(0.0),
+                }
+            }
+            EffectKind::PressureAdmittance => ScenarioEffect::PressureAdmittance {
+                coefficient: need("coefficient")?,
+            },
+            EffectKind::Periodic => ScenarioEffect::Periodic {
+                period_s: need("period_s")?,
+                amplitude: need("amplitude")?,
+                phase_rad: need("phase_rad")?,
+            },
+            EffectKind::RateCoupling | EffectKind::Lag2Coupling => {
+                let channel = channel.unwrap_or_default().to_owned();
+                let drives = channel == "temperature_c"
+                    || channel.starts_with("pressure")
+                    || in_record(&channel)
+                    || SIMULATED_AMBIENT.contains(&channel.as_str());
+                if !drives {
+                    return Err(format!("channel {channel:?} is not a driver of the twin"));
+                }
+                if kind == EffectKind::RateCoupling {
+                    ScenarioEffect::RateCoupling {
+                        channel,
+                        coefficient: need("coefficient")?,
+                    }
+                } else {
+                    ScenarioEffect::Lag2Coupling {
+                        channel,
+                        tau_s: need("tau_s")?,
+                        coefficient: need("coefficient")?,
+                    }
+                }
+            }
+            // The discovery's creep starts at the record's first instant, the scenario's at
+            // t = 0: the same curve only when they coincide.
+            EffectKind::CreepDrift if t0.abs() > self.record_interval_s => {
+                return Err(format!(
+                    "the record starts at t = {t0:.0} s and a power law cannot be moved to t = 0 \
+                     exactly"
+                ))
+            }
+            EffectKind::CreepDrift => ScenarioEffect::CreepDrift {
+                exponent: need("exponent")?,
+                amplitude: need("amplitude")?,
+            },
+            EffectKind::ChannelNoise => {
+                let channel = channel.unwrap_or_default().to_owned();
+                ScenarioEffect::ChannelNoise {
+                    channel,
+                    noise: p("noise")
+                        .or_else(|| p("level"))
+                        .ok_or("parameter noise missing")?,
+                }
+            }
+        })
+    }
+}

@@ -1,0 +1,187 @@
+//! The written scenario is the twin: `discover --simulate --write-scenario` writes the extended
+//! twin, and `accomp simulate FILE --seed k` (the real binary) reproduces member k of the
+//! extended ensemble bit for bit, its transients and drift polynomial included (the same file
+//! without them gives other members); a missing driver file is a named error.
+
+use accomp_host::discover::import::{self, Dataset, DatasetOptions, Format};
+use accomp_host::discover::select;
+use accomp_host::discover::simulate::{simulate_dataset, write_scenario};
+use accomp_host::sim::scenario::Scenario;
+use std::path::Path;
+
+#[path = "common/scratch.rs"]
+mod scratch;
+
+const GMETROLOGY: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/../data/measured/gmetrology_relative_gravimeter_2021-06-08_51d.tsf"
+);
+
+/// Twelve days of the gMetrology record on 15 000 points (keeps the run to a few seconds), with
+/// a knock added.
+fn record() -> Dataset {
+    let path = Path::new(GMETROLOGY);
+    assert!(path.is_file(), "{} missing", path.display());
+    let (log, _) = import::load(path, Format::Auto).expect("record");
+    let opts = DatasetOptions {
+        max_points: 15_000,
+        ..DatasetOptions::default()
+    };
+    let mut ds = import::dataset_from_log(&log, &opts).expect("dataset");
+    let n = ds.t_s.iter().take_while(|&&t| t < 12.0 * 86_400.0).count();
+    ds.t_s.truncate(n);
+    ds.y.truncate(n);
+    ds.segment_start.truncate(n);
+    for c in &mut ds.channels {
+        c.values.truncate(n);
+    }
+    // A knock at day 6 like the record's largest (−0.055 mGal over a few samples; the twelve
+    // days have none of their own), so that the twin has a transient to draw.
+    let at = ds.t_s.iter().take_while(|&&t| t < 6.0 * 86_400.0).count();
+    for (k, dy) in [-0.02, -0.055, -0.03].iter().enumerate() {
+        ds.y[at + k] += dy;
+    }
+    ds
+}
+
+fn member_from_cli(toml: &Path, seed: u64, out: &Path) -> Result<Vec<f64>, String> {
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_accomp"))
+        .args([
+            "simulate",
+            &toml.to_string_lossy(),
+            "--seed",
+            &seed.to_string(),
+            "-o",
+        ])
+        .arg(out)
+        .env("RUST_BACKTRACE", "0")
+        .output()
+        .expect("run accomp");
+    if !o.status.success() {
+        return Err(String::from_utf8_lossy(&o.stderr).into_owned());
+    }
+    let text = std::fs::read_to_string(out).expect("member file");
+    Ok(text
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .skip(1)
+        .map(|l| {
+            l.split(',')
+                .nth(1)
+                .expect("value")
+                .parse::<f64>()
+                .expect("number")
+        })
+        .collect())
+}
+
+#[test]
+fn accomp_simulate_of_the_written_scenario_reproduces_ensemble_member_k() {
+    let ds = record();
+    let mut s = simulate_dataset(&ds, None, 4, &select::Config::default()).expect("simulate");
+    assert!(
+        s.written_twin.is_some(),
+        "no noise family: {:?}",
+        s.warnings
+    );
+    let dir = scratch::Scratch::new("twin-written");
+    let toml = dir.join("ext.toml");
+    write_scenario(&mut s, Some(&toml)).expect("write");
+    assert!(dir.join("ext.drivers.csv").is_file());
+    // The twelve days have transients and a drift curve beyond the linear: the file must
+    // carry both for the members to match.
+    assert!(!s.transients.events.is_empty(), "no transients found");
+    assert!(s.drift.order >= 2, "drift order {}", s.drift.order);
+    let text = std::fs::read_to_string(&toml).unwrap();
+    assert!(
+        text.contains("[[twin.transients.events]]") && text.contains("[[twin.drift.legendre]]"),
+        "the written twin lacks its transients or drift"
+    );
+    // The family has a Gauss–Markov term here: it is a term of the written noise, so that the
+    // members below are drawn with it.
+    assert!(
+        s.family.as_ref().is_some_and(|f| f.resolved(5)),
+        "no Gauss–Markov term: {:?}",
+        s.family.as_ref().map(|f| &f.gm_search)
+    );
+    assert!(text.contains("name = \"gauss_markov\""));
+    let mut members = Vec::new();
+    for k in [1u64, 2] {
+        let y = member_from_cli(&toml, k, &dir.join(format!("m{k}.csv"))).expect("member");
+        assert_eq!(y.len(), ds.len());
+        let v = s.member_views(&ds, &y);
+        // Bit-identical to the ensemble's member k, and not member k + 1.
+        assert_eq!(v, s.members_after[k as usize - 1], "member {k}");
+        assert_ne!(
+            v,
+            s.members_after[k as usize],
+            "member {k} equals member {}",
+            k + 1
+        );
+        members.push(y);
+    }
+    // The same twin written without its drift: each member differs from the file's by the
+    // polynomial, Σ c_k at the last instant (P_k(1) = 1) and Σ (−1)^k c_k at the first.
+    let written = Scenario::from_toml(&text).expect("the written twin parses");
+    let mut no_drift = written.clone();
+    no_drift.twin.as_mut().unwrap().drift = None;
+    let stripped = dir.join("no_drift.toml");
+    std::fs::write(&stripped, no_drift.to_toml()).unwrap();
+    let y = member_from_cli(&stripped, 1, &dir.join("m1_no_drift.csv")).expect("member");
+    let c: Vec<f64> = s.drift_coefficients.iter().map(|c| c.0).collect();
+    let at_last: f64 = c.iter().sum();
+    let at_first: f64 = c
+        .iter()
+        .enumerate()
+        .map(|(k, v)| v * (-1f64).powi(k as i32))
+        .sum();
+    let n = y.len() - 1;
+    let scale = c.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    for (i, want) in [(0, at_first), (n, at_last)] {
+        let got = members[0][i] - y[i];
+        assert!(
+            (got - want).abs() <= 1e-9 * scale,
+            "point {i}: member − member without drift = {got}, the polynomial {want}"
+        );
+    }
+    assert!(
+        members[0].iter().zip(&y).any(|(a, b)| a != b),
+        "dropping the drift changed nothing"
+    );
+    // Without the transients: the noise is the same draw, the events are missing — some member
+    // differs, and only at the cells of its drawn events.
+    let mut no_transients = written;
+    no_transients.twin.as_mut().unwrap().transients = None;
+    std::fs::write(&stripped, no_transients.to_toml()).unwrap();
+    let event_cells: usize = s.transients.events.iter().map(|e| e.1.len()).sum();
+    let mut differing = 0;
+    for (k, with) in [1u64, 2].iter().zip(&members) {
+        let y = member_from_cli(&stripped, *k, &dir.join("m_no_transients.csv")).expect("member");
+        let d = with.iter().zip(&y).filter(|(a, b)| a != b).count();
+        assert!(
+            d <= 10 * event_cells.max(1),
+            "member {k}: {d} points differ, more than its events"
+        );
+        differing += d;
+    }
+    assert!(differing > 0, "dropping the transients changed no member");
+    // The driver file missing: a named error.
+    std::fs::rename(dir.join("ext.drivers.csv"), dir.join("moved.csv")).unwrap();
+    let err = member_from_cli(&toml, 1, &dir.join("m9.csv")).unwrap_err();
+    assert!(
+        err.contains("twin driver file") && err.contains("is missing"),
+        "{err}"
+    );
+    // A malformed [twin] section: a named error.
+    let text = std::fs::read_to_string(&toml).unwrap();
+    std::fs::write(
+        &toml,
+        text.replacen("fixed_effects = ", "fixed_effects = 99 #", 1),
+    )
+    .unwrap();
+    let err = member_from_cli(&toml, 1, &dir.join("m9.csv")).unwrap_err();
+    assert!(
+        err.contains("[twin]") && err.contains("fixed_effects"),
+        "{err}"
+    );
+}
