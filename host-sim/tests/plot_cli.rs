@@ -112,12 +112,14 @@ fn a_record_over_a_board_reset_is_plotted_and_the_reset_said() {
     let err = cli::stderr(&out);
     assert!(out.status.success(), "{err}");
     assert!(
-        err.contains("note: 2 continuous segments: the sampling phase changes at time_s = 150.4")
-            && err.contains("dashed line"),
+        err.contains(
+            "note: 2 continuous segments (1 board_reset): new ones start at time_s = 150.4 \
+             (board_reset event at 2026-01-01T00:02:30Z)"
+        ) && err.contains("dashed line"),
         "{err}"
     );
     let adev = std::fs::read_to_string(figs.join("rec_adev.svg")).unwrap();
-    assert!(adev.contains("pooled within 2 continuous segments"));
+    assert!(adev.contains("pooled within 2 continuous segments (1 board_reset)"));
     let fig3 = std::fs::read_to_string(figs.join("rec_fig3_output_1g.svg")).unwrap();
-    assert!(fig3.contains("board reset (dashed)"));
+    assert!(fig3.contains("board_reset (dashed)"));
 }

@@ -20,11 +20,12 @@
 //! the same sample standard deviation ([`crate::stability::mean_std`]), so the figures and the
 //! stability report agree.
 //!
-//! A recorder's log that crosses a board reset (the new boot samples at another phase) is split
-//! into its continuous segments exactly as `accomp stability` splits it
-//! ([`crate::stability::LogGrid`]): the time figures draw each segment as its own line with the
-//! reset marked by a dashed vertical line, the Allan deviation pools the terms within the
-//! segments, and the outcome carries the same note `stability` prints.
+//! A recorder's log is split into its continuous segments exactly as `accomp stability` splits
+//! it ([`crate::stability::LogGrid`]: after each `board_reset` or `table_changed` event line, and
+//! where the sampling phase changes): the time figures draw each segment as its own line with a
+//! dashed vertical line where a new one starts, labelled by its cause (the event's kind, or
+//! `phase change`), the Allan deviation pools the terms within the segments, and the outcome
+//! carries the same note `stability` prints.
 //!
 //! Time series are decimated per pixel column ([`decimate`]) before drawing: the line is the
 //! column mean, the light shading its min..max envelope, so a 41-day 1 Hz log plots in about a
@@ -39,7 +40,10 @@ use plotters::style::RGBColor;
 
 use crate::allan::{AllanError, Phase, Statistic, TauSet};
 use crate::log::{Log, LogError, TIME_COLUMN};
-use crate::stability::{column_unit, mean_std, segment_note, GridError, LogGrid, StabilityError};
+use crate::stability::{
+    column_unit, mean_std, segment_causes, segment_note, GridError, LogGrid, SegmentStart,
+    StabilityError,
+};
 use decimate::buckets_broken;
 use draw::{AdevCurve, AdevFigure, DrawError, Figure, Marker, Panel, TimeFigure, Trace};
 
@@ -211,7 +215,7 @@ pub struct PlotOutcome {
     pub written: Vec<PathBuf>,
     /// Figures `--kind all` skipped, with the reason.
     pub skipped: Vec<String>,
-    /// What the reader of the figures must know (a record split at board resets).
+    /// What the reader of the figures must know (a record split into segments).
     pub notes: Vec<String>,
 }
 
@@ -219,10 +223,12 @@ pub struct PlotOutcome {
 pub fn plot_log(log: &Log, opts: &PlotOptions) -> Result<PlotOutcome, PlotError> {
     let mut out = PlotOutcome::default();
     let grid = LogGrid::of(log);
-    out.notes.extend(
-        segment_note(log.time_s(), &grid.segment_starts)
-            .map(|n| format!("{n} (the time figures mark each reset with a dashed line)")),
-    );
+    if let Some(n) = segment_note(log.time_s(), &grid.segments) {
+        out.notes.push(format!(
+            "{n} (the time figures mark where each segment starts with a dashed line, labelled by \
+             its cause)"
+        ));
+    }
     let mut figures = Vec::new();
     if opts.kind == Kind::All {
         let output_kind = if is_zero_g(log)? {
@@ -277,7 +283,7 @@ fn build_on(
     kind: Kind,
     grid: &LogGrid,
 ) -> Result<Figure, PlotError> {
-    let resets = &grid.segment_starts;
+    let resets = &grid.segments;
     match kind {
         Kind::All => Err(PlotError::NothingToPlot(
             "`all` is not a single figure".into(),
@@ -319,12 +325,14 @@ struct TimeAxis {
     x: Vec<f64>,
     desc: String,
     range: (f64, f64),
-    /// First rows of the continuous segments after the first (board resets).
+    /// First rows of the continuous segments after the first.
     breaks: Vec<usize>,
+    /// What starts each of them (`board_reset`, `table_changed`, `phase change`).
+    causes: Vec<String>,
 }
 
 impl TimeAxis {
-    /// The figure, with a dashed line at each board reset.
+    /// The figure, with a dashed line where each new segment starts, labelled by its cause.
     fn figure(&self, fig: TimeFigure) -> Figure {
         if self.breaks.is_empty() {
             return Figure::Time(fig);
@@ -332,16 +340,17 @@ impl TimeAxis {
         let markers = self
             .breaks
             .iter()
-            .map(|&i| Marker {
+            .zip(&self.causes)
+            .map(|(&i, cause)| Marker {
                 at: self.x[i],
-                label: "board reset".into(),
+                label: cause.clone(),
             })
             .collect();
         Figure::TimeMarked(fig, markers)
     }
 }
 
-fn time_axis(log: &Log, resets: &[usize]) -> TimeAxis {
+fn time_axis(log: &Log, resets: &[SegmentStart]) -> TimeAxis {
     let t = log.time_s();
     let (first, last) = (
         t.first().copied().unwrap_or(0.0),
@@ -361,7 +370,8 @@ fn time_axis(log: &Log, resets: &[usize]) -> TimeAxis {
         x: t.iter().map(|v| v / div).collect(),
         desc,
         range: if b > a { (a, b) } else { (a, a + 1.0) },
-        breaks: resets.to_vec(),
+        breaks: resets.iter().map(|s| s.row).collect(),
+        causes: resets.iter().map(|s| s.cause.kind()).collect(),
     }
 }
 
@@ -386,7 +396,7 @@ fn sci(v: f64) -> String {
     format!("{v:.2e}")
 }
 
-fn temperature_figure(log: &Log, resets: &[usize]) -> Result<Figure, PlotError> {
+fn temperature_figure(log: &Log, resets: &[SegmentStart]) -> Result<Figure, PlotError> {
     let label = |name: &str, y: &[f64]| match mean_std(y) {
         Some((m, s, _)) => format!("{name}: mean {m:.4} °C, σ {s:.4} °C"),
         None => name.to_owned(),
@@ -400,7 +410,7 @@ fn temperature_figure(log: &Log, resets: &[usize]) -> Result<Figure, PlotError> 
     )
 }
 
-fn tilt_figure(log: &Log, resets: &[usize]) -> Result<Figure, PlotError> {
+fn tilt_figure(log: &Log, resets: &[SegmentStart]) -> Result<Figure, PlotError> {
     let t = log.time_s();
     let label = |name: &str, y: &[f64]| {
         let ms = mean_std(y);
@@ -423,10 +433,10 @@ fn tilt_figure(log: &Log, resets: &[usize]) -> Result<Figure, PlotError> {
 
 /// One channel against time, with its `truth_` twin in grey when the log has one, each trace
 /// labelled by `label(name, values)`. `fig` is (the figure named in errors, its title); `column`
-/// is (the column, the y axis's description); `resets` the first rows of a record's segments.
+/// is (the column, the y axis's description); `resets` the starts of a record's segments.
 fn channel_figure(
     log: &Log,
-    resets: &[usize],
+    resets: &[SegmentStart],
     (fig, title): (&'static str, &str),
     (column, y_desc): (&str, &str),
     label: impl Fn(&str, &[f64]) -> String,
@@ -534,7 +544,7 @@ fn output_figure(
     log: &Log,
     opts: &PlotOptions,
     zero_g: bool,
-    resets: &[usize],
+    resets: &[SegmentStart],
 ) -> Result<Figure, PlotError> {
     let figure = if zero_g {
         Kind::ZeroG.names().1
@@ -615,7 +625,8 @@ fn output_figure(
 
 fn adev_figure(log: &Log, opts: &PlotOptions, grid: &LogGrid) -> Result<Figure, PlotError> {
     let (raw, comp) = output_selection(log, opts, Kind::Adev.names().1)?;
-    let segments = grid.segment_starts.len() + 1;
+    let causes = segment_causes(&grid.segments);
+    let segments = grid.segments.len() + 1;
     let grid = grid.grid.clone()?;
     let mut curves = Vec::new();
     let mut units = Vec::new();
@@ -671,7 +682,7 @@ fn adev_figure(log: &Log, opts: &PlotOptions, grid: &LogGrid) -> Result<Figure, 
             &if segments > 1 {
                 format!(
                     "Overlapping Allan deviation pooled within {segments} continuous segments \
-                     (board resets), shaded: 68 % confidence interval"
+                     ({causes}), shaded: 68 % confidence interval"
                 )
             } else {
                 "Overlapping Allan deviation, shaded: 68 % confidence interval".to_owned()

@@ -25,10 +25,12 @@
 //! is placed on the grid `t0 + k tau0` (it must lie within `tau0 / 4` of a grid point, one
 //! reading per point) and the empty grid points become gaps (NaN), which the Allan code skips
 //! (never interpolates). A log whose time stamps do not fit a grid gets stability and regression
-//! but no Allan curves, and the report says why.
+//! but no Allan curves, and the report says why. A recorder's log (`accomp record`) is split
+//! into continuous segments instead ([`LogGrid`]): after each `board_reset` or `table_changed`
+//! event line and at each change of sampling phase; no Allan term spans two segments.
 
 use crate::allan::{AllanPoint, Phase, Statistic, TauSet};
-use crate::log::{unit_suffix, Log, LogError, TIME_COLUMN};
+use crate::log::{unit_suffix, Event, Log, LogError, TIME_COLUMN};
 use serde::Serialize;
 
 /// Metadata key of the accelerometer scale factor used to convert `_v` columns to g.
@@ -160,12 +162,17 @@ impl Grid {
 
     /// For a recorder's log (`accomp record`): as [`Grid::from_time`], but a row off the grid —
     /// a board reset, whose new boot samples at another phase — starts a new continuous segment
-    /// instead of refusing the log. Each segment keeps its own time stamps; it is placed at the
-    /// grid point nearest its first row, with at least one empty point before it, so no Allan
-    /// term spans two segments (terms touching a gap are skipped): the deviation pools the terms
-    /// within the segments and nothing is resampled. Returns the grid and the first row of every
-    /// segment after the first; refuses (with the first off-grid row) beyond [`MAX_SEGMENTS`].
-    pub fn from_time_segmented(t: &[f64]) -> Result<(Self, Vec<usize>), GridError> {
+    /// instead of refusing the log, and so does every row of `forced` (ascending: the first rows
+    /// after the record's `board_reset` and `table_changed` events, on the old phase or not).
+    /// Each segment keeps its own time stamps; it is placed at the grid point nearest its first
+    /// row, with at least one empty point before it, so no Allan term spans two segments (terms
+    /// touching a gap are skipped): the deviation pools the terms within the segments and
+    /// nothing is resampled. Returns the grid and the first row of every segment after the
+    /// first; refuses (with the first new segment's row) beyond [`MAX_SEGMENTS`].
+    pub fn from_time_segmented(
+        t: &[f64],
+        forced: &[usize],
+    ) -> Result<(Self, Vec<usize>), GridError> {
         let n = t.len();
         if n < 3 {
             return Err(GridError::TooShort);
@@ -177,11 +184,13 @@ impl Grid {
         let mut prev: Option<usize> = None;
         // Phase of the current segment: its time stamps sit at first + shift + k tau0.
         let mut shift = 0.0;
+        let mut forced = forced.iter().copied().filter(|&r| r > 0).peekable();
         for (i, &ti) in t.iter().enumerate() {
             let k_f = ((ti - first - shift) / tau0).round();
             let off = (ti - first - shift) - k_f * tau0;
             let mut k = k_f.max(0.0) as usize;
-            if off.abs() > 0.25 * tau0 || prev.is_some_and(|p| k <= p) {
+            let event = forced.next_if(|&r| r <= i).is_some();
+            if event || off.abs() > 0.25 * tau0 || prev.is_some_and(|p| k <= p) {
                 if starts.len() == MAX_SEGMENTS {
                     return Err(GridError::OffGrid {
                         index: starts[0],
@@ -426,67 +435,168 @@ pub const RECORDER_KEY: &str = "recorder";
 /// Above this many grid points `TauSet::All` is refused (O(N^2)).
 pub const MAX_ALL_TAUS_LEN: usize = 200_000;
 
+/// The event kinds of a record that start a new continuous segment at the first row after
+/// them: a new boot (its readings need not continue the last boot's), and another compensation
+/// table (the compensated output's level and scale may jump). A `seq_gap` or `link_lost` is no
+/// boundary: its missing rows are empty grid points already.
+pub const SEGMENT_EVENTS: [&str; 2] = ["board_reset", "table_changed"];
+
+/// Why a continuous segment of a recorder's log starts where it does.
+#[derive(Debug, Clone, PartialEq)]
+pub enum SegmentCause {
+    /// Event lines of [`SEGMENT_EVENTS`] kinds just before the segment's first row (in file
+    /// order, at least one).
+    Events(Vec<Event>),
+    /// The row is off the previous segment's sampling grid, with no such event before it.
+    PhaseChange,
+}
+
+impl SegmentCause {
+    /// What starts the segment, short: the event kinds (`board_reset`, `board_reset +
+    /// table_changed`) or `phase change`.
+    pub fn kind(&self) -> String {
+        match self {
+            SegmentCause::Events(ev) => ev
+                .iter()
+                .map(|e| e.kind.as_str())
+                .collect::<Vec<_>>()
+                .join(" + "),
+            SegmentCause::PhaseChange => "phase change".into(),
+        }
+    }
+}
+
+/// The start of a continuous segment after the first.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SegmentStart {
+    /// Its first row.
+    pub row: usize,
+    /// Why it starts there.
+    pub cause: SegmentCause,
+}
+
 /// The sampling grid of a log for its Allan deviations, as `stability` and `plot` use it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct LogGrid {
     /// The grid, or why the time base is none.
     pub grid: Result<Grid, GridError>,
-    /// First row of every continuous segment after the first (empty unless a recorder's log
-    /// crosses a board reset).
-    pub segment_starts: Vec<usize>,
+    /// Every continuous segment after the first (empty unless a recorder's log crosses a board
+    /// reset, a table change or a change of phase).
+    pub segments: Vec<SegmentStart>,
 }
 
 impl LogGrid {
-    /// The grid of `log`: a recorder's log over a board reset is split into its continuous
-    /// segments ([`Grid::from_time_segmented`]); any other log off the grid has none.
+    /// The grid of `log`: a recorder's log is split into its continuous segments
+    /// ([`Grid::from_time_segmented`]) after each of its [`SEGMENT_EVENTS`] and at each change
+    /// of sampling phase; any other log off the grid has none.
     pub fn of(log: &Log) -> Self {
         let t = log.time_s();
         let recorder_log = log
             .meta(RECORDER_KEY)
             .is_some_and(|r| r.starts_with("accomp record"));
-        match Grid::from_time(t) {
-            Err(e @ GridError::OffGrid { .. }) if recorder_log => {
-                match Grid::from_time_segmented(t) {
-                    Ok((g, segment_starts)) => LogGrid {
-                        grid: Ok(g),
-                        segment_starts,
-                    },
-                    Err(_) => LogGrid {
-                        grid: Err(e),
-                        segment_starts: Vec::new(),
-                    },
-                }
-            }
-            grid => LogGrid {
-                grid,
-                segment_starts: Vec::new(),
-            },
+        let unsplit = |grid| LogGrid {
+            grid,
+            segments: Vec::new(),
+        };
+        if !recorder_log {
+            return unsplit(Grid::from_time(t));
         }
+        // Events before the first row or after the last start no segment.
+        let boundary_events: Vec<&Event> = log
+            .events()
+            .iter()
+            .filter(|e| SEGMENT_EVENTS.contains(&e.kind.as_str()) && e.row > 0 && e.row < t.len())
+            .collect();
+        let mut forced: Vec<usize> = boundary_events.iter().map(|e| e.row).collect();
+        forced.dedup();
+        let whole = Grid::from_time(t);
+        match (&whole, forced.is_empty()) {
+            (Ok(_), true) => return unsplit(whole),
+            (Err(GridError::OffGrid { .. }), _) | (Ok(_), false) => {}
+            (Err(_), _) => return unsplit(whole),
+        }
+        match Grid::from_time_segmented(t, &forced) {
+            Ok((g, starts)) => LogGrid {
+                grid: Ok(g),
+                segments: starts
+                    .into_iter()
+                    .map(|row| {
+                        let ev: Vec<Event> = boundary_events
+                            .iter()
+                            .filter(|e| e.row == row)
+                            .map(|&e| e.clone())
+                            .collect();
+                        SegmentStart {
+                            row,
+                            cause: if ev.is_empty() {
+                                SegmentCause::PhaseChange
+                            } else {
+                                SegmentCause::Events(ev)
+                            },
+                        }
+                    })
+                    .collect(),
+            },
+            // Beyond MAX_SEGMENTS: no grid (a whole grid would span the events silently).
+            Err(e) => unsplit(whole.and(Err(e))),
+        }
+    }
+
+    /// The first row of every segment after the first.
+    pub fn segment_rows(&self) -> Vec<usize> {
+        self.segments.iter().map(|s| s.row).collect()
     }
 }
 
+/// How many segment starts each cause gave, in words: `1 board_reset, 2 phase changes`.
+pub fn segment_causes(segments: &[SegmentStart]) -> String {
+    let mut counts: Vec<(String, usize)> = Vec::new();
+    for s in segments {
+        let kind = s.cause.kind();
+        match counts.iter_mut().find(|(k, _)| *k == kind) {
+            Some((_, n)) => *n += 1,
+            None => counts.push((kind, 1)),
+        }
+    }
+    counts
+        .iter()
+        .map(|(k, n)| match (k.as_str(), n) {
+            ("phase change", 2..) => format!("{n} phase changes"),
+            _ => format!("{n} {k}"),
+        })
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
 /// What a log split into continuous segments means for its Allan deviation, in words (`None`
-/// for one segment): the times of the first five changes of phase.
-pub fn segment_note(t: &[f64], segment_starts: &[usize]) -> Option<String> {
-    if segment_starts.is_empty() {
+/// for one segment): how many segments each cause started, and where the first five start with
+/// their cause (the event's kind and UTC, or a change of sampling phase).
+pub fn segment_note(t: &[f64], segments: &[SegmentStart]) -> Option<String> {
+    if segments.is_empty() {
         return None;
     }
-    let shown: Vec<String> = segment_starts
+    let shown: Vec<String> = segments
         .iter()
         .take(5)
-        .map(|&i| format!("{}", t[i]))
+        .map(|s| {
+            let why = match &s.cause {
+                SegmentCause::Events(ev) => ev
+                    .iter()
+                    .map(|e| format!("{} event at {}", e.kind, e.utc))
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                SegmentCause::PhaseChange => "the sampling phase changes".into(),
+            };
+            format!("{} ({why})", t[s.row])
+        })
         .collect();
     Some(format!(
-        "{} continuous segments: the sampling phase changes at time_s = {}{} (board resets in a \
-         recorder's log); the Allan deviation pools the terms within each segment, none spans \
-         two, nothing is resampled",
-        segment_starts.len() + 1,
+        "{} continuous segments ({}): new ones start at time_s = {}{}; the Allan deviation pools \
+         the terms within each segment, none spans two, nothing is resampled",
+        segments.len() + 1,
+        segment_causes(segments),
         shown.join(", "),
-        if segment_starts.len() > 5 {
-            ", …"
-        } else {
-            ""
-        }
+        if segments.len() > 5 { ", …" } else { "" }
     ))
 }
 
@@ -502,11 +612,8 @@ pub fn analyse(log: &Log, opts: &Options) -> Result<Report, StabilityError> {
         opts.columns.clone()
     };
     let t = log.time_s();
-    let LogGrid {
-        grid,
-        segment_starts,
-    } = LogGrid::of(log);
-    let segment_note = segment_note(t, &segment_starts);
+    let LogGrid { grid, segments } = LogGrid::of(log);
+    let segment_note = segment_note(t, &segments);
     if let (Ok(g), TauSet::All, true) = (&grid, opts.taus, opts.allan) {
         if g.len > MAX_ALL_TAUS_LEN {
             return Err(StabilityError::TooLongForAllTaus(g.len));
@@ -883,7 +990,8 @@ mod tests {
         assert!((p.dev - (9.0f64 / 38.0).sqrt()).abs() < 1e-12, "{}", p.dev);
         let note = c.allan_note.as_deref().unwrap();
         assert!(
-            note.starts_with("2 continuous segments") && note.contains("10.4"),
+            note.starts_with("2 continuous segments (1 phase change)")
+                && note.contains("10.4 (the sampling phase changes)"),
             "{note}"
         );
         // The same rows without the recorder's mark: refused as off the grid, as before.
@@ -895,6 +1003,100 @@ mod tests {
             .as_deref()
             .unwrap()
             .contains("off the"));
+    }
+
+    /// The options of the tests below: `k1_g` alone, octave taus.
+    fn k1_only() -> Options {
+        Options {
+            columns: vec!["k1_g".into()],
+            ..Options::default()
+        }
+    }
+
+    #[test]
+    fn a_board_reset_on_the_old_sampling_phase_starts_a_segment_at_its_event() {
+        // Boot 1: t = 0..9 s, readings 0, 1, 0, 1, …; the new boot samples exactly on the old
+        // grid, t = 10..20 s, readings constant 5, as `accomp record` writes it: the event line
+        // between the boots. At tau = 1 s the segments' own terms are the 9 first differences of
+        // boot 1 (±1) and the 10 of boot 2 (0): σ² = 9 / (2 · 19). Spanning the reset would add
+        // the term 5 − 1 = 4: σ² = (9 + 16) / (2 · 20).
+        let mut text = String::from(
+            "# recorder: accomp record 0.1.0\n# start_utc: 2026-01-01T00:00:00Z\ntime_s,k1_g\n",
+        );
+        for k in 0..10 {
+            text.push_str(&format!("{k},{}\n", k % 2));
+        }
+        text.push_str(
+            "# event: 2026-01-01T00:00:10Z board_reset seq restarted at 0 after 9 (no READY \
+             seen)\n",
+        );
+        for k in 10..21 {
+            text.push_str(&format!("{k},5\n"));
+        }
+        let rep = analyse(&Log::parse_str(&text).unwrap(), &k1_only()).unwrap();
+        let c = &rep.columns[0];
+        let p = &c.adev[0];
+        assert_eq!((p.m, p.n_terms), (1, 19));
+        assert!((p.dev - (9.0f64 / 38.0).sqrt()).abs() < 1e-12, "{}", p.dev);
+        let note = c.allan_note.as_deref().unwrap();
+        assert!(
+            note.starts_with("2 continuous segments (1 board_reset)")
+                && note.contains("10 (board_reset event at 2026-01-01T00:00:10Z)"),
+            "{note}"
+        );
+        // Without the event line the rows are one grid and a term spans the reset.
+        let unmarked: String = text
+            .lines()
+            .filter(|l| !l.starts_with("# event"))
+            .map(|l| format!("{l}\n"))
+            .collect();
+        let rep = analyse(&Log::parse_str(&unmarked).unwrap(), &k1_only()).unwrap();
+        let p = &rep.columns[0].adev[0];
+        assert_eq!(p.n_terms, 20);
+        assert!((p.dev - (25.0f64 / 40.0).sqrt()).abs() < 1e-12, "{}", p.dev);
+        assert!(rep.columns[0].allan_note.is_none());
+    }
+
+    #[test]
+    fn a_table_change_starts_a_segment_and_a_seq_gap_stays_a_gap() {
+        // One boot on a 1 s grid, t = 0..29 s. Readings 5 and 6 are lost (a seq_gap event);
+        // the table changes before t = 15 (a table_changed event) and the output jumps from
+        // 0, 1, 0, … (by t) to 10. At tau = 1 s: before the change 14 first differences (±1)
+        // less the 3 touching the lost readings = 11; after it 14 (all 0); none across the
+        // change: σ² = 11 / (2 · 25). Spanning the change would add (10 − 0)² over 26 terms.
+        let mut text = String::from(
+            "# recorder: accomp record 0.1.0\n# start_utc: 2026-01-01T00:00:00Z\ntime_s,k1_g\n",
+        );
+        for k in 0..30 {
+            match k {
+                5 | 6 => continue,
+                7 => text.push_str(
+                    "# event: 2026-01-01T00:00:07Z seq_gap lost=2 seq 5..=6 missing (not flagged \
+                     by the board: lost on the link or in the PC)\n",
+                ),
+                15 => text.push_str(
+                    "# event: 2026-01-01T00:00:15Z table_changed 0x00000001 -> 0x00000002\n",
+                ),
+                _ => {}
+            }
+            let y = if k < 15 { k % 2 } else { 10 };
+            text.push_str(&format!("{k},{y}\n"));
+        }
+        let log = Log::parse_str(&text).unwrap();
+        let grid = LogGrid::of(&log);
+        assert_eq!(grid.segment_rows(), vec![13]);
+        let rep = analyse(&log, &k1_only()).unwrap();
+        let c = &rep.columns[0];
+        let p = &c.adev[0];
+        assert_eq!((p.m, p.n_terms), (1, 25));
+        assert!((p.dev - (11.0f64 / 50.0).sqrt()).abs() < 1e-12, "{}", p.dev);
+        let note = c.allan_note.as_deref().unwrap();
+        assert!(
+            note.starts_with("2 continuous segments (1 table_changed)")
+                && note.contains("15 (table_changed event at 2026-01-01T00:00:15Z)")
+                && !note.contains("seq_gap"),
+            "{note}"
+        );
     }
 
     #[test]

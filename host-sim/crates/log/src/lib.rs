@@ -16,7 +16,8 @@
 //!   (key, value) pairs in file order (the first `:` splits key from value; both are trimmed). A
 //!   `#` line without a `:` is a free comment and is ignored. `#` lines after the header are
 //!   rejected as bad rows: a comment in the middle of the samples usually means two logs were
-//!   concatenated, which must not pass silently.
+//!   concatenated, which must not pass silently. The exception is an event line of a record,
+//!   `# event: <UTC> <kind> <details>`: kept as an [`Event`] with the row it precedes.
 //! - Empty lines (also `\r\n` ones) are skipped wherever they are.
 //! - One header row of comma-separated column names. `time_s` (seconds since `start_utc`) is
 //!   required, and so is at least one other column. Names carry their unit as a suffix
@@ -401,6 +402,35 @@ pub fn unit_per_g_for_suffix(unit: &str) -> Option<f64> {
     }
 }
 
+/// An event line of a record (`# event: <UTC> <kind> <details>`, what `accomp record` writes
+/// between the rows where something happened: a reset, a gap, a changed table …).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Event {
+    /// Index of the first row after the event line (the log's length when none follows).
+    pub row: usize,
+    /// When, as written (the `start_utc` form).
+    pub utc: String,
+    /// One word: `board_reset`, `table_changed`, `seq_gap`, … (docs/log-format.md).
+    pub kind: String,
+    /// The rest of the line (in a file the csv crate reads, one with a quoted field before
+    /// the event line, its comma-separated parts trimmed and joined by commas).
+    pub details: String,
+}
+
+impl Event {
+    /// The event of the text after `# event:` (trimmed), before row `row`.
+    fn parse(row: usize, text: &str) -> Self {
+        let mut words = text.splitn(3, ' ');
+        let mut word = || words.next().unwrap_or("").trim().to_owned();
+        Event {
+            row,
+            utc: word(),
+            kind: word(),
+            details: word(),
+        }
+    }
+}
+
 /// A stability-test log in memory: metadata, column names, and columns.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Log {
@@ -408,6 +438,8 @@ pub struct Log {
     names: Vec<String>,
     columns: Vec<ColumnData>,
     rows: usize,
+    /// Event lines of a record, in file order.
+    events: Vec<Event>,
 }
 
 impl Log {
@@ -431,6 +463,7 @@ impl Log {
             names: vec![TIME_COLUMN.to_owned()],
             rows: time_s.len(),
             columns: vec![ColumnData::Numeric(time_s)],
+            events: Vec::new(),
         })
     }
 
@@ -569,6 +602,12 @@ impl Log {
         }
     }
 
+    /// The event lines of a record (`accomp record`), in file order, each with the row it
+    /// precedes; empty for any other log.
+    pub fn events(&self) -> &[Event] {
+        &self.events
+    }
+
     /// Reads a log from a file, or from a directory of daily files as one record
     /// ([`open_record`]).
     pub fn read_path(path: impl AsRef<Path>) -> Result<Self, LogError> {
@@ -629,6 +668,7 @@ impl Log {
         };
         let mut all = Part::new(all_names.len());
         let mut text_index: Vec<HashMap<String, u32>> = vec![HashMap::new(); all_names.len()];
+        let mut events = Vec::new();
         records.for_each_block(
             |rows| layout.parse(rows),
             |part| {
@@ -656,6 +696,11 @@ impl Log {
                 if let Some(f) = fault {
                     return Err(f.error);
                 }
+                events.extend(
+                    part.events
+                        .into_iter()
+                        .map(|e| Event::parse(all.rows + e.rows_before, &e.text)),
+                );
                 all.rows += part.rows;
                 if part.rows > 0 {
                     all.last_t = part.last_t;
@@ -686,6 +731,7 @@ impl Log {
             names,
             columns,
             rows: all.rows,
+            events,
         })
     }
 
@@ -697,7 +743,14 @@ impl Log {
         }
         writeln!(w, "{}", self.names.join(","))?;
         let mut line = String::with_capacity(256);
-        for row in 0..self.rows {
+        let mut events = self.events.iter().peekable();
+        for row in 0..=self.rows {
+            while let Some(e) = events.next_if(|e| e.row <= row) {
+                writeln!(w, "# event: {} {} {}", e.utc, e.kind, e.details)?;
+            }
+            if row == self.rows {
+                break;
+            }
             line.clear();
             for (i, c) in self.columns.iter().enumerate() {
                 if i > 0 {
@@ -756,6 +809,8 @@ struct Part {
     last_t: f64,
     /// Where the rows stopped, if they stopped early.
     fault: Option<RowFault>,
+    /// Event lines among the rows (`rows_before` counted within the part).
+    events: Vec<reader::EventLine>,
 }
 
 impl Part {
@@ -767,6 +822,7 @@ impl Part {
             first_time: None,
             last_t: f64::NEG_INFINITY,
             fault: None,
+            events: Vec::new(),
         }
     }
 }
@@ -857,6 +913,7 @@ impl RowLayout<'_> {
             }
             part.rows += 1;
         }
+        part.events = rows.take_events();
         part
     }
 }
@@ -1015,6 +1072,45 @@ mod tests {
             &["non-monotonic"],
         );
         assert_bad_row("time_s,output_v\n0,1\n,2\n", 3, &["time_s"]);
+    }
+
+    #[test]
+    fn event_lines_are_kept_with_the_row_they_precede_across_blocks_and_written_back() {
+        // 120 rows span many 256-byte test blocks; events before the first row, between rows
+        // in different blocks, two in a row, and after the last row.
+        let at = [0usize, 37, 90, 90, 120];
+        let mut text = String::from("# recorder: accomp record 0.1.0\ntime_s,output_v\n");
+        for i in 0..=120usize {
+            for (n, _) in at.iter().enumerate().filter(|&(_, &r)| r == i) {
+                text.push_str(&format!(
+                    "# event: 2026-01-01T00:00:{n:02}Z kind{n} detail {n}, with a comma\n"
+                ));
+            }
+            if i < 120 {
+                text.push_str(&format!("{i},1.5\n"));
+            }
+        }
+        let check = |log: &Log, csv_from_row: usize| {
+            let ev = log.events();
+            assert_eq!(ev.iter().map(|e| e.row).collect::<Vec<_>>(), at);
+            for (n, e) in ev.iter().enumerate() {
+                assert_eq!(e.utc, format!("2026-01-01T00:00:{n:02}Z"));
+                assert_eq!(e.kind, format!("kind{n}"));
+                let space = if e.row > csv_from_row { "" } else { " " };
+                assert_eq!(e.details, format!("detail {n},{space}with a comma"));
+            }
+        };
+        let log = Log::parse_str(&text).unwrap();
+        assert_eq!(log.len(), 120);
+        check(&log, usize::MAX);
+        // The csv crate's path (a quoted field from row 50 on) keeps them at the same rows; the
+        // details are its trimmed fields joined.
+        let quoted = text.replacen("\n50,1.5\n", "\n50,\"1.5\"\n", 1);
+        check(&Log::parse_str(&quoted).unwrap(), 50);
+        // Written back in place: the text read is the text written.
+        let mut out = Vec::new();
+        log.write_to(&mut out).unwrap();
+        assert_eq!(String::from_utf8(out).unwrap(), text);
     }
 
     #[test]

@@ -16,7 +16,8 @@
 //! - Then one record per line, exactly as many fields as the header. Blank lines are skipped; a
 //!   `#` line after the header is refused ([`ReadError::CommentAfterHeader`]) unless it is an
 //!   event line, `# event: <UTC> <kind> <details>` (what `accomp record` writes in place for a
-//!   gap, a reset, a reconnection …; skipped here, the rows around it are the data): a comment in the
+//!   gap, a reset, a reconnection …; not a record: the rows around it are the data, and the line is
+//!   kept with the number of records before it, [`RowStream::take_events`]): a comment in the
 //!   middle of the samples means two logs were concatenated.
 //!
 //! What a field means (number, gap, text) is the caller's business: [`Row`] hands out the
@@ -27,6 +28,39 @@ use std::io::{BufRead, Chain, Cursor, Read};
 
 /// The start of an event line, allowed among the rows.
 pub const EVENT_PREFIX: &[u8] = b"# event:";
+
+/// An event line met among the records (`# event: <UTC> <kind> <details>`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct EventLine {
+    /// 1-based line in the file.
+    pub line: usize,
+    /// Records the stream handed out before it (the index of the first record after it).
+    pub rows_before: usize,
+    /// The line after `# event:`, trimmed.
+    pub text: String,
+}
+
+/// The event lines a stream met, and the records it handed out so far.
+#[derive(Debug, Default)]
+struct Events {
+    lines: Vec<EventLine>,
+    rows: usize,
+}
+
+impl Events {
+    /// Keeps `text` (a whole line, or its fields joined) when it is an event line: true then.
+    fn keep(&mut self, line: usize, text: &[u8]) -> bool {
+        let Some(rest) = text.trim_ascii_start().strip_prefix(EVENT_PREFIX) else {
+            return false;
+        };
+        self.lines.push(EventLine {
+            line,
+            rows_before: self.rows,
+            text: String::from_utf8_lossy(rest).trim().to_owned(),
+        });
+        true
+    }
+}
 
 /// The UTF-8 byte-order mark.
 const BOM: &[u8] = b"\xEF\xBB\xBF";
@@ -444,6 +478,8 @@ pub struct Records<R: Read> {
     bounds: Vec<(usize, usize)>,
     /// The current record (csv crate).
     record: csv::ByteRecord,
+    /// Event lines met, and the records handed out.
+    events: Events,
 }
 
 /// Where the records come from.
@@ -756,6 +792,9 @@ impl<'a> Row<'a> {
 pub trait RowStream {
     /// The next record, `None` at the end.
     fn next_row(&mut self) -> Result<Option<Row<'_>>, ReadError>;
+    /// The event lines met so far (taken out), each with the number of records this stream
+    /// handed out before it.
+    fn take_events(&mut self) -> Vec<EventLine>;
 }
 
 /// Complete data lines, none needing the csv crate, with the file line of the first.
@@ -772,6 +811,7 @@ impl Block {
             line: self.first_line,
             expected,
             bounds: Vec::new(),
+            events: Events::default(),
         }
     }
 }
@@ -783,9 +823,14 @@ pub struct BlockRows<'a> {
     line: usize,
     expected: usize,
     bounds: Vec<(usize, usize)>,
+    events: Events,
 }
 
 impl RowStream for BlockRows<'_> {
+    fn take_events(&mut self) -> Vec<EventLine> {
+        std::mem::take(&mut self.events.lines)
+    }
+
     fn next_row(&mut self) -> Result<Option<Row<'_>>, ReadError> {
         while self.pos < self.bytes.len() {
             let rest = &self.bytes[self.pos..];
@@ -806,7 +851,11 @@ impl RowStream for BlockRows<'_> {
                 }
             }
             let first = self.bounds.first().map_or(&b""[..], |&(a, b)| &text[a..b]);
+            if first.starts_with(EVENT_PREFIX) && self.events.keep(line, text) {
+                continue;
+            }
             if check_record(line, first, self.bounds.len(), self.expected)? {
+                self.events.rows += 1;
                 return Ok(Some(Row {
                     line,
                     fields: Fields::Split {
@@ -966,6 +1015,7 @@ impl<R: BufRead> Records<R> {
             source,
             bounds,
             record: csv::ByteRecord::new(),
+            events: Events::default(),
         })
     }
 
@@ -1118,6 +1168,10 @@ impl<R: BufRead> RowStream for Records<R> {
     fn next_row(&mut self) -> Result<Option<Row<'_>>, ReadError> {
         Records::next_row(self)
     }
+
+    fn take_events(&mut self) -> Vec<EventLine> {
+        std::mem::take(&mut self.events.lines)
+    }
 }
 
 impl<R: BufRead> Records<R> {
@@ -1147,6 +1201,9 @@ impl<R: BufRead> Records<R> {
                     }
                     let text = &l.buf[start..end];
                     let first = self.bounds.first().map_or(&b""[..], |&(a, b)| &text[a..b]);
+                    if first.starts_with(EVENT_PREFIX) && self.events.keep(line, text) {
+                        continue;
+                    }
                     if check_record(line, first, self.bounds.len(), expected)? {
                         break Some((start, end, line));
                     }
@@ -1175,6 +1232,12 @@ impl<R: BufRead> Records<R> {
                         return Err(too_many_rows(line));
                     }
                     let first = self.record.get(0).unwrap_or(b"");
+                    if first.starts_with(EVENT_PREFIX) {
+                        // The fields as they were (the csv crate split the details on commas).
+                        let text = self.record.iter().collect::<Vec<_>>().join(&b","[..]);
+                        self.events.keep(line, &text);
+                        continue;
+                    }
                     if check_record(line, first, self.record.len(), expected)? {
                         break Some((0, 0, line));
                     }
@@ -1182,6 +1245,9 @@ impl<R: BufRead> Records<R> {
                 Source::Switching => break None,
             }
         };
+        if split.is_some() {
+            self.events.rows += 1;
+        }
         Ok(match (split, &self.source) {
             (Some((start, end, line)), Source::Lines(l)) => Some(Row {
                 line,

@@ -393,15 +393,27 @@ where
                 }
             }
         }
-        let marker_style = BLACK.mix(0.55).stroke_width(1);
-        for (k, m) in x_markers.iter().enumerate() {
+        // One colour and one legend entry per kind of marker (board_reset, table_changed, …).
+        let mut kinds: Vec<&str> = Vec::new();
+        for m in x_markers {
+            let k = kinds
+                .iter()
+                .position(|&l| l == m.label)
+                .unwrap_or(kinds.len());
+            let new_kind = k == kinds.len();
+            if new_kind {
+                kinds.push(&m.label);
+            }
+            let marker_style = MARKER_COLORS[k % MARKER_COLORS.len()]
+                .mix(0.55)
+                .stroke_width(1);
             let dashes = dashed_vertical(m.at, y0, y1);
             let series = chart.draw_series(
                 dashes
                     .into_iter()
                     .map(|seg| PathElement::new(seg, marker_style)),
             )?;
-            if k == 0 {
+            if new_kind {
                 series
                     .label(format!("{} (dashed)", m.label))
                     .legend(legend_line(marker_style));
@@ -419,6 +431,9 @@ where
     }
     Ok(())
 }
+
+/// Colours of the dashed lines of a time figure, one per kind of marker, in order of appearance.
+const MARKER_COLORS: [RGBColor; 3] = [BLACK, RGBColor(0, 90, 200), RGBColor(150, 60, 0)];
 
 /// A dashed vertical line at `x` from `y0` to `y1`: 40 dashes, each half a period long.
 fn dashed_vertical(x: f64, y0: f64, y1: f64) -> Vec<Vec<(f64, f64)>> {

@@ -429,8 +429,10 @@ fn a_record_over_a_board_reset_is_plotted_in_segments_with_the_reset_marked() {
     // The note is the one `stability` prints, with where the reset is.
     assert_eq!(out.notes.len(), 1);
     assert!(
-        out.notes[0]
-            .starts_with("2 continuous segments: the sampling phase changes at time_s = 200.4"),
+        out.notes[0].starts_with(
+            "2 continuous segments (1 board_reset): new ones start at time_s = 200.4 \
+             (board_reset event at 2026-01-01T00:03:20Z)"
+        ),
         "{}",
         out.notes[0]
     );
@@ -453,12 +455,13 @@ fn a_record_over_a_board_reset_is_plotted_in_segments_with_the_reset_marked() {
         other => panic!("expected a marked time figure, got {other:?}"),
     }
     let svg = assert_svg(&dir.join("t_fig2_temperature.svg"));
-    assert!(svg.contains("board reset (dashed)"));
+    assert!(svg.contains("board_reset (dashed)"));
     // The Allan deviation pools within the segments: its title says so.
     match build(&log, &opts(&dir, Format::Svg, Kind::Adev), Kind::Adev).unwrap() {
         Figure::Adev(a) => {
             assert!(
-                a.title.contains("pooled within 2 continuous segments"),
+                a.title
+                    .contains("pooled within 2 continuous segments (1 board_reset)"),
                 "{}",
                 a.title
             );
@@ -475,4 +478,72 @@ fn a_record_over_a_board_reset_is_plotted_in_segments_with_the_reset_marked() {
         build(&plain, &opts(&dir, Format::Svg, Kind::Adev), Kind::Adev),
         Err(PlotError::Grid(GridError::OffGrid { .. }))
     ));
+}
+
+#[test]
+fn a_record_is_split_at_its_events_and_phase_changes_each_line_labelled_by_its_kind() {
+    // Four stretches of 100 s at 1 s, written as `accomp record` writes them: a board reset on
+    // the old phase (t = 100, event line), a table change (t = 200, event line), a reset without
+    // its event whose boot samples 0.4 s off the grid (t = 300.4). Each stretch has its own
+    // temperature, so a line drawn across a boundary would show as a run holding two levels.
+    let mut text = String::from(
+        "# recorder: accomp record 0.1.0\n# start_utc: 2026-01-01T00:00:00Z\n\
+         # input_g: 1\ntime_s,output_v,a_i_exact_g,temperature_c,tilt_arcsec\n",
+    );
+    for (stretch, (t0, event)) in [
+        (0.0, ""),
+        (
+            100.0,
+            "# event: 2026-01-01T00:01:40Z board_reset seq restarted at 0 after 99 (no READY seen)\n",
+        ),
+        (
+            200.0,
+            "# event: 2026-01-01T00:03:20Z table_changed 0x00000001 -> 0x00000002\n",
+        ),
+        (300.4, ""),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        text += event;
+        for k in 0..100 {
+            let w = wiggle(k, 9 + stretch as u64);
+            let t = t0 + k as f64;
+            let temp = 60 + stretch;
+            text += &format!("{t},{},{},{temp},{}\n", 1.0 + 1e-5 * w, 1.0 + 1e-6 * w, 0.1 * w);
+        }
+    }
+    let log = Log::parse_str(&text).unwrap();
+    let dir = scratch("events");
+    let out = plot_log(&log, &opts(&dir, Format::Svg, Kind::Temperature)).unwrap();
+    let note = &out.notes[0];
+    assert!(
+        note.starts_with("4 continuous segments (1 board_reset, 1 table_changed, 1 phase change)")
+            && note.contains("100 (board_reset event at 2026-01-01T00:01:40Z)")
+            && note.contains("200 (table_changed event at 2026-01-01T00:03:20Z)")
+            && note.contains("300.4 (the sampling phase changes)"),
+        "{note}"
+    );
+    match build(
+        &log,
+        &opts(&dir, Format::Svg, Kind::Temperature),
+        Kind::Temperature,
+    )
+    .unwrap()
+    {
+        Figure::TimeMarked(t, markers) => {
+            let labels: Vec<&str> = markers.iter().map(|m| m.label.as_str()).collect();
+            assert_eq!(labels, ["board_reset", "table_changed", "phase change"]);
+            let runs = &t.panels[0].traces[0].runs;
+            assert_eq!(runs.len(), 4);
+            for (run, level) in runs.iter().zip([60.0, 61.0, 62.0, 63.0]) {
+                assert!(run.iter().all(|b| b.min == level && b.max == level));
+            }
+        }
+        other => panic!("expected a marked time figure, got {other:?}"),
+    }
+    let svg = assert_svg(&dir.join("t_fig2_temperature.svg"));
+    for kind in ["board_reset", "table_changed", "phase change"] {
+        assert!(svg.contains(&format!("{kind} (dashed)")), "{kind}");
+    }
 }
