@@ -8,20 +8,17 @@
 //! sinusoid of constant amplitude). The tool is not told what was hidden. Cheap: the first
 //! 12 days binned to ~5 min, 8 members.
 
-use accomp_host::discover::import::{self, Dataset, DatasetOptions, Format};
+use accomp_host::discover::import::{self, Dataset, DatasetOptions};
 use accomp_host::discover::select;
 use accomp_host::discover::simulate::mismatch::Quantity;
 use accomp_host::discover::simulate::Simulation;
 use accomp_host::discover::simulate::{simulate_dataset, write_scenario};
-use std::path::Path;
 
 #[path = "common/scratch.rs"]
 mod scratch;
 
-const GMETROLOGY: &str = concat!(
-    env!("CARGO_MANIFEST_DIR"),
-    "/../data/measured/gmetrology_relative_gravimeter_2021-06-08_51d.tsf"
-);
+#[path = "common/real.rs"]
+mod real;
 
 /// Hidden period (s) and amplitude (mGal): 5.3 h ≈ 4.5 cycles/day, between the ter- and
 /// quarter-diurnal tides; 6 µGal, a few times the residual's noise in that band.
@@ -30,19 +27,7 @@ const HIDDEN_AMPLITUDE: f64 = 0.006;
 const DAYS: f64 = 12.0;
 
 fn record() -> Dataset {
-    let path = Path::new(GMETROLOGY);
-    assert!(
-        path.is_file(),
-        "{} missing: this test did not run",
-        path.display()
-    );
-    let (log, bad) = import::load(path, Format::Auto).expect("record");
-    assert!(bad.is_empty());
-    let opts = DatasetOptions {
-        max_points: 15_000,
-        ..DatasetOptions::default()
-    };
-    let mut ds = import::dataset_from_log(&log, &opts).expect("dataset");
+    let mut ds = real::dataset(&DatasetOptions::with_max_points(15_000));
     let n = ds.t_s.iter().take_while(|&&t| t < DAYS * 86_400.0).count();
     ds.t_s.truncate(n);
     ds.y.truncate(n);
@@ -208,16 +193,7 @@ fn accelerometer_log(hidden: bool) -> (Dataset, Vec<f64>) {
     s.thermostat.proof_mass_lag_s = 0.0;
     s.adc.ads1262.vref_tempco_ppm_per_c = 0.0;
     s.rtd.accuracy_c = 0.0;
-    let bytes = accomp_host::sim::simulate(
-        &s,
-        ACCEL_SEED,
-        &accomp_host::sim::Options::default(),
-        Vec::new(),
-        &mut |_, _| {},
-    )
-    .expect("simulate")
-    .1;
-    let log = Log::read(&bytes[..]).expect("log");
+    let log = accomp_host::sim::simulate_log(&s, ACCEL_SEED).expect("simulate");
     let t = log.time_s().to_vec();
     let truth = log.column("truth_mount_temperature_c").expect("truth T");
     // Two first-order lags in series (exact for a temperature held over each interval).

@@ -12,15 +12,13 @@
 //! family must not take the tide's lines for noise. The record is binned as `accomp discover`
 //! bins it (86 s, 25 000 points per half), 20 members per half: ≈ 5 s per half.
 
-use accomp_host::discover::import::{self, Dataset, DatasetOptions, Format};
+use accomp_host::discover::import::{Dataset, DatasetOptions};
 use accomp_host::discover::select;
 use accomp_host::discover::simulate::{output, simulate_dataset};
-use std::path::Path;
 
-const GMETROLOGY: &str = concat!(
-    env!("CARGO_MANIFEST_DIR"),
-    "/../data/measured/gmetrology_relative_gravimeter_2021-06-08_51d.tsf"
-);
+#[path = "common/real.rs"]
+mod real;
+
 const MEMBERS: usize = 20;
 /// The outside fraction a held-back log may show after the extension.
 const RECORD_OUTSIDE_MAX: f64 = 0.20;
@@ -30,16 +28,8 @@ const MEMBER_OUTSIDE: std::ops::RangeInclusive<f64> = 0.05..=0.15;
 /// The points [a·n, b·n) of the record's n points, as a record of its own (a new segment at
 /// its first point).
 fn part(a: f64, b: f64) -> Dataset {
-    let path = Path::new(GMETROLOGY);
-    assert!(
-        path.is_file(),
-        "{} missing: this test did not run",
-        path.display()
-    );
-    let (log, bad) = import::load(path, Format::Auto).expect("record");
-    assert!(bad.is_empty());
     // The binning `accomp discover` uses (50 000 points, 86 s).
-    let ds = import::dataset_from_log(&log, &DatasetOptions::default()).expect("dataset");
+    let ds = real::dataset(&DatasetOptions::default());
     let n = ds.len() as f64;
     let keep: Vec<usize> = ((a * n) as usize..(b * n) as usize).collect();
     let pick = |v: &[f64]| keep.iter().map(|&i| v[i]).collect::<Vec<_>>();

@@ -8,7 +8,7 @@
 #![allow(dead_code)]
 
 use accomp_host::discover::effects;
-use accomp_host::discover::import::{self, DatasetOptions, Format};
+use accomp_host::discover::import::{self, Dataset, DatasetOptions, Format};
 use std::path::PathBuf;
 
 const FILE: &str = "gmetrology_relative_gravimeter_2021-06-08_51d.tsf";
@@ -66,13 +66,15 @@ pub struct Residual {
     pub pressure_pa: Option<Vec<f64>>,
 }
 
+/// The record (every row good) reduced to a dataset as `accomp discover` reduces it with `opts`.
+pub fn dataset(opts: &DatasetOptions) -> Dataset {
+    let (log, bad) = import::load(&record(), Format::Auto).expect("record");
+    assert!(bad.is_empty(), "{} bad rows in the record", bad.len());
+    import::dataset_from_log(&log, opts).expect("dataset")
+}
+
 pub fn residual_after_tide() -> Residual {
-    let (log, _) = import::load(&record(), Format::Auto).expect("record");
-    let opts = DatasetOptions {
-        max_points: accomp_host::discover::import::MAX_MAX_POINTS,
-        ..DatasetOptions::default()
-    };
-    let ds = import::dataset_from_log(&log, &opts).expect("dataset");
+    let ds = dataset(&DatasetOptions::with_max_points(import::MAX_MAX_POINTS));
     let (tide_g, _, _) = effects::tide_series(&ds).expect("tide (site and start known)");
     let u = ds.unit_per_g.expect("mGal per g");
     let n = ds.len();

@@ -21,7 +21,8 @@ use crate::numerics::linalg::least_squares;
 use crate::sim::effects::ScenarioEffect;
 use crate::sim::noise::AllanParams;
 use crate::sim::scenario::Scenario;
-use crate::sim::{simulate, Options};
+use crate::sim::simulate_log;
+use crate::sim::twin::record::silence_readings;
 use crate::twin::Twin;
 
 const DAY: f64 = 86_400.0;
@@ -32,18 +33,13 @@ fn quiet_station(preset: &str) -> Scenario {
     s.run.duration_s = 3.0 * DAY;
     s.run.interval_s = 300.0;
     s.tide.step_s = 300.0;
-    s.accelerometer.noise_g = AllanParams::NONE;
-    s.accelerometer.orientation.indexing_std_arcsec = 0.0;
-    s.rtd.noise_uv_rms = 0.0;
-    s.tiltmeter.noise_arcsec = 0.0;
+    silence_readings(&mut s);
     s.tiltmeter.resolution_arcsec = 0.0;
-    s.adc.ads1262.noise_uv_rms = 0.0;
-    s.barometer.noise_hpa = 0.0;
     s.barometer.resolution_hpa = 0.0;
     // What the twin does not model (it predicts the instrument, not the converter, and reads the
-    // RTD as the true temperature): the ADC reference's temperature drift and the RTD's offset.
+    // RTD as the true temperature): the ADC reference's temperature drift and the RTD's offset
+    // (the latter silenced with the readings).
     s.adc.ads1262.vref_tempco_ppm_per_c = 0.0;
-    s.rtd.accuracy_c = 0.0;
     // The twin reads the RTD as the proof-mass temperature: no lag between them, and a room
     // coupling strong enough that the temperature moves by a good fraction of a degree.
     s.thermostat.proof_mass_lag_s = 0.0;
@@ -59,22 +55,12 @@ fn dataset(s: &Scenario) -> Dataset {
 /// computed from the log's own columns.
 #[allow(clippy::type_complexity)]
 fn dataset_with(s: &Scenario, extra: &[(&str, &dyn Fn(&Log) -> Vec<f64>)]) -> Dataset {
-    let bytes = simulate(s, 11, &Options::default(), Vec::new(), &mut |_, _| {})
-        .unwrap()
-        .1;
-    let mut log = Log::read(&bytes[..]).unwrap();
+    let mut log = simulate_log(s, 11).unwrap();
     for (name, f) in extra {
         let v = f(&log);
         log.push_column(name, v).unwrap();
     }
-    dataset_from_log(
-        &log,
-        &DatasetOptions {
-            max_points: 1_000_000,
-            ..DatasetOptions::default()
-        },
-    )
-    .unwrap()
+    dataset_from_log(&log, &DatasetOptions::with_max_points(1_000_000)).unwrap()
 }
 
 /// Log with `e`, and the log minus the twin without it.

@@ -101,6 +101,9 @@ pub enum SimError {
     /// Writing the log failed.
     #[error("writing the log: {0}")]
     Io(#[from] std::io::Error),
+    /// The log just written could not be read back.
+    #[error("reading the simulated log back: {0}")]
+    ReadBack(#[from] accomp_log::LogError),
 }
 
 /// Options of a run that are not physics.
@@ -649,6 +652,20 @@ pub fn simulate<W: Write>(
         scale_factor_v_per_g: sim.scale_factor_at_setpoint(),
     };
     Ok((summary, w.finish()?))
+}
+
+/// The log [`simulate`] writes for `scenario` with `seed` (no code columns), read back as any
+/// reader of a log file reads it: what a round trip through the format gives.
+pub fn simulate_log(scenario: &Scenario, seed: u64) -> Result<accomp_log::Log, SimError> {
+    let bytes = simulate(
+        scenario,
+        seed,
+        &Options::default(),
+        Vec::new(),
+        &mut |_, _| {},
+    )?
+    .1;
+    Ok(accomp_log::Log::read(&bytes[..])?)
 }
 
 #[cfg(test)]

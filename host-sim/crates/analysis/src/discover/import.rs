@@ -487,6 +487,16 @@ impl Default for DatasetOptions {
     }
 }
 
+impl DatasetOptions {
+    /// The default options binning to at most `max_points` points.
+    pub fn with_max_points(max_points: usize) -> Self {
+        Self {
+            max_points,
+            ..Self::default()
+        }
+    }
+}
+
 /// Reduces a log to a dataset: picks the output and channels, drops rows with gaps (counted),
 /// bins to at most `max_points`, marks segments.
 pub fn dataset_from_log(log: &Log, opts: &DatasetOptions) -> Result<Dataset, ImportError> {
@@ -501,8 +511,7 @@ pub fn full_rate_from_log(log: &Log, opts: &DatasetOptions) -> Result<Dataset, I
 
 /// The block means, on the bins of `binned`, of a series `v` over the rows of `full` (both from
 /// the same log and options: [`full_rate_from_log`], [`dataset_from_log`]): the bins are
-/// rebuilt as [`reduce`] builds them (bin index from the first row's time, a new bin at an input
-/// change). `None` when the rebuilt bins are not the dataset's (count or mean time differ).
+/// rebuilt with the [`Bins`] that [`reduce`] builds them with. `None` when the rebuilt bins are not the dataset's (count or mean time differ).
 pub fn block_means_like(full: &Dataset, binned: &Dataset, v: &[f64]) -> Option<Vec<f64>> {
     let bin = binned.dt_s;
     let (&t0, true) = (full.t_s.first()?, v.len() == full.len() && bin > 0.0) else {
@@ -512,13 +521,9 @@ pub fn block_means_like(full: &Dataset, binned: &Dataset, v: &[f64]) -> Option<V
         .channel(ChannelKind::Input)
         .map(|c| c.values.as_slice());
     let (mut sums, mut ts, mut counts) = (Vec::new(), Vec::new(), Vec::new());
-    let (mut cur, mut cur_input) = (None, f64::NAN);
+    let mut bins = Bins::new(t0, bin, input);
     for (i, (&t, &x)) in full.t_s.iter().zip(v).enumerate() {
-        let b = ((t - t0) / bin).floor() as i64;
-        let moved = input.is_some_and(|c| c[i] != cur_input);
-        if cur != Some(b) || moved {
-            cur = Some(b);
-            cur_input = input.map_or(f64::NAN, |c| c[i]);
+        if bins.opens(i, t) {
             sums.push(0.0);
             ts.push(0.0);
             counts.push(0.0);
@@ -535,6 +540,47 @@ pub fn block_means_like(full: &Dataset, binned: &Dataset, v: &[f64]) -> Option<V
             .zip(&binned.t_s)
             .all(|((s, c), tb)| (s / c - tb).abs() <= 1e-6 * bin);
     same.then(|| sums.iter().zip(&counts).map(|(s, c)| s / c).collect())
+}
+
+/// Which rows open a new bin of block means: bins of `bin_s` seconds counted from `t0` (none,
+/// `bin_s` = 0: one bin per row), and a new bin wherever the input changes. A changing input
+/// (a dividing-head programme) closes a bin: a block mean across a head move would be an input
+/// value the head never held, and the baseline's one level per input value would need a level
+/// for every mixed bin.
+struct Bins<'a> {
+    t0: f64,
+    bin_s: f64,
+    input: Option<&'a [f64]>,
+    cur: Option<i64>,
+    cur_input: f64,
+}
+
+impl<'a> Bins<'a> {
+    fn new(t0: f64, bin_s: f64, input: Option<&'a [f64]>) -> Self {
+        Self {
+            t0,
+            bin_s,
+            input,
+            cur: None,
+            cur_input: f64::NAN,
+        }
+    }
+
+    /// Whether row `i` (time `t`, rows in time order) opens a new bin.
+    fn opens(&mut self, i: usize, t: f64) -> bool {
+        let b = if self.bin_s > 0.0 {
+            ((t - self.t0) / self.bin_s).floor() as i64
+        } else {
+            i as i64
+        };
+        let moved = self.input.is_some_and(|c| c[i] != self.cur_input);
+        if self.cur != Some(b) || moved {
+            self.cur = Some(b);
+            self.cur_input = self.input.map_or(f64::NAN, |c| c[i]);
+            return true;
+        }
+        false
+    }
 }
 
 fn reduce(log: &Log, opts: &DatasetOptions, binning: bool) -> Result<Dataset, ImportError> {
@@ -681,25 +727,13 @@ fn reduce(log: &Log, opts: &DatasetOptions, binning: bool) -> Result<Dataset, Im
     let mut cs: Vec<Vec<f64>> = vec![Vec::new(); chans.len()];
     let mut counts = Vec::new();
     let t0 = t[keep[0]];
-    let mut cur: Option<i64> = None;
-    // A changing input (a dividing-head programme) also closes a bin: a block mean across a
-    // head move would be an input value the head never held, and the baseline's one level per
-    // input value would need a level for every mixed bin.
     let input_col = chans
         .iter()
         .find(|c| c.1 == ChannelKind::Input)
         .map(|c| c.3);
-    let mut cur_input = f64::NAN;
+    let mut bins = Bins::new(t0, bin, input_col);
     for &i in &keep {
-        let b = if bin > 0.0 {
-            ((t[i] - t0) / bin).floor() as i64
-        } else {
-            i as i64
-        };
-        let moved = input_col.is_some_and(|c| c[i] != cur_input);
-        if cur != Some(b) || moved {
-            cur = Some(b);
-            cur_input = input_col.map_or(f64::NAN, |c| c[i]);
+        if bins.opens(i, t[i]) {
             ts.push(0.0);
             ys.push(0.0);
             for c in cs.iter_mut() {

@@ -241,41 +241,38 @@ impl Bin {
         c
     }
 
-    /// The expected periodogram with log parameters `p`.
-    fn expected(&self, p: &[f64; PARAMS]) -> f64 {
+    /// Σ `term(w, f)` over the mixed frequencies f > 0, w the Hann weight times the
+    /// differencing gain at f: the expected periodogram is linear in the PSD.
+    fn mixed(&self, term: impl Fn(f64, f64) -> f64) -> f64 {
         (0..3)
             .filter(|&j| self.f[j] > 0.0)
-            .map(|j| HANN_MIX[j] * self.g[j] * psd(p, self.f[j]))
+            .map(|j| term(HANN_MIX[j] * self.g[j], self.f[j]))
             .sum()
+    }
+
+    /// The expected periodogram with log parameters `p`.
+    fn expected(&self, p: &[f64; PARAMS]) -> f64 {
+        self.mixed(|w, f| w * psd(p, f))
     }
 
     /// ∂E/∂ln f_c with levels `h`.
     fn d_ln_fc(&self, h: &[f64; LEVELS], fc: f64, fg: f64) -> f64 {
-        (0..3)
-            .filter(|&j| self.f[j] > 0.0)
-            .map(|j| {
-                let f = self.f[j];
-                let u = (f / fc).powi(2);
-                let mut s = h[0] + h[1] / f + h[2] / (f * f) + h[3] / (f * f * f * f);
-                if fg.is_finite() {
-                    s += h[4] / (1.0 + (f / fg).powi(2));
-                }
-                HANN_MIX[j] * self.g[j] * s / (1.0 + u) * 2.0 * u / (1.0 + u)
-            })
-            .sum()
+        self.mixed(|w, f| {
+            let u = (f / fc).powi(2);
+            let mut s = h[0] + h[1] / f + h[2] / (f * f) + h[3] / (f * f * f * f);
+            if fg.is_finite() {
+                s += h[4] / (1.0 + (f / fg).powi(2));
+            }
+            w * s / (1.0 + u) * 2.0 * u / (1.0 + u)
+        })
     }
 
     /// ∂E/∂ln f_g with levels `h`.
     fn d_ln_fg(&self, h: &[f64; LEVELS], fc: f64, fg: f64) -> f64 {
-        (0..3)
-            .filter(|&j| self.f[j] > 0.0)
-            .map(|j| {
-                let f = self.f[j];
-                let v = (f / fg).powi(2);
-                HANN_MIX[j] * self.g[j] / (1.0 + (f / fc).powi(2)) * h[4] * 2.0 * v
-                    / (1.0 + v).powi(2)
-            })
-            .sum()
+        self.mixed(|w, f| {
+            let v = (f / fg).powi(2);
+            w / (1.0 + (f / fc).powi(2)) * h[4] * 2.0 * v / (1.0 + v).powi(2)
+        })
     }
 }
 
@@ -885,22 +882,12 @@ mod tests {
     use super::*;
     use crate::sim::noise::stream;
 
-    /// A series synthesised from known parameters is fitted back within a few σ, and the σ are
-    /// those of the fit (the truth within 4σ for every resolved term).
-    #[test]
-    fn a_synthesised_record_gives_back_its_parameters() {
-        let dt = 60.0;
-        let truth = NoiseFamily {
-            dt_s: dt,
-            ln_params: [
-                (1e-2f64).ln(),
-                (1e-6f64).ln(),
-                (1e-11f64).ln(),
-                (1e-22f64).ln(),
-                (0.3 * 0.5 / dt).ln(),
-                f64::NEG_INFINITY,
-                f64::INFINITY,
-            ],
+    /// The family with log parameters `ln_params` at step `dt_s` and nothing fitted: a truth to
+    /// draw a series from.
+    fn truth(dt_s: f64, ln_params: [f64; PARAMS]) -> NoiseFamily {
+        NoiseFamily {
+            dt_s,
+            ln_params,
             h_cov: [[0.0; LEVELS]; LEVELS],
             ln_fc_var: 0.0,
             ln_fg_var: 0.0,
@@ -909,11 +896,30 @@ mod tests {
             line_bins: 0,
             neg_loglik: 0.0,
             gm_search: GaussMarkovSearch {
-                ln_corner: f64::NAN,
+                ln_corner: ln_params[6],
                 at_edge: false,
                 neg_loglik_gain: 0.0,
             },
-        };
+        }
+    }
+
+    /// A series synthesised from known parameters is fitted back within a few σ, and the σ are
+    /// those of the fit (the truth within 4σ for every resolved term).
+    #[test]
+    fn a_synthesised_record_gives_back_its_parameters() {
+        let dt = 60.0;
+        let truth = truth(
+            dt,
+            [
+                (1e-2f64).ln(),
+                (1e-6f64).ln(),
+                (1e-11f64).ln(),
+                (1e-22f64).ln(),
+                (0.3 * 0.5 / dt).ln(),
+                f64::NEG_INFINITY,
+                f64::INFINITY,
+            ],
+        );
         let mut rng = stream(11, 0);
         let x = truth.spec().synthesise(20_000, &mut rng);
         let fit = NoiseFamily::fit(&x, dt).expect("fit");
@@ -940,9 +946,9 @@ mod tests {
     fn a_gauss_markov_process_is_found_with_its_corner() {
         let dt = 60.0;
         let fg = 1.0 / (2.0 * std::f64::consts::PI * 7200.0);
-        let truth = NoiseFamily {
-            dt_s: dt,
-            ln_params: [
+        let truth = truth(
+            dt,
+            [
                 (1e-2f64).ln(),
                 f64::NEG_INFINITY,
                 f64::NEG_INFINITY,
@@ -951,19 +957,7 @@ mod tests {
                 (0.5f64).ln(),
                 fg.ln(),
             ],
-            h_cov: [[0.0; LEVELS]; LEVELS],
-            ln_fc_var: 0.0,
-            ln_fg_var: 0.0,
-            bins: 0,
-            record_first_bin: RECORD_FIRST_BIN,
-            line_bins: 0,
-            neg_loglik: 0.0,
-            gm_search: GaussMarkovSearch {
-                ln_corner: fg.ln(),
-                at_edge: false,
-                neg_loglik_gain: 0.0,
-            },
-        };
+        );
         let x = truth.spec().synthesise(30_000, &mut stream(5, 0));
         let fit = NoiseFamily::fit(&x, dt).expect("fit");
         let c = fit.components("u");

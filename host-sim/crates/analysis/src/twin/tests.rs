@@ -3,8 +3,7 @@
 use super::build::line_fit;
 use super::*;
 use crate::discover::import::{dataset_from_log, DatasetOptions};
-use crate::log::Log;
-use crate::sim::{simulate, Options};
+use crate::sim::simulate_log;
 
 /// A 2-day gravimeter log at 5 min from the simulator itself (tide, drift, admittance,
 /// noise), read back as the discovery reads records.
@@ -33,18 +32,8 @@ fn gravimeter_scenario() -> Scenario {
 /// The log the simulator writes for `s` with `seed`, read back as the discovery reads records
 /// (every point kept).
 pub(super) fn dataset(s: &Scenario, seed: u64) -> Dataset {
-    let bytes = simulate(s, seed, &Options::default(), Vec::new(), &mut |_, _| {})
-        .unwrap()
-        .1;
-    let log = Log::read(&bytes[..]).unwrap();
-    dataset_from_log(
-        &log,
-        &DatasetOptions {
-            max_points: 1_000_000,
-            ..DatasetOptions::default()
-        },
-    )
-    .unwrap()
+    let log = simulate_log(s, seed).unwrap();
+    dataset_from_log(&log, &DatasetOptions::with_max_points(1_000_000)).unwrap()
 }
 
 /// One day of paper-1g at `interval_s` (seed 2), read back as the discovery reads it.

@@ -68,22 +68,29 @@ pub struct StationSeries {
     pub board_c: Vec<f64>,
 }
 
+/// Silences the accelerometer's and the sensors' random errors (accelerometer noise, head
+/// indexing, RTD offset and noise, tiltmeter, ADC and barometer noise); the station's
+/// environment (room, thermostat, foundation, weather) is left as it is.
+pub fn silence_readings(s: &mut Scenario) {
+    s.accelerometer.noise_g = AllanParams::NONE;
+    s.accelerometer.orientation.indexing_std_arcsec = 0.0;
+    s.rtd.accuracy_c = 0.0;
+    s.rtd.noise_uv_rms = 0.0;
+    s.tiltmeter.noise_arcsec = 0.0;
+    s.adc.ads1262.noise_uv_rms = 0.0;
+    s.barometer.noise_hpa = 0.0;
+}
+
 /// The scenario with every random process silenced: the deterministic part.
 pub fn quiet(s: &Scenario) -> Scenario {
     let mut q = s.clone();
+    silence_readings(&mut q);
     q.room.weather_std_c = 0.0;
     q.room.door_rate_per_day = 0.0;
     q.thermostat.controller_std_c = 0.0;
     q.thermostat.setpoint_walk_c_per_sqrt_day = 0.0;
-    q.accelerometer.noise_g = AllanParams::NONE;
-    q.accelerometer.orientation.indexing_std_arcsec = 0.0;
-    q.rtd.accuracy_c = 0.0;
-    q.rtd.noise_uv_rms = 0.0;
     q.foundation.creep_arcsec_per_sqrt_day = 0.0;
-    q.tiltmeter.noise_arcsec = 0.0;
-    q.adc.ads1262.noise_uv_rms = 0.0;
     q.barometer.weather_std_hpa = 0.0;
-    q.barometer.noise_hpa = 0.0;
     if let Some(InstrumentParams::Gravimeter(g)) = &mut q.instrument {
         g.noise = AllanParams::NONE;
     }
