@@ -1,7 +1,9 @@
 //! The written scenario is the twin: `discover --simulate --write-scenario` writes the extended
 //! twin, and `accomp simulate FILE --seed k` (the real binary) reproduces member k of the
 //! extended ensemble bit for bit, its transients and drift polynomial included (the same file
-//! without them gives other members); a missing driver file is a named error.
+//! without them gives other members); a missing driver file is a named error. A record whose
+//! selection refuses `tidal_gravity` gets the wave-group tide as `tidal_gravity (tidal
+//! analysis)`: the written twin carries it, and the same file without it gives other members.
 
 use accomp_host::discover::import::{self, Dataset, DatasetOptions, Format};
 use accomp_host::discover::select;
@@ -42,6 +44,31 @@ fn record() -> Dataset {
         ds.y[at + k] += dy;
     }
     ds
+}
+
+/// The points [a·n, b·n) of the record at the binning `accomp discover` uses (50 000 points,
+/// 86 s), as a record of its own (a new segment at its first point) — the held-back parts of
+/// `twin_held_back.rs`.
+fn part(a: f64, b: f64) -> Dataset {
+    let path = Path::new(GMETROLOGY);
+    assert!(path.is_file(), "{} missing", path.display());
+    let (log, _) = import::load(path, Format::Auto).expect("record");
+    let ds = import::dataset_from_log(&log, &DatasetOptions::default()).expect("dataset");
+    let n = ds.len() as f64;
+    let keep: Vec<usize> = ((a * n) as usize..(b * n) as usize).collect();
+    let pick = |v: &[f64]| keep.iter().map(|&i| v[i]).collect::<Vec<_>>();
+    let mut out = ds.clone();
+    out.t_s = pick(&ds.t_s);
+    out.y = pick(&ds.y);
+    out.segment_start = keep.iter().map(|&i| ds.segment_start[i]).collect();
+    out.segment_start[0] = true;
+    for (c, src) in out.channels.iter_mut().zip(&ds.channels) {
+        c.values = pick(&src.values);
+    }
+    if !ds.samples_per_point.is_empty() {
+        out.samples_per_point = pick(&ds.samples_per_point);
+    }
+    out
 }
 
 fn member_from_cli(toml: &Path, seed: u64, out: &Path) -> Result<Vec<f64>, String> {
@@ -184,4 +211,84 @@ fn accomp_simulate_of_the_written_scenario_reproduces_ensemble_member_k() {
         err.contains("[twin]") && err.contains("fixed_effects"),
         "{err}"
     );
+}
+
+/// The second half of the record (25 000 points, 86 s): its selection refuses `tidal_gravity`
+/// (forward chaining: the twin's tide is wrong mostly in phase), so the twin takes the
+/// wave-group tide. The written twin must carry it: `accomp simulate` reproduces member k with
+/// it, and the file without it gives members that differ by a tide.
+#[test]
+fn the_written_twin_carries_the_wave_group_tide_when_the_selection_refuses_tidal_gravity() {
+    let ds = part(0.5, 1.0);
+    let mut s = simulate_dataset(&ds, None, 2, &select::Config::default()).expect("simulate");
+    assert!(
+        s.written_twin.is_some(),
+        "no noise family: {:?}",
+        s.warnings
+    );
+    assert!(
+        !s.cause
+            .selection
+            .accepted
+            .iter()
+            .any(|a| a.effect.name() == "tidal_gravity"),
+        "the selection accepted tidal_gravity: not the case under test"
+    );
+    assert!(
+        s.explained_by
+            .iter()
+            .any(|(n, _)| n == "tidal_gravity (tidal analysis)"),
+        "the twin did not take the wave-group tide: {:?}",
+        s.explained_by
+    );
+    let dir = scratch::Scratch::new("twin-written-tide");
+    let toml = dir.join("ext.toml");
+    write_scenario(&mut s, Some(&toml)).expect("write");
+    let text = std::fs::read_to_string(&toml).unwrap();
+    let written = Scenario::from_toml(&text).expect("the written twin parses");
+    let spec = written.twin.as_ref().expect("[twin]");
+    let groups = spec.draws.tide_groups.as_ref().map_or(0, Vec::len);
+    assert!(groups > 0, "the written twin has no wave groups");
+    assert!(
+        spec.draws.effects.iter().any(|e| e.kind == "tidal_gravity"),
+        "the written twin's draws lack the tide"
+    );
+    let mut with_tide = Vec::new();
+    for k in [1u64, 2] {
+        let y = member_from_cli(&toml, k, &dir.join(format!("m{k}.csv"))).expect("member");
+        assert_eq!(y.len(), ds.len());
+        assert_eq!(
+            s.member_views(&ds, &y),
+            s.members_after[k as usize - 1],
+            "member {k}"
+        );
+        with_tide.push(y);
+    }
+    // The same file without the wave-group tide (its draw and its nominal entry): the noise is
+    // the same draw, the tide is missing — every member differs, by a signal with the tide's
+    // size (the groups' factors against the model tide are a few % of ≈ 0.1 mGal: ≈ 2e-3 mGal
+    // RMS here).
+    let mut no_tide = written.clone();
+    let spec = no_tide.twin.as_mut().unwrap();
+    let fixed = spec.fixed_effects;
+    spec.draws.effects.retain(|e| e.kind != "tidal_gravity");
+    spec.draws.tide_groups = None;
+    let mut i = 0;
+    no_tide.effects.retain(|e| {
+        i += 1;
+        i <= fixed || e.name() != "tidal_gravity"
+    });
+    assert!(no_tide.effects.len() < written.effects.len());
+    let stripped = dir.join("no_tide.toml");
+    std::fs::write(&stripped, no_tide.to_toml()).unwrap();
+    for (k, with) in [1u64, 2].iter().zip(&with_tide) {
+        let y = member_from_cli(&stripped, *k, &dir.join("m_no_tide.csv")).expect("member");
+        let d: Vec<f64> = with.iter().zip(&y).map(|(a, b)| a - b).collect();
+        let rms = (d.iter().map(|v| v * v).sum::<f64>() / d.len() as f64).sqrt();
+        eprintln!("member {k}: the wave-group tide is {rms:.3e} RMS of the member");
+        assert!(
+            rms > 5e-4,
+            "member {k}: dropping the tide changed it by {rms:e} RMS only"
+        );
+    }
 }
