@@ -27,15 +27,7 @@ const HIDDEN_AMPLITUDE: f64 = 0.006;
 const DAYS: f64 = 12.0;
 
 fn record() -> Dataset {
-    let mut ds = real::dataset(&DatasetOptions::with_max_points(15_000));
-    let n = ds.t_s.iter().take_while(|&&t| t < DAYS * 86_400.0).count();
-    ds.t_s.truncate(n);
-    ds.y.truncate(n);
-    ds.segment_start.truncate(n);
-    for c in &mut ds.channels {
-        c.values.truncate(n);
-    }
-    ds
+    real::first_days(DAYS, 15_000)
 }
 
 /// A rounded, skewed wave (fundamental + 2nd harmonic) whose amplitude drifts by ±25 % over the

@@ -12,7 +12,6 @@
 //! family must not take the tide's lines for noise. The record is binned as `accomp discover`
 //! bins it (86 s, 25 000 points per half), 20 members per half: ≈ 5 s per half.
 
-use accomp_host::discover::import::{Dataset, DatasetOptions};
 use accomp_host::discover::select;
 use accomp_host::discover::simulate::{output, simulate_dataset};
 
@@ -25,30 +24,8 @@ const RECORD_OUTSIDE_MAX: f64 = 0.20;
 /// The range a left-out member's outside fraction must fall in (a 5–95 % envelope: ≈ 10 %).
 const MEMBER_OUTSIDE: std::ops::RangeInclusive<f64> = 0.05..=0.15;
 
-/// The points [a·n, b·n) of the record's n points, as a record of its own (a new segment at
-/// its first point).
-fn part(a: f64, b: f64) -> Dataset {
-    // The binning `accomp discover` uses (50 000 points, 86 s).
-    let ds = real::dataset(&DatasetOptions::default());
-    let n = ds.len() as f64;
-    let keep: Vec<usize> = ((a * n) as usize..(b * n) as usize).collect();
-    let pick = |v: &[f64]| keep.iter().map(|&i| v[i]).collect::<Vec<_>>();
-    let mut out = ds.clone();
-    out.t_s = pick(&ds.t_s);
-    out.y = pick(&ds.y);
-    out.segment_start = keep.iter().map(|&i| ds.segment_start[i]).collect();
-    out.segment_start[0] = true;
-    for (c, src) in out.channels.iter_mut().zip(&ds.channels) {
-        c.values = pick(&src.values);
-    }
-    if !ds.samples_per_point.is_empty() {
-        out.samples_per_point = pick(&ds.samples_per_point);
-    }
-    out
-}
-
 fn held_back(a: f64, b: f64) {
-    let ds = part(a, b);
+    let ds = real::part(a, b);
     let s = simulate_dataset(&ds, None, MEMBERS, &select::Config::default()).expect("simulate");
     let text = output::text(&s, &ds.output_unit);
     eprintln!("part {a}..{b} of the record ({} points):\n{text}", ds.len());

@@ -73,6 +73,41 @@ pub fn dataset(opts: &DatasetOptions) -> Dataset {
     import::dataset_from_log(&log, opts).expect("dataset")
 }
 
+/// The record's first `days` days, binned to at most `max_points` over the whole record.
+pub fn first_days(days: f64, max_points: usize) -> Dataset {
+    let mut ds = dataset(&DatasetOptions::with_max_points(max_points));
+    let n = ds.t_s.iter().take_while(|&&t| t < days * 86_400.0).count();
+    ds.t_s.truncate(n);
+    ds.y.truncate(n);
+    ds.segment_start.truncate(n);
+    for c in &mut ds.channels {
+        c.values.truncate(n);
+    }
+    ds
+}
+
+/// The points [a·n, b·n) of the record's n points at the binning `accomp discover` uses, as a
+/// record of its own (a new segment at its first point): a held-back part of the record.
+pub fn part(a: f64, b: f64) -> Dataset {
+    // The binning `accomp discover` uses (50 000 points, 86 s).
+    let ds = dataset(&DatasetOptions::default());
+    let n = ds.len() as f64;
+    let keep: Vec<usize> = ((a * n) as usize..(b * n) as usize).collect();
+    let pick = |v: &[f64]| keep.iter().map(|&i| v[i]).collect::<Vec<_>>();
+    let mut out = ds.clone();
+    out.t_s = pick(&ds.t_s);
+    out.y = pick(&ds.y);
+    out.segment_start = keep.iter().map(|&i| ds.segment_start[i]).collect();
+    out.segment_start[0] = true;
+    for (c, src) in out.channels.iter_mut().zip(&ds.channels) {
+        c.values = pick(&src.values);
+    }
+    if !ds.samples_per_point.is_empty() {
+        out.samples_per_point = pick(&ds.samples_per_point);
+    }
+    out
+}
+
 pub fn residual_after_tide() -> Residual {
     let ds = dataset(&DatasetOptions::with_max_points(import::MAX_MAX_POINTS));
     let (tide_g, _, _) = effects::tide_series(&ds).expect("tide (site and start known)");
