@@ -5,7 +5,7 @@
 //! selection refuses `tidal_gravity` gets the wave-group tide as `tidal_gravity (tidal
 //! analysis)`: the written twin carries it, and the same file without it gives other members.
 
-use accomp_host::discover::import::{self, Dataset, DatasetOptions, Format};
+use accomp_host::discover::import::Dataset;
 use accomp_host::discover::select;
 use accomp_host::discover::simulate::{simulate_dataset, write_scenario};
 use accomp_host::sim::scenario::Scenario;
@@ -14,29 +14,15 @@ use std::path::Path;
 #[path = "common/scratch.rs"]
 mod scratch;
 
-const GMETROLOGY: &str = concat!(
-    env!("CARGO_MANIFEST_DIR"),
-    "/../data/measured/gmetrology_relative_gravimeter_2021-06-08_51d.tsf"
-);
+#[path = "common/real.rs"]
+mod real;
+
+use real::part;
 
 /// Twelve days of the gMetrology record on 15 000 points (keeps the run to a few seconds), with
 /// a knock added.
 fn record() -> Dataset {
-    let path = Path::new(GMETROLOGY);
-    assert!(path.is_file(), "{} missing", path.display());
-    let (log, _) = import::load(path, Format::Auto).expect("record");
-    let opts = DatasetOptions {
-        max_points: 15_000,
-        ..DatasetOptions::default()
-    };
-    let mut ds = import::dataset_from_log(&log, &opts).expect("dataset");
-    let n = ds.t_s.iter().take_while(|&&t| t < 12.0 * 86_400.0).count();
-    ds.t_s.truncate(n);
-    ds.y.truncate(n);
-    ds.segment_start.truncate(n);
-    for c in &mut ds.channels {
-        c.values.truncate(n);
-    }
+    let mut ds = real::first_days(12.0, 15_000);
     // A knock at day 6 like the record's largest (−0.055 mGal over a few samples; the twelve
     // days have none of their own), so that the twin has a transient to draw.
     let at = ds.t_s.iter().take_while(|&&t| t < 6.0 * 86_400.0).count();
@@ -44,31 +30,6 @@ fn record() -> Dataset {
         ds.y[at + k] += dy;
     }
     ds
-}
-
-/// The points [a·n, b·n) of the record at the binning `accomp discover` uses (50 000 points,
-/// 86 s), as a record of its own (a new segment at its first point) — the held-back parts of
-/// `twin_held_back.rs`.
-fn part(a: f64, b: f64) -> Dataset {
-    let path = Path::new(GMETROLOGY);
-    assert!(path.is_file(), "{} missing", path.display());
-    let (log, _) = import::load(path, Format::Auto).expect("record");
-    let ds = import::dataset_from_log(&log, &DatasetOptions::default()).expect("dataset");
-    let n = ds.len() as f64;
-    let keep: Vec<usize> = ((a * n) as usize..(b * n) as usize).collect();
-    let pick = |v: &[f64]| keep.iter().map(|&i| v[i]).collect::<Vec<_>>();
-    let mut out = ds.clone();
-    out.t_s = pick(&ds.t_s);
-    out.y = pick(&ds.y);
-    out.segment_start = keep.iter().map(|&i| ds.segment_start[i]).collect();
-    out.segment_start[0] = true;
-    for (c, src) in out.channels.iter_mut().zip(&ds.channels) {
-        c.values = pick(&src.values);
-    }
-    if !ds.samples_per_point.is_empty() {
-        out.samples_per_point = pick(&ds.samples_per_point);
-    }
-    out
 }
 
 fn member_from_cli(toml: &Path, seed: u64, out: &Path) -> Result<Vec<f64>, String> {
