@@ -196,7 +196,7 @@ pub fn text(s: &Simulation, unit: &str) -> String {
             explained[i] = true;
         }
         let what = if idx.is_empty() {
-            "explains none of the mismatches on its own".to_owned()
+            "explains none of the mismatches, alone or with the other accepted effects".to_owned()
         } else {
             format!(
                 "explains {}",
@@ -217,7 +217,7 @@ pub fn text(s: &Simulation, unit: &str) -> String {
     if !left.is_empty() && !s.before.mismatches.is_empty() {
         let _ = writeln!(
             o,
-            "  not explained by any single effect: {}",
+            "  not explained by the accepted effects, alone or together: {}",
             left.join(", ")
         );
     }
