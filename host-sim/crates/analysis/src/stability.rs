@@ -30,7 +30,7 @@
 //! event line and at each change of sampling phase; no Allan term spans two segments.
 
 use crate::allan::{AllanPoint, Phase, Statistic, TauSet};
-use crate::log::{unit_suffix, Event, Log, LogError, TIME_COLUMN};
+use crate::log::{event_kind, unit_suffix, Event, Log, LogError, TIME_COLUMN};
 use serde::Serialize;
 
 /// Metadata key of the accelerometer scale factor used to convert `_v` columns to g.
@@ -439,7 +439,7 @@ pub const MAX_ALL_TAUS_LEN: usize = 200_000;
 /// them: a new boot (its readings need not continue the last boot's), and another compensation
 /// table (the compensated output's level and scale may jump). A `seq_gap` or `link_lost` is no
 /// boundary: its missing rows are empty grid points already.
-pub const SEGMENT_EVENTS: [&str; 2] = ["board_reset", "table_changed"];
+pub const SEGMENT_EVENTS: [&str; 2] = [event_kind::BOARD_RESET, event_kind::TABLE_CHANGED];
 
 /// Why a continuous segment of a recorder's log starts where it does.
 #[derive(Debug, Clone, PartialEq)]

@@ -417,7 +417,25 @@ pub struct Event {
     pub details: String,
 }
 
+/// The start of a record's event line.
+pub const EVENT_LINE_PREFIX: &str = "# event:";
+
+/// Event kinds more than one crate acts on: the recorder writes them, the analysis starts a
+/// new continuous segment at them.
+pub mod event_kind {
+    /// The board restarted (a new boot, seen by READY, the boot id or seq going back).
+    pub const BOARD_RESET: &str = "board_reset";
+    /// Another compensation table became active.
+    pub const TABLE_CHANGED: &str = "table_changed";
+}
+
 impl Event {
+    /// The line a record holds for an event, newline included: `# event: <UTC> <kind>
+    /// <details>` (`utc` in the `start_utc` form).
+    pub fn line(utc: impl fmt::Display, kind: &str, details: &str) -> String {
+        format!("{EVENT_LINE_PREFIX} {utc} {kind} {details}\n")
+    }
+
     /// The event of the text after `# event:` (trimmed), before row `row`.
     fn parse(row: usize, text: &str) -> Self {
         let mut words = text.splitn(3, ' ');
@@ -746,7 +764,7 @@ impl Log {
         let mut events = self.events.iter().peekable();
         for row in 0..=self.rows {
             while let Some(e) = events.next_if(|e| e.row <= row) {
-                writeln!(w, "# event: {} {} {}", e.utc, e.kind, e.details)?;
+                w.write_all(Event::line(&e.utc, &e.kind, &e.details).as_bytes())?;
             }
             if row == self.rows {
                 break;

@@ -26,8 +26,8 @@
 use std::collections::VecDeque;
 use std::io::{BufRead, Chain, Cursor, Read};
 
-/// The start of an event line, allowed among the rows.
-pub const EVENT_PREFIX: &[u8] = b"# event:";
+/// The start of an event line, allowed among the rows ([`crate::Event::line`] writes it).
+pub const EVENT_PREFIX: &[u8] = crate::EVENT_LINE_PREFIX.as_bytes();
 
 /// An event line met among the records (`# event: <UTC> <kind> <details>`).
 #[derive(Debug, Clone, PartialEq, Eq)]

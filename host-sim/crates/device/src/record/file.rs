@@ -518,7 +518,7 @@ impl RecordFile {
                 c => c,
             })
             .collect();
-        let line = format!("# event: {} {kind} {details}\n", Utc(unix_s));
+        let line = accomp_log::Event::line(Utc(unix_s), kind, &details);
         self.w
             .write_all(line.as_bytes())
             .map_err(io_err(&self.path))?;

@@ -377,7 +377,7 @@ impl Recorder<'_> {
                     self.clock.new_boot();
                     self.event(
                         pc,
-                        "board_reset",
+                        accomp_log::event_kind::BOARD_RESET,
                         format!(
                             "seq restarted at {} after {last} (no READY seen)",
                             frame.seq
@@ -643,7 +643,7 @@ pub fn record(
                         r.last_seq = None;
                         r.event(
                             t,
-                            "board_reset",
+                            accomp_log::event_kind::BOARD_RESET,
                             format!(
                                 "uptime {:.3} s, reset cause {:#04x}, boot id {boot_id:#010x}: \
                                  a new boot",
@@ -660,7 +660,11 @@ pub fn record(
                                 .map_or_else(|| "none".into(), |id| format!("{id:#010x}"));
                             if old.1 != now {
                                 let old = old.1.clone();
-                                r.event(t, "table_changed", format!("{old} -> {now}"))?;
+                                r.event(
+                                    t,
+                                    accomp_log::event_kind::TABLE_CHANGED,
+                                    format!("{old} -> {now}"),
+                                )?;
                             }
                         }
                     }
@@ -728,7 +732,7 @@ pub fn record(
                         r.last_boot_id = Some(info.boot.boot_id);
                         r.event(
                             t,
-                            "board_reset",
+                            accomp_log::event_kind::BOARD_RESET,
                             format!(
                                 "READY: a new boot, reset cause {:#04x}, boot id {:#010x}; \
                                  stream restarted",
