@@ -72,17 +72,21 @@ fn fields(text: &str) -> Option<Fields> {
 
 /// Parses a record's time stamp, `YYYY-MM-DD[T ]HH:MM[:SS[.fff]][Z]`, to Unix seconds (the
 /// lenient reading of [`Utc::parse`]: `Z` and seconds may be left out; see
-/// [`civil_unix_seconds`] for the range).
+/// [`Fields::unix_seconds`] for the range).
 pub fn parse_utc(text: &str) -> Option<f64> {
     let f = fields(text)?;
     f.unix_seconds(f.second.unwrap_or(0.0))
 }
 
 impl Fields {
-    /// Unix seconds of these fields with `second` ([`civil_unix_seconds`]).
+    /// Unix seconds of these fields with `second`, by the core's calendar ([`UtcTime::new`],
+    /// [`UtcTime::posix_seconds`]: whole seconds in exact integer arithmetic, the fraction added
+    /// after). `None` for a day or time that does not exist, or outside what the tide model
+    /// takes (years 1600–2400; a leap second's 60.x s is accepted there and counted
+    /// POSIX-style, as the next minute's first second).
     fn unix_seconds(&self, second: f64) -> Option<f64> {
         let small = |v: i64| u8::try_from(v).ok();
-        civil_unix_seconds(
+        let t = UtcTime::new(
             i32::try_from(self.date.0).ok()?,
             small(self.date.1)?,
             small(self.date.2)?,
@@ -90,27 +94,9 @@ impl Fields {
             small(self.hour_minute.1)?,
             second,
         )
+        .ok()?;
+        Some(t.posix_seconds())
     }
-}
-
-/// Unix seconds of a checked calendar instant, by the core's calendar
-/// ([`UtcTime::posix_seconds`]: whole seconds in exact integer arithmetic, the fraction added
-/// after). `None` for a day or time that does not exist, or outside what the tide model takes
-/// (`accomp::tide::UtcTime`: years 1600–2400; a leap second's 60.x s is accepted there and
-/// counted POSIX-style, as the next minute's first second).
-pub fn civil_unix_seconds(
-    year: i32,
-    month: u8,
-    day: u8,
-    hour: u8,
-    minute: u8,
-    second: f64,
-) -> Option<f64> {
-    Some(
-        UtcTime::new(year, month, day, hour, minute, second)
-            .ok()?
-            .posix_seconds(),
-    )
 }
 
 /// Formats Unix seconds as `YYYY-MM-DDTHH:MM:SS.sssZ` (always milliseconds; the date from
@@ -141,7 +127,7 @@ impl CivilMs {
 
 impl Utc {
     /// Parses `YYYY-MM-DDTHH:MM:SS[.fraction]Z` (a space may replace the `T`; years
-    /// 1600–2400, [`civil_unix_seconds`]).
+    /// 1600–2400, [`Fields::unix_seconds`]).
     pub fn parse(s: &str) -> Result<Utc, UtcParseError> {
         let err = || UtcParseError(s.to_string());
         let f = fields(s).ok_or_else(err)?;
@@ -268,7 +254,9 @@ mod tests {
             for mo in 1..=12u8 {
                 let last = Date::new(y as i16, mo as i8, 1).unwrap().days_in_month() as u8;
                 for d in [1, last] {
-                    let core = civil_unix_seconds(y, mo, d, 13, 47, 29.25).unwrap();
+                    let core = UtcTime::new(y, mo, d, 13, 47, 29.25)
+                        .unwrap()
+                        .posix_seconds();
                     let old = jiff_seconds(y as i16, mo as i8, d as i8, 13, 47, 29) + 0.25;
                     assert_eq!(core, old, "{y}-{mo}-{d}");
                     checked += 1;
@@ -277,11 +265,7 @@ mod tests {
         }
         assert!(checked > 2_000);
         for (y, leap) in [(2024, true), (2000, true), (1900, false), (2100, false)] {
-            assert_eq!(
-                civil_unix_seconds(y, 2, 29, 0, 0, 0.0).is_some(),
-                leap,
-                "{y}"
-            );
+            assert_eq!(UtcTime::new(y, 2, 29, 0, 0, 0.0).is_ok(), leap, "{y}");
         }
         // Outside the core's years: refused by both readings.
         assert_eq!(parse_utc("1599-12-31T00:00:00Z"), None);
