@@ -20,6 +20,14 @@ fn board_service() -> Service<BoardFlash> {
 /// The frame id of every [`call`].
 const CALL_ID: u32 = 5;
 
+/// A board service whose active table is `t`, uploaded and committed as upload 1.
+fn service_with_active(t: &CalibrationTable) -> Service<BoardFlash> {
+    let mut s = board_service();
+    let r = upload(&mut s, &t.encode(), 1);
+    assert!(matches!(r, DeviceMessage::Response { .. }), "{r:?}");
+    s
+}
+
 fn call(s: &mut Service<BoardFlash>, request: Request) -> DeviceMessage {
     s.handle(
         HostFrame {
@@ -84,11 +92,7 @@ fn each_flash_error_of_a_commit_has_its_code_and_the_retry_commits() {
     ];
     let (t1, t2) = two_tables();
     for (flag, code) in cases {
-        let mut s = board_service();
-        assert!(matches!(
-            upload(&mut s, &t1.encode(), 1),
-            DeviceMessage::Response { .. }
-        ));
+        let mut s = service_with_active(&t1);
         let _ = s.erase_ahead(&|| 0);
         model(&mut s).fail_next = Some(flag);
         let r = upload(&mut s, &t2.encode(), 2);
@@ -120,8 +124,7 @@ fn each_flash_error_of_a_commit_has_its_code_and_the_retry_commits() {
 #[test]
 fn write_protected_calibration_sectors_are_named_and_nothing_is_lost() {
     let (t1, t2) = two_tables();
-    let mut s = board_service();
-    upload(&mut s, &t1.encode(), 1);
+    let mut s = service_with_active(&t1);
     upload(&mut s, &t2.encode(), 2);
     model(&mut s).n_wrp &= !(0b111 << 9);
     let wrp = refused(ErrorCode::FlashWriteProtected);
@@ -139,8 +142,7 @@ fn write_protected_calibration_sectors_are_named_and_nothing_is_lost() {
 #[test]
 fn a_locked_flash_controller_is_named() {
     let (t1, t2) = two_tables();
-    let mut s = board_service();
-    upload(&mut s, &t1.encode(), 1);
+    let mut s = service_with_active(&t1);
     model(&mut s).key(0);
     let r = upload(&mut s, &t2.encode(), 2);
     assert_eq!(r, refused(ErrorCode::FlashLocked));
