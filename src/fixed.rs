@@ -78,16 +78,12 @@ pub(crate) fn from_f64(v: f64, bits: u32) -> Option<i64> {
 
 /// f32 → fixed with `bits` (≥ 40) fraction bits, truncated towards zero to 2^-40 when |v| < 2^-9
 /// (the tilt correction, the root series' c·g, the linearized ΔE): one VMUL and one VCVT on the
-/// M4F; larger values through f64, rounded. None when not finite or out of [`from_f64`]'s range.
+/// M4F; larger values exactly. None when not finite or |v|·2^bits ≥ 2^61.
 #[inline]
 pub(crate) fn from_f32(v: f32, bits: u32) -> Option<i64> {
-    // Both powers of two are exact in f32; the comparison also refuses NaN.
-    let scaled = v * (pow2(F32_FRACTION_BITS) as f32);
-    if scaled.abs() < 2_147_483_648.0 {
-        Some(i64::from(scaled as i32) << (bits - F32_FRACTION_BITS))
-    } else {
-        from_f32_wide(v, bits)
-    }
+    // [`from_f32_truncated`] with the 2^-40 fast resolution. Beyond 2^-9 a 24-bit significand
+    // times 2^bits (bits ≥ 40) is a whole number, so its exact conversion is also the rounded one.
+    from_f32_truncated(v, F32_FRACTION_BITS, bits)
 }
 
 /// [`from_f32`] for a value the caller has bounded below 2^-9 in magnitude (from the table, at
@@ -116,17 +112,12 @@ pub(crate) fn f32_to_f64(v: f32) -> f64 {
     f64::from_bits((u64::from(high) << 32) | u64::from(bits << 29))
 }
 
-/// [`from_f32`] beyond 2^-9, through f64 and rounded: out of line (the rare side; flash).
-#[inline(never)]
-fn from_f32_wide(v: f32, bits: u32) -> Option<i64> {
-    from_f64(f64::from(v), bits)
-}
-
 /// f32 → fixed with `bits` (≥ `fast_bits`) fraction bits, truncated towards zero to
 /// 2^-`fast_bits` when |v| < 2^(31 − `fast_bits`) (one VMUL and one VCVT), exactly
 /// ([`from_f32_exact`]) beyond. None when not finite or out of range.
 #[inline]
 pub(crate) fn from_f32_truncated(v: f32, fast_bits: u32, bits: u32) -> Option<i64> {
+    // Both powers of two are exact in f32; the comparison also refuses NaN.
     let scaled = v * (pow2(fast_bits) as f32);
     if scaled.abs() < 2_147_483_648.0 {
         Some(i64::from(scaled as i32) << (bits - fast_bits))
@@ -344,6 +335,10 @@ mod tests {
                 let got = from_f32(v, bits).unwrap();
                 let err = to_f64(got, bits) - f64::from(v);
                 assert!(err.abs() < pow2(40).recip(), "{v:e}: {err:e}");
+                // Beyond 2^-9 the value is a whole number of 2^-bits: rounded through f64 alike.
+                if f64::from(v).abs() >= pow2(9).recip() {
+                    assert_eq!(Some(got), from_f64(f64::from(v), bits), "{v:e}");
+                }
             }
         }
         assert_eq!(from_f32(f32::NAN, G_BITS), None);
@@ -482,7 +477,8 @@ mod tests {
             let exact = (i128::from(x) * i128::from(y)) >> 64;
             assert_eq!(i128::from(mul_hi(x, y)), exact, "{x} {y}");
         }
-        for x in [
+        // Every pair of the extremes and the 32-bit word edges.
+        let edges = [
             i64::MIN,
             i64::MAX,
             -1,
@@ -491,17 +487,9 @@ mod tests {
             1 << 32,
             -(1 << 32),
             u32::MAX as i64,
-        ] {
-            for y in [
-                i64::MIN,
-                i64::MAX,
-                -1,
-                0,
-                1,
-                1 << 32,
-                -(1 << 32),
-                u32::MAX as i64,
-            ] {
+        ];
+        for x in edges {
+            for y in edges {
                 let exact = (i128::from(x) * i128::from(y)) >> 64;
                 assert_eq!(i128::from(mul_hi(x, y)), exact, "{x} {y}");
             }

@@ -26,18 +26,9 @@ mod hidden;
 #[path = "../tests/common/synth.rs"]
 mod synth;
 
+use accomp_host::numerics::series::central_difference;
 use accomp_host::sim::noise::AllanParams;
 use rand::Rng;
-
-fn central_diff(x: &[f64], dt: f64) -> Vec<f64> {
-    let n = x.len();
-    (0..n)
-        .map(|i| {
-            let (a, b) = (i.saturating_sub(1), (i + 1).min(n - 1));
-            (x[b] - x[a]) / ((b - a) as f64 * dt)
-        })
-        .collect()
-}
 
 fn moving_average(x: &[f64], half: usize) -> Vec<f64> {
     let n = x.len();
@@ -212,7 +203,7 @@ fn main() {
                 (dt, t, w, s)
             };
             let n = t_true.len();
-            let rate = central_diff(&t_true, dt);
+            let rate = central_difference(&t_true, dt);
             let rms = (rate.iter().map(|v| v * v).sum::<f64>() / n as f64).sqrt();
             // 2 µg rms of coupling.
             let g = 2.0e-6 / rms;
@@ -233,8 +224,8 @@ fn main() {
             };
             let half = (900.0 / dt).round() as usize;
             let regressors = [
-                central_diff(&reading, dt),
-                central_diff(&moving_average(&reading, half), dt),
+                central_difference(&reading, dt),
+                central_difference(&moving_average(&reading, half), dt),
                 wiener_rate(&reading, dt, None),
                 wiener_rate(
                     &reading,

@@ -157,7 +157,7 @@ fn a_rate_coupling_through_a_small_lag_in_the_real_residual_is_a_rate_coupling_o
         let tau = rng.random_range(120.0..300.0);
         let (w, st, unit, g) = draw(&res, &wins, &mut rng, 25.0..40.0, |st| {
             // Central differences of the lagged TRUE temperature, °C/s.
-            synth::central_diff(&synth::low_pass(&st.temp_true_c, DT_S, tau), DT_S)
+            synth::central_difference(&synth::low_pass(&st.temp_true_c, DT_S, tau), DT_S)
         });
         let d = run_with_coupling(&res, &w, &unit, g, &st);
         eprintln!(

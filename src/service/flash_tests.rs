@@ -17,8 +17,33 @@ fn board_service() -> Service<BoardFlash> {
     )
 }
 
+/// The frame id of every [`call`].
+const CALL_ID: u32 = 5;
+
+/// A board service whose active table is `t`, uploaded and committed as upload 1.
+fn service_with_active(t: &CalibrationTable) -> Service<BoardFlash> {
+    let mut s = board_service();
+    let r = upload(&mut s, &t.encode(), 1);
+    assert!(matches!(r, DeviceMessage::Response { .. }), "{r:?}");
+    s
+}
+
 fn call(s: &mut Service<BoardFlash>, request: Request) -> DeviceMessage {
-    s.handle(HostFrame { id: 5, request }, &|| 0)
+    s.handle(
+        HostFrame {
+            id: CALL_ID,
+            request,
+        },
+        &|| 0,
+    )
+}
+
+/// The service's answer to a [`call`] it refuses with `code`.
+fn refused(code: ErrorCode) -> DeviceMessage {
+    DeviceMessage::Error {
+        id: CALL_ID,
+        error: code.reply(0),
+    }
 }
 
 fn upload(s: &mut Service<BoardFlash>, bytes: &[u8], uid: u32) -> DeviceMessage {
@@ -67,22 +92,11 @@ fn each_flash_error_of_a_commit_has_its_code_and_the_retry_commits() {
     ];
     let (t1, t2) = two_tables();
     for (flag, code) in cases {
-        let mut s = board_service();
-        assert!(matches!(
-            upload(&mut s, &t1.encode(), 1),
-            DeviceMessage::Response { .. }
-        ));
+        let mut s = service_with_active(&t1);
         let _ = s.erase_ahead(&|| 0);
         model(&mut s).fail_next = Some(flag);
         let r = upload(&mut s, &t2.encode(), 2);
-        assert_eq!(
-            r,
-            DeviceMessage::Error {
-                id: 5,
-                error: code.reply(0)
-            },
-            "flag {flag:#x}"
-        );
+        assert_eq!(r, refused(code), "flag {flag:#x}");
         assert_eq!(tables(&mut s), (Some(t1.id()), None), "active kept");
         assert_eq!(model(&mut s).sr & sr::ERRORS, 0, "flag left set");
         let r = upload(&mut s, &t2.encode(), 3);
@@ -110,14 +124,10 @@ fn each_flash_error_of_a_commit_has_its_code_and_the_retry_commits() {
 #[test]
 fn write_protected_calibration_sectors_are_named_and_nothing_is_lost() {
     let (t1, t2) = two_tables();
-    let mut s = board_service();
-    upload(&mut s, &t1.encode(), 1);
+    let mut s = service_with_active(&t1);
     upload(&mut s, &t2.encode(), 2);
     model(&mut s).n_wrp &= !(0b111 << 9);
-    let wrp = DeviceMessage::Error {
-        id: 5,
-        error: ErrorCode::FlashWriteProtected.reply(0),
-    };
+    let wrp = refused(ErrorCode::FlashWriteProtected);
     assert_eq!(call(&mut s, Request::Rollback), wrp);
     assert_eq!(tables(&mut s), (Some(t2.id()), Some(t1.id())));
     model(&mut s).n_wrp = 0x0FFF;
@@ -132,16 +142,9 @@ fn write_protected_calibration_sectors_are_named_and_nothing_is_lost() {
 #[test]
 fn a_locked_flash_controller_is_named() {
     let (t1, t2) = two_tables();
-    let mut s = board_service();
-    upload(&mut s, &t1.encode(), 1);
+    let mut s = service_with_active(&t1);
     model(&mut s).key(0);
     let r = upload(&mut s, &t2.encode(), 2);
-    assert_eq!(
-        r,
-        DeviceMessage::Error {
-            id: 5,
-            error: ErrorCode::FlashLocked.reply(0)
-        }
-    );
+    assert_eq!(r, refused(ErrorCode::FlashLocked));
     assert_eq!(tables(&mut s), (Some(t1.id()), None));
 }

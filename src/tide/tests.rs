@@ -17,23 +17,43 @@ fn close(actual: f64, expected: f64, tol: f64) -> bool {
 // ----- time ---------------------------------------------------------------------------------
 
 #[test]
-fn julian_date_matches_published_instants() {
+fn julian_date_and_posix_seconds_match_published_instants() {
     // J2000.0 by definition; 1990-01-01 0h (the ETERNA test epoch); Meeus example 7.a
     // (1957 Oct 4.81 = 19:26:24 → 2436116.31) and 7.b context (1987 June 19.5 → 2446966.0).
+    // POSIX seconds from `date -u -d <instant> +%s`.
     let cases = [
-        (UtcTime::new(2000, 1, 1, 12, 0, 0.0), 2_451_545.0),
-        (UtcTime::new(1990, 1, 1, 0, 0, 0.0), 2_447_892.5),
-        (UtcTime::new(1957, 10, 4, 19, 26, 24.0), 2_436_116.31),
-        (UtcTime::new(1987, 6, 19, 12, 0, 0.0), 2_446_966.0),
-        (UtcTime::new(1970, 1, 1, 0, 0, 0.0), 2_440_587.5),
+        (
+            UtcTime::new(2000, 1, 1, 12, 0, 0.0),
+            2_451_545.0,
+            946_728_000.0,
+        ),
+        (
+            UtcTime::new(1990, 1, 1, 0, 0, 0.0),
+            2_447_892.5,
+            631_152_000.0,
+        ),
+        (
+            UtcTime::new(1957, 10, 4, 19, 26, 24.0),
+            2_436_116.31,
+            -386_310_816.0,
+        ),
+        (
+            UtcTime::new(1987, 6, 19, 12, 0, 0.0),
+            2_446_966.0,
+            551_102_400.0,
+        ),
+        (UtcTime::new(1970, 1, 1, 0, 0, 0.0), 2_440_587.5, 0.0),
     ];
-    for (t, jd) in cases {
+    for (t, jd, posix_s) in cases {
         let t = t.unwrap();
         assert!(
             close(t.julian_date(), jd, 1e-6),
             "{t:?}: {}",
             t.julian_date()
         );
+        // Exact (integer day count); the Julian-date route agrees to its f64 day's ~10 µs.
+        assert_eq!(t.posix_seconds(), posix_s, "{t:?}");
+        assert!(close(t.unix_seconds(), posix_s, 1e-4), "{t:?}");
     }
 }
 

@@ -73,24 +73,40 @@ impl UtcTime {
     }
 
     /// Julian date (UTC-based) of this instant.
-    ///
-    /// Integer day number by the Fliegel–Van Flandern formula (all quotients are of positive
-    /// numbers for years after −4800, so Rust's truncating division is the floor it needs).
     pub fn julian_date(&self) -> f64 {
-        let a = (14 - i64::from(self.month)) / 12;
-        let y = i64::from(self.year) + 4800 - a;
-        let m = i64::from(self.month) + 12 * a - 3;
-        let jdn =
-            i64::from(self.day) + (153 * m + 2) / 5 + 365 * y + y / 4 - y / 100 + y / 400 - 32_045;
         let day_fraction =
             (f64::from(self.hour) * 3600.0 + f64::from(self.minute) * 60.0 + self.second)
                 / SECONDS_PER_DAY;
-        jdn as f64 - 0.5 + day_fraction
+        self.julian_day_number() as f64 - 0.5 + day_fraction
+    }
+
+    /// Julian day number of the date (the Julian day that begins at its noon), by the
+    /// Fliegel–Van Flandern formula (all quotients are of positive numbers for years after
+    /// −4800, so Rust's truncating division is the floor it needs).
+    fn julian_day_number(&self) -> i64 {
+        let a = (14 - i64::from(self.month)) / 12;
+        let y = i64::from(self.year) + 4800 - a;
+        let m = i64::from(self.month) + 12 * a - 3;
+        i64::from(self.day) + (153 * m + 2) / 5 + 365 * y + y / 4 - y / 100 + y / 400 - 32_045
     }
 
     /// Seconds since 1970-01-01 00:00 UTC (Unix time, no leap seconds).
     pub fn unix_seconds(&self) -> f64 {
         unix_seconds_from_julian_date(self.julian_date())
+    }
+
+    /// Seconds since 1970-01-01 00:00 UTC (POSIX: no leap seconds; a leap second's 60.x s
+    /// counts as the next minute's first second), the whole seconds in exact integer
+    /// arithmetic and the fraction added after: what a log's `time_s` is computed from.
+    /// [`Self::unix_seconds`] goes through the f64 Julian date and loses ~10 µs to its day
+    /// count, which would jitter a time stamp.
+    pub fn posix_seconds(&self) -> f64 {
+        // Julian day number of 1970-01-01.
+        const UNIX_EPOCH_JDN: i64 = 2_440_588;
+        let whole = (self.julian_day_number() - UNIX_EPOCH_JDN) * 86_400
+            + i64::from(self.hour) * 3600
+            + i64::from(self.minute) * 60;
+        whole as f64 + self.second
     }
 }
 

@@ -351,19 +351,10 @@ pub fn draw_noise(rng: &mut ChaCha8Rng) -> SensorNoise {
 
 /// The rate of change of the true temperature, °C/s: central differences, one-sided at the ends.
 pub fn true_rate_c_per_s(st: &Station) -> Vec<f64> {
-    central_diff(&st.temp_true_c, st.dt_s)
+    central_difference(&st.temp_true_c, st.dt_s)
 }
 
-/// Central differences of `x` sampled every `dt_s` (one-sided at the two ends), per second.
-pub fn central_diff(x: &[f64], dt_s: f64) -> Vec<f64> {
-    let n = x.len();
-    (0..n)
-        .map(|i| {
-            let (a, b) = (i.saturating_sub(1), (i + 1).min(n - 1));
-            (x[b] - x[a]) / ((b - a) as f64 * dt_s)
-        })
-        .collect()
-}
+pub use accomp_host::numerics::series::central_difference;
 
 /// What a coupling of `k` per °C through a lag adds to the output: k·(lagged − temp), per point.
 pub fn lag_error(lagged: &[f64], temp: &[f64], k: f64) -> Vec<f64> {

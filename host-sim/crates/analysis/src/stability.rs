@@ -979,16 +979,7 @@ mod tests {
         for k in 0..11 {
             text.push_str(&format!("{},5\n", 10.4 + f64::from(k)));
         }
-        let opts = Options {
-            columns: vec!["k1_g".into()],
-            ..Options::default()
-        };
-        let rep = analyse(&Log::parse_str(&text).unwrap(), &opts).unwrap();
-        let c = &rep.columns[0];
-        let p = &c.adev[0];
-        assert_eq!((p.m, p.n_terms), (1, 19));
-        assert!((p.dev - (9.0f64 / 38.0).sqrt()).abs() < 1e-12, "{}", p.dev);
-        let note = c.allan_note.as_deref().unwrap();
+        let note = two_segments_of_9_and_10_differences(&text);
         assert!(
             note.starts_with("2 continuous segments (1 phase change)")
                 && note.contains("10.4 (the sampling phase changes)"),
@@ -996,7 +987,7 @@ mod tests {
         );
         // The same rows without the recorder's mark: refused as off the grid, as before.
         let plain = text.replacen("# recorder: accomp record 0.1.0\n", "", 1);
-        let rep = analyse(&Log::parse_str(&plain).unwrap(), &opts).unwrap();
+        let rep = analyse(&Log::parse_str(&plain).unwrap(), &k1_only()).unwrap();
         assert!(rep.columns[0].adev.is_empty());
         assert!(rep.columns[0]
             .allan_note
@@ -1005,12 +996,24 @@ mod tests {
             .contains("off the"));
     }
 
-    /// The options of the tests below: `k1_g` alone, octave taus.
+    /// The options of the segment tests: `k1_g` alone, octave taus.
     fn k1_only() -> Options {
         Options {
             columns: vec!["k1_g".into()],
             ..Options::default()
         }
+    }
+
+    /// Boot 1's readings 0, 1, 0, 1, … over t = 0..9 s and a constant after a split: at
+    /// tau = 1 s the segments' own terms are boot 1's 9 first differences (±1) and the second
+    /// segment's 10 (0), σ² = 9 / (2 · 19). Checks that point and returns the Allan note.
+    fn two_segments_of_9_and_10_differences(text: &str) -> String {
+        let rep = analyse(&Log::parse_str(text).unwrap(), &k1_only()).unwrap();
+        let c = &rep.columns[0];
+        let p = &c.adev[0];
+        assert_eq!((p.m, p.n_terms), (1, 19));
+        assert!((p.dev - (9.0f64 / 38.0).sqrt()).abs() < 1e-12, "{}", p.dev);
+        c.allan_note.clone().unwrap()
     }
 
     #[test]
@@ -1033,12 +1036,7 @@ mod tests {
         for k in 10..21 {
             text.push_str(&format!("{k},5\n"));
         }
-        let rep = analyse(&Log::parse_str(&text).unwrap(), &k1_only()).unwrap();
-        let c = &rep.columns[0];
-        let p = &c.adev[0];
-        assert_eq!((p.m, p.n_terms), (1, 19));
-        assert!((p.dev - (9.0f64 / 38.0).sqrt()).abs() < 1e-12, "{}", p.dev);
-        let note = c.allan_note.as_deref().unwrap();
+        let note = two_segments_of_9_and_10_differences(&text);
         assert!(
             note.starts_with("2 continuous segments (1 board_reset)")
                 && note.contains("10 (board_reset event at 2026-01-01T00:00:10Z)"),

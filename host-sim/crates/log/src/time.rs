@@ -1,39 +1,18 @@
 //! UTC instants as seconds since the Unix epoch, parsed from and printed as ISO 8601
 //! (`YYYY-MM-DDTHH:MM:SS[.fff]Z`): the one place the host reads and writes a time stamp (the
 //! simulator's `start_utc`, the discovery's record formats). Leap seconds are ignored (POSIX time), which is far below what
-//! a daily tide or thermal cycle can notice. The calendar (which days exist, day counts) is
-//! jiff's; only the f64 seconds are ours, because the simulator and the analyses count time in
-//! f64 seconds.
+//! a daily tide or thermal cycle can notice. A civil time becomes seconds through the core's
+//! calendar ([`UtcTime::new`] decides which days exist, [`UtcTime::posix_seconds`] counts them),
+//! the same conversion the tide model uses; printing takes the civil date of a day count from
+//! jiff. The seconds are f64 because the simulator and the analyses count time in f64 seconds.
 
 use std::fmt;
 
-use jiff::civil::{Date, DateTime};
+use jiff::civil::Date;
 use jiff::tz::TimeZone;
 use jiff::Timestamp;
 
 use accomp::tide::UtcTime;
-
-/// POSIX seconds of a civil UTC date and time (whole seconds), `None` for a day or time that
-/// does not exist or a year outside jiff's −9999..=9999.
-pub fn posix_seconds(y: i64, mo: i64, d: i64, h: i64, mi: i64, s: i64) -> Option<i64> {
-    let small = |v: i64| i8::try_from(v).ok();
-    let dt = DateTime::new(
-        i16::try_from(y).ok()?,
-        small(mo)?,
-        small(d)?,
-        small(h)?,
-        small(mi)?,
-        small(s)?,
-        0,
-    )
-    .ok()?;
-    Some(
-        dt.to_zoned_datetime(TimeZone::UTC)
-            .ok()?
-            .timestamp()
-            .as_second(),
-    )
-}
 
 /// The civil UTC date of POSIX second `s` (`None` outside jiff's years −9999..=9999).
 pub fn utc_date(s: i64) -> Option<Date> {
@@ -93,44 +72,31 @@ fn fields(text: &str) -> Option<Fields> {
 
 /// Parses a record's time stamp, `YYYY-MM-DD[T ]HH:MM[:SS[.fff]][Z]`, to Unix seconds (the
 /// lenient reading of [`Utc::parse`]: `Z` and seconds may be left out; see
-/// [`civil_unix_seconds`] for the range).
+/// [`Fields::unix_seconds`] for the range).
 pub fn parse_utc(text: &str) -> Option<f64> {
     let f = fields(text)?;
-    let small = |v: i64| u8::try_from(v).ok();
-    civil_unix_seconds(
-        i32::try_from(f.date.0).ok()?,
-        small(f.date.1)?,
-        small(f.date.2)?,
-        small(f.hour_minute.0)?,
-        small(f.hour_minute.1)?,
-        f.second.unwrap_or(0.0),
-    )
+    f.unix_seconds(f.second.unwrap_or(0.0))
 }
 
-/// Unix seconds of a checked calendar instant: whole seconds from jiff's calendar
-/// ([`posix_seconds`], exact integer arithmetic — the Julian-date route of
-/// `UtcTime::unix_seconds` loses ~10 µs to the f64 day count, which would jitter `time_s`), the
-/// fraction added after. `None` for a day or time that does not exist, or outside what the tide
-/// model takes (`accomp::tide::UtcTime`: years 1600–2400; a leap second's 60.x s is accepted
-/// there and counted POSIX-style, as the next minute's first second).
-pub fn civil_unix_seconds(
-    year: i32,
-    month: u8,
-    day: u8,
-    hour: u8,
-    minute: u8,
-    second: f64,
-) -> Option<f64> {
-    UtcTime::new(year, month, day, hour, minute, second).ok()?;
-    let whole = posix_seconds(
-        i64::from(year),
-        i64::from(month),
-        i64::from(day),
-        i64::from(hour),
-        i64::from(minute),
-        0,
-    )?;
-    Some(whole as f64 + second)
+impl Fields {
+    /// Unix seconds of these fields with `second`, by the core's calendar ([`UtcTime::new`],
+    /// [`UtcTime::posix_seconds`]: whole seconds in exact integer arithmetic, the fraction added
+    /// after). `None` for a day or time that does not exist, or outside what the tide model
+    /// takes (years 1600–2400; a leap second's 60.x s is accepted there and counted
+    /// POSIX-style, as the next minute's first second).
+    fn unix_seconds(&self, second: f64) -> Option<f64> {
+        let small = |v: i64| u8::try_from(v).ok();
+        let t = UtcTime::new(
+            i32::try_from(self.date.0).ok()?,
+            small(self.date.1)?,
+            small(self.date.2)?,
+            small(self.hour_minute.0)?,
+            small(self.hour_minute.1)?,
+            second,
+        )
+        .ok()?;
+        Some(t.posix_seconds())
+    }
 }
 
 /// Formats Unix seconds as `YYYY-MM-DDTHH:MM:SS.sssZ` (always milliseconds; the date from
@@ -160,7 +126,8 @@ impl CivilMs {
 }
 
 impl Utc {
-    /// Parses `YYYY-MM-DDTHH:MM:SS[.fraction]Z` (a space may replace the `T`).
+    /// Parses `YYYY-MM-DDTHH:MM:SS[.fraction]Z` (a space may replace the `T`; years
+    /// 1600–2400, [`Fields::unix_seconds`]).
     pub fn parse(s: &str) -> Result<Utc, UtcParseError> {
         let err = || UtcParseError(s.to_string());
         let f = fields(s).ok_or_else(err)?;
@@ -168,10 +135,7 @@ impl Utc {
         if !f.zulu || !(0.0..60.0).contains(&sec) {
             return Err(err());
         }
-        let ((y, mo, d), (h, mi)) = (f.date, f.hour_minute);
-        // jiff decides whether the day and the clock time exist.
-        let whole = posix_seconds(y, mo, d, h, mi, 0).ok_or_else(err)?;
-        Ok(Utc(whole as f64 + sec))
+        f.unix_seconds(sec).map(Utc).ok_or_else(err)
     }
 
     /// The civil date and time, rounded to the millisecond (`None` beyond jiff's years).
@@ -268,6 +232,44 @@ mod tests {
         // Rounding to the millisecond carries into the minute (was "00:00:60.000").
         assert_eq!(format_utc(1_623_110_459.999_6), "2021-06-08T00:01:00.000Z");
         assert_eq!(parse_utc("2021-06-08-01T00:00:00Z"), None);
+    }
+
+    /// Civil time to seconds was jiff's calendar here and the core's Julian day count in the
+    /// tide model; it is now the core's alone. Checked against jiff (an independent calendar)
+    /// over the years the core takes: every 1st and last day of a month at an odd time of day,
+    /// and 29 February of leap and century years.
+    #[test]
+    fn the_cores_conversion_agrees_with_jiffs_calendar_over_its_years() {
+        use jiff::civil::DateTime;
+        let jiff_seconds = |y: i16, mo: i8, d: i8, h: i8, mi: i8, s: i8| {
+            DateTime::new(y, mo, d, h, mi, s, 0)
+                .unwrap()
+                .to_zoned_datetime(TimeZone::UTC)
+                .unwrap()
+                .timestamp()
+                .as_second() as f64
+        };
+        let mut checked = 0;
+        for y in (1600..=2400).step_by(7).chain([1900, 2000, 2100, 2400]) {
+            for mo in 1..=12u8 {
+                let last = Date::new(y as i16, mo as i8, 1).unwrap().days_in_month() as u8;
+                for d in [1, last] {
+                    let core = UtcTime::new(y, mo, d, 13, 47, 29.25)
+                        .unwrap()
+                        .posix_seconds();
+                    let old = jiff_seconds(y as i16, mo as i8, d as i8, 13, 47, 29) + 0.25;
+                    assert_eq!(core, old, "{y}-{mo}-{d}");
+                    checked += 1;
+                }
+            }
+        }
+        assert!(checked > 2_000);
+        for (y, leap) in [(2024, true), (2000, true), (1900, false), (2100, false)] {
+            assert_eq!(UtcTime::new(y, 2, 29, 0, 0, 0.0).is_ok(), leap, "{y}");
+        }
+        // Outside the core's years: refused by both readings.
+        assert_eq!(parse_utc("1599-12-31T00:00:00Z"), None);
+        assert!(Utc::parse("2401-01-01T00:00:00Z").is_err());
     }
 
     #[test]

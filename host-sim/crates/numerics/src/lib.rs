@@ -8,4 +8,5 @@ pub mod lcg;
 pub mod linalg;
 pub mod optimize;
 pub mod parallel;
+pub mod series;
 pub mod stats;

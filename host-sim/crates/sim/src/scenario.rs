@@ -593,8 +593,10 @@ fn paper_1g() -> Scenario {
 }
 
 /// The paper's 0 g test: an SNJ-103-like accelerometer, input axis horizontal, at room
-/// temperature for one day with a daily foundation tilt of about 0.45".
+/// temperature for one day with a daily foundation tilt of about 0.45". The station is the 1 g
+/// test's (site, RTD, tide, tiltmeter, converters, barometer); what differs is written here.
 fn paper_0g() -> Scenario {
+    let base = paper_1g();
     Scenario {
         name: "paper-0g".into(),
         description:
@@ -604,18 +606,13 @@ fn paper_0g() -> Scenario {
         run: RunParams {
             start_utc: "2016-05-10T00:00:00Z".into(),
             duration_s: DAY_S,
-            interval_s: 60.0,
+            ..base.run
         },
-        site: beijing(),
         room: RoomParams {
             mean_c: 22.0,
-            diurnal_amplitude_c: 1.5,
-            diurnal_peak_solar_h: 15.0,
             weather_std_c: 0.3,
-            weather_tau_h: 72.0,
-            door_rate_per_day: 2.0,
             door_step_c: 0.5,
-            door_decay_min: 20.0,
+            ..base.room
         },
         thermostat: ThermostatParams {
             setpoint_c: 25.0,
@@ -624,36 +621,24 @@ fn paper_0g() -> Scenario {
             setpoint_walk_c_per_sqrt_day: 0.002,
             room_coupling: 0.005,
             room_lowpass_h: 3.0,
-            proof_mass_lag_s: 60.0,
+            ..base.thermostat
         },
         accelerometer: AccelerometerParams {
             instrument: "SNJ-103 (simulated, JN-06-like models)".into(),
-            calibration: CalibrationSource::PaperPrintedOrder2,
             noise_g: AllanParams {
                 white_adev_1s: 1e-6,
                 flicker_floor: 0.5e-6,
                 random_walk_per_sqrt_s: 8e-9,
             },
             orientation: static_head(0.0),
+            ..base.accelerometer
         },
-        rtd: pt100(),
         foundation: FoundationParams {
-            initial_arcsec: 0.0,
             building_arcsec_per_c: 0.21,
-            building_lag_h: 4.0,
             creep_arcsec_per_sqrt_day: 0.02,
+            ..base.foundation
         },
-        tide: TideParams {
-            enabled: true,
-            tilt_azimuth_deg: 0.0,
-            step_s: 60.0,
-        },
-        tiltmeter: tiltmeter(),
-        adc: board(),
-        barometer: barometer(),
-        instrument: None,
-        effects: Vec::new(),
-        twin: None,
+        ..base
     }
 }
 

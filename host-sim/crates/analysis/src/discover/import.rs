@@ -61,7 +61,8 @@ pub const AQG_START_UTC: &str = "2020-07-31T12:15:00.015Z";
 /// Beijing time − UTC, hours.
 pub const BEIJING_UTC_OFFSET_H: i64 = 8;
 
-pub use crate::log::time::{civil_unix_seconds, format_utc, parse_utc};
+pub use crate::log::time::{format_utc, parse_utc};
+use accomp::tide::UtcTime;
 
 fn read_text(path: &Path) -> Result<String, ImportError> {
     let (_, max_bytes) = crate::log::reader::limits();
@@ -107,14 +108,15 @@ pub fn gmetrology_from_str(text: &str) -> Result<(Log, Vec<BadRow>), ImportError
         // `try_from`, not `as`: a month of 257 must not wrap to 1.
         let field = |k: usize| u8::try_from(ints[k]).ok();
         let Some(local) = (|| {
-            civil_unix_seconds(
+            let t = UtcTime::new(
                 i32::try_from(ints[0]).ok()?,
                 field(1)?,
                 field(2)?,
                 field(3)?,
                 field(4)?,
                 sec,
-            )
+            );
+            Some(t.ok()?.posix_seconds())
         })() else {
             bad.push(BadRow {
                 line: line_no,
@@ -958,8 +960,8 @@ mod tests {
         assert!(bad.iter().all(|b| b.reason == "invalid date/time"));
         // A leap year's 29 February exists.
         assert_eq!(
-            civil_unix_seconds(2024, 2, 29, 23, 59, 30.5),
-            Some(1_709_251_170.5)
+            UtcTime::new(2024, 2, 29, 23, 59, 30.5).map(|t| t.posix_seconds()),
+            Ok(1_709_251_170.5)
         );
     }
 

@@ -85,6 +85,20 @@ fn time_figure(f: Figure) -> TimeFigure {
     }
 }
 
+/// The temperature figure of a log with events or phase changes, which marks them.
+fn marked_temperature_figure(log: &Log, dir: &Path) -> (TimeFigure, Vec<Marker>) {
+    match build(
+        log,
+        &opts(dir, Format::Svg, Kind::Temperature),
+        Kind::Temperature,
+    )
+    .unwrap()
+    {
+        Figure::TimeMarked(t, markers) => (t, markers),
+        other => panic!("expected a marked time figure, got {other:?}"),
+    }
+}
+
 /// Minimal structural check of an SVG document written by plotters.
 fn assert_svg(path: &Path) -> String {
     let s = std::fs::read_to_string(path).unwrap();
@@ -437,23 +451,13 @@ fn a_record_over_a_board_reset_is_plotted_in_segments_with_the_reset_marked() {
         out.notes[0]
     );
     // The time figures: a dashed line at the reset (200.4 s = 0.0557 h), no line across it.
-    match build(
-        &log,
-        &opts(&dir, Format::Svg, Kind::Temperature),
-        Kind::Temperature,
-    )
-    .unwrap()
-    {
-        Figure::TimeMarked(t, markers) => {
-            assert_eq!(markers.len(), 1);
-            assert!((markers[0].at - 200.4 / 3600.0).abs() < 1e-12);
-            let runs = &t.panels[0].traces[0].runs;
-            assert_eq!(runs.len(), 2);
-            assert_eq!(runs[0].last().unwrap().mean, 60.0);
-            assert_eq!(runs[1].first().unwrap().mean, 61.0);
-        }
-        other => panic!("expected a marked time figure, got {other:?}"),
-    }
+    let (t, markers) = marked_temperature_figure(&log, &dir);
+    assert_eq!(markers.len(), 1);
+    assert!((markers[0].at - 200.4 / 3600.0).abs() < 1e-12);
+    let runs = &t.panels[0].traces[0].runs;
+    assert_eq!(runs.len(), 2);
+    assert_eq!(runs[0].last().unwrap().mean, 60.0);
+    assert_eq!(runs[1].first().unwrap().mean, 61.0);
     let svg = assert_svg(&dir.join("t_fig2_temperature.svg"));
     assert!(svg.contains("board_reset (dashed)"));
     // The Allan deviation pools within the segments: its title says so.
@@ -524,23 +528,13 @@ fn a_record_is_split_at_its_events_and_phase_changes_each_line_labelled_by_its_k
             && note.contains("300.4 (the sampling phase changes)"),
         "{note}"
     );
-    match build(
-        &log,
-        &opts(&dir, Format::Svg, Kind::Temperature),
-        Kind::Temperature,
-    )
-    .unwrap()
-    {
-        Figure::TimeMarked(t, markers) => {
-            let labels: Vec<&str> = markers.iter().map(|m| m.label.as_str()).collect();
-            assert_eq!(labels, ["board_reset", "table_changed", "phase change"]);
-            let runs = &t.panels[0].traces[0].runs;
-            assert_eq!(runs.len(), 4);
-            for (run, level) in runs.iter().zip([60.0, 61.0, 62.0, 63.0]) {
-                assert!(run.iter().all(|b| b.min == level && b.max == level));
-            }
-        }
-        other => panic!("expected a marked time figure, got {other:?}"),
+    let (t, markers) = marked_temperature_figure(&log, &dir);
+    let labels: Vec<&str> = markers.iter().map(|m| m.label.as_str()).collect();
+    assert_eq!(labels, ["board_reset", "table_changed", "phase change"]);
+    let runs = &t.panels[0].traces[0].runs;
+    assert_eq!(runs.len(), 4);
+    for (run, level) in runs.iter().zip([60.0, 61.0, 62.0, 63.0]) {
+        assert!(run.iter().all(|b| b.min == level && b.max == level));
     }
     let svg = assert_svg(&dir.join("t_fig2_temperature.svg"));
     for kind in ["board_reset", "table_changed", "phase change"] {
