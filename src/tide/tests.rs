@@ -43,6 +43,23 @@ fn julian_date_and_posix_seconds_match_published_instants() {
             551_102_400.0,
         ),
         (UtcTime::new(1970, 1, 1, 0, 0, 0.0), 2_440_587.5, 0.0),
+        // A leap day with a fraction of a second, the last 32-bit second and the second before
+        // the epoch (JD = 2440587.5 + s / 86400 by the definition of POSIX time).
+        (
+            UtcTime::new(2024, 2, 29, 23, 59, 30.5),
+            2_460_370.499_658_565,
+            1_709_251_170.5,
+        ),
+        (
+            UtcTime::new(2038, 1, 19, 3, 14, 7.0),
+            2_465_442.634_803_241,
+            2_147_483_647.0,
+        ),
+        (
+            UtcTime::new(1969, 12, 31, 23, 59, 59.0),
+            2_440_587.499_988_426,
+            -1.0,
+        ),
     ];
     for (t, jd, posix_s) in cases {
         let t = t.unwrap();
