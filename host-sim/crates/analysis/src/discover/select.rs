@@ -19,7 +19,9 @@
 //!
 //! Otherwise the next candidate by ΔBIC is tried; the loop ends when none passes both.
 
-use super::acceptance::{ambiguity, edge_hint, implausible, refuse, simpler_wins, step_set};
+use super::acceptance::{
+    ambiguity, confounded_with_drift, edge_hint, implausible, refuse, simpler_wins, step_set,
+};
 use super::baseline::{gls, std};
 use super::current_model::{
     fit_state, leftover_correlation_inflation, noise_warnings, NoiseChoice,
@@ -378,6 +380,17 @@ pub fn rounds(
                          first part of the record it does not improve the prediction of the \
                          rest (forward prediction z {:.4} → {:.4})",
                         s.delta_bic, fwd_before.prediction_z, fwd_after.prediction_z
+                    ),
+                );
+                continue;
+            }
+            if let Some(why) = confounded_with_drift(ds, &s.cols, fwd_before, fwd_after) {
+                refuse(
+                    &mut refused,
+                    s.effect.name(),
+                    format!(
+                        "ΔBIC {:.1} and the blocked cross-validation improved, but {why}",
+                        s.delta_bic
                     ),
                 );
                 continue;
