@@ -42,11 +42,29 @@ const NOISE_EVALS: usize = 40;
 /// The same for each drift order's profile likelihood (warm-started from the previous order's).
 const DRIFT_NOISE_EVALS: usize = 60;
 
-/// Default ensemble size.
-pub const DEFAULT_ENSEMBLE: usize = 20;
-/// Ensemble sizes taken: two members make the smallest envelope; a thousand give its 5–95 %
-/// quantiles to a fraction of a percent and take about as long as 50 discover runs (a member
-/// of the twin of a 41-day 1 Hz record is about 13 ms of a core, twice: base and extended).
+/// Default ensemble size. The envelope's 5 % and 95 % lines are quantile estimates: from N
+/// members their error is about [`edge_error`]`(N)` = 1.3/√N of the envelope's half-width
+/// ln(p95/p50) (measured on gMetrology against 400 members: 0.29 at 20 members, 0.20 at 40,
+/// 0.15 at 60, 0.12 at 100 — the Gaussian order-statistic formula), and the record's outside
+/// fraction moves with them (gMetrology, 14 ADEV points: ±10.6 % at 20 members, ±8.8 % at 40,
+/// ±8.1 % at 60, ±7.1 % at 100). A member of the extended twin costs 55–110 ms of wall time
+/// on two cores (the load of the machine); 40 members in each of the two ensembles keep
+/// `discover --simulate` on gMetrology within its 30 s at a load of 2.5 (docs/benchmarks.md),
+/// 60 do not.
+pub const DEFAULT_ENSEMBLE: usize = 40;
+
+/// The 5/95 % lines' sampling error from `members` members, as a fraction of the envelope's
+/// half-width: sd of the 95 % quantile estimate, √(p(1 − p)/N)/φ(z₀.₉₅), over z₀.₉₅ (a
+/// Gaussian spread of the members' values; ln ADEV and ln PSD are nearly so).
+pub fn edge_error(members: usize) -> f64 {
+    let (p, z) = (0.95f64, 1.644_853_626_951_472_2_f64);
+    let density = (-0.5 * z * z).exp() / (2.0 * std::f64::consts::PI).sqrt();
+    (p * (1.0 - p) / members.max(1) as f64).sqrt() / density / z
+}
+
+/// Ensemble sizes taken: two members make the smallest envelope; a thousand give its 5/95 %
+/// lines to 4 % of its half-width and take about two minutes on gMetrology (≈ 60 ms a member,
+/// twice: base and extended).
 pub const ENSEMBLE_RANGE: std::ops::RangeInclusive<usize> = 2..=1000;
 
 /// Parses `--ensemble`, refusing a size outside [`ENSEMBLE_RANGE`] with the range named.
@@ -352,9 +370,11 @@ where
         |x| whitener.whiten(x),
     );
     lap("drift order");
-    // The members' noise: the family (white, flicker, random walk, drift-rate walk, output
-    // filter) fitted by Whittle likelihood to what the extended twin leaves, the drift kept —
-    // the comparison keeps it, so the members must carry it.
+    // The members' noise: the family (white, flicker, random walk, drift-rate walk,
+    // Gauss–Markov, output filter) fitted by Whittle likelihood to what the extended twin
+    // leaves with the drift polynomial removed and without the transients, from the lowest
+    // bin the polynomial leaves; the members carry the polynomial (fitted coefficients) and
+    // draw transients, and lose the polynomial again in the comparison.
     let family =
         match NoiseFamily::fit_after_drift(&clean(&r_after), yard.grid.dt_s, drift_order.order) {
             // Every instrument has a white floor: a fit that does not resolve one has traded it
@@ -392,10 +412,11 @@ where
     provenance.push(noise_source);
     if family.is_some() {
         provenance.push(
-            "ensemble members: the noise family fitted to the extended twin's residual (Whittle \
-             likelihood, drift kept), each member with its own draw of the family's parameters; \
-             members of the extended twin also draw every accepted effect's parameters from \
-             their uncertainty"
+            "ensemble members: the noise family fitted to the extended twin's residual with the \
+             drift polynomial and the transients removed (Whittle likelihood), each member with \
+             its own draw of the family's parameters and of the transients, and the drift \
+             polynomial at its fitted coefficients; members of the extended twin also draw \
+             every accepted effect's parameters from their uncertainty"
                 .to_owned(),
         );
     }
@@ -554,4 +575,35 @@ fn check_len(p: &[f64], ds: &Dataset) -> Result<(), SimulateError> {
         });
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The 95 % line of N Gaussian members (the envelope's own rule, `spectra::percentiles`)
+    /// scatters by `edge_error(N)` of the half-width 1.645σ.
+    #[test]
+    fn the_edge_error_formula_matches_the_scatter_of_the_95_percent_line() {
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, StandardNormal};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        for n in [20usize, 40] {
+            let q: Vec<f64> = (0..3000)
+                .map(|_| {
+                    let mut v: Vec<f64> = (0..n).map(|_| StandardNormal.sample(&mut rng)).collect();
+                    spectra::percentiles(&mut v).2
+                })
+                .collect();
+            let m = q.iter().sum::<f64>() / q.len() as f64;
+            let sd = (q.iter().map(|x| (x - m).powi(2)).sum::<f64>() / q.len() as f64).sqrt();
+            let measured = sd / 1.644_853_626_951_472_2;
+            assert!(
+                (measured / edge_error(n) - 1.0).abs() < 0.12,
+                "{n} members: {measured} against {}",
+                edge_error(n)
+            );
+        }
+        assert!((edge_error(40) - 0.204).abs() < 0.01);
+    }
 }

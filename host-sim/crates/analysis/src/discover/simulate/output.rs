@@ -60,6 +60,10 @@ pub fn json(s: &Simulation) -> Value {
         "twin": if s.simulator { "simulator" } else { "stand-in" },
         "provenance": s.provenance,
         "ensemble": s.ensemble,
+        "envelope_edge_error": json!({
+            "method": "sd of the 5/95 % lines' quantile estimate from the members, as a fraction of the envelope's half-width ln(p95/p50): sqrt(p(1-p)/N)/phi(z)/z at p = 0.95",
+            "fraction_of_half_width": finite(super::edge_error(s.ensemble)),
+        }),
         "residual": format!("measured − twin prediction, the drift polynomial of order {} removed (offset and linear drift at order 1)", s.drift.order),
         "drift": json!({
             "method": "Legendre polynomial of the record's time on [-1, 1], removed from the record and every member alike; order by BIC on the time-domain likelihood (white + flicker + random walk refitted per order, Kalman innovations); coefficients by generalised least squares",
@@ -116,9 +120,11 @@ pub fn text(s: &Simulation, unit: &str) -> String {
     }
     let _ = writeln!(
         o,
-        "Simulation in the loop: the record against its simulated twin ({} members, base \
-         scenario: {})",
-        s.ensemble, s.scenario
+        "Simulation in the loop: the record against its simulated twin ({} members: the \
+         envelope's 5/95 % lines known to ±{:.0} % of its half-width; base scenario: {})",
+        s.ensemble,
+        100.0 * super::edge_error(s.ensemble),
+        s.scenario
     );
     for p in &s.provenance {
         let _ = writeln!(o, "  twin: {p}");
