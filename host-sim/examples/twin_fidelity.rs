@@ -15,10 +15,6 @@ mod record;
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().collect();
     let path = record::path_arg(&args);
-    let members = args
-        .get(2)
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(accomp_host::discover::simulate::DEFAULT_ENSEMBLE);
     let (log, _) = load(std::path::Path::new(&path), Format::Auto)?;
     let mut ds = dataset_from_log(&log, &DatasetOptions::default())?;
     // TWIN_FIDELITY_KEEP=a,b keeps the fraction a..b of the record (to see where a mismatch
@@ -38,6 +34,10 @@ fn main() -> anyhow::Result<()> {
             ds.samples_per_point = ds.samples_per_point[a..b].to_vec();
         }
     }
+    let members = args
+        .get(2)
+        .and_then(|s| s.parse().ok())
+        .unwrap_or_else(|| accomp_host::discover::simulate::default_ensemble(ds.len()));
     let s = simulate_dataset(&ds, None, members, &select::Config::default())?;
     // TWIN_FIDELITY_TEXT=1 prints the command's text report first.
     if std::env::var_os("TWIN_FIDELITY_TEXT").is_some() {

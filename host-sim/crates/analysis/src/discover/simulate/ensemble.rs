@@ -23,6 +23,10 @@ pub struct Yardstick<'a> {
     pub drift_order: usize,
     /// The record's time on [−1, 1] (the polynomials' argument).
     unit_t: Vec<f64>,
+    /// With [`Yardstick::with_fitted_out`]: the drift polynomial's columns and the columns of
+    /// the fit the record went through (the accepted effects' linear columns, the tide groups),
+    /// projected out of every residual by least squares.
+    fitted_out: Option<crate::numerics::linalg::OrthonormalBasis>,
 }
 
 impl<'a> Yardstick<'a> {
@@ -47,13 +51,44 @@ impl<'a> Yardstick<'a> {
             channels,
             drift_order: 1,
             unit_t: super::drift::unit_time(&ds.t_s),
+            fitted_out: None,
         }
     }
 
-    /// The same yardstick removing a drift polynomial of `order` from every residual.
+    /// The same yardstick removing a drift polynomial of `order` from every residual (and
+    /// nothing else: columns fitted out before are dropped).
     pub fn with_drift_order(mut self, order: usize) -> Self {
         self.drift_order = order.max(1);
+        self.fitted_out = None;
         self
+    }
+
+    /// The same yardstick removing, jointly with the drift polynomial, the least-squares fit of
+    /// `columns` (each at the record's instants) from every residual: the record's residual had
+    /// the accepted effects fitted out of it, which takes part of its noise with them (the
+    /// noise's projection on their columns); a member's residual passes through the same fit,
+    /// so the two are compared alike. Columns of another length are ignored.
+    pub fn with_fitted_out(mut self, columns: &[Vec<f64>]) -> Self {
+        let n = self.unit_t.len();
+        let mut cols: Vec<Vec<f64>> = (0..=self.drift_order)
+            .map(|k| {
+                self.unit_t
+                    .iter()
+                    .map(|&x| super::drift::legendre(x, self.drift_order)[k])
+                    .collect()
+            })
+            .collect();
+        cols.extend(columns.iter().filter(|c| c.len() == n).cloned());
+        self.fitted_out = Some(crate::numerics::linalg::OrthonormalBasis::new(&cols));
+        self
+    }
+
+    /// Number of independent columns fitted out of every residual (the drift polynomial's
+    /// included).
+    pub fn fitted_out_columns(&self) -> usize {
+        self.fitted_out
+            .as_ref()
+            .map_or(self.drift_order + 1, |b| b.q.len())
     }
 
     /// The record's time on [−1, 1].
@@ -67,6 +102,11 @@ impl<'a> Yardstick<'a> {
     /// predictions of the simulation; the measured residual and every member's are treated
     /// alike.
     pub fn detrend(&self, r: &[f64]) -> Vec<f64> {
+        if let Some(b) = &self.fitted_out {
+            if r.len() == self.unit_t.len() {
+                return b.residual(r);
+            }
+        }
         let n = r.len().min(self.unit_t.len());
         if n < self.drift_order + 1 {
             return r.to_vec();

@@ -42,16 +42,25 @@ const NOISE_EVALS: usize = 40;
 /// The same for each drift order's profile likelihood (warm-started from the previous order's).
 const DRIFT_NOISE_EVALS: usize = 60;
 
-/// Default ensemble size. The envelope's 5 % and 95 % lines are quantile estimates: from N
-/// members their error is about [`edge_error`]`(N)` = 1.3/√N of the envelope's half-width
-/// ln(p95/p50) (measured on gMetrology against 400 members: 0.29 at 20 members, 0.20 at 40,
-/// 0.15 at 60, 0.12 at 100 — the Gaussian order-statistic formula), and the record's outside
-/// fraction moves with them (gMetrology, 14 ADEV points: ±10.6 % at 20 members, ±8.8 % at 40,
-/// ±8.1 % at 60, ±7.1 % at 100). A member of the extended twin costs 55–110 ms of wall time
-/// on two cores (the load of the machine); 40 members in each of the two ensembles keep
-/// `discover --simulate` on gMetrology within its 30 s at a load of 2.5 (docs/benchmarks.md),
-/// 60 do not.
-pub const DEFAULT_ENSEMBLE: usize = 40;
+/// Smallest default ensemble. The envelope's 5 % and 95 % lines are quantile estimates: from
+/// N members their error is about [`edge_error`]`(N)` = 1.3/√N of the envelope's half-width
+/// ln(p95/p50) (0.29 at 20 members, 0.20 at 40, 0.13 at 100: the Gaussian order-statistic
+/// formula, which the members' own scatter follows, docs/benchmarks.md), and the record's
+/// outside fraction moves with them. 40 members on the longest records keep
+/// `discover --simulate` on gMetrology (50 000 points) within its 30 s on a loaded machine.
+pub const MIN_DEFAULT_ENSEMBLE: usize = 40;
+/// Largest default ensemble (edge error 0.13).
+pub const MAX_DEFAULT_ENSEMBLE: usize = 100;
+/// Member-points the default ensemble spends (members × the record's points): a member's cost
+/// grows with the record's points, so a shorter record affords more members in the same time
+/// (40 members of gMetrology's 50 000 points).
+pub const DEFAULT_MEMBER_POINTS: usize = 2_000_000;
+
+/// The default ensemble size for a record of `points` points: [`DEFAULT_MEMBER_POINTS`] /
+/// points, within [`MIN_DEFAULT_ENSEMBLE`]..=[`MAX_DEFAULT_ENSEMBLE`].
+pub fn default_ensemble(points: usize) -> usize {
+    (DEFAULT_MEMBER_POINTS / points.max(1)).clamp(MIN_DEFAULT_ENSEMBLE, MAX_DEFAULT_ENSEMBLE)
+}
 
 /// The 5/95 % lines' sampling error from `members` members, as a fraction of the envelope's
 /// half-width: sd of the 95 % quantile estimate, √(p(1 − p)/N)/φ(z₀.₉₅), over z₀.₉₅ (a
@@ -192,6 +201,11 @@ pub struct Simulation {
     pub drift_coefficients: Vec<(f64, f64)>,
     /// Transient disturbances found in what the extended twin leaves (members draw them).
     pub transients: Transients,
+    /// The columns fitted out, with the drift polynomial, of the record's residual after
+    /// extension and of every extended member's (see `fitted_columns`).
+    pub fitted_out: Vec<Vec<f64>>,
+    /// How many independent columns that fit has, the drift polynomial's included.
+    pub fitted_out_independent: usize,
 }
 
 /// Runs the comparison with twins made by `build` (noise model → twin).
@@ -438,6 +452,19 @@ where
     // With a noise family, the members are the simulator's member model of the extended
     // twin: the same model `--write-scenario` writes and `accomp simulate` runs.
     let written_twin = twin.written_twin(&cause);
+    // The record's residual after extension had the accepted effects (and the tide groups)
+    // fitted out of it; each member's passes through the same least-squares fit, with the
+    // drift polynomial, and so does the record's again (the same projection for both).
+    // The twin's names are kinds, with " (tidal analysis)" or "#2" added.
+    let in_twin: Vec<&str> = effects
+        .iter()
+        .filter_map(|e| e.0.split([' ', '#']).next())
+        .collect();
+    let fitted_out = fitted_columns(&cause, &in_twin);
+    let yard_after = Yardstick::new(ds)
+        .with_drift_order(drift_order.order)
+        .with_fitted_out(&fitted_out);
+    let r_after = yard_after.detrend(&r_after);
     let members_ext = ensemble::run(
         |k| match &written_twin {
             Some(m) => m.member(k).map_err(SimulateError::twin),
@@ -448,10 +475,10 @@ where
         },
         &det_ext,
         ensemble,
-        &yard,
+        &yard_after,
         "extended",
     )?;
-    let mut after = mismatch::compare(yard.views(&r_after), &members_ext, &freqs, &channels);
+    let mut after = mismatch::compare(yard_after.views(&r_after), &members_ext, &freqs, &channels);
     let members_after = members_ext;
     // What the extended twin still gets wrong is named: unmodelled, with its likely cause.
     let nyquist_cpd = 0.5 / yard.grid.dt_s * 86_400.0;
@@ -509,7 +536,42 @@ where
         drift: drift_order,
         drift_coefficients,
         transients,
+        fitted_out_independent: yard_after.fitted_out_columns(),
+        fitted_out,
     })
+}
+
+/// The columns the record's residual after extension was fitted on, at the record's instants,
+/// for the effects the extended twin carries (`in_twin`, their kinds): each accepted effect's
+/// linear columns at its jointly fitted nonlinear parameters; when the twin's tide comes from
+/// the wave-group analysis, a free cosine and sine at each group's main wave (the groups'
+/// factors and phases were fitted to the record); when it carries a pressure admittance, the
+/// pressure channel. Effects the twin could not express stay in both residuals.
+fn fitted_columns(cause: &Discovery, in_twin: &[&str]) -> Vec<Vec<f64>> {
+    use crate::discover::import::ChannelKind;
+    let has = |name: &str| in_twin.contains(&name);
+    let mut cols: Vec<Vec<f64>> = Vec::new();
+    if let Some(joint) = &cause.selection.joint {
+        for (a, c) in cause.selection.accepted.iter().zip(&joint.effect_columns) {
+            if has(a.effect.name()) {
+                cols.extend(c.iter().cloned());
+            }
+        }
+    }
+    let ds = &cause.dataset;
+    if let (true, Ok(t)) = (has("tidal_gravity"), &cause.tidal) {
+        for g in &t.groups {
+            let w = 2.0 * std::f64::consts::PI * g.main_wave_cpd / 86_400.0;
+            cols.push(ds.t_s.iter().map(|t| (w * t).cos()).collect());
+            cols.push(ds.t_s.iter().map(|t| (w * t).sin()).collect());
+        }
+    }
+    if has("pressure_admittance") {
+        if let Some(p) = ds.channel(ChannelKind::Pressure) {
+            cols.push(p.values.clone());
+        }
+    }
+    cols
 }
 
 impl Simulation {
@@ -517,7 +579,9 @@ impl Simulation {
     /// seen: minus the extended twin's deterministic part, the drift polynomial of the selected
     /// order removed (`ds`: the record the comparison ran on).
     pub fn member_views(&self, ds: &Dataset, series: &[f64]) -> spectra::Views {
-        let yard = Yardstick::new(ds).with_drift_order(self.drift.order);
+        let yard = Yardstick::new(ds)
+            .with_drift_order(self.drift.order)
+            .with_fitted_out(&self.fitted_out);
         yard.views(&yard.detrend(&sub(series, &self.det_after)))
     }
 }
@@ -583,6 +647,15 @@ mod tests {
 
     /// The 95 % line of N Gaussian members (the envelope's own rule, `spectra::percentiles`)
     /// scatters by `edge_error(N)` of the half-width 1.645σ.
+    #[test]
+    fn the_default_ensemble_grows_as_the_record_shortens_within_its_bounds() {
+        assert_eq!(default_ensemble(50_000), 40);
+        assert_eq!(default_ensemble(72_000), 40);
+        assert_eq!(default_ensemble(25_000), 80);
+        assert_eq!(default_ensemble(11_765), 100);
+        assert_eq!(default_ensemble(0), 100);
+    }
+
     #[test]
     fn the_edge_error_formula_matches_the_scatter_of_the_95_percent_line() {
         use rand::SeedableRng;
