@@ -203,3 +203,59 @@ where
         .map(|(k, r)| r.unwrap_or(Err(SimulateError::MemberLost(k + 1))))
         .collect()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn dot(a: &[f64], b: &[f64]) -> f64 {
+        a.iter().zip(b).map(|(x, y)| x * y).sum()
+    }
+
+    /// A residual holding a fitted effect's column loses it, with the drift polynomial, and what
+    /// is left is exactly what the same fit leaves of the noise alone: the record's residual and
+    /// a member's (noise only) go through one fit.
+    #[test]
+    fn the_fitted_columns_leave_record_and_member_alike() {
+        let mut s = crate::sim::scenario::Scenario::preset("paper-1g").unwrap();
+        s.run.duration_s = 86_400.0;
+        s.run.interval_s = 300.0;
+        let ds = crate::twin::tests::dataset(&s, 1);
+        let n = ds.len();
+        let col: Vec<f64> = ds
+            .t_s
+            .iter()
+            .map(|t| (2.0 * std::f64::consts::PI * t / 7200.0).sin())
+            .collect();
+        // Deterministic noise (a fixed pseudo-random sequence).
+        let noise: Vec<f64> = (0..n)
+            .map(|i| ((i * 7919 + 13) % 101) as f64 / 101.0 - 0.5)
+            .collect();
+        let u = super::super::drift::unit_time(&ds.t_s);
+        let record: Vec<f64> = (0..n)
+            .map(|i| noise[i] + 3.0 * col[i] + 0.5 - 0.2 * u[i] + 0.1 * u[i] * u[i])
+            .collect();
+        // The drift polynomial alone leaves the column in.
+        let plain = Yardstick::new(&ds).with_drift_order(2);
+        assert_eq!(plain.fitted_out_columns(), 3);
+        let left = plain.detrend(&record);
+        assert!(dot(&left, &col).abs() > 0.5 * dot(&col, &col));
+        let fitted = Yardstick::new(&ds)
+            .with_drift_order(2)
+            .with_fitted_out(&[col.clone(), vec![1.0; n + 1]]);
+        // The polynomial's three columns and the effect's; the column of another length is
+        // ignored.
+        assert_eq!(fitted.fitted_out_columns(), 4);
+        let rec = fitted.detrend(&record);
+        let member = fitted.detrend(&noise);
+        let scale = dot(&noise, &noise).sqrt();
+        assert!(dot(&rec, &col).abs() < 1e-9 * scale);
+        assert!(rec
+            .iter()
+            .zip(&member)
+            .all(|(a, b)| (a - b).abs() < 1e-9 * scale));
+        // The noise's own projection on the column is what the fit takes from the member.
+        let taken: f64 = noise.iter().zip(&member).map(|(a, b)| (a - b).abs()).sum();
+        assert!(taken > 0.0);
+    }
+}
