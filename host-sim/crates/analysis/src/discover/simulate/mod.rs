@@ -45,7 +45,7 @@ const DRIFT_NOISE_EVALS: usize = 60;
 /// Smallest default ensemble. The envelope's 5 % and 95 % lines are quantile estimates: from
 /// N members their error is about [`edge_error`]`(N)` = 1.3/√N of the envelope's half-width
 /// ln(p95/p50) (0.29 at 20 members, 0.20 at 40, 0.13 at 100: the Gaussian order-statistic
-/// formula, which the members' own scatter follows, docs/benchmarks.md), and the record's
+/// formula, which the members' own scatter follows, docs/discovery.md), and the record's
 /// outside fraction moves with them. 40 members on the longest records keep
 /// `discover --simulate` on gMetrology (50 000 points) within its 30 s on a loaded machine.
 pub const MIN_DEFAULT_ENSEMBLE: usize = 40;
