@@ -42,8 +42,8 @@ pub struct DiscoverArgs {
     /// Base scenario of the twin (default: derived from the record).
     #[arg(long, requires = "simulate")]
     pub scenario: Option<PathBuf>,
-    /// Ensemble size of the twin (seeds 1..=N; default: 2 000 000 / the record's points,
-    /// within 40..=100).
+    /// Ensemble size of the twin (seeds 1..=N; default: 1 500 000 / the record's points,
+    /// within 30..=100).
     #[arg(long, requires = "simulate", value_parser = simulate::parse_ensemble)]
     pub ensemble: Option<usize>,
     /// Write the extended scenario (TOML that `accomp simulate` runs) here.

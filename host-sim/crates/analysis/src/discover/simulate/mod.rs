@@ -46,15 +46,15 @@ const DRIFT_NOISE_EVALS: usize = 60;
 /// N members their error is about [`edge_error`]`(N)` = 1.3/√N of the envelope's half-width
 /// ln(p95/p50) (0.29 at 20 members, 0.20 at 40, 0.13 at 100: the Gaussian order-statistic
 /// formula, which the members' own scatter follows, docs/discovery.md), and the record's
-/// outside fraction moves with them. 40 members on the longest records keep
-/// `discover --simulate` on gMetrology (50 000 points) within its 30 s on a loaded machine.
-pub const MIN_DEFAULT_ENSEMBLE: usize = 40;
+/// outside fraction moves with them. 30 members keep `discover --simulate` on gMetrology
+/// (50 000 points) within its 30 s at a load of 3 on two cores (40 took 31 s there).
+pub const MIN_DEFAULT_ENSEMBLE: usize = 30;
 /// Largest default ensemble (edge error 0.13).
 pub const MAX_DEFAULT_ENSEMBLE: usize = 100;
 /// Member-points the default ensemble spends (members × the record's points): a member's cost
 /// grows with the record's points, so a shorter record affords more members in the same time
-/// (40 members of gMetrology's 50 000 points).
-pub const DEFAULT_MEMBER_POINTS: usize = 2_000_000;
+/// (30 members of gMetrology's 50 000 points).
+pub const DEFAULT_MEMBER_POINTS: usize = 1_500_000;
 
 /// The default ensemble size for a record of `points` points: [`DEFAULT_MEMBER_POINTS`] /
 /// points, within [`MIN_DEFAULT_ENSEMBLE`]..=[`MAX_DEFAULT_ENSEMBLE`].
@@ -649,9 +649,9 @@ mod tests {
     /// scatters by `edge_error(N)` of the half-width 1.645σ.
     #[test]
     fn the_default_ensemble_grows_as_the_record_shortens_within_its_bounds() {
-        assert_eq!(default_ensemble(50_000), 40);
-        assert_eq!(default_ensemble(72_000), 40);
-        assert_eq!(default_ensemble(25_000), 80);
+        assert_eq!(default_ensemble(50_000), 30);
+        assert_eq!(default_ensemble(72_000), 30);
+        assert_eq!(default_ensemble(25_000), 60);
         assert_eq!(default_ensemble(11_765), 100);
         assert_eq!(default_ensemble(0), 100);
     }
