@@ -15,7 +15,6 @@ mod record;
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().collect();
     let path = record::path_arg(&args);
-    let members = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(20);
     let (log, _) = load(std::path::Path::new(&path), Format::Auto)?;
     let mut ds = dataset_from_log(&log, &DatasetOptions::default())?;
     // TWIN_FIDELITY_KEEP=a,b keeps the fraction a..b of the record (to see where a mismatch
@@ -35,6 +34,10 @@ fn main() -> anyhow::Result<()> {
             ds.samples_per_point = ds.samples_per_point[a..b].to_vec();
         }
     }
+    let members = args
+        .get(2)
+        .and_then(|s| s.parse().ok())
+        .unwrap_or_else(|| accomp_host::discover::simulate::default_ensemble(ds.len()));
     let s = simulate_dataset(&ds, None, members, &select::Config::default())?;
     // TWIN_FIDELITY_TEXT=1 prints the command's text report first.
     if std::env::var_os("TWIN_FIDELITY_TEXT").is_some() {
@@ -197,5 +200,95 @@ fn main() -> anyhow::Result<()> {
     for (st, t) in &s.timing_s {
         println!("{st}: {t:.2} s");
     }
+    // TWIN_FIDELITY_SIZES=10,20,50 measures the envelope's own sampling error: envelopes of
+    // that many members drawn (without replacement) from this run's extended ensemble, against
+    // the envelope of all of them.
+    if let Ok(v) = std::env::var("TWIN_FIDELITY_SIZES") {
+        let sizes: Vec<usize> = v.split(',').filter_map(|x| x.parse().ok()).collect();
+        envelope_sampling_error(&s, &sizes);
+    }
     Ok(())
+}
+
+/// For each size m: over [`SUBSETS`] random m-member subsets of the extended ensemble, the rms
+/// error of the 5 % and 95 % lines (ln units, against the whole ensemble's) relative to the
+/// envelope's half-width ln(p95/p50), and the mean and spread of the record's outside
+/// fractions and of the leave-one-member-out figure.
+fn envelope_sampling_error(s: &accomp_host::discover::simulate::Simulation, sizes: &[usize]) {
+    use accomp_host::discover::simulate::mismatch::{leave_one_out, sides};
+    use accomp_host::discover::simulate::spectra::Envelope;
+    use rand::seq::SliceRandom;
+    use rand::SeedableRng;
+    const SUBSETS: usize = 100;
+    let all = &s.members_after;
+    let taus: Vec<f64> = s.after.adev.x.clone();
+    let adev: Vec<Vec<f64>> = all
+        .iter()
+        .map(|m| m.adev.iter().map(|p| p.1).collect())
+        .collect();
+    let psd: Vec<Vec<f64>> = all.iter().map(|m| m.psd.clone()).collect();
+    let meas_adev: Vec<f64> = s.after.measured.adev.iter().map(|p| p.1).collect();
+    let meas_psd = s.after.measured.psd.clone();
+    let full = [
+        Envelope::of(&taus, &adev),
+        Envelope::of(&s.frequencies_hz, &psd),
+    ];
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+    println!(
+        "envelope sampling error against all {} members (ln-rms error of the 5/95 % lines / \
+         half-width; record outside mean ± sd; leave-one-out mean ± sd), {SUBSETS} subsets:",
+        all.len()
+    );
+    for &m in sizes.iter().filter(|&&m| m >= 3 && m <= all.len()) {
+        let mut err = [0.0f64; 2];
+        let mut cnt = [0usize; 2];
+        let mut out = [Vec::new(), Vec::new()];
+        let mut loo = [Vec::new(), Vec::new()];
+        for _ in 0..SUBSETS {
+            let mut idx: Vec<usize> = (0..all.len()).collect();
+            idx.shuffle(&mut rng);
+            idx.truncate(m);
+            for (q, (x, curves, meas)) in [
+                (&taus, &adev, &meas_adev),
+                (&s.frequencies_hz, &psd, &meas_psd),
+            ]
+            .into_iter()
+            .enumerate()
+            {
+                let sub: Vec<Vec<f64>> = idx.iter().map(|&i| curves[i].clone()).collect();
+                let e = Envelope::of(x, &sub);
+                let f = &full[q];
+                for i in 0..x.len() {
+                    let half = (f.high[i] / f.median[i]).ln();
+                    let a = (e.high[i] / f.high[i]).ln() / half;
+                    let b = (e.low[i] / f.low[i]).ln() / half;
+                    if a.is_finite() && b.is_finite() {
+                        err[q] += a * a + b * b;
+                        cnt[q] += 2;
+                    }
+                }
+                let sd = sides(meas, &e);
+                out[q].push(sd.iter().filter(|v| **v != 0).count() as f64 / sd.len() as f64);
+                if loo[q].len() < 20 {
+                    loo[q].push(leave_one_out(x, &sub));
+                }
+            }
+        }
+        let ms = |v: &[f64]| {
+            let n = v.len() as f64;
+            let mean = v.iter().sum::<f64>() / n;
+            let sd = (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+            format!("{:.1} ± {:.1} %", 100.0 * mean, 100.0 * sd)
+        };
+        println!(
+            "  {m:>4} members: edge error ADEV {:.2}, PSD {:.2}; record outside ADEV {}, PSD {}; \
+             leave-one-out ADEV {}, PSD {}",
+            (err[0] / cnt[0].max(1) as f64).sqrt(),
+            (err[1] / cnt[1].max(1) as f64).sqrt(),
+            ms(&out[0]),
+            ms(&out[1]),
+            ms(&loo[0]),
+            ms(&loo[1])
+        );
+    }
 }

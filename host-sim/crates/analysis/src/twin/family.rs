@@ -548,19 +548,6 @@ impl NoiseFamily {
         }
     }
 
-    /// −ℓ of the family refitted to another series at this fit's corner (the levels at their
-    /// maximum, the corner held): the profile likelihood of a change to the series' mean, such
-    /// as a drift polynomial removed.
-    pub fn neg_loglik_of(&self, placed: &[f64]) -> f64 {
-        match diff_periodograms(placed, self.dt_s, self.record_first_bin) {
-            Ok(all) => {
-                let bins = without_lines(&all, &line_bins(&all, &self.ln_params));
-                levels_best(&bins, self.ln_params[4], self.ln_params[6]).1
-            }
-            _ => f64::INFINITY,
-        }
-    }
-
     /// Whether parameter `i` is resolved (above the bottom of its range; the filter: below the
     /// top, i.e. a corner inside the record's band).
     pub fn resolved(&self, i: usize) -> bool {

@@ -17,7 +17,7 @@ pub mod family;
 mod from_discovery;
 mod noise;
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;
 /// The transient disturbances are the simulator's (a written twin's members draw them).
 pub use crate::sim::twin::transients;
 

@@ -31,7 +31,7 @@ fn gravimeter_scenario() -> Scenario {
 
 /// The log the simulator writes for `s` with `seed`, read back as the discovery reads records
 /// (every point kept).
-pub(super) fn dataset(s: &Scenario, seed: u64) -> Dataset {
+pub(crate) fn dataset(s: &Scenario, seed: u64) -> Dataset {
     let log = simulate_log(s, seed).unwrap();
     dataset_from_log(&log, &DatasetOptions::with_max_points(1_000_000)).unwrap()
 }

@@ -23,6 +23,10 @@ pub struct Yardstick<'a> {
     pub drift_order: usize,
     /// The record's time on [−1, 1] (the polynomials' argument).
     unit_t: Vec<f64>,
+    /// With [`Yardstick::with_fitted_out`]: the drift polynomial's columns and the columns of
+    /// the fit the record went through (the accepted effects' linear columns, the tide groups),
+    /// projected out of every residual by least squares.
+    fitted_out: Option<crate::numerics::linalg::OrthonormalBasis>,
 }
 
 impl<'a> Yardstick<'a> {
@@ -47,13 +51,44 @@ impl<'a> Yardstick<'a> {
             channels,
             drift_order: 1,
             unit_t: super::drift::unit_time(&ds.t_s),
+            fitted_out: None,
         }
     }
 
-    /// The same yardstick removing a drift polynomial of `order` from every residual.
+    /// The same yardstick removing a drift polynomial of `order` from every residual (and
+    /// nothing else: columns fitted out before are dropped).
     pub fn with_drift_order(mut self, order: usize) -> Self {
         self.drift_order = order.max(1);
+        self.fitted_out = None;
         self
+    }
+
+    /// The same yardstick removing, jointly with the drift polynomial, the least-squares fit of
+    /// `columns` (each at the record's instants) from every residual: the record's residual had
+    /// the accepted effects fitted out of it, which takes part of its noise with them (the
+    /// noise's projection on their columns); a member's residual passes through the same fit,
+    /// so the two are compared alike. Columns of another length are ignored.
+    pub fn with_fitted_out(mut self, columns: &[Vec<f64>]) -> Self {
+        let n = self.unit_t.len();
+        let mut cols: Vec<Vec<f64>> = (0..=self.drift_order)
+            .map(|k| {
+                self.unit_t
+                    .iter()
+                    .map(|&x| super::drift::legendre(x, self.drift_order)[k])
+                    .collect()
+            })
+            .collect();
+        cols.extend(columns.iter().filter(|c| c.len() == n).cloned());
+        self.fitted_out = Some(crate::numerics::linalg::OrthonormalBasis::new(&cols));
+        self
+    }
+
+    /// Number of independent columns fitted out of every residual (the drift polynomial's
+    /// included).
+    pub fn fitted_out_columns(&self) -> usize {
+        self.fitted_out
+            .as_ref()
+            .map_or(self.drift_order + 1, |b| b.q.len())
     }
 
     /// The record's time on [−1, 1].
@@ -67,6 +102,11 @@ impl<'a> Yardstick<'a> {
     /// predictions of the simulation; the measured residual and every member's are treated
     /// alike.
     pub fn detrend(&self, r: &[f64]) -> Vec<f64> {
+        if let Some(b) = &self.fitted_out {
+            if r.len() == self.unit_t.len() {
+                return b.residual(r);
+            }
+        }
         let n = r.len().min(self.unit_t.len());
         if n < self.drift_order + 1 {
             return r.to_vec();
@@ -162,4 +202,60 @@ where
         .enumerate()
         .map(|(k, r)| r.unwrap_or(Err(SimulateError::MemberLost(k + 1))))
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn dot(a: &[f64], b: &[f64]) -> f64 {
+        a.iter().zip(b).map(|(x, y)| x * y).sum()
+    }
+
+    /// A residual holding a fitted effect's column loses it, with the drift polynomial, and what
+    /// is left is exactly what the same fit leaves of the noise alone: the record's residual and
+    /// a member's (noise only) go through one fit.
+    #[test]
+    fn the_fitted_columns_leave_record_and_member_alike() {
+        let mut s = crate::sim::scenario::Scenario::preset("paper-1g").unwrap();
+        s.run.duration_s = 86_400.0;
+        s.run.interval_s = 300.0;
+        let ds = crate::twin::tests::dataset(&s, 1);
+        let n = ds.len();
+        let col: Vec<f64> = ds
+            .t_s
+            .iter()
+            .map(|t| (2.0 * std::f64::consts::PI * t / 7200.0).sin())
+            .collect();
+        // Deterministic noise (a fixed pseudo-random sequence).
+        let noise: Vec<f64> = (0..n)
+            .map(|i| ((i * 7919 + 13) % 101) as f64 / 101.0 - 0.5)
+            .collect();
+        let u = super::super::drift::unit_time(&ds.t_s);
+        let record: Vec<f64> = (0..n)
+            .map(|i| noise[i] + 3.0 * col[i] + 0.5 - 0.2 * u[i] + 0.1 * u[i] * u[i])
+            .collect();
+        // The drift polynomial alone leaves the column in.
+        let plain = Yardstick::new(&ds).with_drift_order(2);
+        assert_eq!(plain.fitted_out_columns(), 3);
+        let left = plain.detrend(&record);
+        assert!(dot(&left, &col).abs() > 0.5 * dot(&col, &col));
+        let fitted = Yardstick::new(&ds)
+            .with_drift_order(2)
+            .with_fitted_out(&[col.clone(), vec![1.0; n + 1]]);
+        // The polynomial's three columns and the effect's; the column of another length is
+        // ignored.
+        assert_eq!(fitted.fitted_out_columns(), 4);
+        let rec = fitted.detrend(&record);
+        let member = fitted.detrend(&noise);
+        let scale = dot(&noise, &noise).sqrt();
+        assert!(dot(&rec, &col).abs() < 1e-9 * scale);
+        assert!(rec
+            .iter()
+            .zip(&member)
+            .all(|(a, b)| (a - b).abs() < 1e-9 * scale));
+        // The noise's own projection on the column is what the fit takes from the member.
+        let taken: f64 = noise.iter().zip(&member).map(|(a, b)| (a - b).abs()).sum();
+        assert!(taken > 0.0);
+    }
 }

@@ -42,11 +42,38 @@ const NOISE_EVALS: usize = 40;
 /// The same for each drift order's profile likelihood (warm-started from the previous order's).
 const DRIFT_NOISE_EVALS: usize = 60;
 
-/// Default ensemble size.
-pub const DEFAULT_ENSEMBLE: usize = 20;
-/// Ensemble sizes taken: two members make the smallest envelope; a thousand give its 5–95 %
-/// quantiles to a fraction of a percent and take about as long as 50 discover runs (a member
-/// of the twin of a 41-day 1 Hz record is about 13 ms of a core, twice: base and extended).
+/// Smallest default ensemble. The envelope's 5 % and 95 % lines are quantile estimates: from
+/// N members their error is about [`edge_error`]`(N)` = 1.3/√N of the envelope's half-width
+/// ln(p95/p50) (0.29 at 20 members, 0.20 at 40, 0.13 at 100: the Gaussian order-statistic
+/// formula, which the members' own scatter follows, docs/discovery.md), and the record's
+/// outside fraction moves with them. 30 members keep `discover --simulate` on gMetrology
+/// (50 000 points) within its 30 s at a load of 3 on two cores (40 took 31 s there).
+pub const MIN_DEFAULT_ENSEMBLE: usize = 30;
+/// Largest default ensemble (edge error 0.13).
+pub const MAX_DEFAULT_ENSEMBLE: usize = 100;
+/// Member-points the default ensemble spends (members × the record's points): a member's cost
+/// grows with the record's points, so a shorter record affords more members in the same time
+/// (30 members of gMetrology's 50 000 points).
+pub const DEFAULT_MEMBER_POINTS: usize = 1_500_000;
+
+/// The default ensemble size for a record of `points` points: [`DEFAULT_MEMBER_POINTS`] /
+/// points, within [`MIN_DEFAULT_ENSEMBLE`]..=[`MAX_DEFAULT_ENSEMBLE`].
+pub fn default_ensemble(points: usize) -> usize {
+    (DEFAULT_MEMBER_POINTS / points.max(1)).clamp(MIN_DEFAULT_ENSEMBLE, MAX_DEFAULT_ENSEMBLE)
+}
+
+/// The 5/95 % lines' sampling error from `members` members, as a fraction of the envelope's
+/// half-width: sd of the 95 % quantile estimate, √(p(1 − p)/N)/φ(z₀.₉₅), over z₀.₉₅ (a
+/// Gaussian spread of the members' values; ln ADEV and ln PSD are nearly so).
+pub fn edge_error(members: usize) -> f64 {
+    let (p, z) = (0.95f64, 1.644_853_626_951_472_2_f64);
+    let density = (-0.5 * z * z).exp() / (2.0 * std::f64::consts::PI).sqrt();
+    (p * (1.0 - p) / members.max(1) as f64).sqrt() / density / z
+}
+
+/// Ensemble sizes taken: two members make the smallest envelope; a thousand give its 5/95 %
+/// lines to 4 % of its half-width and take about two minutes on gMetrology (≈ 60 ms a member,
+/// twice: base and extended).
 pub const ENSEMBLE_RANGE: std::ops::RangeInclusive<usize> = 2..=1000;
 
 /// Parses `--ensemble`, refusing a size outside [`ENSEMBLE_RANGE`] with the range named.
@@ -174,6 +201,11 @@ pub struct Simulation {
     pub drift_coefficients: Vec<(f64, f64)>,
     /// Transient disturbances found in what the extended twin leaves (members draw them).
     pub transients: Transients,
+    /// The columns fitted out, with the drift polynomial, of the record's residual after
+    /// extension and of every extended member's (see `fitted_columns`).
+    pub fitted_out: Vec<Vec<f64>>,
+    /// How many independent columns that fit has, the drift polynomial's included.
+    pub fitted_out_independent: usize,
 }
 
 /// Runs the comparison with twins made by `build` (noise model → twin).
@@ -352,9 +384,11 @@ where
         |x| whitener.whiten(x),
     );
     lap("drift order");
-    // The members' noise: the family (white, flicker, random walk, drift-rate walk, output
-    // filter) fitted by Whittle likelihood to what the extended twin leaves, the drift kept —
-    // the comparison keeps it, so the members must carry it.
+    // The members' noise: the family (white, flicker, random walk, drift-rate walk,
+    // Gauss–Markov, output filter) fitted by Whittle likelihood to what the extended twin
+    // leaves with the drift polynomial removed and without the transients, from the lowest
+    // bin the polynomial leaves; the members carry the polynomial (fitted coefficients) and
+    // draw transients, and lose the polynomial again in the comparison.
     let family =
         match NoiseFamily::fit_after_drift(&clean(&r_after), yard.grid.dt_s, drift_order.order) {
             // Every instrument has a white floor: a fit that does not resolve one has traded it
@@ -392,10 +426,11 @@ where
     provenance.push(noise_source);
     if family.is_some() {
         provenance.push(
-            "ensemble members: the noise family fitted to the extended twin's residual (Whittle \
-             likelihood, drift kept), each member with its own draw of the family's parameters; \
-             members of the extended twin also draw every accepted effect's parameters from \
-             their uncertainty"
+            "ensemble members: the noise family fitted to the extended twin's residual with the \
+             drift polynomial and the transients removed (Whittle likelihood), each member with \
+             its own draw of the family's parameters and of the transients, and the drift \
+             polynomial at its fitted coefficients; members of the extended twin also draw \
+             every accepted effect's parameters from their uncertainty"
                 .to_owned(),
         );
     }
@@ -417,6 +452,19 @@ where
     // With a noise family, the members are the simulator's member model of the extended
     // twin: the same model `--write-scenario` writes and `accomp simulate` runs.
     let written_twin = twin.written_twin(&cause);
+    // The record's residual after extension had the accepted effects (and the tide groups)
+    // fitted out of it; each member's passes through the same least-squares fit, with the
+    // drift polynomial, and so does the record's again (the same projection for both).
+    // The twin's names are kinds, with " (tidal analysis)" or "#2" added.
+    let in_twin: Vec<&str> = effects
+        .iter()
+        .filter_map(|e| e.0.split([' ', '#']).next())
+        .collect();
+    let fitted_out = fitted_columns(&cause, &in_twin);
+    let yard_after = Yardstick::new(ds)
+        .with_drift_order(drift_order.order)
+        .with_fitted_out(&fitted_out);
+    let r_after = yard_after.detrend(&r_after);
     let members_ext = ensemble::run(
         |k| match &written_twin {
             Some(m) => m.member(k).map_err(SimulateError::twin),
@@ -427,10 +475,10 @@ where
         },
         &det_ext,
         ensemble,
-        &yard,
+        &yard_after,
         "extended",
     )?;
-    let mut after = mismatch::compare(yard.views(&r_after), &members_ext, &freqs, &channels);
+    let mut after = mismatch::compare(yard_after.views(&r_after), &members_ext, &freqs, &channels);
     let members_after = members_ext;
     // What the extended twin still gets wrong is named: unmodelled, with its likely cause.
     let nyquist_cpd = 0.5 / yard.grid.dt_s * 86_400.0;
@@ -488,7 +536,42 @@ where
         drift: drift_order,
         drift_coefficients,
         transients,
+        fitted_out_independent: yard_after.fitted_out_columns(),
+        fitted_out,
     })
+}
+
+/// The columns the record's residual after extension was fitted on, at the record's instants,
+/// for the effects the extended twin carries (`in_twin`, their kinds): each accepted effect's
+/// linear columns at its jointly fitted nonlinear parameters; when the twin's tide comes from
+/// the wave-group analysis, a free cosine and sine at each group's main wave (the groups'
+/// factors and phases were fitted to the record); when it carries a pressure admittance, the
+/// pressure channel. Effects the twin could not express stay in both residuals.
+fn fitted_columns(cause: &Discovery, in_twin: &[&str]) -> Vec<Vec<f64>> {
+    use crate::discover::import::ChannelKind;
+    let has = |name: &str| in_twin.contains(&name);
+    let mut cols: Vec<Vec<f64>> = Vec::new();
+    if let Some(joint) = &cause.selection.joint {
+        for (a, c) in cause.selection.accepted.iter().zip(&joint.effect_columns) {
+            if has(a.effect.name()) {
+                cols.extend(c.iter().cloned());
+            }
+        }
+    }
+    let ds = &cause.dataset;
+    if let (true, Ok(t)) = (has("tidal_gravity"), &cause.tidal) {
+        for g in &t.groups {
+            let w = 2.0 * std::f64::consts::PI * g.main_wave_cpd / 86_400.0;
+            cols.push(ds.t_s.iter().map(|t| (w * t).cos()).collect());
+            cols.push(ds.t_s.iter().map(|t| (w * t).sin()).collect());
+        }
+    }
+    if has("pressure_admittance") {
+        if let Some(p) = ds.channel(ChannelKind::Pressure) {
+            cols.push(p.values.clone());
+        }
+    }
+    cols
 }
 
 impl Simulation {
@@ -496,7 +579,9 @@ impl Simulation {
     /// seen: minus the extended twin's deterministic part, the drift polynomial of the selected
     /// order removed (`ds`: the record the comparison ran on).
     pub fn member_views(&self, ds: &Dataset, series: &[f64]) -> spectra::Views {
-        let yard = Yardstick::new(ds).with_drift_order(self.drift.order);
+        let yard = Yardstick::new(ds)
+            .with_drift_order(self.drift.order)
+            .with_fitted_out(&self.fitted_out);
         yard.views(&yard.detrend(&sub(series, &self.det_after)))
     }
 }
@@ -554,4 +639,44 @@ fn check_len(p: &[f64], ds: &Dataset) -> Result<(), SimulateError> {
         });
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The 95 % line of N Gaussian members (the envelope's own rule, `spectra::percentiles`)
+    /// scatters by `edge_error(N)` of the half-width 1.645σ.
+    #[test]
+    fn the_default_ensemble_grows_as_the_record_shortens_within_its_bounds() {
+        assert_eq!(default_ensemble(50_000), 30);
+        assert_eq!(default_ensemble(72_000), 30);
+        assert_eq!(default_ensemble(25_000), 60);
+        assert_eq!(default_ensemble(11_765), 100);
+        assert_eq!(default_ensemble(0), 100);
+    }
+
+    #[test]
+    fn the_edge_error_formula_matches_the_scatter_of_the_95_percent_line() {
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, StandardNormal};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        for n in [20usize, 40] {
+            let q: Vec<f64> = (0..3000)
+                .map(|_| {
+                    let mut v: Vec<f64> = (0..n).map(|_| StandardNormal.sample(&mut rng)).collect();
+                    spectra::percentiles(&mut v).2
+                })
+                .collect();
+            let m = q.iter().sum::<f64>() / q.len() as f64;
+            let sd = (q.iter().map(|x| (x - m).powi(2)).sum::<f64>() / q.len() as f64).sqrt();
+            let measured = sd / 1.644_853_626_951_472_2;
+            assert!(
+                (measured / edge_error(n) - 1.0).abs() < 0.12,
+                "{n} members: {measured} against {}",
+                edge_error(n)
+            );
+        }
+        assert!((edge_error(40) - 0.204).abs() < 0.01);
+    }
 }

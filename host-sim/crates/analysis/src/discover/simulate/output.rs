@@ -60,7 +60,15 @@ pub fn json(s: &Simulation) -> Value {
         "twin": if s.simulator { "simulator" } else { "stand-in" },
         "provenance": s.provenance,
         "ensemble": s.ensemble,
+        "envelope_edge_error": json!({
+            "method": "sd of the 5/95 % lines' quantile estimate from the members, as a fraction of the envelope's half-width ln(p95/p50): sqrt(p(1-p)/N)/phi(z)/z at p = 0.95",
+            "fraction_of_half_width": finite(super::edge_error(s.ensemble)),
+        }),
         "residual": format!("measured − twin prediction, the drift polynomial of order {} removed (offset and linear drift at order 1)", s.drift.order),
+        "fitted_out_after_extension": json!({
+            "method": "after extension the record's residual and every member's pass through the same least-squares fit: the drift polynomial, each accepted effect's linear columns at its jointly fitted nonlinear parameters and, when the tide comes from the wave-group analysis, a free cosine and sine at each group's main wave",
+            "independent_columns": s.fitted_out_independent,
+        }),
         "drift": json!({
             "method": "Legendre polynomial of the record's time on [-1, 1], removed from the record and every member alike; order by BIC on the time-domain likelihood (white + flicker + random walk refitted per order, Kalman innovations); coefficients by generalised least squares",
             "order": s.drift.order,
@@ -116,13 +124,22 @@ pub fn text(s: &Simulation, unit: &str) -> String {
     }
     let _ = writeln!(
         o,
-        "Simulation in the loop: the record against its simulated twin ({} members, base \
-         scenario: {})",
-        s.ensemble, s.scenario
+        "Simulation in the loop: the record against its simulated twin ({} members: the \
+         envelope's 5/95 % lines known to ±{:.0} % of its half-width; base scenario: {})",
+        s.ensemble,
+        100.0 * super::edge_error(s.ensemble),
+        s.scenario
     );
     for p in &s.provenance {
         let _ = writeln!(o, "  twin: {p}");
     }
+    let _ = writeln!(
+        o,
+        "  after extension: the record's residual and every member's pass through the same \
+         least-squares fit ({} independent columns: the drift polynomial, the accepted effects' \
+         linear columns, the tide groups' main waves)",
+        s.fitted_out_independent
+    );
     let _ = writeln!(
         o,
         "  drift: Legendre polynomial of order {} (BIC on the time-domain likelihood), removed \
