@@ -108,6 +108,18 @@ fn white_floor(p: &[f64], dt: f64) -> f64 {
 /// E[true rate | readings] by a Wiener filter of the reading (see the top); `floor`: the
 /// reading noise variance, None to take it from the spectrum's top quarter.
 fn wiener_rate(w: &[f64], dt: f64, floor: Option<f64>) -> Vec<f64> {
+    filtered_rate(w, dt, floor, None)
+}
+
+/// The rate of the reading band-limited to the frequencies where its smoothed periodogram
+/// stands above `margin` × its white floor (gain 1 there, 0 elsewhere), the floor fitted as in
+/// `white_floor`: inside that band the reading noise is at most 1/`margin` of the power, so the
+/// gain it attenuates is at most that, whatever the floor's error within a factor of `margin`.
+fn band_rate(w: &[f64], dt: f64, margin: f64) -> Vec<f64> {
+    filtered_rate(w, dt, None, Some(margin))
+}
+
+fn filtered_rate(w: &[f64], dt: f64, floor: Option<f64>, margin: Option<f64>) -> Vec<f64> {
     let n = w.len();
     // Linear trend out (its slope is a constant rate, added back), even extension so the
     // periodic FFT sees no jump at the ends.
@@ -141,6 +153,12 @@ fn wiener_rate(w: &[f64], dt: f64, floor: Option<f64>) -> Vec<f64> {
             let ps = p[a..b].iter().sum::<f64>() / (b - a) as f64;
             let gain = if j == 0 {
                 0.0
+            } else if let Some(margin) = margin {
+                if ps > margin * noise {
+                    1.0
+                } else {
+                    0.0
+                }
             } else {
                 (1.0 - noise / ps).max(0.0)
             };
@@ -184,7 +202,7 @@ fn main() {
         .and_then(|s| s.parse().ok())
         .unwrap_or(4);
     println!(
-        "channel, record, reading noise mK: gain found / true for raw, avg, wiener, eiv, oracle"
+        "channel, record, reading noise mK: gain found / true for raw, avg, wiener, eiv, oracle, band10, band30"
     );
     for case in ["slow ramps", "controller noise"] {
         for rec in 0..records {
@@ -242,6 +260,8 @@ fn main() {
                     Some(eiv_floor(&reading, dt).unwrap_or(f64::NAN)),
                 ),
                 wiener_rate(&reading, dt, Some(sigma_r * sigma_r)),
+                band_rate(&reading, dt, 10.0),
+                band_rate(&reading, dt, 30.0),
             ];
             let gains: Vec<String> = regressors
                 .iter()
