@@ -105,6 +105,21 @@ fn white_floor(p: &[f64], dt: f64) -> f64 {
     best.1
 }
 
+/// The lowest mean of the periodogram `p` over bands of 10 % of the frequency in its upper
+/// three quarters: the white floor plus whatever signal is left there, an upper bound of the
+/// floor (an overestimate only narrows the band, it does not bias the gain).
+fn lowest_band(p: &[f64]) -> f64 {
+    let k = p.len();
+    let mut lo = f64::INFINITY;
+    let mut j = k / 4;
+    while j < k {
+        let e = (j + (j / 10).max(1)).min(k);
+        lo = lo.min(p[j..e].iter().sum::<f64>() / (e - j) as f64);
+        j = e;
+    }
+    lo
+}
+
 /// E[true rate | readings] by a Wiener filter of the reading (see the top); `floor`: the
 /// reading noise variance, None to take it from the spectrum's top quarter.
 fn wiener_rate(w: &[f64], dt: f64, floor: Option<f64>) -> Vec<f64> {
@@ -145,7 +160,11 @@ fn filtered_rate(w: &[f64], dt: f64, floor: Option<f64>, margin: Option<f64>) ->
         .map(|(a, b)| (a * a + b * b) / big as f64)
         .collect();
     let k = p.len();
-    let noise = floor.unwrap_or_else(|| white_floor(&p, dt));
+    let noise = match (floor, margin) {
+        (Some(f), _) => f,
+        (None, Some(_)) => lowest_band(&p),
+        (None, None) => white_floor(&p, dt),
+    };
     let mut half: Vec<(f64, f64)> = (0..k)
         .map(|j| {
             let band = (j / 10).max(2);
