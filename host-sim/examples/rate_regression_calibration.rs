@@ -4,7 +4,7 @@
 //! and a linear drift beside it — the fit the discovery makes, without its selection:
 //!
 //! - `raw`: central differences of the reading;
-//! - `avg`: central differences of the reading averaged over ±15 min (what `rate_coupling` uses);
+//! - `avg`: central differences of the reading averaged over ±15 min;
 //! - `wiener`: regression calibration — E[true rate | readings] by a Wiener filter of the
 //!   reading, S_signal/(S_signal + S_noise) per frequency, S_noise the reading's white floor
 //!   fitted to the upper three quarters of its own spectrum as N + A·(2 sin πfΔt)^(−α)
@@ -13,7 +13,11 @@
 //! - `eiv`: the same filter with the reading noise the discovery's errors-in-variables model
 //!   fits to the channel (`discover::eiv::denoise`, the local-linear-trend maximum likelihood
 //!   reported as `channel_noise`);
-//! - `oracle`: the same filter with the true reading noise as the floor.
+//! - `oracle`: the same filter with the true reading noise as the floor;
+//! - `band`: what `rate_coupling` uses (`discover::rate::band_limited_rate`) — the rate kept
+//!   only where the reading's smoothed periodogram stands 10× above its white floor (gain 1
+//!   there, 0 elsewhere), the floor the lowest mean over 10 % bands of the upper three quarters
+//!   of the spectrum (an upper bound: it narrows the band, it does not bias the gain).
 //!
 //! Two channels: slow ramps (a ±0.5 °C programme of 2–6 h ramps, 14 days at 120 s, RTD noise
 //! 1–5 mK) and a thermostat's fast controller noise (AR(1) of 0.165 °C, correlation 15 min,
@@ -105,36 +109,9 @@ fn white_floor(p: &[f64], dt: f64) -> f64 {
     best.1
 }
 
-/// The lowest mean of the periodogram `p` over bands of 10 % of the frequency in its upper
-/// three quarters: the white floor plus whatever signal is left there, an upper bound of the
-/// floor (an overestimate only narrows the band, it does not bias the gain).
-fn lowest_band(p: &[f64]) -> f64 {
-    let k = p.len();
-    let mut lo = f64::INFINITY;
-    let mut j = k / 4;
-    while j < k {
-        let e = (j + (j / 10).max(1)).min(k);
-        lo = lo.min(p[j..e].iter().sum::<f64>() / (e - j) as f64);
-        j = e;
-    }
-    lo
-}
-
 /// E[true rate | readings] by a Wiener filter of the reading (see the top); `floor`: the
 /// reading noise variance, None to take it from the spectrum's top quarter.
 fn wiener_rate(w: &[f64], dt: f64, floor: Option<f64>) -> Vec<f64> {
-    filtered_rate(w, dt, floor, None)
-}
-
-/// The rate of the reading band-limited to the frequencies where its smoothed periodogram
-/// stands above `margin` × its white floor (gain 1 there, 0 elsewhere), the floor fitted as in
-/// `white_floor`: inside that band the reading noise is at most 1/`margin` of the power, so the
-/// gain it attenuates is at most that, whatever the floor's error within a factor of `margin`.
-fn band_rate(w: &[f64], dt: f64, margin: f64) -> Vec<f64> {
-    filtered_rate(w, dt, None, Some(margin))
-}
-
-fn filtered_rate(w: &[f64], dt: f64, floor: Option<f64>, margin: Option<f64>) -> Vec<f64> {
     let n = w.len();
     // Linear trend out (its slope is a constant rate, added back), even extension so the
     // periodic FFT sees no jump at the ends.
@@ -160,11 +137,7 @@ fn filtered_rate(w: &[f64], dt: f64, floor: Option<f64>, margin: Option<f64>) ->
         .map(|(a, b)| (a * a + b * b) / big as f64)
         .collect();
     let k = p.len();
-    let noise = match (floor, margin) {
-        (Some(f), _) => f,
-        (None, Some(_)) => lowest_band(&p),
-        (None, None) => white_floor(&p, dt),
-    };
+    let noise = floor.unwrap_or_else(|| white_floor(&p, dt));
     let mut half: Vec<(f64, f64)> = (0..k)
         .map(|j| {
             let band = (j / 10).max(2);
@@ -172,12 +145,6 @@ fn filtered_rate(w: &[f64], dt: f64, floor: Option<f64>, margin: Option<f64>) ->
             let ps = p[a..b].iter().sum::<f64>() / (b - a) as f64;
             let gain = if j == 0 {
                 0.0
-            } else if let Some(margin) = margin {
-                if ps > margin * noise {
-                    1.0
-                } else {
-                    0.0
-                }
             } else {
                 (1.0 - noise / ps).max(0.0)
             };
@@ -221,7 +188,7 @@ fn main() {
         .and_then(|s| s.parse().ok())
         .unwrap_or(4);
     println!(
-        "channel, record, reading noise mK: gain found / true for raw, avg, wiener, eiv, oracle, band10, band30"
+        "channel, record, reading noise mK: gain found / true for raw, avg, wiener, eiv, oracle, band"
     );
     for case in ["slow ramps", "controller noise"] {
         for rec in 0..records {
@@ -279,8 +246,11 @@ fn main() {
                     Some(eiv_floor(&reading, dt).unwrap_or(f64::NAN)),
                 ),
                 wiener_rate(&reading, dt, Some(sigma_r * sigma_r)),
-                band_rate(&reading, dt, 10.0),
-                band_rate(&reading, dt, 30.0),
+                accomp_host::discover::rate::band_limited_rate(
+                    &reading,
+                    &(0..n).map(|i| i as f64 * dt).collect::<Vec<_>>(),
+                    &(0..n).map(|i| i == 0).collect::<Vec<_>>(),
+                ),
             ];
             let gains: Vec<String> = regressors
                 .iter()
