@@ -311,6 +311,9 @@ pub(super) fn simpler_wins(
     simpler
         .into_iter()
         .filter_map(|e| scored.iter().find(|c| c.effect == e))
+        // A lag at the edge of its grid wants τ → 0 beside a rate coupling: it is that gain on
+        // the rate (of a noisier column), not another explanation.
+        .filter(|alt| !(matches!(s.effect, Effect::RateCoupling(_)) && alt.at_edge))
         .find_map(|alt| {
             let mut trial = cols.to_vec();
             trial.extend(alt.cols.iter().cloned());

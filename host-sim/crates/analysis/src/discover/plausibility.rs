@@ -70,6 +70,25 @@ pub fn simpler_than(e: &Effect, ds: &super::import::Dataset) -> Vec<Effect> {
                 vec![Effect::AmbientCoupling(c.clone())]
             }
         }
+        // A gain on the rate is the limit of the channel's first-order lag as τ → 0 (L_τ[c] − c
+        // ≈ −τ·dc/dt): on a slow cycle the lag at its own τ must not predict the held-out blocks
+        // as well (measured: a 24-min lag on a one-rate cycle named a rate coupling without it).
+        Effect::RateCoupling(c) => {
+            use super::import::ChannelKind;
+            if ds
+                .channel(ChannelKind::Temperature)
+                .is_some_and(|ch| &ch.name == c)
+            {
+                vec![Effect::ThermalLag]
+            } else if ds
+                .channel(ChannelKind::Pressure)
+                .is_some_and(|ch| &ch.name == c)
+            {
+                Vec::new()
+            } else {
+                vec![Effect::AmbientCoupling(c.clone())]
+            }
+        }
         _ => Vec::new(),
     }
 }
