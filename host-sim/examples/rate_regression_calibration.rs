@@ -4,7 +4,7 @@
 //! and a linear drift beside it — the fit the discovery makes, without its selection:
 //!
 //! - `raw`: central differences of the reading;
-//! - `avg`: central differences of the reading averaged over ±15 min (what `rate_coupling` uses);
+//! - `avg`: central differences of the reading averaged over ±15 min;
 //! - `wiener`: regression calibration — E[true rate | readings] by a Wiener filter of the
 //!   reading, S_signal/(S_signal + S_noise) per frequency, S_noise the reading's white floor
 //!   fitted to the upper three quarters of its own spectrum as N + A·(2 sin πfΔt)^(−α)
@@ -13,7 +13,11 @@
 //! - `eiv`: the same filter with the reading noise the discovery's errors-in-variables model
 //!   fits to the channel (`discover::eiv::denoise`, the local-linear-trend maximum likelihood
 //!   reported as `channel_noise`);
-//! - `oracle`: the same filter with the true reading noise as the floor.
+//! - `oracle`: the same filter with the true reading noise as the floor;
+//! - `band`: what `rate_coupling` uses (`discover::rate::band_limited_rate`) — the rate kept
+//!   only where the reading's smoothed periodogram stands 10× above its white floor (gain 1
+//!   there, 0 elsewhere), the floor the lowest mean over 10 % bands of the upper three quarters
+//!   of the spectrum (an upper bound: it narrows the band, it does not bias the gain).
 //!
 //! Two channels: slow ramps (a ±0.5 °C programme of 2–6 h ramps, 14 days at 120 s, RTD noise
 //! 1–5 mK) and a thermostat's fast controller noise (AR(1) of 0.165 °C, correlation 15 min,
@@ -175,7 +179,7 @@ fn main() {
         .and_then(|s| s.parse().ok())
         .unwrap_or(4);
     println!(
-        "channel, record, reading noise mK: gain found / true for raw, avg, wiener, eiv, oracle"
+        "channel, record, reading noise mK: gain found / true for raw, avg, wiener, eiv, oracle, band"
     );
     for case in ["slow ramps", "controller noise"] {
         for rec in 0..records {
@@ -233,6 +237,11 @@ fn main() {
                     Some(eiv_floor(&reading, dt).unwrap_or(f64::NAN)),
                 ),
                 wiener_rate(&reading, dt, Some(sigma_r * sigma_r)),
+                accomp_host::discover::rate::band_limited_rate(
+                    &reading,
+                    &(0..n).map(|i| i as f64 * dt).collect::<Vec<_>>(),
+                    &(0..n).map(|i| i == 0).collect::<Vec<_>>(),
+                ),
             ];
             let gains: Vec<String> = regressors
                 .iter()

@@ -8,9 +8,14 @@
 //! - a second-order lag of two UNEQUAL stages on the temperature (the detector fits a first-order
 //!   lag or two equal stages): named a coupling of `temperature_c` whose delay is the stages' sum;
 //! - a first-order lag on slow ramps, where a gain on the rate explains it as well: reported as
-//!   "ambiguous: A or B" with both parameter sets and what would separate them.
+//!   "ambiguous: A or B" with both parameter sets and what would separate them;
+//! - a bias on the rate of a thermostat's controller noise (AR(1) of 0.1–0.2 °C over 10–20 min on
+//!   a regulated station, read by the RTD with 1–5 mK): the rate lives at the shortest periods,
+//!   next to the reading noise, so it is named only if the rate is taken without its gain being
+//!   attenuated by that noise (errors in variables).
 //!
-//! Tolerances, stated before measuring: coefficients ±40 %, delays within e^0.5.
+//! Tolerances, stated before measuring: coefficients ±40 % (controller noise: ±25 %), delays
+//! within e^0.5.
 //! Measured figures: docs/discovery-causes.md, "Transfer functions per channel".
 
 #[path = "common/hidden.rs"]
@@ -81,6 +86,50 @@ fn a_bias_on_the_rate_of_temperature_change_is_a_rate_coupling_of_the_temperatur
         );
         let text = discover::report::text(&d);
         assert!(text.contains("rate_coupling (temperature_c, °C)"), "{text}");
+    }
+}
+
+#[test]
+fn a_bias_on_the_rate_of_controller_noise_is_a_rate_coupling_with_its_gain() {
+    // 4 days at 60 s, as the paper-1g preset's records.
+    let (rows, dt) = (4 * 1440, 60.0);
+    let mut rng = synth::rng(0x7A7E_0006);
+    for i in 0..2 {
+        let mut r = synth::rng(rng.random::<u64>());
+        let mut st = synth::station(rows, dt, synth::Thermal::Regulated, &mut r);
+        let (sd, tau) = (r.random_range(0.1..0.2), r.random_range(600.0..1200.0));
+        let a = (-dt / tau).exp();
+        let mut c = sd * synth::gauss(&mut r);
+        for k in 0..rows {
+            c = a * c + (1.0 - a * a).sqrt() * sd * synth::gauss(&mut r);
+            st.temp_true_c[k] += c;
+            st.temp_meas_c[k] =
+                ((st.temp_true_c[k] + st.rtd_offset_c + st.rtd_noise_c * synth::gauss(&mut r))
+                    * 1e4)
+                    .round()
+                    / 1e4;
+        }
+        let noise = synth::draw_noise(&mut r);
+        let rate = synth::true_rate_c_per_s(&st);
+        let rms = (rate.iter().map(|v| v * v).sum::<f64>() / rows as f64).sqrt();
+        // 2–4 µg rms of coupling.
+        let g = hidden::sign(&mut r) * r.random_range(2.0e-6..4.0e-6) / rms;
+        let extra: Vec<f64> = rate.iter().map(|v| g * v).collect();
+        let d = blind(&st, &noise, &extra, r.random());
+        eprintln!(
+            "controller {i}: {sd:.3} °C over {tau:.0} s, RTD {:.1} mK, g {g:.3e} g·s/°C → {:?}",
+            st.rtd_noise_c * 1e3,
+            hidden::accepted_with_params(&d)
+        );
+        no_absorbers(&d);
+        let a = hidden::accepted(&d, "rate_coupling")
+            .unwrap_or_else(|| panic!("rate_coupling named: {}", why(&d)));
+        assert_eq!(a.effect.channel(), Some("temperature_c"));
+        let k = hidden::param_value(a, "coefficient");
+        assert!(
+            (k / g - 1.0).abs() < 0.25,
+            "coefficient {k:.3e} against {g:.3e}"
+        );
     }
 }
 

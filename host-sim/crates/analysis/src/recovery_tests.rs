@@ -94,6 +94,7 @@ fn context(ds: &Dataset) -> Context {
             .map(|v| v.iter().map(|x| x * u).collect()),
         hysteresis: None,
         full_rate: Vec::new(),
+        rate_columns: Vec::new(),
     }
 }
 

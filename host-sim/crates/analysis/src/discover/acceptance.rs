@@ -346,9 +346,31 @@ pub(super) fn simpler_wins(
             ));
         }
     }
+    // A gain on the rate is the channel's first-order lag in the limit τ → 0: when the lag
+    // finds a τ inside its grid and is itself significant, the record shows a finite τ and the
+    // lag is named (measured: a 24-min lag on a one-rate cycle named a rate coupling at ΔBIC
+    // −9.2; on a rate coupling the lag ends at the lower edge of its grid).
+    if matches!(s.effect, Effect::RateCoupling(_)) {
+        let lag = rescored
+            .iter()
+            .chain(scored.iter().skip(super::select::RESCORE))
+            .find(|c| simpler.contains(&c.effect) && !c.at_edge && c.delta_bic < -cfg.bic_margin);
+        if let Some(alt) = lag {
+            return Some(format!(
+                "the channel's first-order lag {} finds τ = {:.4e} s inside its grid (ΔBIC \
+                 {:.1}): a gain on the rate is its τ → 0 limit",
+                alt.effect.name(),
+                alt.theta,
+                alt.delta_bic
+            ));
+        }
+    }
     simpler
         .into_iter()
         .filter_map(|e| scored.iter().find(|c| c.effect == e))
+        // A lag at the edge of its grid wants τ → 0 beside a rate coupling: it is that gain on
+        // the rate (of a noisier column), not another explanation.
+        .filter(|alt| !(matches!(s.effect, Effect::RateCoupling(_)) && alt.at_edge))
         .find_map(|alt| {
             let mut trial = cols.to_vec();
             trial.extend(alt.cols.iter().cloned());

@@ -146,6 +146,9 @@ pub struct Context {
     /// means of the lag computed at the rows' own rate. [`columns`] returns it for that effect
     /// at exactly that τ.
     pub full_rate: Vec<FastColumn>,
+    /// The `rate_coupling` column of each channel, from the channel as read
+    /// ([`rate_columns`]); a channel not here takes its column from the dataset's values.
+    pub rate_columns: Vec<(String, Vec<f64>)>,
 }
 
 /// A lag of the full-rate stage as a column of the binned model (see [`Context::full_rate`]).
@@ -298,13 +301,27 @@ pub fn step_durations(ds: &Dataset) -> Vec<f64> {
 /// ±15 min keeps it and cuts the reading noise by √(30 min/Δt).
 pub const TILT_COUPLING_SMOOTHING_S: f64 = 900.0;
 
-/// Half-width of the centred moving average the channel is taken through before its rate is
-/// differenced for `rate_coupling`, seconds. Differencing multiplies a channel's reading noise
-/// by 1/Δt, and the GLS whitening of a flicker/random-walk residual weights exactly those fast
-/// changes: on the raw channel a rate coupling came out at 0.18 × its true gain (errors in
-/// variables, the column's correlation with the true rate 0.90). A gradient across the sensor
-/// builds up over the housing's minutes, so ±15 min keeps it.
-pub const RATE_COUPLING_SMOOTHING_S: f64 = 900.0;
+/// The `rate_coupling` column of every driver channel of `ds`, from its values `as_read` (the
+/// channels before the errors-in-variables smoothing, same names and rows): the rate
+/// band-limited to where the channel stands above its reading noise ([`super::rate`]).
+pub fn rate_columns(ds: &Dataset, as_read: &[super::import::Channel]) -> Vec<(String, Vec<f64>)> {
+    as_read
+        .iter()
+        .filter(|c| c.values.len() == ds.t_s.len())
+        .filter(|c| {
+            matches!(
+                c.kind,
+                ChannelKind::Temperature | ChannelKind::Pressure | ChannelKind::Other
+            )
+        })
+        .map(|c| {
+            (
+                c.name.clone(),
+                super::rate::band_limited_rate(&c.values, &ds.t_s, &ds.segment_start),
+            )
+        })
+        .collect()
+}
 
 /// Centred moving average over ±`half_window_s` inside each segment (the window shrinks at the
 /// segment's ends): the baseline's running mean, the same that smooths the tilt term.
@@ -551,12 +568,12 @@ pub fn columns(e: &Effect, ds: &Dataset, ctx: &Context, theta: f64) -> Vec<Vec<f
                 t.iter().map(|x| (w * x).cos()).collect(),
             ]
         }
-        Effect::RateCoupling(name) => channel_values(ds, name)
-            .map(|v| {
-                let smooth = moving_average(v, t, seg, RATE_COUPLING_SMOOTHING_S);
-                vec![transfer(&smooth, t, seg, f64::NAN, true)]
-            })
-            .unwrap_or_default(),
+        Effect::RateCoupling(name) => match ctx.rate_columns.iter().find(|(c, _)| c == name) {
+            Some((_, col)) => vec![col.clone()],
+            None => channel_values(ds, name)
+                .map(|v| vec![super::rate::band_limited_rate(v, t, seg)])
+                .unwrap_or_default(),
+        },
         Effect::Lag2Coupling(name) => channel_values(ds, name)
             .map(|v| {
                 let l2 = transfer(v, t, seg, theta, false);

@@ -36,6 +36,7 @@ pub mod import;
 pub mod joint;
 pub mod noise;
 pub mod plausibility;
+pub mod rate;
 pub mod report;
 pub mod residual;
 pub mod select;
@@ -117,6 +118,7 @@ pub fn context(ds: &Dataset, base: &baseline::Baseline) -> Context {
         tilt_term,
         hysteresis: None,
         full_rate: Vec::new(),
+        rate_columns: Vec::new(),
     }
 }
 
@@ -161,7 +163,11 @@ pub fn discover_binned(
         }
         None => (baseline::static_baseline(&ds), None),
     };
-    let ctx = context(&ds, &base);
+    let mut ctx = context(&ds, &base);
+    // A rate coupling's column is the band-limited rate of the channel as read ([`rate`]): the
+    // smoothed state's filter is set by an estimated reading noise whose error would pass into
+    // the gain.
+    ctx.rate_columns = effects::rate_columns(&ds, &measured_channels);
     let (cands, not_candidates) = effects::candidates(&ds, &ctx, base.tilt_subtracted);
     let rounds = select::rounds(&ds, &base.target, &base.columns, &cands, &ctx, cfg);
     let mut full_rate = full.map(|f| fullrate::analyse(&f, &ds, &rounds.accepted).map(|r| (f, r)));

@@ -43,11 +43,13 @@ impl Floor {
 pub const FLOOR_RATIO_MIN: f64 = 1.0;
 
 /// The effects whose freedom is large enough to absorb noise, so they must pass [`noise_floor`].
-/// A gain on a channel's rate counts: differencing makes its column follow the channel's fast
-/// wiggles, the most noise-like column of the catalogue (measured: on a null log of a ±0.5 °C
-/// cycling programme a `rate_coupling` was accepted at ΔBIC < 0 without this check).
+/// A gain on a channel's rate is not one: its column is fixed by the channel as read (the rate
+/// band-limited to where the channel stands above its reading noise, `rate`), one linear gain
+/// and no width to tune, so its ΔBIC charges all its freedom; and on a thermostat's controller
+/// noise its contribution is as broadband as the output's noise (0.99× its Allan deviation at
+/// best for ≈ 3 µg rms, ΔBIC −870), which this check would refuse whatever the evidence.
 pub fn is_flexible(e: &Effect) -> bool {
-    matches!(e, Effect::ThermalHysteresis | Effect::RateCoupling(_))
+    matches!(e, Effect::ThermalHysteresis)
 }
 
 /// The simpler physical explanations a flexible effect, or a higher-order transfer function,
@@ -64,6 +66,25 @@ pub fn simpler_than(e: &Effect, ds: &super::import::Dataset) -> Vec<Effect> {
                 vec![Effect::ThermalLag]
             } else if is(ChannelKind::Pressure) {
                 vec![Effect::PressureAdmittance]
+            } else {
+                vec![Effect::AmbientCoupling(c.clone())]
+            }
+        }
+        // A gain on the rate is the limit of the channel's first-order lag as τ → 0 (L_τ[c] − c
+        // ≈ −τ·dc/dt): on a slow cycle the lag at its own τ must not predict the held-out blocks
+        // as well (measured: a 24-min lag on a one-rate cycle named a rate coupling without it).
+        Effect::RateCoupling(c) => {
+            use super::import::ChannelKind;
+            if ds
+                .channel(ChannelKind::Temperature)
+                .is_some_and(|ch| &ch.name == c)
+            {
+                vec![Effect::ThermalLag]
+            } else if ds
+                .channel(ChannelKind::Pressure)
+                .is_some_and(|ch| &ch.name == c)
+            {
+                Vec::new()
             } else {
                 vec![Effect::AmbientCoupling(c.clone())]
             }

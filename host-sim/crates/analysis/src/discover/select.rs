@@ -295,11 +295,17 @@ pub fn rounds(
             &mut before_scores,
             &mut refused,
         );
-        for s in rescored
-            .iter()
-            .filter(|s| s.delta_bic < -cfg.bic_margin)
-            .take(if took.is_empty() { 3 } else { 0 })
-        {
+        // Three candidates are tried per round; one refused at its grid's edge is not a
+        // finding and does not use up a try (on a thermostat's controller noise the lag and both
+        // lag2 stages end at the lower edge ahead of the rate coupling they approximate).
+        let mut tries = if took.is_empty() { 3 } else { 0 };
+        for s in rescored.iter().filter(|s| s.delta_bic < -cfg.bic_margin) {
+            if tries == 0 {
+                break;
+            }
+            if !s.at_edge {
+                tries -= 1;
+            }
             if s.at_edge {
                 refuse(
                     &mut refused,
