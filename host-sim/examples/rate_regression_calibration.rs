@@ -103,55 +103,12 @@ fn white_floor(p: &[f64], dt: f64) -> f64 {
 /// E[true rate | readings] by a Wiener filter of the reading (see the top); `floor`: the
 /// reading noise variance, None to take it from the spectrum's top quarter.
 fn wiener_rate(w: &[f64], dt: f64, floor: Option<f64>) -> Vec<f64> {
-    let n = w.len();
-    // Linear trend out (its slope is a constant rate, added back), even extension so the
-    // periodic FFT sees no jump at the ends.
-    let tm = (n as f64 - 1.0) / 2.0;
-    let m = w.iter().sum::<f64>() / n as f64;
-    let (mut sxy, mut sxx) = (0.0, 0.0);
-    for (i, v) in w.iter().enumerate() {
-        sxy += (i as f64 - tm) * (v - m);
-        sxx += (i as f64 - tm).powi(2);
-    }
-    let slope = sxy / sxx;
-    let d: Vec<f64> = w
-        .iter()
-        .enumerate()
-        .map(|(i, v)| v - m - slope * (i as f64 - tm))
-        .collect();
-    let mut z: Vec<f64> = d.iter().chain(d.iter().rev()).copied().collect();
-    let big = z.len();
-    let x = accomp_numerics::fft::half_spectrum(&mut z);
-    // Per-bin power, E = σ² for white noise of variance σ² (even extension of length 2n).
-    let p: Vec<f64> = x
-        .iter()
-        .map(|(a, b)| (a * a + b * b) / big as f64)
-        .collect();
-    let k = p.len();
-    let noise = floor.unwrap_or_else(|| white_floor(&p, dt));
-    let mut half: Vec<(f64, f64)> = (0..k)
-        .map(|j| {
-            let band = (j / 10).max(2);
-            let (a, b) = (j.saturating_sub(band).max(1), (j + band + 1).min(k));
-            let ps = p[a..b].iter().sum::<f64>() / (b - a) as f64;
-            let gain = if j == 0 {
-                0.0
-            } else {
-                (1.0 - noise / ps).max(0.0)
-            };
-            let om = std::f64::consts::TAU * j as f64 / (big as f64 * dt);
-            // i·sin(ωΔt)/Δt: the central difference's transfer function.
-            let s = (om * dt).sin() / dt * gain;
-            let (re, im) = x[j];
-            (-im * s, re * s)
-        })
-        .collect();
-    half.push((0.0, 0.0));
-    let r = accomp_numerics::fft::real_from_half_spectrum(&half);
-    r.iter()
-        .take(n)
-        .map(|v| v / big as f64 + slope / dt)
-        .collect()
+    // The discovery's frequency-domain rate with the Wiener weight 1 − noise/S in place of its
+    // band (S: the periodogram smoothed as there).
+    accomp_host::discover::rate::filtered_rate(w, dt, |p| {
+        let noise = floor.unwrap_or_else(|| white_floor(p, dt));
+        move |ps| (1.0 - noise / ps).max(0.0)
+    })
 }
 
 /// The reading noise variance the discovery's errors-in-variables model fits to `reading`.

@@ -52,10 +52,26 @@ pub fn band_limited_rate(v: &[f64], t: &[f64], seg_start: &[bool]) -> Vec<f64> {
     out.into_iter().map(|x| x - m).collect()
 }
 
-/// One evenly spaced segment: linear trend out (its slope is a constant rate, added back), even
-/// extension (the periodic FFT sees no jump at the ends), the band kept, the central
-/// difference's transfer function i·sin(ωΔt)/Δt applied.
+/// One evenly spaced segment, the band kept (weight 1 where the smoothed periodogram stands
+/// above [`BAND_MARGIN`] × the white floor, 0 elsewhere).
 fn segment_rate(w: &[f64], dt: f64) -> Vec<f64> {
+    filtered_rate(w, dt, |p| {
+        let floor = white_floor(p);
+        move |ps| if ps <= BAND_MARGIN * floor { 0.0 } else { 1.0 }
+    })
+}
+
+/// The rate (unit per second) of one evenly spaced segment `w`, `dt` s apart, weighted per
+/// frequency: linear trend out (its slope is a constant rate, added back), even extension (the
+/// periodic FFT sees no jump at the ends), the per-bin periodogram (E = σ² for white noise of
+/// variance σ²) handed to `weights`, which returns the weight of a bin from its periodogram
+/// smoothed over ±max(j/10, 2) bins; then the central difference's transfer function
+/// i·sin(ωΔt)/Δt. A segment shorter than [`MIN_SEGMENT`] gives its mean slope.
+pub fn filtered_rate<W, G>(w: &[f64], dt: f64, weights: W) -> Vec<f64>
+where
+    W: FnOnce(&[f64]) -> G,
+    G: Fn(f64) -> f64,
+{
     let n = w.len();
     let tm = (n as f64 - 1.0) / 2.0;
     let m = w.iter().sum::<f64>() / n as f64;
@@ -81,17 +97,18 @@ fn segment_rate(w: &[f64], dt: f64) -> Vec<f64> {
         .map(|(a, b)| (a * a + b * b) / big as f64)
         .collect();
     let k = p.len();
-    let floor = white_floor(&p);
+    let weight = weights(&p);
     let mut half: Vec<(f64, f64)> = (0..k)
         .map(|j| {
-            let w = (j / 10).max(2);
-            let (a, b) = (j.saturating_sub(w).max(1), (j + w + 1).min(k));
+            let band = (j / 10).max(2);
+            let (a, b) = (j.saturating_sub(band).max(1), (j + band + 1).min(k));
             let ps = p[a..b].iter().sum::<f64>() / (b - a).max(1) as f64;
-            if j == 0 || ps <= BAND_MARGIN * floor {
+            let g = if j == 0 { 0.0 } else { weight(ps) };
+            if g == 0.0 {
                 return (0.0, 0.0);
             }
             let om = std::f64::consts::TAU * j as f64 / (big as f64 * dt);
-            let s = (om * dt).sin() / dt;
+            let s = (om * dt).sin() / dt * g;
             let (re, im) = x[j];
             (-im * s, re * s)
         })
