@@ -61,6 +61,20 @@ fn programme_draw(rng: &mut ChaCha8Rng) -> (ChaCha8Rng, synth::Station, synth::S
     (r, st, noise)
 }
 
+/// No absorber is accepted, and a `rate_coupling` of the temperature channel is, with its
+/// coefficient within `tolerance` (relative) of the hidden `g` (g·s/°C).
+fn assert_rate_coupling_of_temperature(d: &Discovery, g: f64, tolerance: f64) {
+    no_absorbers(d);
+    let a = hidden::accepted(d, "rate_coupling")
+        .unwrap_or_else(|| panic!("rate_coupling named: {}", why(d)));
+    assert_eq!(a.effect.channel(), Some("temperature_c"));
+    let k = hidden::param_value(a, "coefficient");
+    assert!(
+        (k / g - 1.0).abs() < tolerance,
+        "coefficient {k:.3e} against {g:.3e}"
+    );
+}
+
 #[test]
 fn a_bias_on_the_rate_of_temperature_change_is_a_rate_coupling_of_the_temperature() {
     let mut rng = synth::rng(0x7A7E_0001);
@@ -75,15 +89,7 @@ fn a_bias_on_the_rate_of_temperature_change_is_a_rate_coupling_of_the_temperatur
             "rate {i}: g {g:.3e} g·s/°C → {:?}",
             hidden::accepted_with_params(&d)
         );
-        no_absorbers(&d);
-        let a = hidden::accepted(&d, "rate_coupling")
-            .unwrap_or_else(|| panic!("rate_coupling named: {}", why(&d)));
-        assert_eq!(a.effect.channel(), Some("temperature_c"));
-        let k = hidden::param_value(a, "coefficient");
-        assert!(
-            (k / g - 1.0).abs() < 0.4,
-            "coefficient {k:.3e} against {g:.3e}"
-        );
+        assert_rate_coupling_of_temperature(&d, g, 0.4);
         let text = discover::report::text(&d);
         assert!(text.contains("rate_coupling (temperature_c, °C)"), "{text}");
     }
@@ -121,15 +127,7 @@ fn a_bias_on_the_rate_of_controller_noise_is_a_rate_coupling_with_its_gain() {
             st.rtd_noise_c * 1e3,
             hidden::accepted_with_params(&d)
         );
-        no_absorbers(&d);
-        let a = hidden::accepted(&d, "rate_coupling")
-            .unwrap_or_else(|| panic!("rate_coupling named: {}", why(&d)));
-        assert_eq!(a.effect.channel(), Some("temperature_c"));
-        let k = hidden::param_value(a, "coefficient");
-        assert!(
-            (k / g - 1.0).abs() < 0.25,
-            "coefficient {k:.3e} against {g:.3e}"
-        );
+        assert_rate_coupling_of_temperature(&d, g, 0.25);
     }
 }
 
