@@ -322,8 +322,10 @@ fn a_state_path_under_a_regular_file_is_named_and_leaves_no_temporary_folder() {
     let file = work.join("a-file");
     std::fs::write(&file, "not a folder").unwrap();
     let state = file.join("state");
+    let tmp = Scratch::new("board-state-badpath-tmp");
     let child = accomp_cmd(&state, &table_get(&["-o"]))
         .arg(work.join("got.acal"))
+        .env("TMPDIR", &*tmp)
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
@@ -340,9 +342,9 @@ fn a_state_path_under_a_regular_file_is_named_and_leaves_no_temporary_folder() {
         "blamed on the emulator: {e}"
     );
     assert!(
-        qemu::temp_dirs_of(pid).is_empty(),
+        qemu::temp_dirs_of(&tmp, pid).is_empty(),
         "{:?} left",
-        qemu::temp_dirs_of(pid)
+        qemu::temp_dirs_of(&tmp, pid)
     );
 }
 
@@ -384,7 +386,11 @@ fn kill_9_of_accomp_leaves_no_emulator_and_the_next_run_reclaims_its_folder() {
     std::fs::write(&csv, text).unwrap();
     let (cal, _) = write_table(&work, 31);
     load_table(&state, &work, 32);
+    // Its own temp dir: a launch by a parallel test would reclaim the folder of the killed
+    // process before this test looks for it.
+    let tmp = Scratch::new("board-state-kill9-tmp");
     let mut child = accomp_cmd(&state, &["compensate", "--target", "qemu", "--calibration"])
+        .env("TMPDIR", &*tmp)
         .arg(&cal)
         .arg("--input")
         .arg(&csv)
@@ -422,18 +428,21 @@ fn kill_9_of_accomp_leaves_no_emulator_and_the_next_run_reclaims_its_folder() {
     // SIGKILL leaves no chance to remove the folder: the next launch reclaims it, and the
     // board's lock died with the process.
     assert!(
-        !qemu::temp_dirs_of(pid).is_empty(),
+        !qemu::temp_dirs_of(&tmp, pid).is_empty(),
         "no folder left: nothing to reclaim was tested"
     );
-    let o = accomp(
+    let o = accomp_cmd(
         &state,
         &table_get(&["--no-wait", "-o", work.join("g.acal").to_str().unwrap()]),
-    );
+    )
+    .env("TMPDIR", &*tmp)
+    .output()
+    .expect("accomp runs");
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(
-        qemu::temp_dirs_of(pid).is_empty(),
+        qemu::temp_dirs_of(&tmp, pid).is_empty(),
         "{:?} not reclaimed",
-        qemu::temp_dirs_of(pid)
+        qemu::temp_dirs_of(&tmp, pid)
     );
 }
 

@@ -70,10 +70,13 @@ fn load_then_table_get_round_trip_across_two_qemu_runs_and_leave_no_temp_folder(
         &["load", "--target", "qemu", file.to_str().unwrap()],
     );
     assert_eq!(tables_after_boot(&state), (Some(table(5).id()), None));
-    // Each `accomp` process removed its QEMU's temporary folder.
+    // Each `accomp` process removed its QEMU's temporary folder (its own temp dir, where no
+    // parallel test's launch reclaims it for it).
+    let tmp = fresh_dir("cli-tmp");
     let out = Command::new(env!("CARGO_BIN_EXE_accomp"))
         .args(["table", "get", "--target", "qemu", "-o"])
         .arg(&back)
+        .env("TMPDIR", &*tmp)
         .env(STATE_ENV, &*state)
         .env("ACCOMP_FIRMWARE_ELF", elf())
         .spawn()
@@ -82,9 +85,9 @@ fn load_then_table_get_round_trip_across_two_qemu_runs_and_leave_no_temp_folder(
     let status = out.wait_with_output().expect("wait").status;
     assert!(status.success());
     assert!(
-        qemu::temp_dirs_of(pid).is_empty(),
+        qemu::temp_dirs_of(&tmp, pid).is_empty(),
         "{:?} left",
-        qemu::temp_dirs_of(pid)
+        qemu::temp_dirs_of(&tmp, pid)
     );
     // And a launch in this process: its temporary folder goes with the Qemu.
     let (q, _c) = qemu::boot();
@@ -107,7 +110,9 @@ fn sigterm_stops_qemu_and_removes_its_temporary_folder() {
     std::fs::write(&csv, text).unwrap();
     let cal = work.join("t.acal");
     std::fs::write(&cal, table(6).encode()).unwrap();
+    let tmp = fresh_dir("sigterm-tmp");
     let mut child = Command::new(env!("CARGO_BIN_EXE_accomp"))
+        .env("TMPDIR", &*tmp)
         .args(["compensate", "--target", "qemu", "--calibration"])
         .arg(&cal)
         .arg("--input")
@@ -122,10 +127,13 @@ fn sigterm_stops_qemu_and_removes_its_temporary_folder() {
     let pid = child.id();
     // Wait until its QEMU runs (its temp folder exists), then a little longer.
     let deadline = std::time::Instant::now() + Duration::from_secs(60);
-    while qemu::temp_dirs_of(pid).is_empty() && std::time::Instant::now() < deadline {
+    while qemu::temp_dirs_of(&tmp, pid).is_empty() && std::time::Instant::now() < deadline {
         std::thread::sleep(Duration::from_millis(50));
     }
-    assert!(!qemu::temp_dirs_of(pid).is_empty(), "QEMU never started");
+    assert!(
+        !qemu::temp_dirs_of(&tmp, pid).is_empty(),
+        "QEMU never started"
+    );
     // Streaming (#15.8): rows are on disk while the run goes on.
     let out_csv = work.join("out.csv");
     let deadline = std::time::Instant::now() + Duration::from_secs(60);
@@ -157,7 +165,7 @@ fn sigterm_stops_qemu_and_removes_its_temporary_folder() {
         .unwrap();
     let status = child.wait().unwrap();
     assert!(!status.success());
-    assert!(qemu::temp_dirs_of(pid).is_empty(), "temp folder left");
+    assert!(qemu::temp_dirs_of(&tmp, pid).is_empty(), "temp folder left");
     for q in qemu_pids {
         assert!(
             !Path::new(&format!("/proc/{q}")).exists()

@@ -72,11 +72,13 @@ impl Rng {
     }
 }
 
-/// The temporary folders (`accomp-qemu-<pid>-*` in the temp dir) of the QEMUs that process
-/// `pid` runs.
-pub fn temp_dirs_of(pid: u32) -> Vec<PathBuf> {
+/// The temporary folders (`accomp-qemu-<pid>-*` in `tmp`) of the QEMUs that process `pid`
+/// runs. Give that process its own `TMPDIR` (= `tmp`): every `accomp` launch removes the
+/// folders of dead processes it finds in its temp dir, so in a shared one a parallel test can
+/// remove the folder this test is looking at.
+pub fn temp_dirs_of(tmp: &Path, pid: u32) -> Vec<PathBuf> {
     let prefix = format!("{}{pid}-", accomp_host::device::qemu::TEMP_PREFIX);
-    std::fs::read_dir(std::env::temp_dir())
+    std::fs::read_dir(tmp)
         .map(|r| {
             r.flatten()
                 .filter(|e| e.file_name().to_string_lossy().starts_with(&prefix))
