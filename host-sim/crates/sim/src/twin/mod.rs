@@ -4,8 +4,8 @@
 //! driven by the record's drivers ([`record::TwinRecord`]), plus, for member k, the member's
 //! draw of the accepted effects' parameters ([`draw::EffectDraws`]), its noise from the
 //! fitted noise family ([`family::NoiseFamily`]) with its draw of the record's transient
-//! disturbances ([`transients::Transients`]), and the record's drift polynomial
-//! ([`drift::DriftPolynomial`]). The analysis (`accomp-analysis`, `twin`)
+//! disturbances ([`transients::Transients`]), and the record's drift polynomial with the
+//! instrument's settling at the record's start, if any ([`drift::DriftPolynomial`]). The analysis (`accomp-analysis`, `twin`)
 //! builds these from a record and a discovery; the scenario's `[twin]` section
 //! ([`TwinSpec`]) holds them with a driver file beside it, so that `accomp simulate ext.toml
 //! --seed k` computes member k with the same code as the ensemble of `accomp discover
