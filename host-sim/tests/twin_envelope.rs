@@ -146,10 +146,15 @@ fn a_record_with_a_drift_curve_and_spikes_lies_outside_about_as_often_as_a_membe
         let s = simulate_dataset(&ds, None, MEMBERS, &select::Config::default()).expect("simulate");
         let (r, m) = outside(&s.after);
         eprintln!(
-            "seed {seed}: drift order {}, {} transients; record outside {:.0} % (ADEV {:.0} %, \
-             PSD {:.0} %), left-out member {:.0} %",
+            "seed {seed}: drift order {}, {} transients, settling {}; record outside {:.0} % \
+             (ADEV {:.0} %, PSD {:.0} %), left-out member {:.0} %",
             s.drift.order,
             s.transients.events.len(),
+            match s.settling.as_ref().map(|f| &f.refused) {
+                None => "not tried".to_owned(),
+                Some(None) => "in the twin".to_owned(),
+                Some(Some(why)) => format!("refused ({why})"),
+            },
             100.0 * r,
             100.0 * s.after.adev_outside_fraction,
             100.0 * s.after.psd_outside_fraction,

@@ -38,7 +38,7 @@ use crate::sim::scenario::Scenario;
 use crate::sim::tide::{TideModel, TideSampler};
 use crate::sim::time::Utc;
 use crate::sim::twin::draw::{Drawn, EffectDraws};
-use crate::sim::twin::drift::DriftPolynomial;
+use crate::sim::twin::drift::{DriftPolynomial, Settling};
 use crate::sim::twin::family::GridNoise;
 pub use crate::sim::twin::record::quiet;
 use crate::sim::twin::record::{
@@ -148,14 +148,17 @@ impl Twin {
     }
 
     /// The same twin whose members also carry the record's drift polynomial (Legendre
-    /// coefficients of the record's time on [−1, 1] with their 1σ; empty: none).
-    pub fn with_drift(&self, coefficients: &[(f64, f64)]) -> Twin {
+    /// coefficients of the record's time on [−1, 1] with their 1σ; empty: none) and the
+    /// instrument's settling at the record's start, if any (each member draws its τ and
+    /// amplitude).
+    pub fn with_drift(&self, coefficients: &[(f64, f64)], settling: Option<&Settling>) -> Twin {
         let mut t = self.clone();
-        t.drift = (!coefficients.is_empty()).then(|| DriftPolynomial {
+        t.drift = (!coefficients.is_empty() || settling.is_some()).then(|| DriftPolynomial {
             legendre: coefficients
                 .iter()
                 .map(|&(value, sigma)| Drawn { value, sigma })
                 .collect(),
+            settling: settling.copied(),
         });
         t
     }

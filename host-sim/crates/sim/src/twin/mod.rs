@@ -4,8 +4,8 @@
 //! driven by the record's drivers ([`record::TwinRecord`]), plus, for member k, the member's
 //! draw of the accepted effects' parameters ([`draw::EffectDraws`]), its noise from the
 //! fitted noise family ([`family::NoiseFamily`]) with its draw of the record's transient
-//! disturbances ([`transients::Transients`]), and the record's drift polynomial
-//! ([`drift::DriftPolynomial`]). The analysis (`accomp-analysis`, `twin`)
+//! disturbances ([`transients::Transients`]), and the record's drift polynomial with the
+//! instrument's settling at the record's start, if any ([`drift::DriftPolynomial`]). The analysis (`accomp-analysis`, `twin`)
 //! builds these from a record and a discovery; the scenario's `[twin]` section
 //! ([`TwinSpec`]) holds them with a driver file beside it, so that `accomp simulate ext.toml
 //! --seed k` computes member k with the same code as the ensemble of `accomp discover
@@ -145,7 +145,8 @@ pub struct TwinSpec {
     /// cells); absent: none.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub transients: Option<Transients>,
-    /// The drift polynomial every member carries; absent: none.
+    /// The drift polynomial every member carries, with the settling at the record's start each
+    /// member draws; absent: none.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub drift: Option<DriftPolynomial>,
 }
@@ -199,7 +200,7 @@ pub struct MemberModel {
 impl MemberModel {
     /// Member `seed`'s output at the record's instants: its draw of the effects added to the
     /// deterministic part (its own weather where a simulated driver enters), then its noise and
-    /// transients, then the drift polynomial.
+    /// transients, then the drift polynomial and its own draw of the settling.
     pub fn member(&self, seed: u64) -> Result<Vec<f64>, TwinRunError> {
         let rec = match &self.draws {
             Some(d) => self.record.extended(&d.drawn(seed)).0,
@@ -209,7 +210,7 @@ impl MemberModel {
         self.noise
             .add_member(&mut out, &mut stream(seed, NOISE_STREAM));
         if let Some(d) = &self.drift {
-            d.add(&mut out, &self.record.t_s);
+            d.add_member(&mut out, &self.record.t_s, seed);
         }
         Ok(out)
     }

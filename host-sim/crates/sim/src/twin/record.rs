@@ -265,27 +265,38 @@ impl TwinRecord {
         let mut t = self.clone();
         let setup = t.chain_setup();
         let offset = t.scenario.effects.len();
-        let mut accepted = Vec::new();
+        let mut valid = Vec::new();
         let mut refused = Vec::new();
         for (i, e) in effects.iter().enumerate() {
-            let ok = e
-                .validate(offset + i)
-                .map_err(|x| x.to_string())
-                .and_then(|()| {
-                    EffectChain::new(std::slice::from_ref(e), setup.clone())
-                        .map(|_| ())
-                        .map_err(|x| x.to_string())
-                });
-            match ok {
-                Ok(()) => accepted.push(e.clone()),
-                Err(why) => refused.push((e.name().to_owned(), why)),
+            match e.validate(offset + i) {
+                Ok(()) => valid.push(e.clone()),
+                Err(why) => refused.push((e.name().to_owned(), why.to_string())),
             }
         }
-        if accepted.is_empty() {
+        // The chain of every valid effect at once: when it builds, each effect's own chain
+        // would (a chain's set-up per effect is independent), so the effects are accepted
+        // without building each one's again — a wave-group tide renders its groups' waves at
+        // every node, the largest part of a member's draw. When it fails, each effect is
+        // tried alone and the ones that cannot be built are refused.
+        let chain = match EffectChain::new(&valid, setup.clone()) {
+            Ok(chain) => Some(chain),
+            Err(_) => {
+                let mut accepted = Vec::new();
+                for e in valid {
+                    match EffectChain::new(std::slice::from_ref(&e), setup.clone()) {
+                        Ok(_) => accepted.push(e),
+                        Err(why) => refused.push((e.name().to_owned(), why.to_string())),
+                    }
+                }
+                valid = accepted;
+                EffectChain::new(&valid, setup).ok()
+            }
+        };
+        if valid.is_empty() {
             return (t, refused);
         }
-        t.scenario.effects.extend(accepted.iter().cloned());
-        if let Ok(chain) = EffectChain::new(&accepted, setup) {
+        t.scenario.effects.extend(valid.iter().cloned());
+        if let Some(chain) = chain {
             add_effects(&mut t.det, chain, &t.t_s, &t.drivers);
         }
         (t, refused)

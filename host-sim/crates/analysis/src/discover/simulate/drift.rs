@@ -28,11 +28,22 @@ pub use crate::sim::twin::drift::{legendre, unit_time};
 /// Least-squares coefficients of P₀…P_order fitted to `r` at unit times `u`, and `r` minus the
 /// fit. A singular system (fewer points than coefficients) removes nothing.
 pub fn remove(u: &[f64], r: &[f64], order: usize) -> (Vec<f64>, Vec<f64>) {
-    let m = order + 1;
+    remove_with(u, r, order, &[])
+}
+
+/// [`remove`] with `extra` columns (each at the record's instants, e.g. the settling) fitted
+/// jointly: the coefficients of P₀…P_order then of the extra columns, and `r` minus the fit.
+pub fn remove_with(u: &[f64], r: &[f64], order: usize, extra: &[Vec<f64>]) -> (Vec<f64>, Vec<f64>) {
+    let m = order + 1 + extra.len();
+    let row = |i: usize, x: f64| {
+        let mut p = legendre(x, order);
+        p.extend(extra.iter().map(|c| c[i]));
+        p
+    };
     let mut ata = vec![vec![0.0; m]; m];
     let mut aty = vec![0.0; m];
-    for (&x, &y) in u.iter().zip(r) {
-        let p = legendre(x, order);
+    for (i, (&x, &y)) in u.iter().zip(r).enumerate() {
+        let p = row(i, x);
         for i in 0..m {
             aty[i] += p[i] * y;
             for j in i..m {
@@ -51,13 +62,8 @@ pub fn remove(u: &[f64], r: &[f64], order: usize) -> (Vec<f64>, Vec<f64>) {
     let out = u
         .iter()
         .zip(r)
-        .map(|(&x, &y)| {
-            y - legendre(x, order)
-                .iter()
-                .zip(&c)
-                .map(|(p, c)| p * c)
-                .sum::<f64>()
-        })
+        .enumerate()
+        .map(|(i, (&x, &y))| y - row(i, x).iter().zip(&c).map(|(p, c)| p * c).sum::<f64>())
         .collect();
     (c, out)
 }
@@ -75,10 +81,11 @@ pub struct DriftOrder {
 
 /// Selects the drift order of residual `r` (at the record's unit times `u`): of orders
 /// 1…[`MAX_ORDER`], the one with the lowest BIC, the profile −ℓ (`neg_loglik` of the residual
-/// with the polynomial removed) + ½ ln n per coefficient.
+/// with the polynomial and the `extra` columns removed) + ½ ln n per coefficient.
 pub fn select_order(
     u: &[f64],
     r: &[f64],
+    extra: &[Vec<f64>],
     span_s: f64,
     neg_loglik: impl Fn(&[f64]) -> f64,
 ) -> DriftOrder {
@@ -94,7 +101,7 @@ pub fn select_order(
     let mut order = 1;
     let mut best = f64::INFINITY;
     for k in 1..=MAX_ORDER {
-        let v = neg_loglik(&remove(u, r, k).1);
+        let v = neg_loglik(&remove_with(u, r, k, extra).1);
         tried.push((k, v));
         // The BIC: −ℓ + ½ ln n per coefficient.
         let bic = v + threshold * k as f64;
@@ -110,17 +117,20 @@ pub fn select_order(
     }
 }
 
-/// Generalised-least-squares coefficients of P₀…P_order in `r` and their 1σ, with `whiten`
-/// the noise model's whitening (normalised Kalman innovations) of a series.
+/// Generalised-least-squares coefficients of P₀…P_order, then of the `extra` columns, in `r`
+/// and their 1σ, with `whiten` the noise model's whitening (normalised Kalman innovations) of a
+/// series.
 pub fn gls(
     u: &[f64],
     r: &[f64],
     order: usize,
+    extra: &[Vec<f64>],
     whiten: impl Fn(&[f64]) -> Vec<f64>,
 ) -> Vec<(f64, f64)> {
-    let m = order + 1;
-    let cols: Vec<Vec<f64>> = (0..m)
+    let m = order + 1 + extra.len();
+    let cols: Vec<Vec<f64>> = (0..=order)
         .map(|k| whiten(&u.iter().map(|&x| legendre(x, order)[k]).collect::<Vec<_>>()))
+        .chain(extra.iter().map(|c| whiten(c)))
         .collect();
     let y = whiten(r);
     let mut ata = vec![vec![0.0; m]; m];

@@ -23,6 +23,7 @@ mod error;
 pub mod gain;
 pub mod mismatch;
 pub mod output;
+pub mod settling;
 pub mod spectra;
 pub mod twin;
 
@@ -32,6 +33,7 @@ pub use error::SimulateError;
 use super::import::Dataset;
 use super::noise::NoiseModel;
 use super::{select, Discovery};
+use crate::sim::twin::drift::Settling;
 use crate::twin::family::NoiseFamily;
 use crate::twin::transients::Transients;
 use ensemble::Yardstick;
@@ -116,8 +118,9 @@ pub trait TwinModel: Sync + Sized {
     /// The twin whose members also draw the record's transient disturbances.
     fn with_transients(&self, found: &Transients) -> Self;
     /// The twin whose members also carry the record's drift polynomial (Legendre coefficients
-    /// with their 1σ, see [`drift`]).
-    fn with_drift(&self, coefficients: &[(f64, f64)]) -> Self;
+    /// with their 1σ, see [`drift`]) and the settling at its start, if any ([`settling`]:
+    /// each member draws its τ and amplitude).
+    fn with_drift(&self, coefficients: &[(f64, f64)], settling: Option<&Settling>) -> Self;
     /// What came from the record and what from defaults.
     fn provenance(&self) -> Vec<String>;
     /// The scenario as TOML (`accomp simulate` runs it), if the twin has one.
@@ -201,6 +204,10 @@ pub struct Simulation {
     pub drift_coefficients: Vec<(f64, f64)>,
     /// Transient disturbances found in what the extended twin leaves (members draw them).
     pub transients: Transients,
+    /// The instrument's settling at the record's start fitted with the drift polynomial (in
+    /// the twin's drift when kept: in-sample, not a discovered cause); None: the record is too
+    /// short for one or the fit failed.
+    pub settling: Option<settling::SettlingFit>,
     /// The columns fitted out, with the drift polynomial, of the record's residual after
     /// extension and of every extended member's (see `fitted_columns`).
     pub fitted_out: Vec<Vec<f64>>,
@@ -361,8 +368,53 @@ where
             held
         }
     };
-    let drift_order = drift::select_order(yard.unit_time(), &r_clean, ds.span_s(), profile);
+    // The instrument's settling at the record's start: an exponential fitted with the
+    // polynomial of the highest order, kept by the profile likelihood (`settling`); the order
+    // is then selected with it in.
+    let settling_found = if ds.span_s() >= drift::MIN_SPAN_S {
+        let whitener = super::noise::Whitener::new(&noise, &ds.t_s, idx.clone());
+        settling::search(
+            &ds.t_s,
+            yard.unit_time(),
+            &r_clean,
+            drift::MAX_ORDER,
+            ds.dt_s,
+            |x| whitener.whiten(x),
+        )
+        .map(|f| {
+            settling::decide(
+                f,
+                &ds.t_s,
+                yard.unit_time(),
+                &r_clean,
+                drift::MAX_ORDER,
+                profile,
+            )
+        })
+    } else {
+        None
+    };
+    // The order's profiles start from the same warm start with or without the settling.
+    *last.borrow_mut() = noise.clone();
+    let settling_cols: Vec<Vec<f64>> = settling_found
+        .as_ref()
+        .and_then(|f| f.kept())
+        .map(|s| vec![Settling::column(&ds.t_s, s.tau_s.value)])
+        .unwrap_or_default();
+    let drift_order = drift::select_order(
+        yard.unit_time(),
+        &r_clean,
+        &settling_cols,
+        ds.span_s(),
+        profile,
+    );
     let yard = yard.with_drift_order(drift_order.order);
+    // The settling is removed with the polynomial from every residual (record and members).
+    let yard = if settling_cols.is_empty() {
+        yard
+    } else {
+        yard.with_fitted_out(&settling_cols)
+    };
     let r_before = yard.detrend(&r_before);
     let r_after = yard.detrend(&r_after);
     let drift_noise = NoiseModel::fit_ml(
@@ -377,12 +429,24 @@ where
     )
     .model;
     let whitener = super::noise::Whitener::new(&drift_noise, &ds.t_s, idx.clone());
-    let drift_coefficients = drift::gls(
+    let mut drift_coefficients = drift::gls(
         yard.unit_time(),
         &transients.removed_points(&grid.cell, &sub(&ds.y, &det_ext)),
         drift_order.order,
+        &settling_cols,
         |x| whitener.whiten(x),
     );
+    // The settling's amplitude and σ from the same fit (its τ and τ's σ from the search).
+    let settling_fit = settling_found.map(|mut f| {
+        if f.kept().is_some() {
+            if let Some(&(value, sigma)) = drift_coefficients.get(drift_order.order + 1) {
+                f.fitted.amplitude = crate::sim::twin::draw::Drawn { value, sigma };
+            }
+        }
+        f
+    });
+    drift_coefficients.truncate(drift_order.order + 1);
+    let settling_kept = settling_fit.as_ref().and_then(|f| f.kept()).copied();
     lap("drift order");
     // The members' noise: the family (white, flicker, random walk, drift-rate walk,
     // Gauss–Markov, output filter) fitted by Whittle likelihood to what the extended twin
@@ -419,11 +483,25 @@ where
         twin = twin
             .with_family(f, &yard.grid)
             .with_transients(&transients)
-            .with_drift(&drift_coefficients);
+            .with_drift(&drift_coefficients, settling_kept.as_ref());
     }
     let ext = twin.extended(&effects.iter().map(|e| e.1.clone()).collect::<Vec<_>>());
     let mut provenance = ext.provenance();
     provenance.push(noise_source);
+    if let Some(s) = &settling_kept {
+        provenance.push(format!(
+            "drift: the instrument's settling at the record's start, {:.3e} ± {:.1e} {} × \
+             exp(−t/τ), τ {:.3} ± {:.3} d, fitted with the drift polynomial and removed with it \
+             from the record and every member (in-sample: a property of the instrument's \
+             history in the twin's drift, not a discovered cause; members draw τ and the \
+             amplitude)",
+            s.amplitude.value,
+            s.amplitude.sigma,
+            ds.output_unit,
+            s.tau_s.value / 86_400.0,
+            s.tau_s.sigma / 86_400.0
+        ));
+    }
     if family.is_some() {
         provenance.push(
             "ensemble members: the noise family fitted to the extended twin's residual with the \
@@ -460,7 +538,8 @@ where
         .iter()
         .filter_map(|e| e.0.split([' ', '#']).next())
         .collect();
-    let fitted_out = fitted_columns(&cause, &in_twin);
+    let mut fitted_out = settling_cols.clone();
+    fitted_out.extend(fitted_columns(&cause, &in_twin));
     let yard_after = Yardstick::new(ds)
         .with_drift_order(drift_order.order)
         .with_fitted_out(&fitted_out);
@@ -536,6 +615,7 @@ where
         drift: drift_order,
         drift_coefficients,
         transients,
+        settling: settling_fit,
         fitted_out_independent: yard_after.fitted_out_columns(),
         fitted_out,
     })

@@ -76,6 +76,17 @@ pub fn json(s: &Simulation) -> Value {
             "bic_price_per_coefficient": finite(s.drift.threshold),
             "coefficients": s.drift_coefficients.iter().enumerate().map(|(k, (v, e))| json!({"legendre": k, "value": finite(*v), "sigma": finite(*e)})).collect::<Vec<_>>(),
             "unit": s.cause.dataset.output_unit,
+            "settling": s.settling.as_ref().map(|f| json!({
+                "method": "amplitude * exp(-(t - t0)/tau) from the record's first instant, fitted with the drift polynomial of the highest order (generalised least squares, tau by golden-section search on ln tau); kept when the profile likelihood improves by more than ln n, the amplitude is beyond 3 sigma and tau is not at an end of its range; in the twin's drift (in-sample: a property of the instrument's history, not a discovered cause and not forecast), removed with the polynomial from the record and every member, members draw tau and amplitude",
+                "in_twin": f.kept().is_some(),
+                "tau_s": finite(f.fitted.tau_s.value),
+                "tau_s_sigma": finite(f.fitted.tau_s.sigma),
+                "amplitude": finite(f.fitted.amplitude.value),
+                "amplitude_sigma": finite(f.fitted.amplitude.sigma),
+                "neg_loglik_gain": finite(f.gain),
+                "price": finite(f.price),
+                "refused": f.refused,
+            })),
         }),
         "transients": json!({
             "method": format!("first differences beyond {} robust sigma of the extended twin's residual; the noise family is fitted without them, members draw a Poisson number of the record's shapes at random cells", crate::twin::transients::THRESHOLD_SIGMAS),
@@ -151,6 +162,28 @@ pub fn text(s: &Simulation, unit: &str) -> String {
             .collect::<Vec<_>>()
             .join(", ")
     );
+    if let Some(f) = &s.settling {
+        let c = &f.fitted;
+        let what = format!(
+            "{:.3e} ± {:.1e} {unit} × exp(−t/τ), τ {:.3} ± {:.3} d from the record's start \
+             (−ℓ improves by {:.1}, price {:.1})",
+            c.amplitude.value,
+            c.amplitude.sigma,
+            c.tau_s.value / 86_400.0,
+            c.tau_s.sigma / 86_400.0,
+            f.gain,
+            f.price
+        );
+        let _ = match &f.refused {
+            None => writeln!(
+                o,
+                "  settling: {what}; in the twin's drift (in-sample: the instrument's history, \
+                 not a discovered cause, not forecast), removed with the polynomial from the \
+                 record and every member; members draw τ and the amplitude"
+            ),
+            Some(why) => writeln!(o, "  settling: none in the twin ({why}; best fit {what})"),
+        };
+    }
     let _ = writeln!(
         o,
         "  transients: {} beyond {} robust σ of the first differences ({:.3} per day), peaks {} \

@@ -18,6 +18,7 @@ use super::{Refused, TwinModel};
 use crate::discover::Discovery;
 use crate::sim::effects::ScenarioEffect;
 use crate::sim::twin::draw::{Drawn, EffectDraw, EffectDraws};
+use crate::sim::twin::drift::Settling;
 use crate::sim::twin::MemberModel;
 use crate::twin::family::NoiseFamily;
 use crate::twin::transients::Transients;
@@ -108,8 +109,8 @@ impl TwinModel for Twin {
         Twin::with_transients(self, found)
     }
 
-    fn with_drift(&self, coefficients: &[(f64, f64)]) -> Self {
-        Twin::with_drift(self, coefficients)
+    fn with_drift(&self, coefficients: &[(f64, f64)], settling: Option<&Settling>) -> Self {
+        Twin::with_drift(self, coefficients, settling)
     }
 
     fn provenance(&self) -> Vec<String> {
