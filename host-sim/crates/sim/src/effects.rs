@@ -535,6 +535,17 @@ fn lag_step(x: &mut Option<(f64, f64)>, t: f64, u: f64, tau: f64) -> f64 {
 impl EffectChain {
     /// The chain of `effects` (validated by the scenario) for a run described by `setup`.
     pub fn new(effects: &[ScenarioEffect], setup: ChainSetup) -> Result<Self, EffectError> {
+        Self::with_group_tides(effects, setup, &GroupTides::default())
+    }
+
+    /// The same, taking the wave groups' tides from `tides` (evaluating and keeping there
+    /// those it does not hold yet): chains of one run built with the same `tides` evaluate
+    /// each group's waves once.
+    pub fn with_group_tides(
+        effects: &[ScenarioEffect],
+        setup: ChainSetup,
+        tides: &GroupTides,
+    ) -> Result<Self, EffectError> {
         let mut states = Vec::with_capacity(effects.len());
         let mut needs_tide = false;
         let mut group_terms: Vec<&TideGroupTerm> = Vec::new();
@@ -605,7 +616,7 @@ impl EffectChain {
         let groups = if group_terms.is_empty() {
             None
         } else {
-            Some(group_nodes(&station()?, &setup, &group_terms))
+            Some(group_nodes(&station()?, &setup, &group_terms, tides))
         };
         Ok(EffectChain {
             effects: effects.to_vec(),
@@ -866,45 +877,152 @@ impl Nodes {
     }
 }
 
-/// Σ over the terms of factor·(elastic group tide advanced by phase), nm/s², on the nodes.
-fn group_nodes(st: &Station, setup: &ChainSetup, terms: &[&TideGroupTerm]) -> Nodes {
-    // Per term: the catalogue waves in its band with their rigid gravity and the model's δ.
-    let per_term: Vec<(f64, f64, Vec<_>)> = terms
+/// The node grid of a run's wave-group corrections: its first node (s from t = 0), the node
+/// count, and what the groups' tide depends on besides (the run's start and site).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct GroupGrid {
+    start_unix_s: u64,
+    t0_s: u64,
+    nodes: usize,
+    site: [u64; 3],
+}
+
+impl GroupGrid {
+    fn new(setup: &ChainSetup) -> Self {
+        let t0 = setup.span_s.0 - 2.0 * GROUP_NODE_S;
+        let t1 = setup.span_s.1 + 2.0 * GROUP_NODE_S;
+        let nodes = ((t1 - t0) / GROUP_NODE_S).ceil().max(0.0) as usize + 1;
+        let (lat, lon, h) = setup.site;
+        GroupGrid {
+            start_unix_s: setup.start_unix_s.to_bits(),
+            t0_s: t0.to_bits(),
+            nodes,
+            site: [lat.to_bits(), lon.to_bits(), h.to_bits()],
+        }
+    }
+
+    fn t0_s(&self) -> f64 {
+        f64::from_bits(self.t0_s)
+    }
+}
+
+/// One wave group's elastic-Earth tide (Σ δ·rigid gravity of the catalogue waves in its band),
+/// nm/s², on a [`GroupGrid`]: in phase (`in_phase[k]` = Σ δ·A·cos θ) and in quadrature
+/// (`quadrature[k]` = Σ δ·A·sin θ). The group advanced by φ is cos φ·in_phase − sin φ·quadrature.
+#[derive(Debug)]
+struct GroupTide {
+    in_phase: Vec<f64>,
+    quadrature: Vec<f64>,
+}
+
+/// The wave groups' tides of one run, kept for every chain built on it: a group term's draw
+/// (factor, phase) is a linear combination of its group's two series, so the chains of a
+/// twin's members share them and no member evaluates a wave. Chains on another grid (start,
+/// span or site) get their own series.
+#[derive(Debug, Default)]
+pub struct GroupTides {
+    kept: std::sync::Mutex<Vec<(GroupGrid, String, std::sync::Arc<GroupTide>)>>,
+}
+
+impl GroupTides {
+    /// The tides of the groups `names` on `grid`, those not kept yet evaluated (all in one pass
+    /// over the nodes: the Doodson arguments once per node).
+    fn of(
+        &self,
+        st: &Station,
+        setup: &ChainSetup,
+        grid: GroupGrid,
+        names: &[&str],
+    ) -> Vec<std::sync::Arc<GroupTide>> {
+        // Held while evaluating: members that start together wait for one evaluation instead
+        // of each making its own.
+        let mut kept = self
+            .kept
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        let find = |kept: &[(GroupGrid, String, std::sync::Arc<GroupTide>)], name: &str| {
+            kept.iter()
+                .find(|(g, n, _)| *g == grid && n == name)
+                .map(|(_, _, t)| t.clone())
+        };
+        let mut missing: Vec<&str> = Vec::new();
+        for &name in names {
+            if find(&kept, name).is_none() && !missing.contains(&name) {
+                missing.push(name);
+            }
+        }
+        for (name, tide) in missing.iter().zip(group_tides(st, setup, grid, &missing)) {
+            kept.push((grid, (*name).to_owned(), std::sync::Arc::new(tide)));
+        }
+        names.iter().filter_map(|name| find(&kept, name)).collect()
+    }
+}
+
+/// The elastic-Earth tides of the groups `names` on `grid`.
+fn group_tides(
+    st: &Station,
+    setup: &ChainSetup,
+    grid: GroupGrid,
+    names: &[&str],
+) -> Vec<GroupTide> {
+    // Per group: the catalogue waves in its band with their rigid gravity and the model's δ.
+    let per_group: Vec<Vec<_>> = names
         .iter()
-        .map(|g| {
-            let (lo, hi) = group_band(&g.name).unwrap_or((0.0, 0.0));
-            let (s, c) = g.phase_deg.to_radians().sin_cos();
-            let waves: Vec<_> = CTE1973
+        .map(|name| {
+            let (lo, hi) = group_band(name).unwrap_or((0.0, 0.0));
+            CTE1973
                 .iter()
                 .filter(|w| (lo..hi).contains(&w.frequency_cpd()))
                 .map(|w| (*w, st.wave_gravity(w), st.gravimetric_factor(w)))
-                .collect();
-            (g.factor * c, g.factor * s, waves)
+                .collect()
         })
         .collect();
-    let t0 = setup.span_s.0 - 2.0 * GROUP_NODE_S;
-    let t1 = setup.span_s.1 + 2.0 * GROUP_NODE_S;
-    let n = ((t1 - t0) / GROUP_NODE_S).ceil().max(0.0) as usize + 1;
-    let v = (0..n)
-        .map(|k| {
-            let args = DoodsonArguments::at_unix_seconds(
-                setup.start_unix_s + t0 + k as f64 * GROUP_NODE_S,
-            );
-            let mut sum = 0.0;
-            for (fc, fs, waves) in &per_term {
-                let (mut cs, mut sn) = (0.0, 0.0);
-                for (w, wg, delta) in waves {
-                    let (s, c) = sin_cos(w.argument_rad(&args) + wg.phase_rad);
-                    cs += delta * wg.amplitude_nm_s2 * c;
-                    sn += delta * wg.amplitude_nm_s2 * s;
-                }
-                // cos(x + φ) = cos x·cos φ − sin x·sin φ.
-                sum += fc * cs - fs * sn;
+    let mut tides: Vec<GroupTide> = names
+        .iter()
+        .map(|_| GroupTide {
+            in_phase: Vec::with_capacity(grid.nodes),
+            quadrature: Vec::with_capacity(grid.nodes),
+        })
+        .collect();
+    for k in 0..grid.nodes {
+        let args = DoodsonArguments::at_unix_seconds(
+            setup.start_unix_s + grid.t0_s() + k as f64 * GROUP_NODE_S,
+        );
+        for (waves, tide) in per_group.iter().zip(tides.iter_mut()) {
+            let (mut cs, mut sn) = (0.0, 0.0);
+            for (w, wg, delta) in waves {
+                let (s, c) = sin_cos(w.argument_rad(&args) + wg.phase_rad);
+                cs += delta * wg.amplitude_nm_s2 * c;
+                sn += delta * wg.amplitude_nm_s2 * s;
             }
-            sum
-        })
-        .collect();
-    Nodes { t0, v }
+            tide.in_phase.push(cs);
+            tide.quadrature.push(sn);
+        }
+    }
+    tides
+}
+
+/// Σ over the terms of factor·(elastic group tide advanced by phase), nm/s², on the nodes,
+/// from the groups' tides (`tides`: kept or evaluated now).
+fn group_nodes(
+    st: &Station,
+    setup: &ChainSetup,
+    terms: &[&TideGroupTerm],
+    tides: &GroupTides,
+) -> Nodes {
+    let grid = GroupGrid::new(setup);
+    let names: Vec<&str> = terms.iter().map(|g| g.name.as_str()).collect();
+    let per_term = tides.of(st, setup, grid, &names);
+    let mut v = vec![0.0; grid.nodes];
+    for (g, tide) in terms.iter().zip(&per_term) {
+        let (s, c) = g.phase_deg.to_radians().sin_cos();
+        let (fc, fs) = (g.factor * c, g.factor * s);
+        // cos(x + φ) = cos x·cos φ − sin x·sin φ.
+        for ((v, cs), sn) in v.iter_mut().zip(&tide.in_phase).zip(&tide.quadrature) {
+            *v += fc * cs - fs * sn;
+        }
+    }
+    Nodes { t0: grid.t0_s(), v }
 }
 
 #[cfg(test)]
@@ -1093,6 +1211,73 @@ mod tests {
         }];
         let err = EffectChain::new(&e, setup()).unwrap_err();
         assert!(err.to_string().contains("humidity"), "{err}");
+    }
+
+    /// A member's draw of the ten groups rendered from the kept in-phase and quadrature series
+    /// (kept by an earlier draw's chain) is each wave's δ·A·cos(θ + mλ + φ) summed directly
+    /// with the core's per-wave evaluation, and bit for bit what a chain evaluating its own
+    /// series renders.
+    #[test]
+    fn a_draw_from_the_kept_group_tides_is_the_direct_sum_of_its_waves() {
+        let mut rng = crate::noise::stream(7, 11);
+        let mut drawn = || -> Vec<TideGroupTerm> {
+            crate::tide::GROUPS
+                .iter()
+                .map(|g| TideGroupTerm {
+                    name: g.name.into(),
+                    factor: 0.05 * gauss(&mut rng),
+                    phase_deg: 5.0 * gauss(&mut rng),
+                })
+                .collect()
+        };
+        let tidal = |groups: Vec<TideGroupTerm>| ScenarioEffect::TidalGravity {
+            amplitude_factor: 0.0,
+            delay_s: 0.0,
+            groups,
+        };
+        let kept = GroupTides::default();
+        EffectChain::with_group_tides(&[tidal(drawn())], setup(), &kept).unwrap();
+        let member = drawn();
+        let mut cached =
+            EffectChain::with_group_tides(&[tidal(member.clone())], setup(), &kept).unwrap();
+        let mut own = EffectChain::new(&[tidal(member.clone())], setup()).unwrap();
+        assert_eq!(
+            kept.kept.lock().unwrap().len(),
+            10,
+            "one series pair per group"
+        );
+        let (lat, lon, h) = setup().site;
+        let st = Station::new(lat, lon, h).unwrap();
+        let nm_s2_per_g = STANDARD_GRAVITY_M_S2 * NM_S2_PER_M_S2;
+        let (mut worst, mut peak) = (0.0f64, 0.0f64);
+        // At the nodes (every 300 s from t = −600 s) the interpolation returns the node value.
+        for i in 0..288 {
+            let t = 300.0 * f64::from(i);
+            let args = DoodsonArguments::at_unix_seconds(setup().start_unix_s + t);
+            let direct: f64 = member
+                .iter()
+                .map(|g| {
+                    let (lo, hi) = group_band(&g.name).unwrap();
+                    let phase = g.phase_deg.to_radians();
+                    CTE1973
+                        .iter()
+                        .filter(|w| (lo..hi).contains(&w.frequency_cpd()))
+                        .map(|w| {
+                            let mut wg = st.wave_gravity(w);
+                            wg.phase_rad += phase;
+                            g.factor * st.gravimetric_factor(w) * wg.at(w, &args)
+                        })
+                        .sum::<f64>()
+                })
+                .sum::<f64>()
+                / nm_s2_per_g;
+            let y = cached.output_term(&drive(t, 0.0));
+            assert_eq!(y.to_bits(), own.output_term(&drive(t, 0.0)).to_bits());
+            worst = worst.max((y - direct).abs());
+            peak = peak.max(direct.abs());
+        }
+        assert!(peak > 1e-10, "the draw's correction is a tide: {peak}");
+        assert!(worst <= 1e-12 * peak, "{worst} of {peak}");
     }
 
     #[test]
