@@ -535,16 +535,16 @@ fn lag_step(x: &mut Option<(f64, f64)>, t: f64, u: f64, tau: f64) -> f64 {
 impl EffectChain {
     /// The chain of `effects` (validated by the scenario) for a run described by `setup`.
     pub fn new(effects: &[ScenarioEffect], setup: ChainSetup) -> Result<Self, EffectError> {
-        Self::with_group_tides(effects, setup, &GroupTides::default())
+        Self::with_kept_tides(effects, setup, &KeptTides::default())
     }
 
-    /// The same, taking the wave groups' tides from `tides` (evaluating and keeping there
-    /// those it does not hold yet): chains of one run built with the same `tides` evaluate
-    /// each group's waves once.
-    pub fn with_group_tides(
+    /// The same, taking the model's tide and the wave groups' tides from `tides` (evaluating
+    /// and keeping there those it does not hold yet): chains of one run built with the same
+    /// `tides` evaluate the ephemeris and each group's waves once.
+    pub fn with_kept_tides(
         effects: &[ScenarioEffect],
         setup: ChainSetup,
-        tides: &GroupTides,
+        tides: &KeptTides,
     ) -> Result<Self, EffectError> {
         let mut states = Vec::with_capacity(effects.len());
         let mut needs_tide = false;
@@ -609,7 +609,9 @@ impl EffectChain {
             Station::new(lat, lon, h).map_err(|e| EffectError::Site(format!("{e:?}")))
         };
         let tide = if needs_tide {
-            Some(TideNodes::new(station()?, &setup))
+            let st = station()?;
+            let kept = tides.model(&st, &setup);
+            Some(TideNodes::new(st, &setup, kept))
         } else {
             None
         };
@@ -799,6 +801,8 @@ impl EffectChain {
 struct TideNodes {
     station: Station,
     start_unix_s: f64,
+    /// The nodes over the run's span (delays included), evaluated once per run.
+    kept: std::sync::Arc<ModelTide>,
     k: i64,
     a: (f64, f64, f64),
     b: (f64, f64, f64),
@@ -807,10 +811,11 @@ struct TideNodes {
 const TIDE_NODE_S: f64 = 60.0;
 
 impl TideNodes {
-    fn new(station: Station, setup: &ChainSetup) -> Self {
+    fn new(station: Station, setup: &ChainSetup, kept: std::sync::Arc<ModelTide>) -> Self {
         TideNodes {
             station,
             start_unix_s: setup.start_unix_s,
+            kept,
             k: i64::MIN,
             a: (0.0, 0.0, 0.0),
             b: (0.0, 0.0, 0.0),
@@ -818,14 +823,13 @@ impl TideNodes {
     }
 
     fn node(&self, k: i64) -> (f64, f64, f64) {
-        let s = self
-            .station
-            .tide_at_unix_seconds(self.start_unix_s + k as f64 * TIDE_NODE_S);
-        (
-            s.gravity_gs().0,
-            s.tilt_north_mas / MAS_PER_RAD,
-            s.tilt_east_mas / MAS_PER_RAD,
-        )
+        let kept = usize::try_from(k - self.kept.first_node)
+            .ok()
+            .and_then(|i| self.kept.nodes.get(i));
+        match kept {
+            Some(v) => *v,
+            None => model_node(&self.station, self.start_unix_s, k),
+        }
     }
 
     fn at(&mut self, t: f64) -> (f64, f64, f64) {
@@ -846,6 +850,39 @@ impl TideNodes {
             self.a.1 + f * (self.b.1 - self.a.1),
             self.a.2 + f * (self.b.2 - self.a.2),
         )
+    }
+}
+
+/// The model's tide (gravity g, tilt north and east rad) at node `k` of a run starting at
+/// `start_unix_s`.
+fn model_node(station: &Station, start_unix_s: f64, k: i64) -> (f64, f64, f64) {
+    let s = station.tide_at_unix_seconds(start_unix_s + k as f64 * TIDE_NODE_S);
+    (
+        s.gravity_gs().0,
+        s.tilt_north_mas / MAS_PER_RAD,
+        s.tilt_east_mas / MAS_PER_RAD,
+    )
+}
+
+/// The model's tide on the 60 s nodes of a run's span widened by the longest delay
+/// (`tidal_gravity`'s ±7200 s) and one node each side: node `first_node + i` is `nodes[i]`.
+#[derive(Debug)]
+struct ModelTide {
+    first_node: i64,
+    nodes: Vec<(f64, f64, f64)>,
+}
+
+impl ModelTide {
+    fn new(station: &Station, setup: &ChainSetup) -> Self {
+        const LONGEST_DELAY_S: f64 = 7200.0;
+        let first_node = ((setup.span_s.0 - LONGEST_DELAY_S) / TIDE_NODE_S).floor() as i64 - 1;
+        let last_node = ((setup.span_s.1 + LONGEST_DELAY_S) / TIDE_NODE_S).floor() as i64 + 2;
+        ModelTide {
+            first_node,
+            nodes: (first_node..=last_node)
+                .map(|k| model_node(station, setup.start_unix_s, k))
+                .collect(),
+        }
     }
 }
 
@@ -877,24 +914,26 @@ impl Nodes {
     }
 }
 
-/// The node grid of a run's wave-group corrections: its first node (s from t = 0), the node
-/// count, and what the groups' tide depends on besides (the run's start and site).
+/// The run kept tides are of (start, span, site; bit patterns, a key) with the node grid of
+/// its wave-group corrections: the first node (s from t = 0) and the node count.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-struct GroupGrid {
+struct TideRun {
     start_unix_s: u64,
+    span_end_s: u64,
     t0_s: u64,
     nodes: usize,
     site: [u64; 3],
 }
 
-impl GroupGrid {
+impl TideRun {
     fn new(setup: &ChainSetup) -> Self {
         let t0 = setup.span_s.0 - 2.0 * GROUP_NODE_S;
         let t1 = setup.span_s.1 + 2.0 * GROUP_NODE_S;
         let nodes = ((t1 - t0) / GROUP_NODE_S).ceil().max(0.0) as usize + 1;
         let (lat, lon, h) = setup.site;
-        GroupGrid {
+        TideRun {
             start_unix_s: setup.start_unix_s.to_bits(),
+            span_end_s: setup.span_s.1.to_bits(),
             t0_s: t0.to_bits(),
             nodes,
             site: [lat.to_bits(), lon.to_bits(), h.to_bits()],
@@ -907,7 +946,7 @@ impl GroupGrid {
 }
 
 /// One wave group's elastic-Earth tide (Σ δ·rigid gravity of the catalogue waves in its band),
-/// nm/s², on a [`GroupGrid`]: in phase (`in_phase[k]` = Σ δ·A·cos θ) and in quadrature
+/// nm/s², on a [`TideRun`]: in phase (`in_phase[k]` = Σ δ·A·cos θ) and in quadrature
 /// (`quadrature[k]` = Σ δ·A·sin θ). The group advanced by φ is cos φ·in_phase − sin φ·quadrature.
 #[derive(Debug)]
 struct GroupTide {
@@ -915,23 +954,41 @@ struct GroupTide {
     quadrature: Vec<f64>,
 }
 
-/// The wave groups' tides of one run, kept for every chain built on it: a group term's draw
-/// (factor, phase) is a linear combination of its group's two series, so the chains of a
-/// twin's members share them and no member evaluates a wave. Chains on another grid (start,
-/// span or site) get their own series.
+/// The tide series of one run that no effect parameter changes, kept for every chain built on
+/// it: the model's tide on its 60 s nodes (`tidal_gravity`'s `amplitude_factor` term,
+/// `tidal_tilt`) and the wave groups' tides on theirs (a group term's draw, factor and phase,
+/// is a linear combination of its group's two series). The chains of a twin's members share
+/// them, so no member evaluates the ephemeris or a wave. Chains of another run (start, span
+/// or site) get their own series.
 #[derive(Debug, Default)]
-pub struct GroupTides {
-    kept: std::sync::Mutex<Vec<(GroupGrid, String, std::sync::Arc<GroupTide>)>>,
+pub struct KeptTides {
+    kept: std::sync::Mutex<Vec<(TideRun, String, std::sync::Arc<GroupTide>)>>,
+    model: std::sync::Mutex<Vec<(TideRun, std::sync::Arc<ModelTide>)>>,
 }
 
-impl GroupTides {
+impl KeptTides {
+    /// The model's tide on the nodes of the run `setup` describes (evaluated on first use).
+    fn model(&self, st: &Station, setup: &ChainSetup) -> std::sync::Arc<ModelTide> {
+        let run = TideRun::new(setup);
+        let mut model = self
+            .model
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if let Some((_, m)) = model.iter().find(|(g, _)| *g == run) {
+            return m.clone();
+        }
+        let m = std::sync::Arc::new(ModelTide::new(st, setup));
+        model.push((run, m.clone()));
+        m
+    }
+
     /// The tides of the groups `names` on `grid`, those not kept yet evaluated (all in one pass
     /// over the nodes: the Doodson arguments once per node).
     fn of(
         &self,
         st: &Station,
         setup: &ChainSetup,
-        grid: GroupGrid,
+        grid: TideRun,
         names: &[&str],
     ) -> Vec<std::sync::Arc<GroupTide>> {
         // Held while evaluating: members that start together wait for one evaluation instead
@@ -940,7 +997,7 @@ impl GroupTides {
             .kept
             .lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner);
-        let find = |kept: &[(GroupGrid, String, std::sync::Arc<GroupTide>)], name: &str| {
+        let find = |kept: &[(TideRun, String, std::sync::Arc<GroupTide>)], name: &str| {
             kept.iter()
                 .find(|(g, n, _)| *g == grid && n == name)
                 .map(|(_, _, t)| t.clone())
@@ -959,12 +1016,7 @@ impl GroupTides {
 }
 
 /// The elastic-Earth tides of the groups `names` on `grid`.
-fn group_tides(
-    st: &Station,
-    setup: &ChainSetup,
-    grid: GroupGrid,
-    names: &[&str],
-) -> Vec<GroupTide> {
+fn group_tides(st: &Station, setup: &ChainSetup, grid: TideRun, names: &[&str]) -> Vec<GroupTide> {
     // Per group: the catalogue waves in its band with their rigid gravity and the model's δ.
     let per_group: Vec<Vec<_>> = names
         .iter()
@@ -1008,9 +1060,9 @@ fn group_nodes(
     st: &Station,
     setup: &ChainSetup,
     terms: &[&TideGroupTerm],
-    tides: &GroupTides,
+    tides: &KeptTides,
 ) -> Nodes {
-    let grid = GroupGrid::new(setup);
+    let grid = TideRun::new(setup);
     let names: Vec<&str> = terms.iter().map(|g| g.name.as_str()).collect();
     let per_term = tides.of(st, setup, grid, &names);
     let mut v = vec![0.0; grid.nodes];
@@ -1235,11 +1287,11 @@ mod tests {
             delay_s: 0.0,
             groups,
         };
-        let kept = GroupTides::default();
-        EffectChain::with_group_tides(&[tidal(drawn())], setup(), &kept).unwrap();
+        let kept = KeptTides::default();
+        EffectChain::with_kept_tides(&[tidal(drawn())], setup(), &kept).unwrap();
         let member = drawn();
         let mut cached =
-            EffectChain::with_group_tides(&[tidal(member.clone())], setup(), &kept).unwrap();
+            EffectChain::with_kept_tides(&[tidal(member.clone())], setup(), &kept).unwrap();
         let mut own = EffectChain::new(&[tidal(member.clone())], setup()).unwrap();
         assert_eq!(
             kept.kept.lock().unwrap().len(),
@@ -1278,6 +1330,43 @@ mod tests {
         }
         assert!(peak > 1e-10, "the draw's correction is a tide: {peak}");
         assert!(worst <= 1e-12 * peak, "{worst} of {peak}");
+    }
+
+    /// A delayed `tidal_gravity` term from the kept model tide (kept by an earlier chain of
+    /// the run) is the ephemeris tide at the 60 s nodes around t − delay, linear in between,
+    /// inside the run's span and beyond it (where the chain evaluates the nodes itself).
+    #[test]
+    fn a_delayed_tide_term_from_the_kept_nodes_is_the_ephemeris_tide_interpolated() {
+        let tidal = |amplitude_factor: f64| ScenarioEffect::TidalGravity {
+            amplitude_factor,
+            delay_s: 1234.0,
+            groups: Vec::new(),
+        };
+        let kept = KeptTides::default();
+        EffectChain::with_kept_tides(&[tidal(0.3)], setup(), &kept).unwrap();
+        let mut c = EffectChain::with_kept_tides(&[tidal(0.07)], setup(), &kept).unwrap();
+        assert_eq!(
+            kept.model.lock().unwrap().len(),
+            1,
+            "one model tide for the run"
+        );
+        let (lat, lon, h) = setup().site;
+        let st = Station::new(lat, lon, h).unwrap();
+        let g = |k: f64| {
+            st.tide_at_unix_seconds(setup().start_unix_s + k * TIDE_NODE_S)
+                .gravity_gs()
+                .0
+        };
+        // Inside the span, then two days past its end.
+        for t in (0..144)
+            .map(|i| 137.0 + 600.0 * f64::from(i))
+            .chain([259_321.0])
+        {
+            let x = (t - 1234.0) / TIDE_NODE_S;
+            let k = x.floor();
+            let want = 0.07 * (g(k) + (x - k) * (g(k + 1.0) - g(k)));
+            assert_eq!(c.output_term(&drive(t, 0.0)), want, "t = {t}");
+        }
     }
 
     #[test]
