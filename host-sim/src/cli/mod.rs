@@ -1,8 +1,11 @@
 //! The command line's glue, one file per subcommand of `accomp` (`main.rs` only dispatches): its
 //! clap arguments, reading the files it names, calling the domain module, printing and writing
 //! what it returns. The domain modules (`fit`, `sim`, `tumble`, `discover`, `plot`, `stability`,
-//! `demo`, `device`) hold no clap: the domain's value enums (`plot::Format`, `plot::Kind`,
-//! `discover::import::Format`) get their command-line names in [`values`].
+//! `device`) hold no clap: the domain's value enums (`plot::Format`, `plot::Kind`,
+//! `discover::import::Format`) get their command-line names in [`values`]. Two option structs are
+//! a command's flags one for one and derive them where they are defined, so each option is
+//! written and documented once: `demo::DemoOptions` (`accomp demo`) and
+//! `device::record::Options` (`accomp record`, behind accomp-device's `clap` feature).
 
 pub mod board_sim;
 pub mod compensate;

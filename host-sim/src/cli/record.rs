@@ -2,7 +2,6 @@
 //! [`crate::device::record`]).
 
 use std::io::{IsTerminal as _, Write as _};
-use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
@@ -20,47 +19,13 @@ pub struct RecordArgs {
     /// serial:<port>
     #[arg(long)]
     pub target: Target,
-    /// Output file (.csv), or directory with --rotate daily / daily-gz.
-    #[arg(short = 'o', long = "output")]
-    pub output: PathBuf,
-    /// Stop after this many samples written.
-    #[arg(long, conflicts_with = "duration")]
-    pub samples: Option<u64>,
-    /// Stop after this much board time: 6w, 3d, 12h, 30m, 90s.
-    #[arg(long, value_parser = record::parse_duration)]
-    pub duration: Option<f64>,
-    /// Continue an existing record (the header must name the same board and table).
-    #[arg(long)]
-    pub append: bool,
-    /// Write over an existing record, or append to one of another board or table.
-    #[arg(long)]
-    pub force: bool,
-    /// `daily`: one file per UTC day in the output directory; `daily-gz`: the same, and every day
-    /// older than yesterday gzip-compressed (`YYYY-MM-DD.csv.gz`, a third of the size).
-    #[arg(long, value_enum)]
-    pub rotate: Option<Rotate>,
-    /// Where the test runs (written into the header).
-    #[arg(long)]
-    pub site: Option<String>,
-    /// A note for the header.
-    #[arg(long)]
-    pub note: Option<String>,
-    /// Set the ADS1262 data rate first (samples/s; frames come at rate / 8).
-    #[arg(long)]
-    pub rate: Option<u32>,
+    /// The recorder's options (all but the port, from `--target`, and the live rows, `--tui`).
+    #[command(flatten)]
+    pub options: Options,
     /// Full-screen live view: output, temperature and tilt over the last hours, the Allan
     /// deviation so far, the counters, the events (q or Ctrl-C stops the record).
     #[arg(long)]
     pub tui: bool,
-}
-
-/// `--rotate` values.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum Rotate {
-    /// One file per UTC day.
-    Daily,
-    /// One file per UTC day, the days before yesterday gzip-compressed.
-    DailyGz,
 }
 
 fn pc_clock() -> f64 {
@@ -100,17 +65,8 @@ pub fn run(args: &RecordArgs) -> anyhow::Result<()> {
     }
     let opts = Options {
         port: port.clone(),
-        output: args.output.clone(),
-        samples: args.samples,
-        duration_s: args.duration,
-        append: args.append,
-        force: args.force,
-        daily: args.rotate.is_some(),
-        compress_days: args.rotate == Some(Rotate::DailyGz),
-        site: args.site.clone(),
-        note: args.note.clone(),
-        rate_hz: args.rate,
         live_rows: tui,
+        ..args.options.clone()
     };
     let stop = Arc::new(AtomicBool::new(false));
     {

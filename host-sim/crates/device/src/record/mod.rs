@@ -27,34 +27,60 @@ use accomp_log::time::Utc;
 use clock::{ClockEvent, ClockModel, Last};
 use file::{Layout, RecordFile, RecordFileError};
 
-/// What to record and where.
+/// What to record and where. With the `clap` feature these are also the flags of
+/// `accomp record` (the doc comments are their help), except `port` (the CLI's `--target
+/// serial:<port>`) and `live_rows` (its `--tui`).
 #[derive(Debug, Clone)]
+#[cfg_attr(feature = "clap", derive(clap::Args))]
 pub struct Options {
     /// Serial port path.
+    #[cfg_attr(feature = "clap", arg(skip))]
     pub port: String,
-    /// Output file, or directory with `daily`.
+    /// Output file (.csv), or directory with --rotate daily / daily-gz.
+    #[cfg_attr(feature = "clap", arg(short = 'o', long = "output"))]
     pub output: PathBuf,
-    /// Stop after this many rows written by this run.
+    /// Stop after this many samples written.
+    #[cfg_attr(feature = "clap", arg(long, conflicts_with = "duration_s"))]
     pub samples: Option<u64>,
-    /// Stop after this much record time, seconds (board clock).
+    /// Stop after this much board time: 6w, 3d, 12h, 30m, 90s.
+    #[cfg_attr(
+        feature = "clap",
+        arg(long = "duration", value_name = "DURATION", value_parser = parse_duration)
+    )]
     pub duration_s: Option<f64>,
-    /// Continue an existing record.
+    /// Continue an existing record (the header must name the same board and table).
+    #[cfg_attr(feature = "clap", arg(long))]
     pub append: bool,
-    /// Write over an existing file, or append to one of another board or table.
+    /// Write over an existing record, or append to one of another board or table.
+    #[cfg_attr(feature = "clap", arg(long))]
     pub force: bool,
-    /// One file per UTC day in the output directory.
-    pub daily: bool,
-    /// With `daily`: gzip the days older than yesterday (`YYYY-MM-DD.csv.gz`).
-    pub compress_days: bool,
-    /// Where the test runs.
+    /// `daily`: one file per UTC day in the output directory; `daily-gz`: the same, and every day
+    /// older than yesterday gzip-compressed (`YYYY-MM-DD.csv.gz`, a third of the size).
+    #[cfg_attr(feature = "clap", arg(long, value_enum))]
+    pub rotate: Option<Rotate>,
+    /// Where the test runs (written into the header).
+    #[cfg_attr(feature = "clap", arg(long))]
     pub site: Option<String>,
-    /// Free text for the header.
+    /// A note for the header.
+    #[cfg_attr(feature = "clap", arg(long))]
     pub note: Option<String>,
-    /// SetRate before streaming.
+    /// Set the ADS1262 data rate first (samples/s; frames come at rate / 8).
+    #[cfg_attr(feature = "clap", arg(long = "rate", value_name = "RATE"))]
     pub rate_hz: Option<u32>,
     /// Hand the rows to the progress callback ([`Progress::rows`]) for a live view; off, no
     /// row is kept (the recorder's memory does not depend on the frame rate).
+    #[cfg_attr(feature = "clap", arg(skip))]
     pub live_rows: bool,
+}
+
+/// How a record is split into files (`--rotate`); without it, one file.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+pub enum Rotate {
+    /// One file per UTC day.
+    Daily,
+    /// One file per UTC day, the days before yesterday gzip-compressed.
+    DailyGz,
 }
 
 /// State of the link, for the status line.
@@ -307,14 +333,14 @@ impl Recorder<'_> {
 
     /// Opens the file at the first frame (its UTC is the record's start).
     fn open_file(&mut self, dev: &Device, pc_s: f64) -> Result<(), DeviceError> {
-        let layout = if self.opts.daily {
+        let layout = if self.opts.rotate.is_some() {
             Layout::Daily(self.opts.output.clone())
         } else {
             Layout::File(self.opts.output.clone())
         };
         let file = match self.existing.take() {
             Some(e) => {
-                let path = if self.opts.daily {
+                let path = if self.opts.rotate.is_some() {
                     file::newest_daily(&self.opts.output).ok_or(DeviceError::NoDailyFile)?
                 } else {
                     self.opts.output.clone()
@@ -331,7 +357,7 @@ impl Recorder<'_> {
             }
         };
         let mut file = file;
-        file.compress_finished_days(self.opts.daily && self.opts.compress_days);
+        file.compress_finished_days(self.opts.rotate == Some(Rotate::DailyGz));
         self.file = Some(file);
         for (t, k, d) in std::mem::take(&mut self.queued) {
             if let Some(f) = &mut self.file {
@@ -493,7 +519,7 @@ impl Recorder<'_> {
 /// Prepares the output: refuses to overwrite without `force`, checks and trims a record to
 /// append to.
 fn prepare_output(opts: &Options) -> Result<Option<file::Existing>, DeviceError> {
-    let target = if opts.daily {
+    let target = if opts.rotate.is_some() {
         file::newest_daily(&opts.output)
     } else {
         opts.output.exists().then(|| opts.output.clone())
