@@ -4,9 +4,9 @@
 //!
 //! The **ideal SNR** of a hidden coupling g·dT/dt is what a detector that knew its column
 //! exactly (the true rate, no reading noise) and the output's noise exactly would have: the
-//! matched-filter SNR (`hidden::matched_filter_snr`) of g·dT/dt under the true white + flicker
-//! + random-walk noise, after an offset, a linear drift and the true temperature took what they
-//! can. One linear column is charged ln n by the criterion, so with everything known it would be
+//! matched-filter SNR (`hidden::matched_filter_snr`) of g·dT/dt under the true white,
+//! flicker and random-walk noise, after an offset, a linear drift and the true temperature took
+//! what they can. One linear column is charged ln n by the criterion, so with everything known it would be
 //! named from SNR √(ln n) ≈ 2.9–3.0.
 //!
 //! Two stations (`tests/common/synth.rs`), the noise of the hidden-effect tests (white 2 µg·√s,
