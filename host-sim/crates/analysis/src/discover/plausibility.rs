@@ -345,6 +345,55 @@ mod tests {
         );
     }
 
+    /// Deterministic standard normal deviates (sum of 12 uniforms) for the tests.
+    fn normals(n: usize, mut state: u64) -> Vec<f64> {
+        (0..n)
+            .map(|_| {
+                (0..12)
+                    .map(|_| {
+                        state = state
+                            .wrapping_mul(6364136223846793005)
+                            .wrapping_add(1442695040888963407);
+                        (state >> 11) as f64 / (1u64 << 53) as f64
+                    })
+                    .sum::<f64>()
+                    - 6.0
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_jackknife_agrees_with_the_model_on_a_spread_gain_and_not_on_one_resting_on_a_block() {
+        let n = 4000;
+        let t: Vec<f64> = (0..n).map(|i| 60.0 * i as f64).collect();
+        let e = normals(n, 0x5EED);
+        let x = normals(n, 0xBEEF);
+        // A gain of 0.1 on a column spread over the record, in white noise the model describes:
+        // the blocks' scatter is the model's standard error (within the ±16 % of 19 degrees of
+        // freedom, ×2 for a margin).
+        let y: Vec<f64> = x.iter().zip(&e).map(|(x, e)| 0.1 * x + e).collect();
+        let ds = Dataset::test_g(t.clone(), y.clone(), 60.0);
+        let j = jackknife_gain(&ds, &[vec![1.0; n], x.clone()], &y, &white(1.0)).expect("fit");
+        let ratio = j.se_jackknife / j.se_model;
+        assert!((0.68..1.32).contains(&ratio), "{j:?}");
+        assert!(j.chi2() > 20.0, "{j:?}");
+        // A column that is small except in one short stretch, where the output follows it: the
+        // model's standard error sees n rows, the gain rests on the one block, and leaving that
+        // block out leaves a gain of ≈ 0 — its jackknife error is far above the model's.
+        let (a, b) = (1000, 1010);
+        let mut z: Vec<f64> = x.iter().map(|v| 0.05 * v).collect();
+        for (i, v) in z.iter_mut().enumerate().take(b).skip(a) {
+            *v = if i % 2 == 0 { 1.0 } else { -1.0 };
+        }
+        let mut y2 = e.clone();
+        for i in a..b {
+            y2[i] += 3.0 * z[i];
+        }
+        let ds2 = Dataset::test_g(t, y2.clone(), 60.0);
+        let j2 = jackknife_gain(&ds2, &[vec![1.0; n], z], &y2, &white(1.0)).expect("fit");
+        assert!(j2.se_jackknife > 3.0 * j2.se_model, "{j2:?}");
+    }
+
     #[test]
     fn a_square_wave_stands_above_white_noise_of_its_size_but_not_one_tenth_of_it() {
         // ±1 switching every 100 samples, 60 s spacing; white noise σ = 1 per sample has
