@@ -370,6 +370,14 @@ fn a_hidden_thermal_path_in_a_simulated_accelerometer_log_is_found_in_its_band_a
         worst(&bc),
         accomp_host::discover::simulate::output::text(&control, &ds0.output_unit)
     );
+    // The extended twin holds the whole log, not only the effect's band: at most a fifth of
+    // its ADEV points and of its PSD bands outside the envelope (70 % and 72 % before).
+    assert!(
+        s.after.adev_outside_fraction <= 0.2 && s.after.psd_outside_fraction <= 0.2,
+        "after the extension ADEV {:.0} %, PSD {:.0} % outside",
+        100.0 * s.after.adev_outside_fraction,
+        100.0 * s.after.psd_outside_fraction
+    );
     // The gain: the out-of-sample residual drops.
     let (b, a) = (
         s.before_scores.residual_std_out_of_sample,

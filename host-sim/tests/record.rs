@@ -31,10 +31,13 @@ fn temp_dir(name: &str) -> Scratch {
 struct BoardSim {
     child: Child,
     stdin: ChildStdin,
+    /// When the process was started (its board's clock runs from about then).
+    started: Instant,
 }
 
 impl BoardSim {
     fn start(dir: &Path, speed: u32, seed: u64) -> BoardSim {
+        let started = Instant::now();
         let mut child = Command::new(BIN)
             .args(["board-sim", "paper-1g", "--speed", &speed.to_string()])
             .args(["--seed", &seed.to_string()])
@@ -50,7 +53,11 @@ impl BoardSim {
         BufReader::new(stdout).read_line(&mut first).unwrap();
         assert!(first.starts_with("port: /dev/"), "first line {first:?}");
         let stdin = child.stdin.take().unwrap();
-        BoardSim { child, stdin }
+        BoardSim {
+            child,
+            stdin,
+            started,
+        }
     }
 
     fn command(&mut self, c: &str) {
@@ -91,6 +98,14 @@ impl Recorder {
     fn kill(&mut self) {
         let _ = self.0.kill();
         let _ = self.0.wait();
+    }
+    /// Ctrl-C: the recorder stops the stream, writes its stop event and exits with success.
+    fn interrupt(&mut self) {
+        let ok = Command::new("kill")
+            .args(["-INT", &self.0.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(ok.success());
     }
 }
 
@@ -275,6 +290,42 @@ fn wait_rows(path: &Path, n: usize) {
     panic!("{} never reached {n} rows", path.display());
 }
 
+/// Waits until the record has a line containing both `a` and `b`.
+fn wait_text(path: &Path, a: &str, b: &str) {
+    let t = Instant::now();
+    while t.elapsed() < Duration::from_secs(20) {
+        if let Ok(s) = std::fs::read_to_string(path) {
+            if s.split_inclusive('\n')
+                .any(|l| l.contains(a) && l.contains(b))
+            {
+                return;
+            }
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    panic!("{} never had a line with {a:?} and {b:?}", path.display());
+}
+
+/// Waits until the record has `n` rows after the first line containing `marker`.
+fn wait_rows_after(path: &Path, marker: &str, n: usize) {
+    let t = Instant::now();
+    while t.elapsed() < Duration::from_secs(20) {
+        if let Ok(s) = std::fs::read_to_string(path) {
+            if let Some(at) = s.find(marker) {
+                let rows = s[at..]
+                    .lines()
+                    .filter(|l| l.starts_with(|c: char| c.is_ascii_digit()))
+                    .count();
+                if rows >= n {
+                    return;
+                }
+            }
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    panic!("{} never had {n} rows after {marker:?}", path.display());
+}
+
 #[test]
 fn recorded_samples_are_the_scenarios_physics_in_seq_and_board_time() {
     let (dir, _board, out) = board_with_table("truth", 1000, 7);
@@ -407,12 +458,22 @@ fn a_board_reset_and_garbage_on_the_line_are_events_and_lose_nothing_else() {
 #[test]
 fn an_unplugged_link_keeps_the_boot_and_flag_changes_are_events() {
     let (dir, mut board, out) = board_with_table("unplug", 1000, 5);
-    let mut rec = recording(&dir, &out, "3000", 400);
-    // ≈ 375 frames with the loop open (the file shows rows half a second late: waiting for
-    // a row count would not separate the two commands).
-    board.fault_for("rtd-open", 300);
-    std::thread::sleep(Duration::from_millis(300));
+    // No sample count: the recorder loses nothing, so under load it may still be writing rows
+    // from before the faults when a count would be reached. It is stopped (Ctrl-C) once the
+    // record holds rows from after the link came back, which it reads in order.
+    let mut rec = Recorder::spawn(record_cmd(&dir, &out, &[]));
+    wait_rows(&out, 400);
+    // The loop opened until the record has the status event raising RTD_OPEN, then closed
+    // until it has the one back to OK (event lines are synced at once; rows may show half a
+    // second late), then the link pulled: each step seen before the next, however late
+    // board-sim or the recorder are scheduled.
+    board.command("rtd-open");
+    wait_text(&out, "status OK -> ", "RTD_OPEN");
+    board.command("rtd-open=off");
+    wait_text(&out, " status ", "-> OK\n");
     board.command("unplug=1");
+    wait_rows_after(&out, " reconnected ", 300);
+    rec.interrupt();
     assert!(rec.wait_success());
     let r = read_rec(&out);
     assert_events(
@@ -442,12 +503,13 @@ fn an_unplugged_link_keeps_the_boot_and_flag_changes_are_events() {
 fn a_reset_while_unplugged_is_a_new_boot_though_its_clock_and_seq_passed_the_old_boots() {
     let (dir, mut board, out) = board_with_table("unplugreset", 1000, 9);
     let mut rec = recording(&dir, &out, "3000", 400);
-    // Unplugged for 1 s of wall clock (1000 s of the board's) and reset at once: READY goes
-    // into the void, and when the link is back the new boot's uptime and seq are far past the
-    // old boot's last frame (≈ 320 s, seq ≈ 400). Only Info's boot id tells it is a new boot.
-    board.command("unplug=1");
-    std::thread::sleep(Duration::from_millis(50));
-    board.command("reset");
+    // Unplugged and reset at once (one write: board-sim takes both in the same turn, however
+    // late it is scheduled): READY goes into the void. The link stays down 1 s longer than the
+    // old boot has lived (1000 s of the board's clock), so when it is back the new boot's
+    // uptime and seq are far past the old boot's last frame whatever the load made of the old
+    // boot's life. Only Info's boot id tells it is a new boot.
+    let unplug_s = board.started.elapsed().as_secs_f64() + 1.0;
+    board.command(&format!("unplug={unplug_s:.3}\nreset"));
     assert!(rec.wait_success());
     let r = read_rec(&out);
     // A new boot's seq is no gap.

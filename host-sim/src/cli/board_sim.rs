@@ -190,6 +190,13 @@ pub fn run(args: &BoardSimArgs) -> anyhow::Result<()> {
     let mut board = VirtualBoard::boot(flash, 0, POWER_ON);
     let mut plugged_again: Option<Instant> = None;
     let mut rx = [0u8; 1024];
+    // What the PC side holds of the board's output when its program does not read (the bytes
+    // beyond the pseudo-terminal's own 20 KiB): 64 KiB of the stream at the real rate, i.e.
+    // the same stretch of wall clock at any speed. A PC's stalls (scheduling, a disk sync) last
+    // as long in wall clock whatever the speed, and so does this process's own catching up
+    // after it was not scheduled; a fixed 64 KiB would shrink the PC's margin `--speed` times
+    // (3.5 s at 250×) and lose frames no real board would lose.
+    let pc_buffer = ((1usize << 16) as f64 * args.speed.max(1.0)) as usize;
     let mut noise = 0x1234_5678u32;
     while !stop.load(Ordering::Relaxed) {
         let now = Instant::now();
@@ -251,19 +258,24 @@ pub fn run(args: &BoardSimArgs) -> anyhow::Result<()> {
         board.run_until(board_end, &mut station);
         match &mut line {
             Some(l) => {
-                loop {
-                    let n = l.read(&mut rx);
-                    if n == 0 {
-                        break;
+                let client_open = loop {
+                    match l.read(&mut rx) {
+                        Ok(0) => break true,
+                        Ok(n) => board.receive(&rx[..n]),
+                        Err(_) => break false,
                     }
-                    board.receive(&rx[..n]);
+                };
+                if client_open {
+                    let sent = l.write(&board.tx);
+                    board.tx.drain(..sent);
+                } else {
+                    // The PC's driver drops what arrives at a port no program has open.
+                    board.tx.clear();
                 }
-                let sent = l.write(&board.tx);
-                board.tx.drain(..sent);
                 // A UART never waits for the PC: what the PC side does not take in time is lost
                 // there (the recorder sees the gap in seq). Whole frames: the one being
                 // written stays.
-                if board.tx.len() > 1 << 16 {
+                if board.tx.len() > pc_buffer {
                     let keep = board.tx.iter().position(|&b| b == 0).map_or(0, |i| i + 1);
                     board.tx.truncate(keep);
                 }

@@ -186,17 +186,31 @@ fn register(pid: u32, dir: Option<PathBuf>) {
     }
 }
 
-/// Connections tried before giving up on READY (see `Qemu::launch`).
-const CONNECT_ATTEMPTS: u32 = 3;
-
-/// Whether a local TCP connection ended up connected to itself (same address on both ends).
-fn is_self_connection(s: &TcpStream) -> bool {
-    matches!((s.local_addr(), s.peer_addr()), (Ok(a), Ok(b)) if a == b)
+/// The listening socket of QEMU's UART, made here and handed to QEMU (`-chardev socket,fd=N`):
+/// the port is this launch's from the moment the OS picks it until QEMU exits, so the host's
+/// connection can only reach this QEMU. (A port picked by binding port 0 and released for QEMU
+/// to bind can be picked again in between by another launch's bind — the OS chooses among the
+/// free odd ports of one half of the ephemeral range, a few thousand — and then one QEMU fails
+/// to bind while both hosts connect to the other: one of them gets the wrong board, the other a
+/// connection that is never accepted, and its QEMU waits for a client that never comes.)
+fn uart_listener() -> std::io::Result<TcpListener> {
+    TcpListener::bind("127.0.0.1:0")
 }
 
-fn free_port() -> std::io::Result<u16> {
-    // The OS picks a free port; QEMU binds it right after we release it.
-    Ok(TcpListener::bind("127.0.0.1:0")?.local_addr()?.port())
+/// Lets the child inherit descriptor `fd` across exec (Rust opens every descriptor
+/// close-on-exec, so no other child of this process gets it).
+fn inherit_fd(cmd: &mut Command, fd: std::os::fd::RawFd) {
+    use std::os::unix::process::CommandExt as _;
+    // SAFETY: fcntl is async-signal-safe and touches no memory of ours; `fd` is open in the
+    // child (a copy of the parent's descriptor table, the listener alive until after spawn).
+    unsafe {
+        cmd.pre_exec(move || {
+            if libc::fcntl(fd, libc::F_SETFD, 0) != 0 {
+                return Err(std::io::Error::last_os_error());
+            }
+            Ok(())
+        });
+    }
 }
 
 impl Qemu {
@@ -241,7 +255,12 @@ impl Qemu {
         let stderr_path = log_dir.join("qemu-stderr.txt");
         let stderr = File::create(&stderr_path)
             .map_err(io_err("cannot create QEMU's stderr file", &stderr_path))?;
-        let port = free_port().map_err(QemuError::Spawn)?;
+        let listener = uart_listener().map_err(QemuError::Spawn)?;
+        let port = listener.local_addr().map_err(QemuError::Spawn)?.port();
+        let listener_fd = {
+            use std::os::fd::AsRawFd as _;
+            listener.as_raw_fd()
+        };
         let mut cmd = Command::new("qemu-system-arm");
         cmd.args([
             "-machine",
@@ -251,8 +270,11 @@ impl Qemu {
             "-monitor",
             "none",
         ])
-        .arg("-serial")
-        .arg(format!("tcp:127.0.0.1:{port},server=on,wait=on,nodelay=on"))
+        .arg("-chardev")
+        .arg(format!(
+            "socket,id=uart,fd={listener_fd},server=on,wait=on,nodelay=on"
+        ))
+        .args(["-serial", "chardev:uart"])
         .args(["-semihosting-config", "enable=on,target=native"]);
         if let Some(shift) = opts.icount_shift {
             cmd.arg("-icount").arg(format!("shift={shift}"));
@@ -264,7 +286,10 @@ impl Qemu {
             .stdout(stdout)
             .stderr(stderr);
         die_with_parent(&mut cmd);
+        inherit_fd(&mut cmd, listener_fd);
         let child = cmd.spawn().map_err(QemuError::Spawn)?;
+        // QEMU holds the listener now; this process's copy goes (it never accepts).
+        drop(listener);
         register(child.id(), temporary_log_dir.then(|| log_dir.clone()));
         guard.0 = None;
         let mut qemu = Qemu {
@@ -275,59 +300,21 @@ impl Qemu {
             elf: elf.to_path_buf(),
         };
         let deadline = Instant::now() + opts.ready_timeout;
-        // A connection can fail after it is made: connecting in a loop to a local port nobody
-        // listens on yet can, on Linux, connect the socket to itself (source port = the
-        // destination, both in the ephemeral range), and under load a first connection has been
-        // reset before READY (CI, 2026-11-21) while QEMU stayed up and kept waiting. QEMU's
-        // server socket takes a new client after a disconnect, so such a connection is dropped
-        // and the next one tried, as long as QEMU runs and time is left.
-        let mut attempt = 0u32;
-        let client = loop {
-            attempt += 1;
-            let stream = loop {
-                match TcpStream::connect(("127.0.0.1", port)) {
-                    Ok(s) if is_self_connection(&s) => {
-                        drop(s);
-                        std::thread::sleep(Duration::from_millis(20));
-                    }
-                    Ok(s) => break s,
-                    Err(e) => {
-                        if qemu.exited().is_some() || Instant::now() >= deadline {
-                            return Err(qemu.failure(format!("cannot connect to QEMU's UART: {e}")));
-                        }
-                        std::thread::sleep(Duration::from_millis(20));
-                    }
-                }
-            };
-            let transport = match TcpTransport::new(stream) {
-                Ok(t) => t,
-                Err(e) => return Err(qemu.failure(format!("socket set-up: {e}"))),
-            };
-            let mut client = Client::new(Box::new(transport));
-            let left = deadline.saturating_duration_since(Instant::now());
-            // On a later connection the guest may have booted already and sent READY down the
-            // dropped one: then a ping answered proves the link instead.
-            let ready = if attempt == 1 {
-                client.wait_ready(left)
-            } else {
-                client
-                    .wait_ready(left.min(Duration::from_secs(3)))
-                    .or_else(|_| client.ping())
-            };
-            match ready {
-                Ok(()) => break client,
-                Err(e) => {
-                    let give_up = attempt >= CONNECT_ATTEMPTS
-                        || qemu.exited().is_some()
-                        || Instant::now() >= deadline;
-                    if give_up {
-                        return Err(qemu.failure(format!(
-                            "no READY from the firmware (connection {attempt}): {e}"
-                        )));
-                    }
-                }
-            }
+        // The port listens already (QEMU's own socket): the connection waits in its backlog
+        // until QEMU accepts it, which starts the guest (wait=on). Refused means QEMU is gone.
+        let stream = match TcpStream::connect(("127.0.0.1", port)) {
+            Ok(s) => s,
+            Err(e) => return Err(qemu.failure(format!("cannot connect to QEMU's UART: {e}"))),
         };
+        let transport = match TcpTransport::new(stream) {
+            Ok(t) => t,
+            Err(e) => return Err(qemu.failure(format!("socket set-up: {e}"))),
+        };
+        let mut client = Client::new(Box::new(transport));
+        let left = deadline.saturating_duration_since(Instant::now());
+        if let Err(e) = client.wait_ready(left) {
+            return Err(qemu.failure(format!("no READY from the firmware: {e}")));
+        }
         Ok((qemu, client))
     }
 

@@ -201,6 +201,11 @@ pub fn tide_series(ds: &Dataset) -> Option<(Vec<f64>, Vec<f64>, Vec<f64>)> {
     Some((g, tn, te))
 }
 
+/// The catalogue's rate (`RateOfChange`) of a channel, restarted at each segment, centred.
+pub fn catalogue_rate(u: &[f64], t: &[f64], seg_start: &[bool]) -> Vec<f64> {
+    transfer(u, t, seg_start, 0.0, true)
+}
+
 /// A catalogue transfer function (`RateOfChange`, `SecondOrderLag`) run over a channel,
 /// restarted at each segment, centred.
 fn transfer(u: &[f64], t: &[f64], seg_start: &[bool], tau_s: f64, rate: bool) -> Vec<f64> {

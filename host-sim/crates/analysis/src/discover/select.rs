@@ -547,8 +547,14 @@ pub fn finish(
                         "accepted on the bins (ΔBIC {:.1}), replaced by the lag of its channel \
                          found on the full-rate rows: on the bins a lag much shorter than a bin \
                          is −coefficient·τ·dc/dt, the same column (one transfer function per \
-                         channel)",
-                        a.delta_bic
+                         channel){}",
+                        a.delta_bic,
+                        if fast.iter().any(|f| f.keeps_rate) {
+                            "; the full rate found the channel's own gain on its rate beside the \
+                             lag, which is in the lag's column (see full rate)"
+                        } else {
+                            ""
+                        }
                     ),
                 ));
             }

@@ -39,12 +39,24 @@ impl Pty {
         Ok(Pty { master, path })
     }
 
-    /// Reads what the client sent; 0 when nothing (or no client has the port open).
-    pub fn read(&mut self, buf: &mut [u8]) -> usize {
+    /// Reads what the client sent: Ok(0) when nothing came, Err when no client has the port
+    /// open (EIO: every descriptor of the slave is closed).
+    pub fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
         // SAFETY: `buf` is valid for `buf.len()` bytes.
         let n = unsafe { libc::read(self.master.as_raw_fd(), buf.as_mut_ptr().cast(), buf.len()) };
-        // EAGAIN: nothing; EIO: no client has the slave open.
-        usize::try_from(n).unwrap_or(0)
+        match usize::try_from(n) {
+            Ok(n) => Ok(n),
+            Err(_) => match io::Error::last_os_error() {
+                e if matches!(
+                    e.kind(),
+                    io::ErrorKind::WouldBlock | io::ErrorKind::Interrupted
+                ) =>
+                {
+                    Ok(0)
+                }
+                e => Err(e),
+            },
+        }
     }
 
     /// Writes as much of `bytes` as the line takes now; returns how many bytes went.

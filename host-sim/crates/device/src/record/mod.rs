@@ -180,7 +180,9 @@ fn connect(port: &str, rate_hz: Option<u32>) -> Result<Device, ClientError> {
     let mut t = SerialTransport::open(port, 115_200)?;
     // Whatever the line held from before (a previous run, an unplugged stretch) is old.
     t.clear_input();
-    let mut client = Client::new(Box::new(t));
+    // Read by a thread of its own: a stalled write or sync of the record must not stop the
+    // port from being read (the line would lose what overflows the kernel's buffer).
+    let mut client = Client::new(Box::new(t.drained()?));
     client.timeout = Duration::from_secs(2);
     client.ping()?;
     // Stop first so the table read-back is not interleaved with samples.
