@@ -535,6 +535,17 @@ fn lag_step(x: &mut Option<(f64, f64)>, t: f64, u: f64, tau: f64) -> f64 {
 impl EffectChain {
     /// The chain of `effects` (validated by the scenario) for a run described by `setup`.
     pub fn new(effects: &[ScenarioEffect], setup: ChainSetup) -> Result<Self, EffectError> {
+        Self::with_kept_tides(effects, setup, &KeptTides::default())
+    }
+
+    /// The same, taking the model's tide and the wave groups' tides from `tides` (evaluating
+    /// and keeping there those it does not hold yet): chains of one run built with the same
+    /// `tides` evaluate the ephemeris and each group's waves once.
+    pub fn with_kept_tides(
+        effects: &[ScenarioEffect],
+        setup: ChainSetup,
+        tides: &KeptTides,
+    ) -> Result<Self, EffectError> {
         let mut states = Vec::with_capacity(effects.len());
         let mut needs_tide = false;
         let mut group_terms: Vec<&TideGroupTerm> = Vec::new();
@@ -598,14 +609,16 @@ impl EffectChain {
             Station::new(lat, lon, h).map_err(|e| EffectError::Site(format!("{e:?}")))
         };
         let tide = if needs_tide {
-            Some(TideNodes::new(station()?, &setup))
+            let st = station()?;
+            let kept = tides.model(&st, &setup);
+            Some(TideNodes::new(st, &setup, kept))
         } else {
             None
         };
         let groups = if group_terms.is_empty() {
             None
         } else {
-            Some(group_nodes(&station()?, &setup, &group_terms))
+            Some(group_nodes(&station()?, &setup, &group_terms, tides))
         };
         Ok(EffectChain {
             effects: effects.to_vec(),
@@ -788,6 +801,8 @@ impl EffectChain {
 struct TideNodes {
     station: Station,
     start_unix_s: f64,
+    /// The nodes over the run's span (delays included), evaluated once per run.
+    kept: std::sync::Arc<ModelTide>,
     k: i64,
     a: (f64, f64, f64),
     b: (f64, f64, f64),
@@ -796,10 +811,11 @@ struct TideNodes {
 const TIDE_NODE_S: f64 = 60.0;
 
 impl TideNodes {
-    fn new(station: Station, setup: &ChainSetup) -> Self {
+    fn new(station: Station, setup: &ChainSetup, kept: std::sync::Arc<ModelTide>) -> Self {
         TideNodes {
             station,
             start_unix_s: setup.start_unix_s,
+            kept,
             k: i64::MIN,
             a: (0.0, 0.0, 0.0),
             b: (0.0, 0.0, 0.0),
@@ -807,14 +823,13 @@ impl TideNodes {
     }
 
     fn node(&self, k: i64) -> (f64, f64, f64) {
-        let s = self
-            .station
-            .tide_at_unix_seconds(self.start_unix_s + k as f64 * TIDE_NODE_S);
-        (
-            s.gravity_gs().0,
-            s.tilt_north_mas / MAS_PER_RAD,
-            s.tilt_east_mas / MAS_PER_RAD,
-        )
+        let kept = usize::try_from(k - self.kept.first_node)
+            .ok()
+            .and_then(|i| self.kept.nodes.get(i));
+        match kept {
+            Some(v) => *v,
+            None => model_node(&self.station, self.start_unix_s, k),
+        }
     }
 
     fn at(&mut self, t: f64) -> (f64, f64, f64) {
@@ -835,6 +850,39 @@ impl TideNodes {
             self.a.1 + f * (self.b.1 - self.a.1),
             self.a.2 + f * (self.b.2 - self.a.2),
         )
+    }
+}
+
+/// The model's tide (gravity g, tilt north and east rad) at node `k` of a run starting at
+/// `start_unix_s`.
+fn model_node(station: &Station, start_unix_s: f64, k: i64) -> (f64, f64, f64) {
+    let s = station.tide_at_unix_seconds(start_unix_s + k as f64 * TIDE_NODE_S);
+    (
+        s.gravity_gs().0,
+        s.tilt_north_mas / MAS_PER_RAD,
+        s.tilt_east_mas / MAS_PER_RAD,
+    )
+}
+
+/// The model's tide on the 60 s nodes of a run's span widened by the longest delay
+/// (`tidal_gravity`'s ±7200 s) and one node each side: node `first_node + i` is `nodes[i]`.
+#[derive(Debug)]
+struct ModelTide {
+    first_node: i64,
+    nodes: Vec<(f64, f64, f64)>,
+}
+
+impl ModelTide {
+    fn new(station: &Station, setup: &ChainSetup) -> Self {
+        const LONGEST_DELAY_S: f64 = 7200.0;
+        let first_node = ((setup.span_s.0 - LONGEST_DELAY_S) / TIDE_NODE_S).floor() as i64 - 1;
+        let last_node = ((setup.span_s.1 + LONGEST_DELAY_S) / TIDE_NODE_S).floor() as i64 + 2;
+        ModelTide {
+            first_node,
+            nodes: (first_node..=last_node)
+                .map(|k| model_node(station, setup.start_unix_s, k))
+                .collect(),
+        }
     }
 }
 
@@ -866,45 +914,167 @@ impl Nodes {
     }
 }
 
-/// Σ over the terms of factor·(elastic group tide advanced by phase), nm/s², on the nodes.
-fn group_nodes(st: &Station, setup: &ChainSetup, terms: &[&TideGroupTerm]) -> Nodes {
-    // Per term: the catalogue waves in its band with their rigid gravity and the model's δ.
-    let per_term: Vec<(f64, f64, Vec<_>)> = terms
+/// The run kept tides are of (start, span, site; bit patterns, a key) with the node grid of
+/// its wave-group corrections: the first node (s from t = 0) and the node count.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct TideRun {
+    start_unix_s: u64,
+    span_end_s: u64,
+    t0_s: u64,
+    nodes: usize,
+    site: [u64; 3],
+}
+
+impl TideRun {
+    fn new(setup: &ChainSetup) -> Self {
+        let t0 = setup.span_s.0 - 2.0 * GROUP_NODE_S;
+        let t1 = setup.span_s.1 + 2.0 * GROUP_NODE_S;
+        let nodes = ((t1 - t0) / GROUP_NODE_S).ceil().max(0.0) as usize + 1;
+        let (lat, lon, h) = setup.site;
+        TideRun {
+            start_unix_s: setup.start_unix_s.to_bits(),
+            span_end_s: setup.span_s.1.to_bits(),
+            t0_s: t0.to_bits(),
+            nodes,
+            site: [lat.to_bits(), lon.to_bits(), h.to_bits()],
+        }
+    }
+
+    fn t0_s(&self) -> f64 {
+        f64::from_bits(self.t0_s)
+    }
+}
+
+/// One wave group's elastic-Earth tide (Σ δ·rigid gravity of the catalogue waves in its band),
+/// nm/s², on a [`TideRun`]: in phase (`in_phase[k]` = Σ δ·A·cos θ) and in quadrature
+/// (`quadrature[k]` = Σ δ·A·sin θ). The group advanced by φ is cos φ·in_phase − sin φ·quadrature.
+#[derive(Debug)]
+struct GroupTide {
+    in_phase: Vec<f64>,
+    quadrature: Vec<f64>,
+}
+
+/// The tide series of one run that no effect parameter changes, kept for every chain built on
+/// it: the model's tide on its 60 s nodes (`tidal_gravity`'s `amplitude_factor` term,
+/// `tidal_tilt`) and the wave groups' tides on theirs (a group term's draw, factor and phase,
+/// is a linear combination of its group's two series). The chains of a twin's members share
+/// them, so no member evaluates the ephemeris or a wave. Chains of another run (start, span
+/// or site) get their own series.
+#[derive(Debug, Default)]
+pub struct KeptTides {
+    kept: std::sync::Mutex<Vec<(TideRun, String, std::sync::Arc<GroupTide>)>>,
+    model: std::sync::Mutex<Vec<(TideRun, std::sync::Arc<ModelTide>)>>,
+}
+
+impl KeptTides {
+    /// The model's tide on the nodes of the run `setup` describes (evaluated on first use).
+    fn model(&self, st: &Station, setup: &ChainSetup) -> std::sync::Arc<ModelTide> {
+        let run = TideRun::new(setup);
+        let mut model = self
+            .model
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if let Some((_, m)) = model.iter().find(|(g, _)| *g == run) {
+            return m.clone();
+        }
+        let m = std::sync::Arc::new(ModelTide::new(st, setup));
+        model.push((run, m.clone()));
+        m
+    }
+
+    /// The tides of the groups `names` on `grid`, those not kept yet evaluated (all in one pass
+    /// over the nodes: the Doodson arguments once per node).
+    fn of(
+        &self,
+        st: &Station,
+        setup: &ChainSetup,
+        grid: TideRun,
+        names: &[&str],
+    ) -> Vec<std::sync::Arc<GroupTide>> {
+        // Held while evaluating: members that start together wait for one evaluation instead
+        // of each making its own.
+        let mut kept = self
+            .kept
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        let find = |kept: &[(TideRun, String, std::sync::Arc<GroupTide>)], name: &str| {
+            kept.iter()
+                .find(|(g, n, _)| *g == grid && n == name)
+                .map(|(_, _, t)| t.clone())
+        };
+        let mut missing: Vec<&str> = Vec::new();
+        for &name in names {
+            if find(&kept, name).is_none() && !missing.contains(&name) {
+                missing.push(name);
+            }
+        }
+        for (name, tide) in missing.iter().zip(group_tides(st, setup, grid, &missing)) {
+            kept.push((grid, (*name).to_owned(), std::sync::Arc::new(tide)));
+        }
+        names.iter().filter_map(|name| find(&kept, name)).collect()
+    }
+}
+
+/// The elastic-Earth tides of the groups `names` on `grid`.
+fn group_tides(st: &Station, setup: &ChainSetup, grid: TideRun, names: &[&str]) -> Vec<GroupTide> {
+    // Per group: the catalogue waves in its band with their rigid gravity and the model's δ.
+    let per_group: Vec<Vec<_>> = names
         .iter()
-        .map(|g| {
-            let (lo, hi) = group_band(&g.name).unwrap_or((0.0, 0.0));
-            let (s, c) = g.phase_deg.to_radians().sin_cos();
-            let waves: Vec<_> = CTE1973
+        .map(|name| {
+            let (lo, hi) = group_band(name).unwrap_or((0.0, 0.0));
+            CTE1973
                 .iter()
                 .filter(|w| (lo..hi).contains(&w.frequency_cpd()))
                 .map(|w| (*w, st.wave_gravity(w), st.gravimetric_factor(w)))
-                .collect();
-            (g.factor * c, g.factor * s, waves)
+                .collect()
         })
         .collect();
-    let t0 = setup.span_s.0 - 2.0 * GROUP_NODE_S;
-    let t1 = setup.span_s.1 + 2.0 * GROUP_NODE_S;
-    let n = ((t1 - t0) / GROUP_NODE_S).ceil().max(0.0) as usize + 1;
-    let v = (0..n)
-        .map(|k| {
-            let args = DoodsonArguments::at_unix_seconds(
-                setup.start_unix_s + t0 + k as f64 * GROUP_NODE_S,
-            );
-            let mut sum = 0.0;
-            for (fc, fs, waves) in &per_term {
-                let (mut cs, mut sn) = (0.0, 0.0);
-                for (w, wg, delta) in waves {
-                    let (s, c) = sin_cos(w.argument_rad(&args) + wg.phase_rad);
-                    cs += delta * wg.amplitude_nm_s2 * c;
-                    sn += delta * wg.amplitude_nm_s2 * s;
-                }
-                // cos(x + φ) = cos x·cos φ − sin x·sin φ.
-                sum += fc * cs - fs * sn;
+    let mut tides: Vec<GroupTide> = names
+        .iter()
+        .map(|_| GroupTide {
+            in_phase: Vec::with_capacity(grid.nodes),
+            quadrature: Vec::with_capacity(grid.nodes),
+        })
+        .collect();
+    for k in 0..grid.nodes {
+        let args = DoodsonArguments::at_unix_seconds(
+            setup.start_unix_s + grid.t0_s() + k as f64 * GROUP_NODE_S,
+        );
+        for (waves, tide) in per_group.iter().zip(tides.iter_mut()) {
+            let (mut cs, mut sn) = (0.0, 0.0);
+            for (w, wg, delta) in waves {
+                let (s, c) = sin_cos(w.argument_rad(&args) + wg.phase_rad);
+                cs += delta * wg.amplitude_nm_s2 * c;
+                sn += delta * wg.amplitude_nm_s2 * s;
             }
-            sum
-        })
-        .collect();
-    Nodes { t0, v }
+            tide.in_phase.push(cs);
+            tide.quadrature.push(sn);
+        }
+    }
+    tides
+}
+
+/// Σ over the terms of factor·(elastic group tide advanced by phase), nm/s², on the nodes,
+/// from the groups' tides (`tides`: kept or evaluated now).
+fn group_nodes(
+    st: &Station,
+    setup: &ChainSetup,
+    terms: &[&TideGroupTerm],
+    tides: &KeptTides,
+) -> Nodes {
+    let grid = TideRun::new(setup);
+    let names: Vec<&str> = terms.iter().map(|g| g.name.as_str()).collect();
+    let per_term = tides.of(st, setup, grid, &names);
+    let mut v = vec![0.0; grid.nodes];
+    for (g, tide) in terms.iter().zip(&per_term) {
+        let (s, c) = g.phase_deg.to_radians().sin_cos();
+        let (fc, fs) = (g.factor * c, g.factor * s);
+        // cos(x + φ) = cos x·cos φ − sin x·sin φ.
+        for ((v, cs), sn) in v.iter_mut().zip(&tide.in_phase).zip(&tide.quadrature) {
+            *v += fc * cs - fs * sn;
+        }
+    }
+    Nodes { t0: grid.t0_s(), v }
 }
 
 #[cfg(test)]
@@ -1093,6 +1263,110 @@ mod tests {
         }];
         let err = EffectChain::new(&e, setup()).unwrap_err();
         assert!(err.to_string().contains("humidity"), "{err}");
+    }
+
+    /// A member's draw of the ten groups rendered from the kept in-phase and quadrature series
+    /// (kept by an earlier draw's chain) is each wave's δ·A·cos(θ + mλ + φ) summed directly
+    /// with the core's per-wave evaluation, and bit for bit what a chain evaluating its own
+    /// series renders.
+    #[test]
+    fn a_draw_from_the_kept_group_tides_is_the_direct_sum_of_its_waves() {
+        let mut rng = crate::noise::stream(7, 11);
+        let mut drawn = || -> Vec<TideGroupTerm> {
+            crate::tide::GROUPS
+                .iter()
+                .map(|g| TideGroupTerm {
+                    name: g.name.into(),
+                    factor: 0.05 * gauss(&mut rng),
+                    phase_deg: 5.0 * gauss(&mut rng),
+                })
+                .collect()
+        };
+        let tidal = |groups: Vec<TideGroupTerm>| ScenarioEffect::TidalGravity {
+            amplitude_factor: 0.0,
+            delay_s: 0.0,
+            groups,
+        };
+        let kept = KeptTides::default();
+        EffectChain::with_kept_tides(&[tidal(drawn())], setup(), &kept).unwrap();
+        let member = drawn();
+        let mut cached =
+            EffectChain::with_kept_tides(&[tidal(member.clone())], setup(), &kept).unwrap();
+        let mut own = EffectChain::new(&[tidal(member.clone())], setup()).unwrap();
+        assert_eq!(
+            kept.kept.lock().unwrap().len(),
+            10,
+            "one series pair per group"
+        );
+        let (lat, lon, h) = setup().site;
+        let st = Station::new(lat, lon, h).unwrap();
+        let nm_s2_per_g = STANDARD_GRAVITY_M_S2 * NM_S2_PER_M_S2;
+        let (mut worst, mut peak) = (0.0f64, 0.0f64);
+        // At the nodes (every 300 s from t = −600 s) the interpolation returns the node value.
+        for i in 0..288 {
+            let t = 300.0 * f64::from(i);
+            let args = DoodsonArguments::at_unix_seconds(setup().start_unix_s + t);
+            let direct: f64 = member
+                .iter()
+                .map(|g| {
+                    let (lo, hi) = group_band(&g.name).unwrap();
+                    let phase = g.phase_deg.to_radians();
+                    CTE1973
+                        .iter()
+                        .filter(|w| (lo..hi).contains(&w.frequency_cpd()))
+                        .map(|w| {
+                            let mut wg = st.wave_gravity(w);
+                            wg.phase_rad += phase;
+                            g.factor * st.gravimetric_factor(w) * wg.at(w, &args)
+                        })
+                        .sum::<f64>()
+                })
+                .sum::<f64>()
+                / nm_s2_per_g;
+            let y = cached.output_term(&drive(t, 0.0));
+            assert_eq!(y.to_bits(), own.output_term(&drive(t, 0.0)).to_bits());
+            worst = worst.max((y - direct).abs());
+            peak = peak.max(direct.abs());
+        }
+        assert!(peak > 1e-10, "the draw's correction is a tide: {peak}");
+        assert!(worst <= 1e-12 * peak, "{worst} of {peak}");
+    }
+
+    /// A delayed `tidal_gravity` term from the kept model tide (kept by an earlier chain of
+    /// the run) is the ephemeris tide at the 60 s nodes around t − delay, linear in between,
+    /// inside the run's span and beyond it (where the chain evaluates the nodes itself).
+    #[test]
+    fn a_delayed_tide_term_from_the_kept_nodes_is_the_ephemeris_tide_interpolated() {
+        let tidal = |amplitude_factor: f64| ScenarioEffect::TidalGravity {
+            amplitude_factor,
+            delay_s: 1234.0,
+            groups: Vec::new(),
+        };
+        let kept = KeptTides::default();
+        EffectChain::with_kept_tides(&[tidal(0.3)], setup(), &kept).unwrap();
+        let mut c = EffectChain::with_kept_tides(&[tidal(0.07)], setup(), &kept).unwrap();
+        assert_eq!(
+            kept.model.lock().unwrap().len(),
+            1,
+            "one model tide for the run"
+        );
+        let (lat, lon, h) = setup().site;
+        let st = Station::new(lat, lon, h).unwrap();
+        let g = |k: f64| {
+            st.tide_at_unix_seconds(setup().start_unix_s + k * TIDE_NODE_S)
+                .gravity_gs()
+                .0
+        };
+        // Inside the span, then two days past its end.
+        for t in (0..144)
+            .map(|i| 137.0 + 600.0 * f64::from(i))
+            .chain([259_321.0])
+        {
+            let x = (t - 1234.0) / TIDE_NODE_S;
+            let k = x.floor();
+            let want = 0.07 * (g(k) + (x - k) * (g(k + 1.0) - g(k)));
+            assert_eq!(c.output_term(&drive(t, 0.0)), want, "t = {t}");
+        }
     }
 
     #[test]

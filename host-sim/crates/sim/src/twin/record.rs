@@ -8,7 +8,7 @@ use accomp::units::RAD_PER_ARCSEC;
 
 use super::TwinRunError;
 use crate::accelerometer::{axes, true_coefficients};
-use crate::effects::{ChainSetup, Drive, EffectChain, ScenarioEffect};
+use crate::effects::{ChainSetup, Drive, EffectChain, KeptTides, ScenarioEffect};
 use crate::gravimeter::{InstrumentParams, UNITS};
 use crate::noise::AllanParams;
 use crate::scenario::Scenario;
@@ -231,6 +231,10 @@ pub struct TwinRecord {
     pub base: Vec<f64>,
     /// `base` plus the effects.
     pub det: Vec<f64>,
+    /// The model's tide and the wave groups' tides over the record's span, evaluated once for
+    /// the record and its extensions (shared by the clones: a member's draw of the tide
+    /// effects only combines them).
+    pub kept_tides: std::sync::Arc<KeptTides>,
 }
 
 impl TwinRecord {
@@ -254,6 +258,7 @@ impl TwinRecord {
             drivers,
             unit_per_g,
             out_scale,
+            kept_tides: Default::default(),
         };
         Ok(r.extended(&effects))
     }
@@ -278,18 +283,23 @@ impl TwinRecord {
         // without building each one's again — a wave-group tide renders its groups' waves at
         // every node, the largest part of a member's draw. When it fails, each effect is
         // tried alone and the ones that cannot be built are refused.
-        let chain = match EffectChain::new(&valid, setup.clone()) {
+        let tides = &*self.kept_tides;
+        let chain = match EffectChain::with_kept_tides(&valid, setup.clone(), tides) {
             Ok(chain) => Some(chain),
             Err(_) => {
                 let mut accepted = Vec::new();
                 for e in valid {
-                    match EffectChain::new(std::slice::from_ref(&e), setup.clone()) {
+                    match EffectChain::with_kept_tides(
+                        std::slice::from_ref(&e),
+                        setup.clone(),
+                        tides,
+                    ) {
                         Ok(_) => accepted.push(e),
                         Err(why) => refused.push((e.name().to_owned(), why.to_string())),
                     }
                 }
                 valid = accepted;
-                EffectChain::new(&valid, setup).ok()
+                EffectChain::with_kept_tides(&valid, setup, tides).ok()
             }
         };
         if valid.is_empty() {
@@ -392,7 +402,11 @@ impl TwinRecord {
         let start = Utc::parse(&self.scenario.run.start_utc)?;
         let mut y = instrument_output(&self.scenario, start, &self.t_s, d, self.out_scale)?;
         if !self.scenario.effects.is_empty() {
-            let chain = EffectChain::new(&self.scenario.effects, self.chain_setup())?;
+            let chain = EffectChain::with_kept_tides(
+                &self.scenario.effects,
+                self.chain_setup(),
+                &self.kept_tides,
+            )?;
             add_effects(&mut y, chain, &self.t_s, d);
         }
         Ok(y)
