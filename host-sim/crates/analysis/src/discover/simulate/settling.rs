@@ -18,6 +18,7 @@
 //! two parameters (ln n), A is beyond [`MIN_SIGMAS`] σ and τ is not at an end of its range.
 
 use super::drift::{legendre, remove_with};
+use crate::numerics::optimize::golden_section_min;
 use crate::sim::twin::draw::Drawn;
 use crate::sim::twin::drift::Settling;
 
@@ -111,30 +112,12 @@ pub fn search(
     }
     let edge = best == 0 || best == grid.len() - 1;
     // Golden-section search on ln τ between the best grid point's neighbours.
-    let (mut a, mut b) = (
+    let (a, b) = (
         grid[best.saturating_sub(1)].ln(),
         grid[(best + 1).min(grid.len() - 1)].ln(),
     );
-    let g = 0.5 * (5f64.sqrt() - 1.0);
     let cost = |x: f64| at(x).map_or(f64::INFINITY, |f| f.0);
-    let (mut x1, mut x2) = (b - g * (b - a), a + g * (b - a));
-    let (mut f1, mut f2) = (cost(x1), cost(x2));
-    for _ in 0..20 {
-        if f1 < f2 {
-            b = x2;
-            x2 = x1;
-            f2 = f1;
-            x1 = b - g * (b - a);
-            f1 = cost(x1);
-        } else {
-            a = x1;
-            x1 = x2;
-            f1 = f2;
-            x2 = a + g * (b - a);
-            f2 = cost(x2);
-        }
-    }
-    let x = if f1 < f2 { x1 } else { x2 };
+    let x = golden_section_min(cost, a, b, 20);
     let (c0, amp, var) = at(x)?;
     // τ's σ: the curvature of −ℓ = ½ RSS (unit-variance innovations) in ln τ.
     let h = 0.02;
