@@ -316,6 +316,7 @@ pub fn separating_measurement(a: &Effect, b: &Effect) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::discover::test_noise::normals;
 
     fn white(var: f64) -> NoiseModel {
         NoiseModel::white(var)
@@ -343,23 +344,6 @@ mod tests {
             separating_measurement(&Effect::ThermalHysteresis, &Effect::ThermalLag)
                 .contains("different rates")
         );
-    }
-
-    /// Deterministic standard normal deviates (sum of 12 uniforms) for the tests.
-    fn normals(n: usize, mut state: u64) -> Vec<f64> {
-        (0..n)
-            .map(|_| {
-                (0..12)
-                    .map(|_| {
-                        state = state
-                            .wrapping_mul(6364136223846793005)
-                            .wrapping_add(1442695040888963407);
-                        (state >> 11) as f64 / (1u64 << 53) as f64
-                    })
-                    .sum::<f64>()
-                    - 6.0
-            })
-            .collect()
     }
 
     #[test]

@@ -151,23 +151,12 @@ mod tests {
         let (n, dt) = (4096, 60.0);
         let period = 86_400.0 / 4.0;
         let w = std::f64::consts::TAU / period;
-        let mut state = 0x1234_5678_u64;
-        let mut gauss = || {
-            // Sum of 12 uniforms: a deterministic, adequate normal deviate for a test.
-            (0..12)
-                .map(|_| {
-                    state = state
-                        .wrapping_mul(6364136223846793005)
-                        .wrapping_add(1442695040888963407);
-                    (state >> 11) as f64 / (1u64 << 53) as f64
-                })
-                .sum::<f64>()
-                - 6.0
-        };
+        let noise = crate::discover::test_noise::normals(n, 0x1234_5678);
         let t: Vec<f64> = (0..n).map(|i| i as f64 * dt).collect();
         let v: Vec<f64> = t
             .iter()
-            .map(|x| 0.5 * (w * x).sin() + 0.005 * gauss())
+            .zip(&noise)
+            .map(|(x, e)| 0.5 * (w * x).sin() + 0.005 * e)
             .collect();
         let seg: Vec<bool> = (0..n).map(|i| i == 0).collect();
         let r = band_limited_rate(&v, &t, &seg);
