@@ -61,8 +61,8 @@ pub struct Ads1262Model {
     pub accel_v: f64,
     /// Differential input on AIN2−AIN3 (tiltmeter), volts.
     pub tilt_v: f64,
-    /// Fault: the modulator stops, DRDY never falls again.
-    pub stuck_drdy: bool,
+    /// Fault: the modulator stops, DRDY never falls again ([`Self::set_stuck_drdy`]).
+    stuck_drdy: bool,
     /// Fault: MISO reads all ones (chip unpowered or line open with a pull-up).
     pub miso_high: bool,
     /// Fault: corrupt this many upcoming conversion reads (one data bit flipped on the wire).
@@ -127,6 +127,17 @@ impl Ads1262Model {
         self.running = true;
         self.new_data = false;
         self.next_conversion_us = Some(self.clock.now() + self.first_latency_us());
+    }
+
+    /// Fault switch: the modulator stops (DRDY never falls) or runs again. A modulator that
+    /// runs again starts its conversion cycle at that moment ("Conversion Latency": the first
+    /// result after a start takes the filter's settling), so no DRDY edge falls in the past:
+    /// the conversions the stopped modulator never made are not delivered late.
+    pub fn set_stuck_drdy(&mut self, stuck: bool) {
+        if self.stuck_drdy && !stuck && self.running {
+            self.restart();
+        }
+        self.stuck_drdy = stuck;
     }
 
     /// When DRDY will next fall, if it will.

@@ -335,7 +335,7 @@ fn a_multi_day_stability_run_names_every_fault_and_recovers() {
             2 * H,
             5 * S,
             Status::DRDY_TIMEOUT,
-            |b, on| b.board.ads.borrow_mut().stuck_drdy = on,
+            |b, on| b.board.ads.borrow_mut().set_stuck_drdy(on),
         ),
         (
             "ADS1262 MISO 0xFF",
@@ -421,7 +421,7 @@ fn a_multi_day_stability_run_names_every_fault_and_recovers() {
             30 * H,
             3 * S,
             Status::DRDY_TIMEOUT,
-            |b, on| b.board.ads.borrow_mut().stuck_drdy = on,
+            |b, on| b.board.ads.borrow_mut().set_stuck_drdy(on),
         ),
     ];
     let rate_change_at = start + 26 * H;
@@ -567,6 +567,57 @@ fn a_core_stall_longer_than_a_pair_leaves_a_seq_gap_flagged_stall_and_nothing_el
     for f in frames {
         check_clean_frame(&b.station, f).unwrap();
     }
+}
+
+/// A DRDY stall ends at whatever moment of the sequencer's recovery cycle (RESET, reset wait,
+/// configuration, waiting for the first DRDY): the chip's conversions start again from that
+/// moment, so the first pair after the stall is stamped after its end, the pairs then follow at
+/// the pair rate, and the timeout readings took every number meanwhile: no gap in seq, no STALL.
+#[test]
+fn a_drdy_stall_ending_at_any_moment_of_the_recovery_leaves_no_seq_gap() {
+    use accomp::pipeline::LossFlags;
+    // One recovery cycle is 2 × 0.4 s + 20 ms of overdue and a 20 ms tick of reset wait: the
+    // stall's end is swept across it in 5 ms steps.
+    let mut wrong = Vec::new();
+    for phase_ms in (0..880).step_by(5) {
+        let mut b = Bench::new();
+        assert_eq!(b.boot(), (true, true));
+        let on = b.now() + 5 * S;
+        b.run_until(on);
+        b.board.ads.borrow_mut().set_stuck_drdy(true);
+        let off = on + 10 * S + phase_ms * 1000;
+        b.run_until(off);
+        b.board.ads.borrow_mut().set_stuck_drdy(false);
+        b.run_until(off + 10 * S);
+        let frames = &b.frames;
+        for w in frames.windows(2) {
+            if w[1].seq != w[0].seq + 1 || w[1].lost.has(LossFlags::STALL) {
+                wrong.push(format!(
+                    "{phase_ms} ms: seq {} at {} µs then {} at {} µs ({:?})",
+                    w[0].seq, w[0].time_us, w[1].seq, w[1].time_us, w[1].lost
+                ));
+            }
+            if w[1].time_us <= w[0].time_us {
+                wrong.push(format!("{phase_ms} ms: time goes back at seq {}", w[1].seq));
+            }
+        }
+        let first_clean = frames
+            .iter()
+            .find(|f| f.time_us > on && f.status == Status::default())
+            .expect("clean frames after the stall");
+        if first_clean.time_us < off {
+            wrong.push(format!(
+                "{phase_ms} ms: a conversion stamped {} µs, before the stall ended at {off} µs",
+                first_clean.time_us
+            ));
+        }
+    }
+    assert!(
+        wrong.is_empty(),
+        "{} wrong:\n{}",
+        wrong.len(),
+        wrong.join("\n")
+    );
 }
 
 /// Only the erases stall here (2 s each, DS8626 worst case at x32); the whole front-end test

@@ -283,7 +283,7 @@ impl VirtualBoard {
             let p = station.at((*boot_world_us + t) as f64 * 1e-6);
             a.accel_v = p.accel_v;
             a.tilt_v = p.tilt_v;
-            a.stuck_drdy = faults.drdy_stall;
+            a.set_stuck_drdy(faults.drdy_stall);
             r.rtd_ohms = if faults.rtd_open {
                 f64::INFINITY
             } else {

@@ -222,22 +222,29 @@ impl ClockModel {
 
     fn finish_block(&mut self, b: f64, offset: f64, events: &mut Vec<ClockEvent>) {
         let mut offset = offset;
+        let mut placed = false;
         if let Some((pb, po, jump)) = self.pending.take() {
             // The block before jumped off the line. If this one goes on at the same slope the
-            // board clock is no crystal; if it stays at the new level the PC's clock stepped.
+            // board clock is no crystal; if it stays at the new level the PC's clock stepped;
+            // if it is back on the line, the jumped block was a burst of delay (every frame of
+            // it late): dropped, and this block is checked against the line as any other.
             let before = self.blocks.back().map_or(pb - BLOCK_S, |&(b0, _)| b0);
             let s_prev = jump / (pb - before).max(1e-9);
             let s_now = (offset - po) / (b - pb).max(1e-9);
+            let stays = (offset - (po - self.drift * (b - pb))).abs() <= STEP_S;
             if s_now.abs() > MAX_CRYSTAL_DRIFT && (s_now - s_prev).abs() < 0.1 * s_prev.abs() {
                 self.crystal = false;
                 self.blocks.push_back((pb, po));
-            } else {
+                placed = true;
+            } else if stays {
                 self.steps_s += jump;
                 events.push(ClockEvent::PcStep { step_s: jump });
                 self.blocks.push_back((pb, po - jump));
                 offset -= jump;
+                placed = true;
             }
-        } else if let Some(&(pb, po)) = self.blocks.back() {
+        }
+        if let (false, Some(&(pb, po))) = (placed, self.blocks.back()) {
             let jump = offset - (po - self.drift * (b - pb));
             if self.crystal && jump.abs() > STEP_S {
                 self.pending = Some((b, offset, jump));
@@ -400,6 +407,39 @@ mod tests {
         assert!((steps[0] + 30.0).abs() < 0.02, "{steps:?}");
         for (i, (_, t)) in rows.iter().enumerate() {
             assert!((t - i as f64 * 0.8).abs() < 0.02, "frame {i}: {t}");
+        }
+    }
+
+    #[test]
+    fn a_burst_of_delay_over_a_whole_block_is_no_pc_clock_step() {
+        let mut m = ClockModel::new(None);
+        let start = 1.7e9;
+        let mut events = Vec::new();
+        let mut rows = Vec::new();
+        for k in 0..9000u64 {
+            let true_s = k as f64 * 0.8;
+            // Every frame between 1800 s and 1890 s (a whole 60 s block at least) waits 2 s
+            // more: a PC that did not read the port for a minute and a half.
+            let burst = if (1800.0..1890.0).contains(&true_s) {
+                2.0
+            } else {
+                0.0
+            };
+            let pc = start + true_s + 0.002 + 0.001 * ((k % 5) as f64) + burst;
+            rows.push(m.record_time((true_s * 1e6) as u64, pc, start, true, &mut events));
+        }
+        assert!(
+            !events.iter().any(|e| matches!(
+                e,
+                ClockEvent::PcStep { .. } | ClockEvent::NotACrystal { .. }
+            )),
+            "{events:?}"
+        );
+        for (k, t) in rows.iter().enumerate() {
+            assert!(
+                (t - (k as f64 * 0.8 + 0.002)).abs() < 0.01,
+                "frame {k}: {t}"
+            );
         }
     }
 
