@@ -43,8 +43,6 @@ pub mod select;
 pub mod shape;
 pub mod simulate;
 pub mod table_error;
-#[cfg(test)]
-mod test_noise;
 pub mod tidal;
 pub mod unexplained;
 pub mod validation;

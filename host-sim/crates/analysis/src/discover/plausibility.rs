@@ -316,7 +316,13 @@ pub fn separating_measurement(a: &Effect, b: &Effect) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::discover::test_noise::normals;
+    use crate::numerics::lcg::Lcg;
+
+    /// `n` standard normal deviates (sum of 12 uniforms) from the LCG seeded with `state`.
+    fn normals(n: usize, state: u64) -> Vec<f64> {
+        let mut g = Lcg(state);
+        (0..n).map(|_| g.normal()).collect()
+    }
 
     fn white(var: f64) -> NoiseModel {
         NoiseModel::white(var)

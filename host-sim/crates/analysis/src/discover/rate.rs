@@ -151,12 +151,11 @@ mod tests {
         let (n, dt) = (4096, 60.0);
         let period = 86_400.0 / 4.0;
         let w = std::f64::consts::TAU / period;
-        let noise = crate::discover::test_noise::normals(n, 0x1234_5678);
+        let mut lcg = crate::numerics::lcg::Lcg(0x1234_5678);
         let t: Vec<f64> = (0..n).map(|i| i as f64 * dt).collect();
         let v: Vec<f64> = t
             .iter()
-            .zip(&noise)
-            .map(|(x, e)| 0.5 * (w * x).sin() + 0.005 * e)
+            .map(|x| 0.5 * (w * x).sin() + 0.005 * lcg.normal())
             .collect();
         let seg: Vec<bool> = (0..n).map(|i| i == 0).collect();
         let r = band_limited_rate(&v, &t, &seg);
