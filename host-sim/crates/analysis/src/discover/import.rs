@@ -522,26 +522,15 @@ pub fn block_means_like(full: &Dataset, binned: &Dataset, v: &[f64]) -> Option<V
     let input = full
         .channel(ChannelKind::Input)
         .map(|c| c.values.as_slice());
-    let (mut sums, mut ts, mut counts) = (Vec::new(), Vec::new(), Vec::new());
     let mut bins = Bins::new(t0, bin, input);
-    for (i, (&t, &x)) in full.t_s.iter().zip(v).enumerate() {
-        if bins.opens(i, t) {
-            sums.push(0.0);
-            ts.push(0.0);
-            counts.push(0.0);
-        }
-        let k = sums.len() - 1;
-        sums[k] += x;
-        ts[k] += t;
-        counts[k] += 1.0;
-    }
+    let (ts, means, _) =
+        crate::numerics::series::block_means(&full.t_s, v, |i, t| bins.opens(i, t));
     let same = ts.len() == binned.len()
         && ts
             .iter()
-            .zip(&counts)
             .zip(&binned.t_s)
-            .all(|((s, c), tb)| (s / c - tb).abs() <= 1e-6 * bin);
-    same.then(|| sums.iter().zip(&counts).map(|(s, c)| s / c).collect())
+            .all(|(t, tb)| (t - tb).abs() <= 1e-6 * bin);
+    same.then_some(means)
 }
 
 /// Which rows open a new bin of block means: bins of `bin_s` seconds counted from `t0` (none,

@@ -45,32 +45,21 @@ pub struct Spectrum {
     pub lines: Vec<Line>,
 }
 
-/// Block means of at most `max_points` points (bins never cross a spacing > 2.5 × median).
+/// Block means of at most `max_points` points: equal-width bins over the span (an empty bin
+/// gives no point).
 pub fn bin(t: &[f64], y: &[f64], max_points: usize) -> (Vec<f64>, Vec<f64>) {
     if t.len() <= max_points || t.len() < 2 {
         return (t.to_vec(), y.to_vec());
     }
     let span = t[t.len() - 1] - t[0];
     let w = span / max_points as f64;
-    let (mut bt, mut by, mut bn) = (Vec::new(), Vec::new(), Vec::new());
     let mut cur = i64::MIN;
-    for (&ti, &yi) in t.iter().zip(y) {
+    let (bt, by, _) = crate::numerics::series::block_means(t, y, |_, ti| {
         let b = ((ti - t[0]) / w).floor() as i64;
-        if b != cur {
-            cur = b;
-            bt.push(0.0);
-            by.push(0.0);
-            bn.push(0.0);
-        }
-        let k = bt.len() - 1;
-        bt[k] += ti;
-        by[k] += yi;
-        bn[k] += 1.0;
-    }
-    for k in 0..bt.len() {
-        bt[k] /= bn[k];
-        by[k] /= bn[k];
-    }
+        let opens = b != cur;
+        cur = b;
+        opens
+    });
     (bt, by)
 }
 
