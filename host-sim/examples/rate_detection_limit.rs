@@ -27,7 +27,6 @@ mod hidden;
 mod synth;
 
 use accomp_host::sim::noise::AllanParams;
-use rand::Rng;
 
 /// One station of `case` drawn from `seed`, and its sensor noise.
 fn station(case: &str, seed: u64) -> (synth::Station, synth::SensorNoise, rand_chacha::ChaCha8Rng) {
@@ -36,20 +35,7 @@ fn station(case: &str, seed: u64) -> (synth::Station, synth::SensorNoise, rand_c
         let (st, noise) = synth::programme_station(14 * 720, 120.0, &mut r);
         return (st, noise, r);
     }
-    let (rows, dt) = (4 * 1440, 60.0);
-    let mut st = synth::station(rows, dt, synth::Thermal::Regulated, &mut r);
-    let (sd, tau) = (r.random_range(0.1..0.2), r.random_range(600.0..1200.0));
-    let a = (-dt / tau).exp();
-    let mut c = sd * synth::gauss(&mut r);
-    for k in 0..rows {
-        c = a * c + (1.0 - a * a).sqrt() * sd * synth::gauss(&mut r);
-        st.temp_true_c[k] += c;
-        st.temp_meas_c[k] =
-            ((st.temp_true_c[k] + st.rtd_offset_c + st.rtd_noise_c * synth::gauss(&mut r)) * 1e4)
-                .round()
-                / 1e4;
-    }
-    let noise = synth::draw_noise(&mut r);
+    let (st, noise, _) = synth::controller_noise_station(4 * 1440, 60.0, &mut r);
     (st, noise, r)
 }
 

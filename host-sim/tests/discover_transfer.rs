@@ -102,20 +102,7 @@ fn a_bias_on_the_rate_of_controller_noise_is_a_rate_coupling_with_its_gain() {
     let mut rng = synth::rng(0x7A7E_0006);
     for i in 0..2 {
         let mut r = synth::rng(rng.random::<u64>());
-        let mut st = synth::station(rows, dt, synth::Thermal::Regulated, &mut r);
-        let (sd, tau) = (r.random_range(0.1..0.2), r.random_range(600.0..1200.0));
-        let a = (-dt / tau).exp();
-        let mut c = sd * synth::gauss(&mut r);
-        for k in 0..rows {
-            c = a * c + (1.0 - a * a).sqrt() * sd * synth::gauss(&mut r);
-            st.temp_true_c[k] += c;
-            st.temp_meas_c[k] =
-                ((st.temp_true_c[k] + st.rtd_offset_c + st.rtd_noise_c * synth::gauss(&mut r))
-                    * 1e4)
-                    .round()
-                    / 1e4;
-        }
-        let noise = synth::draw_noise(&mut r);
+        let (st, noise, (sd, tau)) = synth::controller_noise_station(rows, dt, &mut r);
         let rate = synth::true_rate_c_per_s(&st);
         let rms = (rate.iter().map(|v| v * v).sum::<f64>() / rows as f64).sqrt();
         // 2–4 µg rms of coupling.

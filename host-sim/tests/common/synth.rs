@@ -361,6 +361,28 @@ pub fn lag_error(lagged: &[f64], temp: &[f64], k: f64) -> Vec<f64> {
     lagged.iter().zip(temp).map(|(l, t)| k * (l - t)).collect()
 }
 
+/// A regulated station whose thermostat adds controller noise (AR(1), 0.1–0.2 °C, correlation
+/// time 10–20 min) to the true temperature, read by the RTD (offset, noise, 0.1 mK steps), and
+/// its sensor's noise levels, drawn in that order; also the controller noise's level (°C) and
+/// correlation time (s) as drawn.
+pub fn controller_noise_station(
+    n: usize,
+    dt_s: f64,
+    r: &mut ChaCha8Rng,
+) -> (Station, SensorNoise, (f64, f64)) {
+    let mut st = station(n, dt_s, Thermal::Regulated, r);
+    let (sd, tau) = (r.random_range(0.1..0.2), r.random_range(600.0..1200.0));
+    let a = (-dt_s / tau).exp();
+    let mut c = sd * gauss(r);
+    for k in 0..n {
+        c = a * c + (1.0 - a * a).sqrt() * sd * gauss(r);
+        st.temp_true_c[k] += c;
+        st.temp_meas_c[k] =
+            ((st.temp_true_c[k] + st.rtd_offset_c + st.rtd_noise_c * gauss(r)) * 1e4).round() / 1e4;
+    }
+    (st, draw_noise(r), (sd, tau))
+}
+
 /// A station on a lab's programmed chamber (±0.5 °C ramps of 2–6 h, what makes
 /// `thermal_hysteresis` a candidate) and its sensor's noise levels, drawn in that order.
 pub fn programme_station(n: usize, dt_s: f64, rng: &mut ChaCha8Rng) -> (Station, SensorNoise) {
