@@ -312,25 +312,28 @@ pub fn analyse(
                     ((1.0 - w.cos()) / dt, w.sin() / dt)
                 })
                 .collect();
-        let with_rate = {
-            let mut br = base.clone();
-            br.insert(1, rate_shape.clone());
-            let chi_r = |tau: f64| -> f64 {
-                let mut sh = br.clone();
-                sh.push(shape(tau));
-                fit(&b, &sh).map_or(f64::INFINITY, |f| f.0)
-            };
-            let grid: Vec<f64> = taus.iter().map(|&t| chi_r(t)).collect();
+        // χ² of the columns `cols` with the lag at τ beside them, and the τ grid's best index.
+        let chi_with = |cols: &[Vec<(f64, f64)>], tau: f64| -> f64 {
+            let mut sh = cols.to_vec();
+            sh.push(shape(tau));
+            fit(&b, &sh).map_or(f64::INFINITY, |f| f.0)
+        };
+        let best_on_grid = |chi: &dyn Fn(f64) -> f64| -> (Vec<f64>, usize) {
+            let grid: Vec<f64> = taus.iter().map(|&t| chi(t)).collect();
             let ib = (0..grid.len())
                 .min_by(|&i, &j| grid[i].total_cmp(&grid[j]))
                 .unwrap_or(0);
+            (grid, ib)
+        };
+        let with_rate = {
+            let mut br = base.clone();
+            br.insert(1, rate_shape.clone());
+            let chi_r = |tau: f64| chi_with(&br, tau);
+            let (grid, ib) = best_on_grid(&chi_r);
             let interior = ib > 0 && ib + 1 < grid.len();
             let shows = interior && {
                 let lt = golden(|l| chi_r(l.exp()), taus[ib - 1].ln(), taus[ib + 1].ln(), 40);
-                let mut sh = base.clone();
-                sh.push(shape(lt.exp()));
-                let chi_without = fit(&b, &sh).map_or(f64::INFINITY, |f| f.0);
-                chi_without - chi_r(lt.exp()) > rows_used.ln()
+                chi_with(&base, lt.exp()) - chi_r(lt.exp()) > rows_used.ln()
             };
             shows.then_some(br)
         };
@@ -339,15 +342,8 @@ pub fn analyse(
         let Some((chi0, _, _)) = fit(&b, &base) else {
             continue;
         };
-        let chi_at = |tau: f64| -> f64 {
-            let mut sh = base.clone();
-            sh.push(shape(tau));
-            fit(&b, &sh).map_or(f64::INFINITY, |f| f.0)
-        };
-        let grid: Vec<f64> = taus.iter().map(|&t| chi_at(t)).collect();
-        let ib = (0..grid.len())
-            .min_by(|&i, &j| grid[i].total_cmp(&grid[j]))
-            .unwrap_or(0);
+        let chi_at = |tau: f64| chi_with(&base, tau);
+        let (grid, ib) = best_on_grid(&chi_at);
         let delta_bic = grid[ib] - chi0 + charge;
         let label = format!("{name} ({})", ch.name);
         if delta_bic >= 0.0 {
