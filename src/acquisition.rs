@@ -877,53 +877,40 @@ mod tests {
 
     #[test]
     fn every_driver_error_names_a_flag() {
+        // The variants both drivers' errors share (`converter_error!`), then the chip's own.
+        macro_rules! every_error {
+            ($E:ident: $($own:expr),*) => {
+                [
+                    $E::Spi(()),
+                    $E::Pin(()),
+                    $E::DrdyTimeout,
+                    $E::CrcMismatch {
+                        expected: 0,
+                        received: 1,
+                    },
+                    $E::InvalidConfig,
+                    $E::DeviceId { found: 3 },
+                    $E::NotResponding { found: 0xFF },
+                    $E::ReadBack {
+                        register: 1,
+                        written: 1,
+                        read: 0,
+                    },
+                    $E::UnexpectedReset,
+                    $($own),*
+                ]
+            };
+        }
         use ads1262::Error as A;
-        let ads: [A<(), ()>; 11] = [
-            A::Spi(()),
-            A::Pin(()),
-            A::DrdyTimeout,
-            A::Checksum {
-                expected: 0,
-                received: 1,
-            },
-            A::CrcMismatch {
-                expected: 0,
-                received: 1,
-            },
-            A::InvalidConfig,
-            A::DeviceId { found: 3 },
-            A::NotResponding { found: 0xFF },
-            A::ReadBack {
-                register: 1,
-                written: 1,
-                read: 0,
-            },
-            A::StaleData,
-            A::UnexpectedReset,
-        ];
+        let ads: [A<(), ()>; 11] = every_error!(A: A::Checksum {
+            expected: 0,
+            received: 1,
+        }, A::StaleData);
         for e in ads {
             assert_ne!(flags_for(&e).0, 0, "{e:?}");
         }
         use ad7124::Error as R;
-        let rtd: [R<(), ()>; 10] = [
-            R::Spi(()),
-            R::Pin(()),
-            R::DrdyTimeout,
-            R::CrcMismatch {
-                expected: 0,
-                received: 1,
-            },
-            R::InvalidConfig,
-            R::DeviceId { found: 3 },
-            R::NotResponding { found: 0xFF },
-            R::ReadBack {
-                register: 1,
-                written: 1,
-                read: 0,
-            },
-            R::UnexpectedReset,
-            R::AdcError(ad7124::ErrorFlags(0)),
-        ];
+        let rtd: [R<(), ()>; 10] = every_error!(R: R::AdcError(ad7124::ErrorFlags(0)));
         for e in rtd {
             assert_ne!(flags_for(&e).0, 0, "{e:?}");
         }

@@ -254,6 +254,11 @@ mod tests {
         (good, bad)
     }
 
+    /// `line` on a fresh decoder: one frame refused, then `served` decoded, and nothing else.
+    fn assert_one_refused_then_served(line: &[u8], served: HostFrame) {
+        assert_eq!(feed(&mut Decoder::new(), line), (vec![served], 1));
+    }
+
     fn sample_request(id: u32) -> HostFrame {
         HostFrame {
             id,
@@ -522,24 +527,18 @@ mod tests {
     #[test]
     fn garbage_right_before_a_frame_without_a_delimiter_does_not_hide_it() {
         // The frame's own leading 0x00 ends the garbage.
-        let mut d = Decoder::new();
         let mut line = vec![0x13, 0x37, 0x42];
         line.extend(wire(&sample_request(1)));
-        let (good, bad) = feed(&mut d, &line);
-        assert_eq!(good, vec![sample_request(1)]);
-        assert_eq!(bad, 1);
+        assert_one_refused_then_served(&line, sample_request(1));
     }
 
     #[test]
     fn a_truncated_frame_is_refused_and_the_next_one_is_served() {
-        let mut d = Decoder::new();
         let full = wire(&sample_request(1));
         let mut line = full[..full.len() / 2].to_vec();
         line.push(0); // cut short by a delimiter
         line.extend(wire(&sample_request(2)));
-        let (good, bad) = feed(&mut d, &line);
-        assert_eq!(good, vec![sample_request(2)]);
-        assert_eq!(bad, 1);
+        assert_one_refused_then_served(&line, sample_request(2));
     }
 
     #[test]

@@ -3,7 +3,7 @@
 //! the board's slot layout (sectors 9–11).
 
 use super::*;
-use crate::drivers::stm32f4_flash::model::FlashModel;
+use crate::drivers::stm32f4_flash::model::{FlashModel, SR_ERROR_FLAGS};
 use crate::drivers::stm32f4_flash::{sr, FlashRegisters, Stm32f4Flash};
 use crate::table::tests::paper_table;
 
@@ -83,15 +83,8 @@ fn two_tables() -> (CalibrationTable, CalibrationTable) {
 /// commit failed until reset).
 #[test]
 fn each_flash_error_of_a_commit_has_its_code_and_the_retry_commits() {
-    let cases = [
-        (sr::PGSERR, ErrorCode::FlashProgramSequence),
-        (sr::PGPERR, ErrorCode::FlashProgramParallelism),
-        (sr::PGAERR, ErrorCode::FlashProgramAlignment),
-        (sr::WRPERR, ErrorCode::FlashWriteProtected),
-        (sr::OPERR, ErrorCode::FlashOperation),
-    ];
     let (t1, t2) = two_tables();
-    for (flag, code) in cases {
+    for (flag, _, code) in SR_ERROR_FLAGS {
         let mut s = service_with_active(&t1);
         let _ = s.erase_ahead(&|| 0);
         model(&mut s).fail_next = Some(flag);

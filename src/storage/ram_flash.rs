@@ -83,6 +83,14 @@ impl<const N: usize, const ERASE: usize, const WRITE: usize> RamFlash<N, ERASE, 
     pub fn as_bytes_mut(&mut self) -> &mut [u8; N] {
         &mut self.bytes
     }
+
+    /// The `len` cells from `offset`, if they are inside the flash.
+    fn cells(&mut self, offset: u32, len: usize) -> Result<&mut [u8], RamFlashError> {
+        let start = offset as usize;
+        self.bytes
+            .get_mut(start..start + len)
+            .ok_or(RamFlashError::OutOfBounds)
+    }
 }
 
 impl<const N: usize, const ERASE: usize, const WRITE: usize> Default for RamFlash<N, ERASE, WRITE> {
@@ -104,12 +112,7 @@ impl<const N: usize, const ERASE: usize, const WRITE: usize> ReadNorFlash
 
     fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
         check_read(self, offset, bytes.len())?;
-        let start = offset as usize;
-        let src = self
-            .bytes
-            .get(start..start + bytes.len())
-            .ok_or(RamFlashError::OutOfBounds)?;
-        bytes.copy_from_slice(src);
+        bytes.copy_from_slice(self.cells(offset, bytes.len())?);
         Ok(())
     }
 
@@ -135,11 +138,7 @@ impl<const N: usize, const ERASE: usize, const WRITE: usize> NorFlash
 
     fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
         check_write(self, offset, bytes.len())?;
-        let start = offset as usize;
-        let dst = self
-            .bytes
-            .get_mut(start..start + bytes.len())
-            .ok_or(RamFlashError::OutOfBounds)?;
+        let dst = self.cells(offset, bytes.len())?;
         // Check everything first so a refused write changes nothing.
         if let Some(i) = dst.iter().zip(bytes).position(|(old, new)| new & !old != 0) {
             return Err(RamFlashError::WouldSetBits {

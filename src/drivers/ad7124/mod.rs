@@ -22,16 +22,10 @@ use embedded_hal::digital::InputPin;
 use embedded_hal::spi::{Mode, SpiDevice, MODE_3};
 
 use crate::adc::{Ad7124Code, AdcScale, Coding};
-use crate::drivers::{wait_low, WaitError, CRC8_ATM};
+use crate::drivers::{wait_low, CRC8_ATM};
 use crate::units::Volts;
 use registers::{adc_control, config, err, status, Reg};
 pub use registers::{AnalogInput, Excitation, FilterType, Gain, IoutPin, PowerMode, Reference};
-
-/// Error type of a driver built on bus `SPI` and data-ready pin `DRDY`.
-pub type DriverError<SPI, DRDY> = Error<
-    <SPI as embedded_hal::spi::ErrorType>::Error,
-    <DRDY as embedded_hal::digital::ErrorType>::Error,
->;
 
 /// SPI mode the AD7124-4 requires: CPOL = 1, CPHA = 1. Datasheet Rev. B, "Timing
 /// Characteristics" (Figures 2 and 3, read and write cycle timing): SCLK idles high, DOUT/RDY
@@ -117,7 +111,8 @@ impl Status {
     }
 }
 
-/// Complete AD7124-4 configuration (the board's is `crate::board::ad7124_config`).
+/// Complete AD7124-4 configuration: power mode, reference, excitation current and pin, the
+/// channel's inputs, coding, buffers and gain, filter, SPI CRC, and how long to poll data-ready.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Ad7124Config {
     /// Power mode (ADC_CONTROL.POWER_MODE).
@@ -254,80 +249,9 @@ pub struct DeviceInfo {
     pub silicon_revision: u8,
 }
 
-/// Everything a driver call can fail with.
-///
-/// `SpiE` is the bus error of the [`embedded_hal::spi::SpiDevice`], `PinE` the error of the
-/// data-ready [`embedded_hal::digital::InputPin`]. The other variants say what the chip did wrong,
-/// so the firmware can report a precise status flag instead of a number it cannot trust.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Error<SpiE, PinE> {
-    /// The SPI transfer itself failed.
-    Spi(SpiE),
-    /// Reading the data-ready pin failed.
-    Pin(PinE),
-    /// Data-ready did not assert within the configured number of polls.
-    DrdyTimeout,
-    /// CRC-8 (x^8 + x^2 + x + 1) over the received bytes differs from the received CRC byte.
-    CrcMismatch {
-        /// CRC computed from the received bytes.
-        expected: u8,
-        /// CRC byte the converter sent.
-        received: u8,
-    },
-    /// A configuration value does not fit its register field or contradicts another setting.
-    InvalidConfig,
-    /// The ID register names another device.
-    DeviceId {
-        /// The ID register content read.
-        found: u8,
-    },
-    /// The ID register reads as an idle bus (all zeros or all ones): no device answered.
-    NotResponding {
-        /// The byte read where the ID was expected.
-        found: u8,
-    },
-    /// A register read back after writing holds another value than written.
-    ReadBack {
-        /// Register address.
-        register: u8,
-        /// Value written.
-        written: u32,
-        /// Value read back.
-        read: u32,
-    },
-    /// The converter reports it has been reset since it was configured (brown-out or glitch on
-    /// the reset line): its configuration is lost and must be re-initialised.
-    UnexpectedReset,
+converter_error! {
     /// The ERROR register reports the listed conditions (see [`ErrorFlags`]).
     AdcError(ErrorFlags),
-}
-
-impl<SpiE, PinE> Error<SpiE, PinE> {
-    /// The variant's name, for firmware logs: defmt prints it without pulling in `core::fmt`
-    /// (whose Debug machinery would cost the front-end build ~3.5 KiB of flash).
-    pub const fn name(&self) -> &'static str {
-        match self {
-            Error::Spi(_) => "Spi",
-            Error::Pin(_) => "Pin",
-            Error::DrdyTimeout => "DrdyTimeout",
-            Error::CrcMismatch { .. } => "CrcMismatch",
-            Error::InvalidConfig => "InvalidConfig",
-            Error::DeviceId { .. } => "DeviceId",
-            Error::NotResponding { .. } => "NotResponding",
-            Error::ReadBack { .. } => "ReadBack",
-            Error::UnexpectedReset => "UnexpectedReset",
-            Error::AdcError(_) => "AdcError",
-        }
-    }
-}
-
-impl<SpiE, PinE> From<WaitError<PinE>> for Error<SpiE, PinE> {
-    fn from(e: WaitError<PinE>) -> Self {
-        match e {
-            WaitError::Pin(p) => Error::Pin(p),
-            WaitError::Timeout => Error::DrdyTimeout,
-        }
-    }
 }
 
 /// Result width (Rev. B "Data Register": 24 bits).

@@ -2,12 +2,14 @@
 //! re-declared here from the AD7124-4 datasheet (Rev. B), not imported from the driver.
 
 use super::*;
-use crate::drivers::test_support::{crc8_reference, BrokenBus};
+use crate::drivers::test_support::{
+    check_drdy_failures, crc8_reference, driver, finish, run, transfer_frame, write_frame,
+    BrokenBus,
+};
 use embedded_hal::spi::ErrorKind;
 use embedded_hal_mock::eh1::delay::NoopDelay;
 use embedded_hal_mock::eh1::digital::{Mock as PinMock, State, Transaction as PinT};
 use embedded_hal_mock::eh1::spi::{Mock as SpiMock, Transaction as SpiT};
-use embedded_hal_mock::eh1::MockError;
 
 /// The configuration the register values below are worked out for (the front-end board's,
 /// re-declared here: the driver does not know the board).
@@ -71,11 +73,7 @@ fn wr(addr: u8, value: &[u8], crc: bool) -> Vec<SpiT<u8>> {
     if crc {
         sent.push(crc8_reference(&sent));
     }
-    vec![
-        SpiT::transaction_start(),
-        SpiT::write_vec(sent),
-        SpiT::transaction_end(),
-    ]
+    write_frame(sent)
 }
 
 /// A read whose CRC byte (if any) is `crc_override` or else the correct one.
@@ -91,11 +89,7 @@ fn rd_with(addr: u8, value: &[u8], crc: bool, crc_override: Option<u8>) -> Vec<S
         covered.extend_from_slice(value);
         answer.push(crc_override.unwrap_or_else(|| crc8_reference(&covered)));
     }
-    vec![
-        SpiT::transaction_start(),
-        SpiT::transfer_in_place(sent, answer),
-        SpiT::transaction_end(),
-    ]
+    transfer_frame(sent, answer)
 }
 
 fn rd(addr: u8, value: &[u8], crc: bool) -> Vec<SpiT<u8>> {
@@ -108,11 +102,7 @@ fn written(addr: u8, value: &[u8], crc: bool) -> Vec<SpiT<u8>> {
 }
 
 fn reset() -> Vec<SpiT<u8>> {
-    vec![
-        SpiT::transaction_start(),
-        SpiT::write_vec(vec![0xFF; 8]),
-        SpiT::transaction_end(),
-    ]
+    write_frame(vec![0xFF; 8])
 }
 
 fn board_init() -> Vec<SpiT<u8>> {
@@ -147,27 +137,12 @@ fn board_init_with(crc: bool) -> Vec<SpiT<u8>> {
 
 type Driver = Ad7124<SpiMock<u8>, PinMock, NoopDelay>;
 
-fn driver(spi: &[SpiT<u8>], pin: &[PinT], config: Ad7124Config) -> Driver {
-    Ad7124::new(
-        SpiMock::new(spi),
-        PinMock::new(pin),
-        NoopDelay::new(),
-        config,
-    )
-}
-
 /// A board-default driver already through `init`, expecting `then` afterwards.
 fn initialised(then: &[SpiT<u8>], pin: &[PinT]) -> Driver {
     let spi = [board_init(), then.to_vec()].concat();
     let mut d = driver(&spi, pin, config());
     assert!(d.init().is_ok(), "board-default init failed");
     d
-}
-
-fn finish(d: Driver) {
-    let (mut spi, mut pin, _) = d.release();
-    spi.done();
-    pin.done();
 }
 
 #[test]
@@ -178,14 +153,12 @@ fn the_board_configuration_converts_at_10_sps() {
 
 #[test]
 fn init_resets_checks_id_and_writes_every_register_with_crc_and_read_back() {
-    let mut d = driver(&board_init(), &[], config());
     assert_eq!(
-        d.init(),
+        run(&board_init(), &[], config(), |d| d.init()),
         Ok(DeviceInfo {
             silicon_revision: 4
         })
     );
-    finish(d);
 }
 
 #[test]
@@ -211,16 +184,14 @@ fn init_reports_a_register_that_did_not_read_back() {
         rd(CONFIG_0, &[0x08, 0x60], true), // still the reset value
     ]
     .concat();
-    let mut d = driver(&spi, &[], config());
     assert_eq!(
-        d.init(),
+        run(&spi, &[], config(), |d| d.init()),
         Err(Error::ReadBack {
             register: CONFIG_0,
             written: 0x01E4,
             read: 0x0860
         })
     );
-    finish(d);
 }
 
 #[test]
@@ -231,9 +202,7 @@ fn init_rejects_the_ad7124_8_and_an_idle_bus() {
         (0xFF, Error::NotResponding { found: 0xFF }),
     ] {
         let spi = [reset(), rd(ID, &[id], false)].concat();
-        let mut d = driver(&spi, &[], config());
-        assert_eq!(d.init(), Err(expected));
-        finish(d);
+        assert_eq!(run(&spi, &[], config(), |d| d.init()), Err(expected));
     }
 }
 
@@ -251,15 +220,13 @@ fn corrupted_read_back_fails_the_crc() {
         rd_with(ERROR_EN, &ERROR_EN_CRC, true, Some(good ^ 0x80)),
     ]
     .concat();
-    let mut d = driver(&spi, &[], config());
     assert_eq!(
-        d.init(),
+        run(&spi, &[], config(), |d| d.init()),
         Err(Error::CrcMismatch {
             expected: good,
             received: good ^ 0x80
         })
     );
-    finish(d);
 }
 
 #[test]
@@ -283,9 +250,7 @@ fn init_refuses_impossible_configurations_without_touching_the_bus() {
             ..base
         },
     ] {
-        let mut d = driver(&[], &[], cfg);
-        assert_eq!(d.init(), Err(Error::InvalidConfig));
-        finish(d);
+        assert_eq!(run(&[], &[], cfg, |d| d.init()), Err(Error::InvalidConfig));
     }
 }
 
@@ -358,16 +323,15 @@ fn read_rtd_polled_polls_status_until_ready() {
     finish(d);
 }
 
+/// Data-ready that never falls times out after the poll limit; a failing pin is a pin error.
 #[test]
-fn drdy_that_never_falls_times_out() {
-    let cfg = Ad7124Config {
-        drdy_poll_limit: 2,
-        ..config()
-    };
-    let pin = [PinT::get(State::High), PinT::get(State::High)];
-    let mut d = driver(&[], &pin, cfg);
-    assert_eq!(d.read_rtd(), Err(Error::DrdyTimeout));
-    finish(d);
+fn drdy_failures_are_named() {
+    check_drdy_failures(
+        config(),
+        |d| d.read_rtd().map(drop),
+        Error::DrdyTimeout,
+        Error::Pin,
+    );
 }
 
 #[test]
@@ -378,18 +342,10 @@ fn status_that_never_shows_ready_times_out() {
         ..config()
     };
     let spi = [rd(STATUS, &[0x80], false), rd(STATUS, &[0x80], false)].concat();
-    let mut d = driver(&spi, &[], cfg);
-    assert_eq!(d.read_rtd_polled(), Err(Error::DrdyTimeout));
-    finish(d);
-}
-
-#[test]
-fn drdy_pin_failure_is_a_pin_error() {
-    let err = MockError::Io(std::io::ErrorKind::Other);
-    let pin = [PinT::get(State::Low).with_error(err.clone())];
-    let mut d = driver(&[], &pin, config());
-    assert_eq!(d.read_rtd(), Err(Error::Pin(err)));
-    finish(d);
+    assert_eq!(
+        run(&spi, &[], cfg, |d| d.read_rtd_polled()),
+        Err(Error::DrdyTimeout)
+    );
 }
 
 #[test]

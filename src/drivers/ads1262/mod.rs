@@ -16,18 +16,12 @@ use embedded_hal::digital::InputPin;
 use embedded_hal::spi::{Mode, SpiDevice, MODE_1};
 
 use crate::adc::{AdcScale, Ads1262Code, Coding};
-use crate::drivers::{wait_low, WaitError, CRC8_ATM};
+use crate::drivers::{wait_low, CRC8_ATM};
 use crate::units::Volts;
 use registers::{cmd, reg, status};
 pub use registers::{
     Chop, DataRate, Filter, Gain, Input, Integrity, Pga, RefNegative, RefPositive,
 };
-
-/// Error type of a driver built on bus `SPI` and data-ready pin `DRDY`.
-pub type DriverError<SPI, DRDY> = Error<
-    <SPI as embedded_hal::spi::ErrorType>::Error,
-    <DRDY as embedded_hal::digital::ErrorType>::Error,
->;
 
 /// Time to wait after the RESET command before talking to the device, in microseconds.
 ///
@@ -89,7 +83,8 @@ impl BoardChannels {
     }
 }
 
-/// Complete ADS1262 configuration (the board's is `crate::board::ads1262_config`).
+/// Complete ADS1262 configuration: filter, data rate, chop, start delay, reference, status and
+/// check bytes, the two input channels, and how long to poll DRDY.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Ads1262Config {
     /// Digital filter (MODE1).
@@ -270,19 +265,7 @@ pub struct ChannelSample {
     pub sample: Sample,
 }
 
-/// Everything a driver call can fail with.
-///
-/// `SpiE` is the bus error of the [`embedded_hal::spi::SpiDevice`], `PinE` the error of the
-/// data-ready [`embedded_hal::digital::InputPin`]. The other variants say what the chip did wrong,
-/// so the firmware can report a precise status flag instead of a number it cannot trust.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Error<SpiE, PinE> {
-    /// The SPI transfer itself failed.
-    Spi(SpiE),
-    /// Reading the data-ready pin failed.
-    Pin(PinE),
-    /// Data-ready did not assert within the configured number of polls.
-    DrdyTimeout,
+converter_error! {
     /// Checksum mode: the received checksum byte differs from the sum of the data bytes + 0x9B.
     Checksum {
         /// Checksum computed from the received data bytes.
@@ -290,68 +273,8 @@ pub enum Error<SpiE, PinE> {
         /// Checksum byte the converter sent.
         received: u8,
     },
-    /// CRC-8 (x^8 + x^2 + x + 1) over the received bytes differs from the received CRC byte.
-    CrcMismatch {
-        /// CRC computed from the received bytes.
-        expected: u8,
-        /// CRC byte the converter sent.
-        received: u8,
-    },
-    /// A configuration value does not fit its register field or contradicts another setting.
-    InvalidConfig,
-    /// The ID register names another device.
-    DeviceId {
-        /// The ID register content read.
-        found: u8,
-    },
-    /// The ID register reads as an idle bus (all zeros or all ones): no device answered.
-    NotResponding {
-        /// The byte read where the ID was expected.
-        found: u8,
-    },
-    /// A register read back after writing holds another value than written.
-    ReadBack {
-        /// Register address.
-        register: u8,
-        /// Value written.
-        written: u32,
-        /// Value read back.
-        read: u32,
-    },
-    /// The converter reports it has been reset since it was configured (brown-out or glitch on
-    /// the reset line): its configuration is lost and must be re-initialised.
-    UnexpectedReset,
     /// The status byte says no new conversion since the last read (stale data).
     StaleData,
-}
-
-impl<SpiE, PinE> Error<SpiE, PinE> {
-    /// The variant's name, for firmware logs: defmt prints it without pulling in `core::fmt`
-    /// (whose Debug machinery would cost the front-end build ~3.5 KiB of flash).
-    pub const fn name(&self) -> &'static str {
-        match self {
-            Error::Spi(_) => "Spi",
-            Error::Pin(_) => "Pin",
-            Error::DrdyTimeout => "DrdyTimeout",
-            Error::CrcMismatch { .. } => "CrcMismatch",
-            Error::InvalidConfig => "InvalidConfig",
-            Error::DeviceId { .. } => "DeviceId",
-            Error::NotResponding { .. } => "NotResponding",
-            Error::ReadBack { .. } => "ReadBack",
-            Error::UnexpectedReset => "UnexpectedReset",
-            Error::Checksum { .. } => "Checksum",
-            Error::StaleData => "StaleData",
-        }
-    }
-}
-
-impl<SpiE, PinE> From<WaitError<PinE>> for Error<SpiE, PinE> {
-    fn from(e: WaitError<PinE>) -> Self {
-        match e {
-            WaitError::Pin(p) => Error::Pin(p),
-            WaitError::Timeout => Error::DrdyTimeout,
-        }
-    }
 }
 
 /// ADC1 result width (SBAS661C "Data Format": 32-bit two's complement).

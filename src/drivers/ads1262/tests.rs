@@ -4,12 +4,14 @@
 //! `drivers::test_support`.
 
 use super::*;
-use crate::drivers::test_support::{crc8_reference, BrokenBus};
+use crate::drivers::test_support::{
+    check_drdy_failures, crc8_reference, driver, finish, run, transfer_frame, write_frame,
+    BrokenBus,
+};
 use embedded_hal::spi::ErrorKind;
 use embedded_hal_mock::eh1::delay::NoopDelay;
 use embedded_hal_mock::eh1::digital::{Mock as PinMock, State, Transaction as PinT};
 use embedded_hal_mock::eh1::spi::{Mock as SpiMock, Transaction as SpiT};
-use embedded_hal_mock::eh1::MockError;
 
 /// The configuration the register values below are worked out for (the front-end board's,
 /// re-declared here: the driver does not know the board).
@@ -65,11 +67,7 @@ const ID_ADS1262_REV3: u8 = 0b000_00011;
 const POWER_AFTER_RESET: u8 = 0x11;
 
 fn command(op: u8) -> Vec<SpiT<u8>> {
-    vec![
-        SpiT::transaction_start(),
-        SpiT::write_vec(vec![op]),
-        SpiT::transaction_end(),
-    ]
+    write_frame(vec![op])
 }
 
 fn rreg(addr: u8, values: &[u8]) -> Vec<SpiT<u8>> {
@@ -77,21 +75,13 @@ fn rreg(addr: u8, values: &[u8]) -> Vec<SpiT<u8>> {
     sent.extend(std::iter::repeat_n(0u8, values.len()));
     let mut answer = vec![0xFF, 0xFF];
     answer.extend_from_slice(values);
-    vec![
-        SpiT::transaction_start(),
-        SpiT::transfer_in_place(sent, answer),
-        SpiT::transaction_end(),
-    ]
+    transfer_frame(sent, answer)
 }
 
 fn wreg(addr: u8, values: &[u8]) -> Vec<SpiT<u8>> {
     let mut sent = vec![WREG | addr, values.len() as u8 - 1];
     sent.extend_from_slice(values);
-    vec![
-        SpiT::transaction_start(),
-        SpiT::write_vec(sent),
-        SpiT::transaction_end(),
-    ]
+    write_frame(sent)
 }
 
 fn rdata1(answer: &[u8]) -> Vec<SpiT<u8>> {
@@ -99,11 +89,7 @@ fn rdata1(answer: &[u8]) -> Vec<SpiT<u8>> {
     sent.extend(std::iter::repeat_n(0u8, answer.len()));
     let mut resp = vec![0xFF];
     resp.extend_from_slice(answer);
-    vec![
-        SpiT::transaction_start(),
-        SpiT::transfer_in_place(sent, resp),
-        SpiT::transaction_end(),
-    ]
+    transfer_frame(sent, resp)
 }
 
 fn board_init() -> Vec<SpiT<u8>> {
@@ -125,17 +111,6 @@ fn init_writing(block: &[u8], refmux: u8) -> Vec<SpiT<u8>> {
     .concat()
 }
 
-type Driver = Ads1262<SpiMock<u8>, PinMock, NoopDelay>;
-
-fn driver(spi: &[SpiT<u8>], pin: &[PinT], config: Ads1262Config) -> Driver {
-    Ads1262::new(
-        SpiMock::new(spi),
-        PinMock::new(pin),
-        NoopDelay::new(),
-        config,
-    )
-}
-
 /// `read_conversion` of the board configuration on one RDATA1 answer (status, four data bytes,
 /// check byte), the mock then checked done.
 fn conversion_of(answer: &[u8]) -> Result<Sample, DriverError<SpiMock<u8>, PinMock>> {
@@ -145,23 +120,15 @@ fn conversion_of(answer: &[u8]) -> Result<Sample, DriverError<SpiMock<u8>, PinMo
     r
 }
 
-fn finish(d: Driver) {
-    let (mut spi, mut pin, _) = d.release();
-    spi.done();
-    pin.done();
-}
-
 #[test]
 fn init_resets_identifies_writes_verifies_and_starts() {
-    let mut d = driver(&board_init(), &[], config());
     assert_eq!(
-        d.init(),
+        run(&board_init(), &[], config(), |d| d.init()),
         Ok(DeviceInfo {
             part: Part::Ads1262,
             revision: 3
         })
     );
-    finish(d);
 }
 
 #[test]
@@ -197,24 +164,23 @@ fn init_reports_the_register_that_did_not_read_back() {
         rreg(POWER, &back),
     ]
     .concat();
-    let mut d = driver(&spi, &[], config());
     assert_eq!(
-        d.init(),
+        run(&spi, &[], config(), |d| d.init()),
         Err(Error::ReadBack {
             register: MODE1,
             written: 0x60,
             read: 0x80
         })
     );
-    finish(d);
 }
 
 #[test]
 fn init_rejects_a_foreign_device_id() {
     let spi = [command(RESET), rreg(ID, &[0b010_00001, 0x11])].concat();
-    let mut d = driver(&spi, &[], config());
-    assert_eq!(d.init(), Err(Error::DeviceId { found: 0x41 }));
-    finish(d);
+    assert_eq!(
+        run(&spi, &[], config(), |d| d.init()),
+        Err(Error::DeviceId { found: 0x41 })
+    );
 }
 
 #[test]
@@ -230,9 +196,10 @@ fn init_accepts_the_ads1263() {
 fn init_reports_an_idle_bus_as_not_responding() {
     for idle in [0x00u8, 0xFF] {
         let spi = [command(RESET), rreg(ID, &[idle, idle])].concat();
-        let mut d = driver(&spi, &[], config());
-        assert_eq!(d.init(), Err(Error::NotResponding { found: idle }));
-        finish(d);
+        assert_eq!(
+            run(&spi, &[], config(), |d| d.init()),
+            Err(Error::NotResponding { found: idle })
+        );
     }
 }
 
@@ -240,9 +207,10 @@ fn init_reports_an_idle_bus_as_not_responding() {
 fn init_notices_a_reset_command_that_did_not_arrive() {
     // POWER without its RESET flag right after RESET: the command was lost.
     let spi = [command(RESET), rreg(ID, &[ID_ADS1262_REV3, 0x01])].concat();
-    let mut d = driver(&spi, &[], config());
-    assert_eq!(d.init(), Err(Error::NotResponding { found: 0x01 }));
-    finish(d);
+    assert_eq!(
+        run(&spi, &[], config(), |d| d.init()),
+        Err(Error::NotResponding { found: 0x01 })
+    );
 }
 
 #[test]
@@ -266,9 +234,7 @@ fn init_refuses_impossible_configurations_without_touching_the_bus() {
         ..base
     };
     for cfg in [fir_fast, no_intref, ref_on_signal_pin, bad_delay] {
-        let mut d = driver(&[], &[], cfg);
-        assert_eq!(d.init(), Err(Error::InvalidConfig));
-        finish(d);
+        assert_eq!(run(&[], &[], cfg, |d| d.init()), Err(Error::InvalidConfig));
     }
 }
 
@@ -455,29 +421,10 @@ fn failed_mux_switch_is_retried_on_the_next_read() {
     finish(d);
 }
 
+/// DRDY that never falls times out after the poll limit; a failing pin is a pin error.
 #[test]
-fn drdy_that_never_falls_times_out_after_the_poll_limit() {
-    let cfg = Ads1262Config {
-        drdy_poll_limit: 3,
-        ..config()
-    };
-    let pin = [
-        PinT::get(State::High),
-        PinT::get(State::High),
-        PinT::get(State::High),
-    ];
-    let mut d = driver(&[], &pin, cfg);
-    assert_eq!(d.wait_drdy(), Err(Error::DrdyTimeout));
-    finish(d);
-}
-
-#[test]
-fn drdy_pin_failure_is_a_pin_error() {
-    let err = MockError::Io(std::io::ErrorKind::Other);
-    let pin = [PinT::get(State::Low).with_error(err.clone())];
-    let mut d = driver(&[], &pin, config());
-    assert_eq!(d.wait_drdy(), Err(Error::Pin(err)));
-    finish(d);
+fn drdy_failures_are_named() {
+    check_drdy_failures(config(), |d| d.wait_drdy(), Error::DrdyTimeout, Error::Pin);
 }
 
 #[test]

@@ -16,8 +16,35 @@
 //!   without changing the cells (as the hardware does when it aborts), and OPERR is added when
 //!   ERRIE is set.
 
-use super::{cr, sector_of, sr, FlashRegisters, FLASH_BYTES, KEY1, KEY2};
+use super::{cr, sector_of, sr, FlashError, FlashRegisters, FLASH_BYTES, KEY1, KEY2};
+use crate::protocol::ErrorCode;
 use std::vec::Vec;
+
+/// Each FLASH_SR error flag `fail_next` can raise, with the error the driver must name it by and
+/// the code a commit that meets it must answer (RM0090 §3.8.4; protocol codes 63–68).
+pub(crate) const SR_ERROR_FLAGS: [(u32, FlashError, ErrorCode); 5] = [
+    (
+        sr::PGSERR,
+        FlashError::ProgramSequence,
+        ErrorCode::FlashProgramSequence,
+    ),
+    (
+        sr::PGPERR,
+        FlashError::ProgramParallelism,
+        ErrorCode::FlashProgramParallelism,
+    ),
+    (
+        sr::PGAERR,
+        FlashError::ProgramAlignment,
+        ErrorCode::FlashProgramAlignment,
+    ),
+    (
+        sr::WRPERR,
+        FlashError::WriteProtected,
+        ErrorCode::FlashWriteProtected,
+    ),
+    (sr::OPERR, FlashError::Operation, ErrorCode::FlashOperation),
+];
 
 /// The model's state.
 pub(crate) struct FlashModel {

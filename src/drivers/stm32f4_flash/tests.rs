@@ -1,6 +1,6 @@
 //! The flash driver against the register-level controller model (model.rs, RM0090 §3.5/§3.8).
 
-use super::model::FlashModel;
+use super::model::{FlashModel, SR_ERROR_FLAGS};
 use super::*;
 
 const SECTOR_9: u32 = 0xA_0000;
@@ -86,14 +86,7 @@ fn sectors_follow_the_f405_map() {
 /// HAL left the sticky flag set, so every later write failed until reset).
 #[test]
 fn each_flash_error_is_named_and_the_next_operation_succeeds() {
-    let cases = [
-        (sr::PGSERR, FlashError::ProgramSequence),
-        (sr::PGPERR, FlashError::ProgramParallelism),
-        (sr::PGAERR, FlashError::ProgramAlignment),
-        (sr::WRPERR, FlashError::WriteProtected),
-        (sr::OPERR, FlashError::Operation),
-    ];
-    for (flag, named) in cases {
+    for (flag, named, _) in SR_ERROR_FLAGS {
         let mut f = flash();
         assert_eq!(f.erase(SECTOR_9, SECTOR_9 + SECTOR), Ok(()));
         f.registers().fail_next = Some(flag);

@@ -12,7 +12,7 @@
 
 use accomp::acquisition::{SpiRequirement, AD7124_SPI};
 
-use crate::bus::{crc8, Chip, Clock};
+use crate::bus::{crc8, Chip, Clock, Port};
 
 const STATUS: u8 = 0x00;
 const ADC_CONTROL: u8 = 0x01;
@@ -82,11 +82,9 @@ pub struct Ad7124Model {
     pub reference_ohms: f64,
     /// Fault: conversions stop (RDY never comes).
     pub stuck: bool,
-    /// Fault: MISO reads all ones.
-    pub miso_high: bool,
-    /// Fault: corrupt this many upcoming register reads (one bit flipped after the CRC).
-    pub corrupt_reads: u32,
-    pub refusals: u32,
+    /// The SPI port's faults and refusals; `corrupt_reads` here are register reads, the first
+    /// byte's low bit flipped after the CRC.
+    pub port: Port,
     pub conversions: u64,
 }
 
@@ -104,26 +102,11 @@ impl Ad7124Model {
             rtd_ohms: 100.0,
             reference_ohms: 5110.0,
             stuck: false,
-            miso_high: false,
-            corrupt_reads: 0,
-            refusals: 0,
+            port: Port::default(),
             conversions: 0,
         };
         m.power_glitch();
         m
-    }
-
-    /// Reset (serial reset or supply glitch): registers to reset values, CRC off, POR flag set.
-    /// The reset value of ADC_CONTROL is continuous conversion of CHANNEL_0 at low power, so
-    /// the part keeps converting — with the wrong settings.
-    pub fn power_glitch(&mut self) {
-        for a in 0..0x39u8 {
-            self.regs[usize::from(a)] = reset_value(a);
-        }
-        self.por = true;
-        self.ready = false;
-        self.errors = 0;
-        self.restart();
     }
 
     fn crc_on(&self) -> bool {
@@ -245,8 +228,8 @@ impl Ad7124Model {
             covered.extend_from_slice(&out);
             out.push(crc8(&covered));
         }
-        if self.corrupt_reads > 0 {
-            self.corrupt_reads -= 1;
+        if self.port.corrupt_reads > 0 {
+            self.port.corrupt_reads -= 1;
             out[0] ^= 0x01;
         }
         out
@@ -296,7 +279,7 @@ impl Chip for Ad7124Model {
         } else {
             self.ones = 0;
         }
-        let out = match std::mem::replace(&mut self.frame, Frame::Ignore) {
+        match std::mem::replace(&mut self.frame, Frame::Ignore) {
             Frame::Comms => {
                 let addr = mosi & 0x3F;
                 if mosi & 0x80 != 0 || size(addr) == 0 {
@@ -332,11 +315,6 @@ impl Chip for Ad7124Model {
                 0xFF
             }
             Frame::Ignore => 0xFF,
-        };
-        if self.miso_high {
-            0xFF
-        } else {
-            out
         }
     }
 
@@ -345,7 +323,20 @@ impl Chip for Ad7124Model {
         self.frame = Frame::Ignore;
     }
 
-    fn refused(&mut self) -> &mut u32 {
-        &mut self.refusals
+    /// Reset (serial reset or supply glitch): registers to reset values, CRC off, POR flag set.
+    /// The reset value of ADC_CONTROL is continuous conversion of CHANNEL_0 at low power, so
+    /// the part keeps converting — with the wrong settings.
+    fn power_glitch(&mut self) {
+        for a in 0..0x39u8 {
+            self.regs[usize::from(a)] = reset_value(a);
+        }
+        self.por = true;
+        self.ready = false;
+        self.errors = 0;
+        self.restart();
+    }
+
+    fn port(&mut self) -> &mut Port {
+        &mut self.port
     }
 }

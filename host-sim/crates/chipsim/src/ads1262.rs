@@ -8,7 +8,7 @@
 
 use accomp::acquisition::{SpiRequirement, ADS1262_SPI};
 
-use crate::bus::{crc8, Chip, Clock};
+use crate::bus::{crc8, Chip, Clock, Port};
 
 const ID: usize = 0x00;
 const POWER: usize = 0x01;
@@ -63,11 +63,9 @@ pub struct Ads1262Model {
     pub tilt_v: f64,
     /// Fault: the modulator stops, DRDY never falls again ([`Self::set_stuck_drdy`]).
     stuck_drdy: bool,
-    /// Fault: MISO reads all ones (chip unpowered or line open with a pull-up).
-    pub miso_high: bool,
-    /// Fault: corrupt this many upcoming conversion reads (one data bit flipped on the wire).
-    pub corrupt_reads: u32,
-    pub refusals: u32,
+    /// The SPI port's faults and refusals; `corrupt_reads` here are conversion reads, the last
+    /// data byte's low bit flipped after the checksum or CRC.
+    pub port: Port,
     /// Conversions completed (DRDY falling edges).
     pub drdy_edges: u64,
     /// The result in the output register: the time its conversion ended (its DRDY edge) and
@@ -89,21 +87,10 @@ impl Ads1262Model {
             accel_v: 0.0,
             tilt_v: 0.0,
             stuck_drdy: false,
-            miso_high: false,
-            corrupt_reads: 0,
-            refusals: 0,
+            port: Port::default(),
             drdy_edges: 0,
             latched: None,
         }
-    }
-
-    /// A supply glitch: every register back to its power-on value, conversions stopped (the
-    /// START pin is held low, so only a START1 command restarts them).
-    pub fn power_glitch(&mut self) {
-        self.regs = RESET_VALUES;
-        self.running = false;
-        self.next_conversion_us = None;
-        self.new_data = false;
     }
 
     fn period_us(&self) -> f64 {
@@ -212,8 +199,8 @@ impl Ads1262Model {
             0b10 => Some(crc8(&data)),
             _ => None,
         };
-        if self.corrupt_reads > 0 {
-            self.corrupt_reads -= 1;
+        if self.port.corrupt_reads > 0 {
+            self.port.corrupt_reads -= 1;
             data[3] ^= 0x01;
         }
         out.extend_from_slice(&data);
@@ -246,7 +233,7 @@ impl Chip for Ads1262Model {
     }
 
     fn exchange(&mut self, mosi: u8) -> u8 {
-        let out = match std::mem::replace(&mut self.frame, Frame::Ignore) {
+        match std::mem::replace(&mut self.frame, Frame::Ignore) {
             Frame::Command => {
                 match mosi {
                     0x06 => {
@@ -320,11 +307,6 @@ impl Chip for Ads1262Model {
                 b
             }
             Frame::Ignore => 0xFF,
-        };
-        if self.miso_high {
-            0xFF
-        } else {
-            out
         }
     }
 
@@ -332,7 +314,16 @@ impl Chip for Ads1262Model {
         self.frame = Frame::Ignore;
     }
 
-    fn refused(&mut self) -> &mut u32 {
-        &mut self.refusals
+    /// A supply glitch: every register back to its power-on value, conversions stopped (the
+    /// START pin is held low, so only a START1 command restarts them).
+    fn power_glitch(&mut self) {
+        self.regs = RESET_VALUES;
+        self.running = false;
+        self.next_conversion_us = None;
+        self.new_data = false;
+    }
+
+    fn port(&mut self) -> &mut Port {
+        &mut self.port
     }
 }

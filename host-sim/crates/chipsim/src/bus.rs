@@ -42,8 +42,23 @@ pub trait Chip {
     fn exchange(&mut self, mosi: u8) -> u8;
     /// CS rose.
     fn end_frame(&mut self);
-    /// Count of transactions refused (wrong mode or clock).
-    fn refused(&mut self) -> &mut u32;
+    /// A supply glitch: the chip back to its power-on state.
+    fn power_glitch(&mut self);
+    /// The port's faults and count, which the bus applies the same way to every chip.
+    fn port(&mut self) -> &mut Port;
+}
+
+/// A chip's SPI port as the harness sees it: the faults it switches on the wire and the count
+/// of transactions the chip refused. The same on every chip model.
+#[derive(Debug, Default)]
+pub struct Port {
+    /// Fault: MISO reads all ones (chip unpowered or line open with a pull-up).
+    pub miso_high: bool,
+    /// Fault: corrupt this many upcoming reads, one bit flipped on the wire after the chip
+    /// computed its check byte (which reads count, and which bit, is the chip model's).
+    pub corrupt_reads: u32,
+    /// Transactions refused (wrong mode or clock).
+    pub refusals: u32,
 }
 
 /// Why the model refused a transaction.
@@ -87,7 +102,7 @@ impl<M: Chip> SpiDevice for SimSpi<M> {
         let mut chip = self.chip.borrow_mut();
         let req = M::REQUIRED;
         if !req.accepts(&self.bus) {
-            *chip.refused() += 1;
+            chip.port().refusals += 1;
             let same_mode = SpiRequirement {
                 mode: self.bus.mode,
                 max_sclk_hz: u32::MAX,
@@ -103,22 +118,32 @@ impl<M: Chip> SpiDevice for SimSpi<M> {
             });
         }
         chip.begin_frame();
+        let chip = &mut *chip;
+        // One byte each way, with the MISO fault on the wire after the chip.
+        let mut exchange = |mosi: u8| {
+            let miso = chip.exchange(mosi);
+            if chip.port().miso_high {
+                0xFF
+            } else {
+                miso
+            }
+        };
         for op in operations.iter_mut() {
             match op {
                 Operation::Write(w) => {
                     for b in w.iter() {
-                        chip.exchange(*b);
+                        exchange(*b);
                     }
                 }
                 Operation::Read(r) => {
                     for b in r.iter_mut() {
-                        *b = chip.exchange(0x00);
+                        *b = exchange(0x00);
                     }
                 }
                 Operation::Transfer(r, w) => {
                     let n = r.len().max(w.len());
                     for i in 0..n {
-                        let out = chip.exchange(w.get(i).copied().unwrap_or(0x00));
+                        let out = exchange(w.get(i).copied().unwrap_or(0x00));
                         if let Some(x) = r.get_mut(i) {
                             *x = out;
                         }
@@ -126,7 +151,7 @@ impl<M: Chip> SpiDevice for SimSpi<M> {
                 }
                 Operation::TransferInPlace(buf) => {
                     for b in buf.iter_mut() {
-                        *b = chip.exchange(*b);
+                        *b = exchange(*b);
                     }
                 }
                 Operation::DelayNs(_) => {}

@@ -17,6 +17,6 @@ pub mod usart;
 pub use ad7124::Ad7124Model;
 pub use ads1262::Ads1262Model;
 pub use board::{Acquired, Board, Inputs};
-pub use bus::{BusRefusal, Chip, Clock, SimDelay, SimSpi};
+pub use bus::{BusRefusal, Chip, Clock, Port, SimDelay, SimSpi};
 pub use flash::{timed, FlashClock, FlashTiming, TimedFlash};
 pub use usart::UsartRx;

@@ -9,6 +9,7 @@
 //! The station is generated here from the core (the chip models and this test need nothing
 //! above it). Run: `cargo test -p accomp-chipsim --test board_sim`.
 
+use std::cell::RefCell;
 use std::rc::Rc;
 
 use accomp::acquisition::SpiSettings;
@@ -23,7 +24,7 @@ use accomp::table::CalibrationTable;
 use accomp::units::{Celsius, Gs, RAD_PER_ARCSEC};
 use embedded_hal::spi::{MODE_1, MODE_3};
 
-use accomp_chipsim::{Acquired, Ad7124Model, Ads1262Model, Board, BusRefusal, Clock};
+use accomp_chipsim::{Acquired, Ad7124Model, Ads1262Model, Board, BusRefusal, Chip, Clock};
 
 const S: u64 = 1_000_000;
 const H: u64 = 3600 * S;
@@ -69,6 +70,13 @@ impl Station {
             .resistance(Celsius(self.temperature_c(t_us)))
             .0
     }
+
+    /// The station on the chips' analog inputs at `t_us`.
+    fn put_on(&self, t_us: u64, ads: &mut Ads1262Model, rtd: &mut Ad7124Model) {
+        ads.accel_v = self.output_v(t_us);
+        ads.tilt_v = self.tilt_arcsec(t_us) / self.table.tilt.scale_arcsec_per_v;
+        rtd.rtd_ohms = self.rtd_ohms(t_us);
+    }
 }
 
 /// The board on the bench: the chip models, sequencers and assembler ([`Board`]), the station
@@ -107,6 +115,11 @@ impl Bench {
         self.board.now()
     }
 
+    /// Transactions the two chips refused (wrong mode or clock).
+    fn refusals(&self) -> u32 {
+        self.board.ads.borrow_mut().port().refusals + self.board.rtd.borrow_mut().port().refusals
+    }
+
     /// Power-up as the firmware does it: no blocking init, the sequencers bring their chips up
     /// in steps from their first ticks. Runs 1.5 s and says whether both are running.
     fn boot(&mut self) -> (bool, bool) {
@@ -117,16 +130,9 @@ impl Bench {
         )
     }
 
-    /// Runs `f` on the board with the station (and the fault overrides) on its inputs and the
+    /// Runs the board with the station (and the fault overrides) on its inputs and the
     /// pipeline behind it.
-    fn drive(
-        &mut self,
-        f: impl FnOnce(
-            &mut Board,
-            &mut dyn FnMut(u64, &mut Ads1262Model, &mut Ad7124Model),
-            &mut dyn FnMut(Acquired),
-        ),
-    ) {
+    fn drive(&mut self, run: Run) {
         let Bench {
             board,
             prepared,
@@ -135,12 +141,16 @@ impl Bench {
             accel_override_v,
             rtd_override_ohms,
         } = self;
-        let mut inputs = |t: u64, a: &mut Ads1262Model, r: &mut Ad7124Model| {
-            a.accel_v = accel_override_v.unwrap_or_else(|| station.output_v(t));
-            a.tilt_v = station.tilt_arcsec(t) / station.table.tilt.scale_arcsec_per_v;
-            r.rtd_ohms = rtd_override_ohms.unwrap_or_else(|| station.rtd_ohms(t));
+        let inputs = |t: u64, a: &mut Ads1262Model, r: &mut Ad7124Model| {
+            station.put_on(t, a, r);
+            if let Some(v) = *accel_override_v {
+                a.accel_v = v;
+            }
+            if let Some(ohms) = *rtd_override_ohms {
+                r.rtd_ohms = ohms;
+            }
         };
-        let mut out = |acq: Acquired| {
+        let out = |acq: Acquired| {
             let mut frame = process_prepared(
                 acq.reading.seq,
                 acq.reading.time_us,
@@ -150,18 +160,41 @@ impl Bench {
             frame.lost = acq.reading.lost;
             frames.push(frame);
         };
-        f(board, &mut inputs, &mut out);
+        run.on(board, inputs, out);
     }
 
     /// The core stalls for `duration_us` (a flash erase: no instruction fetch, no handler runs)
     /// while the converters go on converting ([`Board::stall`]).
     fn stall(&mut self, duration_us: u64) {
-        self.drive(|b, i, o| b.stall(duration_us, &mut &mut *i, &mut &mut *o));
+        self.drive(Run::Stall(duration_us));
     }
 
     /// Event-driven run to `end_us` ([`Board::run_until`]).
     fn run_until(&mut self, end_us: u64) {
-        self.drive(|b, i, o| b.run_until(end_us, &mut &mut *i, &mut &mut *o));
+        self.drive(Run::Until(end_us));
+    }
+}
+
+/// How a harness runs the board: event-driven to a time, or through a stall of the core.
+#[derive(Clone, Copy)]
+enum Run {
+    /// [`Board::run_until`] this time, µs.
+    Until(u64),
+    /// [`Board::stall`] for this long, µs.
+    Stall(u64),
+}
+
+impl Run {
+    fn on(
+        self,
+        board: &mut Board,
+        mut inputs: impl FnMut(u64, &mut Ads1262Model, &mut Ad7124Model),
+        mut out: impl FnMut(Acquired),
+    ) {
+        match self {
+            Run::Until(end_us) => board.run_until(end_us, &mut inputs, &mut out),
+            Run::Stall(us) => board.stall(us, &mut inputs, &mut out),
+        }
     }
 }
 
@@ -201,10 +234,7 @@ fn both_chips_come_up_on_the_board_buses_in_their_own_modes() {
     assert_eq!(board::AD7124_BUS.mode, MODE_3);
     let at_boot = b.frames.len();
     b.run_until(b.now() + 10 * S);
-    assert_eq!(
-        b.board.ads.borrow().refusals + b.board.rtd.borrow().refusals,
-        0
-    );
+    assert_eq!(b.refusals(), 0);
     // sinc4 at 10 SPS: each channel settles in 4 periods, a pair every 0.8 s.
     let n = b.frames.len() - at_boot;
     assert!((12..=13).contains(&n), "{n} frames in 10 s");
@@ -231,7 +261,7 @@ fn a_wrong_spi_mode_or_clock_is_refused_and_every_frame_says_so() {
         boot_result.err(),
         Some(ad7124::Error::Spi(BusRefusal::WrongMode))
     );
-    assert!(b.board.rtd.borrow().refusals > 0);
+    assert!(b.board.rtd.borrow_mut().port().refusals > 0);
     // The right mode, but faster than the AD7124's 100 ns SCLK pulse widths allow.
     let fast = SpiSettings {
         mode: MODE_3,
@@ -310,7 +340,7 @@ fn set_rate_reprograms_the_ads1262_data_rate_and_claims_no_stall() {
 
 /// A fault switched on for a while; frames between `on` and `off + RECOVERY` must show `bit`.
 struct Injected {
-    name: &'static str,
+    name: String,
     on: u64,
     off: u64,
     bit: u16,
@@ -318,6 +348,73 @@ struct Injected {
 
 /// Time after a fault is cleared within which the stream must be clean again.
 const RECOVERY_US: u64 = 6 * S;
+
+/// Switches a fault on (`true`) or off on the bench.
+type Switch = fn(&mut Bench, bool);
+/// A fault of the schedule: its name, when it is switched on, for how long, the status bit
+/// that must name it, and its switch.
+type ScheduledFault = (String, u64, u64, u16, Switch);
+
+/// A chip model on the bench, for the faults of its SPI port.
+trait OnBench: Chip {
+    fn on(b: &Bench) -> &Rc<RefCell<Self>>;
+}
+
+impl OnBench for Ads1262Model {
+    fn on(b: &Bench) -> &Rc<RefCell<Self>> {
+        &b.board.ads
+    }
+}
+
+impl OnBench for Ad7124Model {
+    fn on(b: &Bench) -> &Rc<RefCell<Self>> {
+        &b.board.rtd
+    }
+}
+
+fn miso_high<C: OnBench>(b: &mut Bench, on: bool) {
+    C::on(b).borrow_mut().port().miso_high = on;
+}
+
+fn corrupt_one_read<C: OnBench>(b: &mut Bench, on: bool) {
+    if on {
+        C::on(b).borrow_mut().port().corrupt_reads = 1;
+    }
+}
+
+fn reset_mid_run<C: OnBench>(b: &mut Bench, on: bool) {
+    if on {
+        C::on(b).borrow_mut().power_glitch();
+    }
+}
+
+/// The faults of a chip's SPI port, the same on either chip, two hours apart from `at`: MISO
+/// reading 0xFF, one read corrupted (caught by the chip's `check`), a reset mid-run.
+fn port_faults<C: OnBench>(chip: &str, check: &str, at: u64) -> [ScheduledFault; 3] {
+    [
+        (
+            format!("{chip} MISO 0xFF"),
+            at,
+            4 * S,
+            Status::ADC_NOT_RESPONDING,
+            miso_high::<C>,
+        ),
+        (
+            format!("{chip} {check} error"),
+            at + 2 * H,
+            S,
+            Status::ADC_CHECKSUM,
+            corrupt_one_read::<C>,
+        ),
+        (
+            format!("{chip} reset mid-run"),
+            at + 4 * H,
+            S,
+            Status::ADC_RESET,
+            reset_mid_run::<C>,
+        ),
+    ]
+}
 
 #[test]
 fn a_multi_day_stability_run_names_every_fault_and_recovers() {
@@ -328,102 +425,58 @@ fn a_multi_day_stability_run_names_every_fault_and_recovers() {
     let days = 2;
 
     // Each fault: switch on at `at`, off after `dur`.
-    type Switch = fn(&mut Bench, bool);
-    let schedule: [(&'static str, u64, u64, u16, Switch); 12] = [
-        (
-            "ADS1262 DRDY stuck",
+    let schedule: Vec<ScheduledFault> = [
+        vec![(
+            "ADS1262 DRDY stuck".to_string(),
             2 * H,
             5 * S,
             Status::DRDY_TIMEOUT,
-            |b, on| b.board.ads.borrow_mut().set_stuck_drdy(on),
-        ),
-        (
-            "ADS1262 MISO 0xFF",
-            4 * H,
-            4 * S,
-            Status::ADC_NOT_RESPONDING,
-            |b, on| b.board.ads.borrow_mut().miso_high = on,
-        ),
-        (
-            "ADS1262 checksum error",
-            6 * H,
-            S,
-            Status::ADC_CHECKSUM,
-            |b, on| {
-                if on {
-                    b.board.ads.borrow_mut().corrupt_reads = 1
-                }
-            },
-        ),
-        (
-            "ADS1262 reset mid-run",
-            8 * H,
-            S,
-            Status::ADC_RESET,
-            |b, on| {
-                if on {
-                    b.board.ads.borrow_mut().power_glitch()
-                }
-            },
-        ),
-        (
-            "accelerometer input saturated",
-            10 * H,
-            3 * S,
-            Status::ADC_SATURATED,
-            |b, on| b.accel_override_v = on.then_some(3.1),
-        ),
-        ("RTD open", 12 * H, 5 * S, Status::RTD_OPEN, |b, on| {
-            b.rtd_override_ohms = on.then_some(f64::INFINITY)
-        }),
-        ("RTD shorted", 14 * H, 5 * S, Status::RTD_SHORT, |b, on| {
-            b.rtd_override_ohms = on.then_some(0.0)
-        }),
-        (
-            "AD7124 MISO 0xFF",
-            16 * H,
-            4 * S,
-            Status::ADC_NOT_RESPONDING,
-            |b, on| b.board.rtd.borrow_mut().miso_high = on,
-        ),
-        (
-            "AD7124 CRC error",
-            18 * H,
-            S,
-            Status::ADC_CHECKSUM,
-            |b, on| {
-                if on {
-                    b.board.rtd.borrow_mut().corrupt_reads = 1
-                }
-            },
-        ),
-        (
-            "AD7124 reset mid-run",
-            20 * H,
-            S,
-            Status::ADC_RESET,
-            |b, on| {
-                if on {
-                    b.board.rtd.borrow_mut().power_glitch()
-                }
-            },
-        ),
-        (
-            "AD7124 conversions stuck",
-            22 * H,
-            4 * S,
-            Status::DRDY_TIMEOUT,
-            |b, on| b.board.rtd.borrow_mut().stuck = on,
-        ),
-        // The second day again at a faster ADS1262 rate (SetRate 20 SPS), with a DRDY stall.
-        (
-            "ADS1262 DRDY stuck at 20 SPS",
-            30 * H,
-            3 * S,
-            Status::DRDY_TIMEOUT,
-            |b, on| b.board.ads.borrow_mut().set_stuck_drdy(on),
-        ),
-    ];
+            (|b, on| b.board.ads.borrow_mut().set_stuck_drdy(on)) as Switch,
+        )],
+        port_faults::<Ads1262Model>("ADS1262", "checksum", 4 * H).into(),
+        vec![
+            (
+                "accelerometer input saturated".to_string(),
+                10 * H,
+                3 * S,
+                Status::ADC_SATURATED,
+                |b, on| b.accel_override_v = on.then_some(3.1),
+            ),
+            (
+                "RTD open".to_string(),
+                12 * H,
+                5 * S,
+                Status::RTD_OPEN,
+                |b, on| b.rtd_override_ohms = on.then_some(f64::INFINITY),
+            ),
+            (
+                "RTD shorted".to_string(),
+                14 * H,
+                5 * S,
+                Status::RTD_SHORT,
+                |b, on| b.rtd_override_ohms = on.then_some(0.0),
+            ),
+        ],
+        port_faults::<Ad7124Model>("AD7124", "CRC", 16 * H).into(),
+        vec![
+            (
+                "AD7124 conversions stuck".to_string(),
+                22 * H,
+                4 * S,
+                Status::DRDY_TIMEOUT,
+                |b, on| b.board.rtd.borrow_mut().stuck = on,
+            ),
+            // The second day again at a faster ADS1262 rate (SetRate 20 SPS), with a DRDY stall.
+            (
+                "ADS1262 DRDY stuck at 20 SPS".to_string(),
+                30 * H,
+                3 * S,
+                Status::DRDY_TIMEOUT,
+                |b, on| b.board.ads.borrow_mut().set_stuck_drdy(on),
+            ),
+        ],
+    ]
+    .concat();
     let rate_change_at = start + 26 * H;
     let mut rate_changed = false;
     for (name, at, dur, bit, switch) in schedule {
@@ -456,10 +509,7 @@ fn a_multi_day_stability_run_names_every_fault_and_recovers() {
         "{} frames, expected ≈ {expected:.0}",
         frames.len()
     );
-    assert_eq!(
-        b.board.ads.borrow().refusals + b.board.rtd.borrow().refusals,
-        0
-    );
+    assert_eq!(b.refusals(), 0);
 
     // 1. Never a silent number: every frame without a status bit is right.
     let mut clean = 0;
@@ -900,8 +950,9 @@ impl Rig {
         self.board.now()
     }
 
-    /// The chips up to `t_us`: handlers run, finished pairs queue for the worker.
-    fn chips_until(&mut self, t_us: u64) {
+    /// Runs the board with the station on its inputs and the finished pairs queued for the
+    /// worker.
+    fn drive(&mut self, run: Run) {
         let Rig {
             board,
             station,
@@ -909,13 +960,16 @@ impl Rig {
             readings_dropped,
             ..
         } = self;
-        board.run_until(
-            t_us,
-            &mut |t: u64, a: &mut Ads1262Model, r: &mut Ad7124Model| {
-                station_inputs(station, t, a, r)
-            },
-            &mut |acq: Acquired| push_reading(inbound, readings_dropped, acq),
+        run.on(
+            board,
+            |t, a, r| station.put_on(t, a, r),
+            |acq| push_reading(inbound, readings_dropped, acq),
         );
+    }
+
+    /// The chips up to `t_us`: handlers run, finished pairs queue for the worker.
+    fn chips_until(&mut self, t_us: u64) {
+        self.drive(Run::Until(t_us));
     }
 
     /// Runs everything until `end_us`, the worker after every event.
@@ -983,20 +1037,7 @@ impl Rig {
             let (_, b) = self.line.pop_front().unwrap();
             self.usart.byte_received(b);
         }
-        let Rig {
-            board,
-            station,
-            inbound,
-            readings_dropped,
-            ..
-        } = self;
-        board.stall(
-            us,
-            &mut |t: u64, a: &mut Ads1262Model, r: &mut Ad7124Model| {
-                station_inputs(station, t, a, r)
-            },
-            &mut |acq: Acquired| push_reading(inbound, readings_dropped, acq),
-        );
+        self.drive(Run::Stall(us));
         self.uart_rx();
     }
 
@@ -1172,12 +1213,61 @@ impl Rig {
             })
             .collect()
     }
-}
 
-fn station_inputs(station: &Station, t: u64, a: &mut Ads1262Model, r: &mut Ad7124Model) {
-    a.accel_v = station.output_v(t);
-    a.tilt_v = station.tilt_arcsec(t) / station.table.tilt.scale_arcsec_per_v;
-    r.rtd_ohms = station.rtd_ohms(t);
+    /// Info now, and the stream that reached the host after its first `from` messages checked
+    /// ([`check_stream`]) against the conversions lost since `lost_before`: the gaps in it.
+    fn check_stream_since(
+        &mut self,
+        name: &str,
+        from: usize,
+        lost_before: u32,
+    ) -> (accomp::protocol::DeviceInfo, usize) {
+        let info = self.info();
+        let frames = self.delivered(from);
+        let gaps = check_stream(
+            name,
+            &frames,
+            self.board.ads_seq.pair_period_us(),
+            info.losses.conversions_lost - lost_before,
+            &self.station,
+        );
+        (info, gaps)
+    }
+
+    /// `lead_us` into the stream, `table` uploaded and committed, 2 s more: the stream since the
+    /// host's first `from` messages has exactly one gap, the commit's. Info afterwards.
+    fn commit_mid_stream(
+        &mut self,
+        name: &str,
+        table: &CalibrationTable,
+        lead_us: u64,
+        from: usize,
+        before: &accomp::protocol::DeviceInfo,
+    ) -> accomp::protocol::DeviceInfo {
+        self.run_until(self.now() + lead_us);
+        self.upload(table);
+        self.run_until(self.now() + 2 * S);
+        let (info, gaps) = self.check_stream_since(name, from, before.losses.conversions_lost);
+        assert_eq!(gaps, 1, "{name}: one gap, the commit's");
+        info
+    }
+
+    /// No byte from the host lost: every byte sent received, none overrun, all read from the
+    /// ring, and the device (`info`) counted no overrun and dropped no frame.
+    fn assert_no_byte_lost(&self, info: &accomp::protocol::DeviceInfo) {
+        let uart = (
+            self.usart.received,
+            self.usart.overrun_bytes,
+            self.bytes_read,
+        );
+        let sent = self.bytes_sent;
+        assert_eq!(
+            uart,
+            (sent, 0, sent),
+            "received, overrun, read from the ring"
+        );
+        assert_eq!((info.losses.uart_rx_overrun, info.frames_dropped), (0, 0));
+    }
 }
 
 /// The DRDY interrupt's `try_send`: a full queue loses the reading, counted for the next one.
@@ -1332,18 +1422,10 @@ fn a_400_sps_stream_through_uploads_rollback_and_reboot_loses_no_byte_and_accoun
         let code = rig.answer(id).unwrap_err().code;
         assert_eq!(code, accomp::protocol::ErrorCode::NoUpload as u16);
     }
-    let info = rig.info();
-    assert_eq!(info.active_table, Some(tables[1].id()));
     let pair_us = rig.board.ads_seq.pair_period_us();
     assert_eq!(pair_us, 20_000, "400 SPS, sinc4: 4 × 2.5 ms per input");
-    let frames = rig.delivered(from);
-    let gaps = check_stream(
-        "first boot",
-        &frames,
-        pair_us,
-        info.losses.conversions_lost - before.conversions_lost,
-        &rig.station,
-    );
+    let (info, gaps) = rig.check_stream_since("first boot", from, before.conversions_lost);
+    assert_eq!(info.active_table, Some(tables[1].id()));
     assert_eq!(
         gaps, 4,
         "one gap per commit (the programming alone is > half a pair)"
@@ -1354,14 +1436,7 @@ fn a_400_sps_stream_through_uploads_rollback_and_reboot_loses_no_byte_and_accoun
         "the rollback's erase"
     );
     assert!(info.losses.erase_stall_us - before.erase_stall_us >= 2 * S);
-    let uart = (rig.usart.received, rig.usart.overrun_bytes, rig.bytes_read);
-    let sent = rig.bytes_sent;
-    assert_eq!(
-        uart,
-        (sent, 0, sent),
-        "received, overrun, read from the ring"
-    );
-    assert_eq!((info.losses.uart_rx_overrun, info.frames_dropped), (0, 0));
+    rig.assert_no_byte_lost(&info);
     let stalls = rig.stalls.clone();
 
     // Power cut while streaming: the erase ahead after the rollback never ran, the spare holds
@@ -1377,19 +1452,8 @@ fn a_400_sps_stream_through_uploads_rollback_and_reboot_loses_no_byte_and_accoun
         (before.active_table, before.previous_table),
         (Some(tables[1].id()), Some(tables[2].id()))
     );
-    rig.run_until(rig.now() + 3 * S);
-    rig.upload(&tables[3]); // the spare still holds an old table: this commit erases
-    rig.run_until(rig.now() + 2 * S);
-    let info = rig.info();
-    let frames = rig.delivered(from);
-    let gaps = check_stream(
-        "after the reboot",
-        &frames,
-        pair_us,
-        info.losses.conversions_lost - before.losses.conversions_lost,
-        &rig.station,
-    );
-    assert_eq!(gaps, 1, "one gap: the commit's");
+    // The spare still holds an old table: this commit erases.
+    let info = rig.commit_mid_stream("after the reboot", &tables[3], 3 * S, from, &before);
     assert_eq!(info.losses.erase_stalls - before.losses.erase_stalls, 1);
     // Stopped, the erase ahead runs; the next stream's upload only programs.
     let erased = erases.get();
@@ -1403,32 +1467,13 @@ fn a_400_sps_stream_through_uploads_rollback_and_reboot_loses_no_byte_and_accoun
     let before = rig.info();
     assert_eq!(rig.call(Request::StreamStart), Response::Ok);
     let from = rig.to_host.len();
-    rig.run_until(rig.now() + S);
-    rig.upload(&tables[4]);
-    rig.run_until(rig.now() + 2 * S);
-    let info = rig.info();
-    let frames = rig.delivered(from);
-    let gaps = check_stream(
-        "upload into the erased spare",
-        &frames,
-        pair_us,
-        info.losses.conversions_lost - before.losses.conversions_lost,
-        &rig.station,
-    );
-    assert_eq!(gaps, 1, "the programming's gap");
+    let info = rig.commit_mid_stream("upload into the erased spare", &tables[4], S, from, &before);
     assert_eq!(
         info.losses.erase_stalls, before.losses.erase_stalls,
         "no erase"
     );
     assert_eq!(info.active_table, Some(tables[4].id()));
-    let uart = (rig.usart.received, rig.usart.overrun_bytes, rig.bytes_read);
-    let sent = rig.bytes_sent;
-    assert_eq!(
-        uart,
-        (sent, 0, sent),
-        "received, overrun, read from the ring"
-    );
-    assert_eq!((info.losses.uart_rx_overrun, info.frames_dropped), (0, 0));
+    rig.assert_no_byte_lost(&info);
 
     // Every stall during a stream was a commit the host asked for.
     for s in stalls.iter().chain(&rig.stalls) {
