@@ -83,13 +83,7 @@ fn main() {
                     .filter(|a| !a.starts_with("rate_coupling"))
                     .count();
                 extras += other;
-                let refusal = d
-                    .selection
-                    .refused
-                    .iter()
-                    .find(|(name, _)| name == "rate_coupling")
-                    .map(|(_, why)| why.clone())
-                    .unwrap_or_default();
+                let refusal = hidden::refusal(&d, "rate_coupling");
                 match found {
                     Some(k) => {
                         named += 1;

@@ -379,11 +379,9 @@ fn running(pid: u32) -> bool {
 fn kill_9_of_accomp_leaves_no_emulator_and_the_next_run_reclaims_its_folder() {
     let (state, work) = board("kill9");
     let csv = work.join("in.csv");
-    let mut text = String::from("time_s,output_v,temperature_c\n");
-    for i in 0..200_000 {
-        text += &format!("{},1.3,50\n", i as f64 * 0.1);
-    }
-    std::fs::write(&csv, text).unwrap();
+    cli::write_csv(&csv, "time_s,output_v,temperature_c\n", 200_000, |i| {
+        format!("{},1.3,50", i as f64 * 0.1)
+    });
     let (cal, _) = write_table(&work, 31);
     load_table(&state, &work, 32);
     // Its own temp dir: a launch by a parallel test would reclaim the folder of the killed
@@ -456,17 +454,12 @@ fn compensate_says_that_it_activates_its_table_and_the_board_keeps_it() {
     let out = work.join("out.csv");
     let o = accomp(
         &state,
-        &[
-            "compensate",
-            "--target",
+        &cli::compensate_args(
             "qemu",
-            "--calibration",
             cal.to_str().unwrap(),
-            "--input",
             csv.to_str().unwrap(),
-            "--output",
             out.to_str().unwrap(),
-        ],
+        ),
     );
     assert!(o.status.success(), "{}", stderr(&o));
     let e = stderr(&o);

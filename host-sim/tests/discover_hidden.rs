@@ -13,7 +13,7 @@ use accomp::tide::Station;
 use accomp_host::discover::{baseline, context, effects, select};
 use accomp_host::log::Log;
 use accomp_host::sim::scenario::Scenario;
-use accomp_host::sim::{Sample, Simulator};
+use accomp_host::sim::Sample;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -177,10 +177,7 @@ fn simulate(unit: &Hidden, snr: f64, seed: u64) -> (Log, Hidden, Vec<f64>) {
     if let Hidden::ThermalLag { tau_s } = unit {
         sc.thermostat.proof_mass_lag_s = *tau_s;
     }
-    let mut sim = Simulator::new(&sc, seed).expect("simulator");
-    let k1 = sim.scale_factor_at_setpoint();
-    let meta = sim.metadata(seed);
-    let samples = hidden::run(&mut sim);
+    let hidden::StationRun { k1, meta, samples } = hidden::run_station(&sc, seed);
     let col = |f: fn(&Sample) -> f64| hidden::column(&samples, f);
     let (t, mut out, temp, tilt) = (
         col(|s| s.time_s),
@@ -200,14 +197,14 @@ fn simulate(unit: &Hidden, snr: f64, seed: u64) -> (Log, Hidden, Vec<f64>) {
     let true_pressure_pa = col(|s| 100.0 * s.truth_pressure_hpa);
     let start = hidden::start_unix_s(&meta);
     let unit_g = hidden_series_g(unit, &t, &mount, &room, &true_pressure_pa, start, &sc);
-    let unit_snr = hidden::matched_filter_snr(
+    let k = hidden::scale_to_snr(
         &unit_g,
         &hidden::static_nuisance(&t, &temp),
         &sc.accelerometer.noise_g,
         INTERVAL_S,
         DURATION_S,
+        snr,
     );
-    let k = if unit_snr > 0.0 { snr / unit_snr } else { 0.0 };
     let hidden = unit.scaled(k);
     let added: Vec<f64> = unit_g.iter().map(|e| k1 * k * e).collect();
     for (o, e) in out.iter_mut().zip(&added) {

@@ -28,7 +28,7 @@ use accomp_host::discover::select;
 use accomp_host::log::Log;
 use accomp_host::sim::noise::AllanParams;
 use accomp_host::sim::scenario::Scenario;
-use accomp_host::sim::{Sample, Simulator};
+use accomp_host::sim::Sample;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -128,11 +128,8 @@ fn effective_noise(sc: &Scenario) -> AllanParams {
 /// the board records it and the effect as hidden.
 fn simulate(unit: &Hidden, snr: f64, seed: u64) -> (Log, Hidden) {
     let sc = scenario();
-    let mut sim = Simulator::new(&sc, seed).expect("simulator");
-    let k1 = sim.scale_factor_at_setpoint();
-    let n = sim.samples() as usize;
-    let meta = sim.metadata(seed);
-    let samples = hidden::run(&mut sim);
+    let hidden::StationRun { k1, meta, samples } = hidden::run_station(&sc, seed);
+    let n = samples.len();
     let col = |f: fn(&Sample) -> f64| hidden::column(&samples, f);
     let (t, mut out, temp, mut tilt, pressure, true_tilt) = (
         col(|s| s.time_s),
@@ -198,14 +195,14 @@ fn simulate(unit: &Hidden, snr: f64, seed: u64) -> (Log, Hidden) {
                 .collect(),
         );
     }
-    let unit_snr = hidden::matched_filter_snr(
+    let k = hidden::scale_to_snr(
         &shape,
         &nuisance,
         &effective_noise(&sc),
         INTERVAL_S,
         DURATION_S,
+        snr,
     );
-    let k = if unit_snr > 0.0 { snr / unit_snr } else { 0.0 };
     let hidden = match unit {
         Hidden::None => Hidden::None,
         Hidden::TidalTilt { azimuth_deg, .. } => Hidden::TidalTilt {

@@ -12,7 +12,7 @@ mod hidden_snr;
 use accomp_host::log::Log;
 use accomp_host::sim::accelerometer::HeadPosition;
 use accomp_host::sim::scenario::Scenario;
-use accomp_host::sim::{Sample, Simulator};
+use accomp_host::sim::Sample;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -95,10 +95,7 @@ fn simulate(unit: Option<Hidden>, snr: f64, seed: u64) -> (Log, Option<Hidden>) 
             dwell_s: DWELL_S,
         })
         .collect();
-    let mut sim = Simulator::new(&sc, seed).expect("simulator");
-    let k1 = sim.scale_factor_at_setpoint();
-    let meta = sim.metadata(seed);
-    let samples = hidden_snr::run(&mut sim);
+    let hidden_snr::StationRun { k1, meta, samples } = hidden_snr::run_station(&sc, seed);
     let col = |f: fn(&Sample) -> f64| hidden_snr::column(&samples, f);
     let (t, mut out, temp, tilt, truth_a) = (
         col(|s| s.time_s),
@@ -133,14 +130,14 @@ fn simulate(unit: Option<Hidden>, snr: f64, seed: u64) -> (Log, Option<Hidden>) 
             );
         }
         let shape: Vec<f64> = heat.iter().map(|x| h.coefficient_g * x).collect();
-        let unit_snr = hidden_snr::matched_filter_snr(
+        let k = hidden_snr::scale_to_snr(
             &shape,
             &nuisance,
             &sc.accelerometer.noise_g,
             INTERVAL_S,
             DURATION_S,
+            snr,
         );
-        let k = if unit_snr > 0.0 { snr / unit_snr } else { 0.0 };
         for (o, x) in out.iter_mut().zip(&shape) {
             *o += k1 * k * x;
         }

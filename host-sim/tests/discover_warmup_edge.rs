@@ -5,6 +5,8 @@
 //! record, it moves the drift's slope and the rest of the record is forecast worse than the
 //! noise model predicts. Nothing is hidden or told: the tool runs on the measured rows.
 
+#[path = "common/hidden.rs"]
+mod hidden;
 #[path = "common/real.rs"]
 mod real;
 
@@ -32,13 +34,7 @@ fn a_settling_transient_that_worsens_the_forecast_of_the_rest_is_refused() {
         acc.iter().map(|a| a.effect.name()).collect::<Vec<_>>()
     );
     // Refused, with why (it passed the criterion and the blocked cross-validation).
-    let why = d
-        .selection
-        .refused
-        .iter()
-        .find(|(n, _)| n == "warmup")
-        .map(|(_, w)| w.clone())
-        .unwrap_or_default();
+    let why = hidden::refusal(&d, "warmup");
     assert!(
         why.contains("forward"),
         "warmup not refused for the forecast: {why:?}"

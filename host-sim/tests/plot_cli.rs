@@ -48,12 +48,11 @@ fn plots_a_simulated_zero_g_log_as_fig2_fig5_fig4_and_adev() {
 fn one_kind_as_svg_and_a_missing_column_named_on_stderr() {
     let dir = Scratch::new("plot-cli-hand");
     let log = dir.join("small.csv");
-    let mut csv = String::from("# input_g: 1\n# scale_factor_v_per_g: 1.3\ntime_s,output_v\n");
-    for i in 0..200 {
+    let header = "# input_g: 1\n# scale_factor_v_per_g: 1.3\ntime_s,output_v\n";
+    cli::write_csv(&log, header, 200, |i| {
         let v = 1.3 + if i % 3 == 0 { 2e-6 } else { -1e-6 };
-        csv.push_str(&format!("{i},{v}\n"));
-    }
-    std::fs::write(&log, csv).unwrap();
+        format!("{i},{v}")
+    });
     accomp_ok(
         &[
             "plot",

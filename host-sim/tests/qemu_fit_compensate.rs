@@ -67,33 +67,25 @@ fn a_table_fitted_from_table_1_is_loaded_into_qemu_and_used_by_compensate() {
 
     // 1 g samples at temperatures across the calibrated range, made with the
     // fitted models (eq. (1) forward, which the firmware must invert).
-    let mut csv = String::from("# input_g: 1\ntime_s,output_v,temperature_c,tilt_arcsec\n");
     let temps: Vec<f64> = (0..40).map(|i| 31.0 + 0.8 * f64::from(i)).collect();
-    for (i, t) in temps.iter().enumerate() {
-        let (k, _) = table.thermal.coefficients_at(Celsius(*t)).unwrap();
-        let e = k.output(Gs(1.0), CrossAxis::default());
-        csv += &format!("{},{:.12},{t},0.0\n", i as f64 * 60.0, e.0);
-    }
     let input = dir.join("samples.csv");
-    std::fs::write(&input, csv).unwrap();
+    let header = "# input_g: 1\ntime_s,output_v,temperature_c,tilt_arcsec\n";
+    cli::write_csv(&input, header, temps.len(), |i| {
+        let t = temps[i];
+        let (k, _) = table.thermal.coefficients_at(Celsius(t)).unwrap();
+        let e = k.output(Gs(1.0), CrossAxis::default());
+        format!("{},{:.12},{t},0.0", i as f64 * 60.0, e.0)
+    });
 
     let run = |target: &str, out: &Path| {
-        accomp(
-            &dir,
-            &[
-                "compensate",
-                "--target",
-                target,
-                "--calibration",
-                cal.to_str().unwrap(),
-                "--input",
-                input.to_str().unwrap(),
-                "--output",
-                out.to_str().unwrap(),
-                "--firmware",
-                elf.to_str().unwrap(),
-            ],
+        let mut args = cli::compensate_args(
+            target,
+            cal.to_str().unwrap(),
+            input.to_str().unwrap(),
+            out.to_str().unwrap(),
         );
+        args.extend(["--firmware", elf.to_str().unwrap()]);
+        accomp(&dir, &args);
         std::fs::read_to_string(out).unwrap()
     };
     let qemu = run("qemu", &dir.join("qemu.csv"));

@@ -103,11 +103,9 @@ fn sigterm_stops_qemu_and_removes_its_temporary_folder() {
     let work = fresh_dir("sigterm-files");
     // A long compensate through QEMU, interrupted while it streams.
     let csv = work.join("in.csv");
-    let mut text = String::from("time_s,output_v,temperature_c\n");
-    for i in 0..200_000 {
-        text += &format!("{},{},50\n", i as f64 * 0.1, 1.3);
-    }
-    std::fs::write(&csv, text).unwrap();
+    cli::write_csv(&csv, "time_s,output_v,temperature_c\n", 200_000, |i| {
+        format!("{},{},50", i as f64 * 0.1, 1.3)
+    });
     let cal = work.join("t.acal");
     std::fs::write(&cal, table(6).encode()).unwrap();
     let tmp = fresh_dir("sigterm-tmp");

@@ -95,6 +95,11 @@ impl Recorder {
     fn wait_success(&mut self) -> bool {
         self.0.wait().unwrap().success()
     }
+    /// The record at `out` once the recorder has exited, asserted to have succeeded.
+    fn finished_record(&mut self, out: &Path) -> Rec {
+        assert!(self.wait_success(), "the recorder failed");
+        read_rec(out)
+    }
     fn kill(&mut self) {
         let _ = self.0.kill();
         let _ = self.0.wait();
@@ -398,8 +403,7 @@ fn the_record_goes_on_when_the_board_is_killed_and_restarted_on_the_same_link() 
     board.kill();
     std::thread::sleep(Duration::from_millis(800));
     let _board = BoardSim::start(&dir, 1000, 1);
-    assert!(rec.wait_success());
-    let r = read_rec(&out);
+    let r = rec.finished_record(&out);
     assert_eq!(r.rows.len(), 3000);
     assert_events(&r, &["link_lost", "reconnected", "board_reset"], &[]);
     assert_a_new_boot(&r);
@@ -448,8 +452,7 @@ fn a_board_reset_and_garbage_on_the_line_are_events_and_lose_nothing_else() {
     board.command("garbage=300");
     wait_rows(&out, 1000);
     board.command("reset");
-    assert!(rec.wait_success());
-    let r = read_rec(&out);
+    let r = rec.finished_record(&out);
     assert_events(&r, &["line_noise", "board_reset"], &["link_lost"]);
     assert_time_increases(&r);
     assert_a_new_boot(&r);
@@ -474,8 +477,7 @@ fn an_unplugged_link_keeps_the_boot_and_flag_changes_are_events() {
     board.command("unplug=1");
     wait_rows_after(&out, " reconnected ", 300);
     rec.interrupt();
-    assert!(rec.wait_success());
-    let r = read_rec(&out);
+    let r = rec.finished_record(&out);
     assert_events(
         &r,
         &["link_lost", "reconnected", "seq_gap"],
@@ -510,8 +512,7 @@ fn a_reset_while_unplugged_is_a_new_boot_though_its_clock_and_seq_passed_the_old
     // boot's life. Only Info's boot id tells it is a new boot.
     let unplug_s = board.started.elapsed().as_secs_f64() + 1.0;
     board.command(&format!("unplug={unplug_s:.3}\nreset"));
-    assert!(rec.wait_success());
-    let r = read_rec(&out);
+    let r = rec.finished_record(&out);
     // A new boot's seq is no gap.
     assert_events(
         &r,
@@ -702,8 +703,7 @@ fn a_drdy_stall_is_flagged_in_rows_and_status_events_and_takes_no_number_from_se
     let mut rec = recording(&dir, &out, "2500", 400);
     // 1.2 s of wall clock: 300 s of the board's, ≈ 375 pair periods without a conversion.
     board.fault_for("drdy-stall", 1200);
-    assert!(rec.wait_success());
-    let r = read_rec(&out);
+    let r = rec.finished_record(&out);
     assert_events(&r, &[], &["seq_gap", "board_reset"]);
     // The timeout readings keep coming at the pair rate and take the numbers: no gap in seq.
     for w in r.rows.windows(2) {

@@ -41,21 +41,6 @@ fn accomp_in_1_gib(args: &[&str]) -> Output {
     c.output().expect("accomp runs")
 }
 
-/// `accomp compensate --target host` of `input` with the table `cal` into `output`.
-fn compensate_on_host<'a>(cal: &'a str, input: &'a str, output: &'a str) -> Vec<&'a str> {
-    vec![
-        "compensate",
-        "--target",
-        "host",
-        "--calibration",
-        cal,
-        "--input",
-        input,
-        "--output",
-        output,
-    ]
-}
-
 fn simulated_log(dir: &Path) -> String {
     let log = cli::simulated_log(
         dir,
@@ -98,7 +83,7 @@ fn dev_zero_and_a_10_gb_file_are_refused_within_seconds_under_1_gib_naming_the_l
             vec!["discover", input],
             vec!["fit", input],
             vec!["tumble", input],
-            compensate_on_host(&cal, input, "/dev/null"),
+            cli::compensate_args("host", &cal, input, "/dev/null"),
         ];
         for args in commands {
             let started = Instant::now();
@@ -156,7 +141,10 @@ fn outputs_are_checked_before_any_work_and_named() {
         (vec!["tumble", &log, "-o", d], "is a directory"),
         (vec!["simulate-tumble", "-o", d], "is a directory"),
         (vec!["plot", &log, "--out-dir", f], "is a file"),
-        (compensate_on_host(&cal, &log, d), "is a directory"),
+        (
+            cli::compensate_args("host", &cal, &log, d),
+            "is a directory",
+        ),
         (
             vec!["table", "get", "--target", "qemu", "-o", d],
             "is a directory",
@@ -342,15 +330,10 @@ fn parameters_out_of_range_are_refused_with_the_name_and_the_range() {
     }
     // ±1e308 in a log: the statistics overflow; refused by column, no `inf` printed.
     let big = dir.path("big.csv");
-    let mut text = String::from("time_s,output_v\n");
-    for i in 0..200 {
-        text += &format!(
-            "{},{}\n",
-            i * 60,
-            if i % 2 == 0 { "1e308" } else { "-1e308" }
-        );
-    }
-    std::fs::write(&big, text).unwrap();
+    cli::write_csv(&big, "time_s,output_v\n", 200, |i| {
+        let v = if i % 2 == 0 { "1e308" } else { "-1e308" };
+        format!("{},{v}", i * 60)
+    });
     let o = accomp(&["stability", big.to_str().unwrap()]);
     assert!(!o.status.success());
     assert!(!stdout(&o).contains("inf"), "{}", stdout(&o));
@@ -373,11 +356,9 @@ fn parameters_out_of_range_are_refused_with_the_name_and_the_range() {
 fn a_constant_log_has_std_0_and_no_blank_allan_plot() {
     let dir = Scratch::new("robust-constant");
     let log = dir.path("c.csv");
-    let mut text = String::from("time_s,output_v,temperature_c\n");
-    for i in 0..2000 {
-        text += &format!("{},1.2345678,60\n", i * 60);
-    }
-    std::fs::write(&log, text).unwrap();
+    cli::write_csv(&log, "time_s,output_v,temperature_c\n", 2000, |i| {
+        format!("{},1.2345678,60", i * 60)
+    });
     let o = accomp(&["stability", log.to_str().unwrap()]);
     assert!(o.status.success());
     assert!(
@@ -485,7 +466,7 @@ fn fit_compensate_and_tumble_take_allow_large_and_their_limits_name_it() {
     let commands: Vec<Vec<&str>> = vec![
         vec!["fit", h],
         vec!["tumble", h],
-        compensate_on_host(&cal, h, "/dev/null"),
+        cli::compensate_args("host", &cal, h, "/dev/null"),
     ];
     for args in commands {
         let o = accomp(&args);
@@ -543,7 +524,14 @@ fn infinities_are_refused_by_every_reader_with_file_line_and_column() {
     let plots = dir.path("plots");
     let own = |v: &[&str]| v.iter().map(|s| (*s).to_owned()).collect::<Vec<_>>();
     let out = dir.path("out.csv");
-    let compensate = |input: &str| own(&compensate_on_host(&cal, input, out.to_str().unwrap()));
+    let compensate = |input: &str| {
+        own(&cli::compensate_args(
+            "host",
+            &cal,
+            input,
+            out.to_str().unwrap(),
+        ))
+    };
     let cases: Vec<(Vec<String>, &str, &str, &str)> = vec![
         (own(&["stability", &log]), &log, "line 22", "output_v"),
         (
@@ -581,12 +569,10 @@ fn infinities_are_refused_by_every_reader_with_file_line_and_column() {
 fn compensate_prints_progress_lines_when_not_on_a_terminal() {
     let dir = Scratch::new("robust-compensate-progress");
     let cal = table_file(&dir);
-    let mut text = String::from("time_s,output_v,temperature_c\n");
-    for i in 0..200 {
-        text += &format!("{i},1.3,60\n");
-    }
     let input = dir.path("in.csv");
-    std::fs::write(&input, text).unwrap();
+    cli::write_csv(&input, "time_s,output_v,temperature_c\n", 200, |i| {
+        format!("{i},1.3,60")
+    });
     let o = Command::new(env!("CARGO_BIN_EXE_accomp"))
         .args([
             "compensate",

@@ -52,3 +52,34 @@ pub fn simulated_log(dir: &Path, file: &str, preset: &str, extra: &[&str]) -> Pa
     accomp_ok(&args, &[]);
     log
 }
+
+/// `accomp compensate --target <target>` of `input` with the table `cal` into `output`.
+pub fn compensate_args<'a>(
+    target: &'a str,
+    cal: &'a str,
+    input: &'a str,
+    output: &'a str,
+) -> Vec<&'a str> {
+    vec![
+        "compensate",
+        "--target",
+        target,
+        "--calibration",
+        cal,
+        "--input",
+        input,
+        "--output",
+        output,
+    ]
+}
+
+/// Writes a hand-made CSV log to `path`: `header` (its metadata and column lines, each ending in
+/// a newline), then `rows` data lines, line i being `row(i)`.
+pub fn write_csv(path: &Path, header: &str, rows: usize, row: impl FnMut(usize) -> String) {
+    let mut text = String::from(header);
+    for line in (0..rows).map(row) {
+        text.push_str(&line);
+        text.push('\n');
+    }
+    std::fs::write(path, text).unwrap_or_else(|e| panic!("cannot write {}: {e}", path.display()));
+}

@@ -43,6 +43,26 @@ pub fn quiet_station(sc: &mut Scenario) {
     sc.adc.ads1262.vref_tempco_ppm_per_c = 0.0;
 }
 
+/// A station simulated to its end.
+pub struct StationRun {
+    /// Its scale factor K1 at the thermostat's set point (output unit per g).
+    pub k1: f64,
+    /// The log metadata the simulator writes.
+    pub meta: Vec<(String, String)>,
+    /// Every sample, in order.
+    pub samples: Vec<Sample>,
+}
+
+/// Simulates scenario `sc` with `seed` to its end.
+pub fn run_station(sc: &Scenario, seed: u64) -> StationRun {
+    let mut sim = Simulator::new(sc, seed).expect("simulator");
+    StationRun {
+        k1: sim.scale_factor_at_setpoint(),
+        meta: sim.metadata(seed),
+        samples: run(&mut sim),
+    }
+}
+
 /// Runs the simulator to its end: every sample, in order.
 pub fn run(sim: &mut Simulator) -> Vec<Sample> {
     (0..sim.samples())
@@ -105,6 +125,16 @@ pub fn k1_of(log: &Log) -> f64 {
         .ok()
         .flatten()
         .unwrap_or(1.0)
+}
+
+/// Why the discovery refused the effect `name` (empty when it did not refuse it).
+pub fn refusal(d: &Discovery, name: &str) -> String {
+    d.selection
+        .refused
+        .iter()
+        .find(|(n, _)| n == name)
+        .map(|(_, why)| why.clone())
+        .unwrap_or_default()
 }
 
 /// Runs `accomp discover` on a log with default options, told nothing: the dataset as
@@ -476,6 +506,24 @@ impl NoiseStateSpace {
             }
         }
         out
+    }
+}
+
+/// The factor that scales an effect of unit size, `shape`, to the matched-filter SNR `snr`
+/// ([`matched_filter_snr`] with the same arguments); 0 for a shape the nuisance absorbs whole.
+pub fn scale_to_snr(
+    shape: &[f64],
+    nuisance: &[Vec<f64>],
+    noise: &AllanParams,
+    interval_s: f64,
+    duration_s: f64,
+    snr: f64,
+) -> f64 {
+    let unit_snr = matched_filter_snr(shape, nuisance, noise, interval_s, duration_s);
+    if unit_snr > 0.0 {
+        snr / unit_snr
+    } else {
+        0.0
     }
 }
 

@@ -56,35 +56,10 @@ pub fn raw_for_row(table: &CalibrationTable, row: &SampleRow) -> RawSample {
     }
 }
 
-/// Runs rows through `target` with `table_bytes` as calibration; returns (time_s, frame) rows.
-/// On a device, the table is uploaded (and read back) unless it is already the active one.
-pub fn compensate(
-    target: &Target,
-    firmware: Option<&Path>,
-    table_bytes: &[u8],
-    rows: &[SampleRow],
-    mut progress: impl FnMut(&str, usize, usize),
-) -> Result<Vec<(f64, Frame)>, DeviceError> {
-    let mut out = Vec::with_capacity(rows.len());
-    let total = rows.len();
-    let progress = std::cell::RefCell::new(&mut progress);
-    compensate_streaming(
-        target,
-        firmware,
-        table_bytes,
-        rows,
-        |what, done, total| (progress.borrow_mut())(what, done, total),
-        |t, f| {
-            out.push((t, *f));
-            (progress.borrow_mut())("samples", out.len(), total);
-            Ok(())
-        },
-    )?;
-    Ok(out)
-}
-
-/// As [`compensate`], but each output row goes to `on_row(time_s, frame)` in input order as soon
-/// as it is known, so a long run is on disk while it runs (issue #15.8).
+/// Runs rows through `target` with `table_bytes` as calibration: each output row goes to
+/// `on_row(time_s, frame)` in input order as soon as it is known, so a long run is on disk while
+/// it runs (issue #15.8). On a device, the table is uploaded (and read back) unless it is
+/// already the active one.
 pub fn compensate_streaming(
     target: &Target,
     firmware: Option<&Path>,

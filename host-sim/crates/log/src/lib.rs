@@ -44,6 +44,20 @@ use std::path::Path;
 
 use accomp::tide::STANDARD_GRAVITY_M_S2;
 
+/// Unit tests: asserts that `result` is an `Err` matching `pattern`, saying which error it was
+/// when not (a bare `assert!(matches!(…))` says only that it failed). Defined before the modules
+/// so that their tests have it too.
+#[cfg(test)]
+macro_rules! assert_err {
+    ($result:expr, $pattern:pat) => {
+        match $result {
+            Err($pattern) => {}
+            Err(other) => panic!("expected {}, got {other:?}", stringify!($pattern)),
+            Ok(_) => panic!("expected {}, got Ok", stringify!($pattern)),
+        }
+    };
+}
+
 pub mod calibration_file;
 pub mod outputs;
 pub mod reader;
@@ -1178,31 +1192,25 @@ mod tests {
 
     #[test]
     fn header_without_time_or_outputs_is_rejected() {
-        assert!(matches!(
+        assert_err!(
             Log::parse_str("# a: b\nt,output_v\n0,1\n"),
-            Err(LogError::MissingTime { line: 2 })
-        ));
-        assert!(matches!(
+            LogError::MissingTime { line: 2 }
+        );
+        assert_err!(
             Log::parse_str("time_s\n0\n"),
-            Err(LogError::NoOutputColumn { line: 1 })
-        ));
-        assert!(matches!(
-            Log::parse_str("# only: meta\n"),
-            Err(LogError::MissingHeader)
-        ));
-        assert!(matches!(
+            LogError::NoOutputColumn { line: 1 }
+        );
+        assert_err!(Log::parse_str("# only: meta\n"), LogError::MissingHeader);
+        assert_err!(
             Log::parse_str("time_s,a_v,a_v\n"),
-            Err(LogError::BadHeader { line: 1, .. })
-        ));
+            LogError::BadHeader { line: 1, .. }
+        );
     }
 
     #[test]
     fn bad_metadata_number_is_a_named_error() {
         let log = Log::parse_str("# input_g: one\ntime_s,output_v\n0,1\n").unwrap();
-        assert!(matches!(
-            log.meta_f64("input_g"),
-            Err(LogError::BadMeta { .. })
-        ));
+        assert_err!(log.meta_f64("input_g"), LogError::BadMeta { .. });
     }
 
     #[test]

@@ -1391,23 +1391,20 @@ mod tests {
             events.unwrap().iter().map(|r| r.0).collect::<Vec<_>>(),
             vec![2, 4]
         );
-        assert!(matches!(
-            Records::from_text("# only: meta\n\n"),
-            Err(ReadError::NoHeader)
-        ));
-        assert!(matches!(
+        assert_err!(Records::from_text("# only: meta\n\n"), ReadError::NoHeader);
+        assert_err!(
             Records::from_text("time_s,v,v\n"),
-            Err(ReadError::BadHeader { line: 1, .. })
-        ));
-        assert!(matches!(
+            ReadError::BadHeader { line: 1, .. }
+        );
+        assert_err!(
             Records::from_text("time_s,,v\n"),
-            Err(ReadError::BadHeader { line: 1, .. })
-        ));
+            ReadError::BadHeader { line: 1, .. }
+        );
         let r = Records::from_text("a,b\n").unwrap();
-        assert!(matches!(
+        assert_err!(
             r.require("time_s"),
-            Err(ReadError::MissingColumn { line: 1, .. })
-        ));
+            ReadError::MissingColumn { line: 1, .. }
+        );
         let bad = Records::new(&b"# k: \xff\na,b\n"[..]).err().unwrap();
         assert!(matches!(bad, ReadError::NotUtf8 { line: 1 }));
     }

@@ -93,6 +93,15 @@ pub enum ScenarioError {
     /// The `[instrument]` gravimeter is out of its range.
     #[error("scenario: {0}")]
     Instrument(#[from] crate::gravimeter::InvalidInstrument),
+    /// `run.start_utc` is refused.
+    #[error("scenario: {0}")]
+    Start(#[from] InvalidStart),
+    /// A numeric field is not finite or outside its physical range.
+    #[error("scenario: {0}")]
+    Field(#[from] InvalidField),
+    /// The `[twin]` section is inconsistent.
+    #[error("scenario: [twin]: {0}")]
+    Twin(#[from] crate::twin::InvalidTwin),
     /// Neither a file nor a preset of that name.
     #[error("no scenario file or preset named {0:?} (presets: {presets})", presets = PRESETS.join(", "))]
     Unknown(String),
@@ -158,8 +167,8 @@ impl Scenario {
         if !(r.duration_s.is_finite() && r.duration_s >= r.interval_s) {
             return bad("run.duration_s must be at least one interval");
         }
-        check_start(&r.start_utc, r.duration_s).map_err(ScenarioError::Invalid)?;
-        self.check_field_ranges().map_err(ScenarioError::Invalid)?;
+        check_start(&r.start_utc, r.duration_s)?;
+        self.check_field_ranges()?;
         if !(-90.0..=90.0).contains(&self.site.latitude_deg) {
             return bad("site.latitude_deg must be within ±90");
         }
@@ -224,8 +233,7 @@ impl Scenario {
             e.validate(i)?;
         }
         if let Some(t) = &self.twin {
-            t.validate(self.effects.len())
-                .map_err(|why| ScenarioError::Invalid(format!("[twin]: {why}")))?;
+            t.validate(self.effects.len())?;
         }
         Ok(())
     }
@@ -235,41 +243,62 @@ impl Scenario {
 /// series are fitted to the 20th and 21st centuries), with margin.
 pub const RUN_YEARS: std::ops::RangeInclusive<i64> = 1900..=2199;
 
+/// Why `run.start_utc` is refused (the message quotes the value).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum InvalidStart {
+    /// No year in front.
+    #[error("run.start_utc = {0:?}: not of the form YYYY-MM-DDTHH:MM:SSZ")]
+    NoYear(String),
+    /// The year is outside [`RUN_YEARS`].
+    #[error(
+        "run.start_utc = {start:?}: year {year} outside {}..={} (the range of the tide and \
+         sun ephemerides)",
+        RUN_YEARS.start(),
+        RUN_YEARS.end()
+    )]
+    Year {
+        /// The value.
+        start: String,
+        /// Its year.
+        year: i64,
+    },
+    /// Not the format, or a day or time that does not exist.
+    #[error(
+        "run.start_utc = {0:?}: not of the form YYYY-MM-DDTHH:MM:SSZ, or a day or time that \
+         does not exist"
+    )]
+    NotADate(String),
+    /// The run ends after the last of [`RUN_YEARS`].
+    #[error(
+        "run.start_utc + run.duration_s ends after {}-12-31: outside the range of the tide and \
+         sun ephemerides",
+        RUN_YEARS.end()
+    )]
+    EndsTooLate,
+}
+
 /// `run.start_utc`: the format, a day and time that exist, and a start and end within
 /// [`RUN_YEARS`], each failure said as such.
-fn check_start(start: &str, duration_s: f64) -> Result<(), String> {
+fn check_start(start: &str, duration_s: f64) -> Result<(), InvalidStart> {
     let year = start
         .trim()
         .split('-')
         .next()
         .and_then(|y| y.parse::<i64>().ok());
     let Some(year) = year else {
-        return Err(format!(
-            "run.start_utc = {start:?}: not of the form YYYY-MM-DDTHH:MM:SSZ"
-        ));
+        return Err(InvalidStart::NoYear(start.to_owned()));
     };
     if !RUN_YEARS.contains(&year) {
-        return Err(format!(
-            "run.start_utc = {start:?}: year {year} outside {}..={} (the range of the tide and \
-             sun ephemerides)",
-            RUN_YEARS.start(),
-            RUN_YEARS.end()
-        ));
+        return Err(InvalidStart::Year {
+            start: start.to_owned(),
+            year,
+        });
     }
-    let t = super::time::Utc::parse(start).map_err(|_| {
-        format!(
-            "run.start_utc = {start:?}: not of the form YYYY-MM-DDTHH:MM:SSZ, or a day or time \
-             that does not exist"
-        )
-    })?;
+    let t = super::time::Utc::parse(start).map_err(|_| InvalidStart::NotADate(start.to_owned()))?;
     // 2200-01-01T00:00:00Z in seconds since 1970.
     const END_UNIX_S: f64 = 7_258_118_400.0;
     if duration_s.is_finite() && t.0 + duration_s > END_UNIX_S {
-        return Err(format!(
-            "run.start_utc + run.duration_s ends after {}-12-31: outside the range of the tide \
-             and sun ephemerides",
-            RUN_YEARS.end()
-        ));
+        return Err(InvalidStart::EndsTooLate);
     }
     Ok(())
 }
@@ -353,6 +382,31 @@ const FIELD_RANGES: &[(&str, f64, f64)] = &[
     ("barometer.resolution_hpa", 0.0, 10.0),
 ];
 
+/// A numeric field refused, by its dotted path (array indices as `[i]`) and value.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum InvalidField {
+    /// NaN or an infinity.
+    #[error("{path} = {value}: must be a finite number")]
+    NotFinite {
+        /// The field.
+        path: String,
+        /// Its value.
+        value: f64,
+    },
+    /// Outside the field's [`FIELD_RANGES`] range.
+    #[error("{path} = {value}: outside its physical range {lo} ..= {hi}")]
+    OutOfRange {
+        /// The field.
+        path: String,
+        /// Its value.
+        value: f64,
+        /// Lowest value allowed.
+        lo: f64,
+        /// Highest value allowed.
+        hi: f64,
+    },
+}
+
 /// Every numeric leaf of a TOML value with its dotted path (array indices as `[i]`).
 fn numeric_fields(v: &toml::Value, path: &str, out: &mut Vec<(String, f64)>) {
     match v {
@@ -380,7 +434,7 @@ fn numeric_fields(v: &toml::Value, path: &str, out: &mut Vec<(String, f64)>) {
 impl Scenario {
     /// Every numeric field finite (NaN and infinities refused by name), and each station field
     /// within its [`FIELD_RANGES`] range.
-    fn check_field_ranges(&self) -> Result<(), String> {
+    fn check_field_ranges(&self) -> Result<(), InvalidField> {
         let Ok(v) = toml::Value::try_from(self) else {
             return Ok(());
         };
@@ -388,7 +442,7 @@ impl Scenario {
         numeric_fields(&v, "", &mut fields);
         for (path, x) in fields {
             if !x.is_finite() {
-                return Err(format!("{path} = {x}: must be a finite number"));
+                return Err(InvalidField::NotFinite { path, value: x });
             }
             let key: String = {
                 // `positions[2].angle_deg` → `positions.angle_deg`
@@ -406,9 +460,12 @@ impl Scenario {
             };
             if let Some((_, lo, hi)) = FIELD_RANGES.iter().find(|(f, ..)| *f == key) {
                 if !(*lo..=*hi).contains(&x) {
-                    return Err(format!(
-                        "{path} = {x}: outside its physical range {lo} ..= {hi}"
-                    ));
+                    return Err(InvalidField::OutOfRange {
+                        path,
+                        value: x,
+                        lo: *lo,
+                        hi: *hi,
+                    });
                 }
             }
         }
@@ -720,7 +777,10 @@ mod tests {
         ));
         let mut s = Scenario::preset("paper-0g").unwrap();
         s.barometer.sea_level_hpa = 0.0;
-        assert!(matches!(s.validate(), Err(ScenarioError::Invalid(m)) if m.contains("sea_level")));
+        // Outside the field's physical range (checked before the "must be > 0" of validate).
+        assert!(
+            matches!(s.validate(), Err(e @ ScenarioError::Field(_)) if e.to_string().contains("sea_level"))
+        );
     }
 
     #[test]

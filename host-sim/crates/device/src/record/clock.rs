@@ -364,24 +364,34 @@ mod tests {
         assert!(rows.windows(2).all(|w| w[1].1 > w[0].1));
     }
 
-    #[test]
-    fn a_late_first_frame_is_slewed_out_without_a_jump() {
+    /// Frames `0..frames` of a board at 1.25 frames/s with an exact crystal, frame k (true
+    /// time `true_s`) reaching the PC `delay_s(k, true_s)` late: each frame's record time, and
+    /// the events.
+    fn record_times(frames: u64, delay_s: impl Fn(u64, f64) -> f64) -> (Vec<f64>, Vec<ClockEvent>) {
         let mut m = ClockModel::new(None);
         let start = 1.7e9;
         let mut events = Vec::new();
-        let mut rows = Vec::new();
-        for k in 0..20_000u64 {
-            let true_s = k as f64 * 0.8;
-            // The first frame waited 0.4 s in a buffer (the record starts at its arrival);
-            // every other one arrives within 1–3 ms.
-            let delay = if k == 0 {
+        let rows = (0..frames)
+            .map(|k| {
+                let true_s = k as f64 * 0.8;
+                let pc = start + true_s + delay_s(k, true_s);
+                m.record_time((true_s * 1e6) as u64, pc, start, true, &mut events)
+            })
+            .collect();
+        (rows, events)
+    }
+
+    #[test]
+    fn a_late_first_frame_is_slewed_out_without_a_jump() {
+        // The first frame waited 0.4 s in a buffer (the record starts at its arrival); every
+        // other one arrives within 1–3 ms.
+        let (rows, _) = record_times(20_000, |k, _| {
+            if k == 0 {
                 0.4
             } else {
                 0.001 + 0.002 * ((k % 7) as f64 / 7.0)
-            };
-            let pc = start + true_s + delay;
-            rows.push(m.record_time((true_s * 1e6) as u64, pc, start, true, &mut events));
-        }
+            }
+        });
         // Record time of frame k should be its true time plus the 1 ms minimum delay; the
         // anchor put the first frame 0.4 s late.
         let err = |k: usize| rows[k] - (k as f64 * 0.8 + 0.001);
@@ -412,12 +422,7 @@ mod tests {
 
     #[test]
     fn a_burst_of_delay_over_a_whole_block_is_no_pc_clock_step() {
-        let mut m = ClockModel::new(None);
-        let start = 1.7e9;
-        let mut events = Vec::new();
-        let mut rows = Vec::new();
-        for k in 0..9000u64 {
-            let true_s = k as f64 * 0.8;
+        let (rows, events) = record_times(9000, |k, true_s| {
             // Every frame between 1800 s and 1890 s (a whole 60 s block at least) waits 2 s
             // more: a PC that did not read the port for a minute and a half.
             let burst = if (1800.0..1890.0).contains(&true_s) {
@@ -425,9 +430,8 @@ mod tests {
             } else {
                 0.0
             };
-            let pc = start + true_s + 0.002 + 0.001 * ((k % 5) as f64) + burst;
-            rows.push(m.record_time((true_s * 1e6) as u64, pc, start, true, &mut events));
-        }
+            0.002 + 0.001 * ((k % 5) as f64) + burst
+        });
         assert!(
             !events.iter().any(|e| matches!(
                 e,

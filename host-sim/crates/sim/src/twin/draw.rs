@@ -5,7 +5,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::catalogue::EffectKind;
-use crate::effects::{ScenarioEffect, TideGroupTerm, SIMULATED_AMBIENT};
+use crate::effects::{InvalidEffect, ScenarioEffect, TideGroupTerm, SIMULATED_AMBIENT};
 use crate::noise::{gauss, stream, SimRng};
 
 /// Random stream of a member's draw of the effects' parameters (not the noise's stream).
@@ -13,6 +13,39 @@ pub const EFFECT_DRAW_STREAM: u64 = 5;
 
 /// Pascals per hectopascal.
 const PA_PER_HPA: f64 = 100.0;
+
+/// Why an accepted effect cannot be written as a scenario entry (said beside its name in
+/// [`EffectDraws::nominal`]'s refusals).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum Unexpressible {
+    /// The name is no catalogue effect.
+    #[error("{0:?} is not in the catalogue")]
+    NotInCatalogue(String),
+    /// A parameter the entry needs is not among the fitted ones, or not a finite number.
+    #[error("parameter {0} missing or not finite")]
+    MissingParameter(&'static str),
+    /// The channel noise's level is missing.
+    #[error("parameter noise missing")]
+    MissingNoise,
+    /// An ambient coupling's channel is neither recorded nor simulated.
+    #[error("channel {0:?} is neither in the record nor simulated")]
+    ChannelNotDriven(String),
+    /// A rate or second-order coupling's channel drives nothing in the twin.
+    #[error("channel {0:?} is not a driver of the twin")]
+    NotADriver(String),
+    /// A creep fitted from a record that starts after t = 0.
+    #[error(
+        "the record starts at t = {record_start_s:.0} s and a power law cannot be moved to t = 0 \
+         exactly"
+    )]
+    CreepNotAtZero {
+        /// The record's first instant, s.
+        record_start_s: f64,
+    },
+    /// The entry is out of the scenario's range.
+    #[error(transparent)]
+    Invalid(#[from] InvalidEffect),
+}
 
 /// A fitted value and its 1σ.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -103,14 +136,14 @@ impl EffectDraws {
         for a in &self.effects {
             let kind = EffectKind::from_name(&a.kind);
             let e = kind
-                .ok_or_else(|| format!("{:?} is not in the catalogue", a.kind))
+                .ok_or_else(|| Unexpressible::NotInCatalogue(a.kind.clone()))
                 .and_then(|k| self.entry(k, a.channel.as_deref(), &a.params, None));
             match e.and_then(|e| {
                 let i = out.len();
-                e.validate(i).map(|()| e).map_err(|x| x.to_string())
+                e.validate(i).map(|()| e).map_err(Unexpressible::from)
             }) {
                 Ok(e) => out.push(e),
-                Err(why) => refused.push((a.kind.clone(), why)),
+                Err(why) => refused.push((a.kind.clone(), why.to_string())),
             }
         }
         if let Some(p) = &self.admittance_per_hpa {
@@ -143,7 +176,8 @@ impl EffectDraws {
             let ch = a.channel.as_deref();
             let drawn = self.entry(kind, ch, params, Some(&mut rng));
             let i = out.len();
-            let ok = |e: Result<ScenarioEffect, String>| e.ok().filter(|e| e.validate(i).is_ok());
+            let ok =
+                |e: Result<ScenarioEffect, Unexpressible>| e.ok().filter(|e| e.validate(i).is_ok());
             if let Some(e) = ok(drawn).or_else(|| ok(self.entry(kind, ch, params, None))) {
                 out.push(e);
             }
@@ -163,7 +197,7 @@ impl EffectDraws {
         channel: Option<&str>,
         params: &[NamedParam],
         draw: Option<&mut SimRng>,
-    ) -> Result<ScenarioEffect, String> {
+    ) -> Result<ScenarioEffect, Unexpressible> {
         let t0 = self.record_start_s;
         let draw = std::cell::RefCell::new(draw);
         let drawn = |v: &Drawn| -> f64 {
@@ -179,8 +213,7 @@ impl EffectDraws {
                 .map(|q| drawn(&q.drawn))
                 .filter(|v| v.is_finite())
         };
-        let need =
-            |key: &str| p(key).ok_or_else(|| format!("parameter {key} missing or not finite"));
+        let need = |key: &'static str| p(key).ok_or(Unexpressible::MissingParameter(key));
         let in_record = |c: &str| self.record_channels.iter().any(|n| n == c);
         Ok(match kind {
             EffectKind::ThermalLag => ScenarioEffect::ThermalLag {
@@ -244,9 +277,7 @@ impl EffectDraws {
             EffectKind::AmbientCoupling => {
                 let channel = channel.unwrap_or_default().to_owned();
                 if !in_record(&channel) && !SIMULATED_AMBIENT.contains(&channel.as_str()) {
-                    return Err(format!(
-                        "channel {channel:?} is neither in the record nor simulated"
-                    ));
+                    return Err(Unexpressible::ChannelNotDriven(channel));
                 }
                 ScenarioEffect::AmbientCoupling {
                     channel,
@@ -269,7 +300,7 @@ impl EffectDraws {
                     || in_record(&channel)
                     || SIMULATED_AMBIENT.contains(&channel.as_str());
                 if !drives {
-                    return Err(format!("channel {channel:?} is not a driver of the twin"));
+                    return Err(Unexpressible::NotADriver(channel));
                 }
                 if kind == EffectKind::RateCoupling {
                     ScenarioEffect::RateCoupling {
@@ -287,10 +318,7 @@ impl EffectDraws {
             // The discovery's creep starts at the record's first instant, the scenario's at
             // t = 0: the same curve only when they coincide.
             EffectKind::CreepDrift if t0.abs() > self.record_interval_s => {
-                return Err(format!(
-                    "the record starts at t = {t0:.0} s and a power law cannot be moved to t = 0 \
-                     exactly"
-                ))
+                return Err(Unexpressible::CreepNotAtZero { record_start_s: t0 })
             }
             EffectKind::CreepDrift => ScenarioEffect::CreepDrift {
                 exponent: need("exponent")?,
@@ -302,7 +330,7 @@ impl EffectDraws {
                     channel,
                     noise: p("noise")
                         .or_else(|| p("level"))
-                        .ok_or("parameter noise missing")?,
+                        .ok_or(Unexpressible::MissingNoise)?,
                 }
             }
         })

@@ -20,6 +20,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::draw::Drawn;
+use super::InvalidTwin;
 use crate::noise::{gauss, stream};
 
 /// Random stream of a member's draw of the settling's parameters (apart from the noise's and
@@ -71,10 +72,10 @@ impl Settling {
     }
 
     /// Checks the values are usable (τ > 0, everything finite).
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), InvalidTwin> {
         let finite = |d: &Drawn| d.value.is_finite() && d.sigma.is_finite();
         if !(finite(&self.tau_s) && finite(&self.amplitude) && self.tau_s.value > 0.0) {
-            return Err("drift.settling: tau_s must be > 0 and every value and σ finite".into());
+            return Err(InvalidTwin::Settling);
         }
         Ok(())
     }
@@ -120,15 +121,13 @@ pub struct DriftPolynomial {
 
 impl DriftPolynomial {
     /// Checks the coefficients are finite numbers.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), InvalidTwin> {
         match self
             .legendre
             .iter()
             .position(|c| !(c.value.is_finite() && c.sigma.is_finite()))
         {
-            Some(k) => Err(format!(
-                "drift: Legendre coefficient {k} must be a finite value and σ"
-            )),
+            Some(order) => Err(InvalidTwin::DriftCoefficient { order }),
             None => self.settling.as_ref().map_or(Ok(()), Settling::validate),
         }
     }

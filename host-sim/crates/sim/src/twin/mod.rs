@@ -103,10 +103,74 @@ pub enum TwinFileError {
     NotATwin,
     /// The `[twin]` section is inconsistent.
     #[error("scenario [twin]: {0}")]
-    Invalid(String),
+    Invalid(#[from] InvalidTwin),
+    /// A fixed effect of the `[twin]` scenario cannot be driven by the driver file.
+    #[error("scenario [twin]: fixed effect {name} cannot be applied: {why}")]
+    FixedEffect {
+        /// The effect's name.
+        name: String,
+        /// Why not.
+        why: String,
+    },
     /// The twin cannot run.
     #[error(transparent)]
     Run(#[from] TwinRunError),
+}
+
+/// Why a `[twin]` section is refused before its driver file is read (the message names the
+/// field at fault).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum InvalidTwin {
+    /// The noise family is refused.
+    #[error(transparent)]
+    Noise(#[from] family::FamilyError),
+    /// A transient event starts outside the grid.
+    #[error("transients event {event}: cell {cell} is not a cell of the {grid_cells}-cell grid")]
+    TransientCell {
+        /// Index of the event.
+        event: usize,
+        /// Its first cell.
+        cell: usize,
+        /// Cells of the grid.
+        grid_cells: usize,
+    },
+    /// A transient event's shape is empty or not finite.
+    #[error("transients event {event}: the shape must be finite numbers (at least one)")]
+    TransientShape {
+        /// Index of the event.
+        event: usize,
+    },
+    /// A drift coefficient is not finite.
+    #[error("drift: Legendre coefficient {order} must be a finite value and σ")]
+    DriftCoefficient {
+        /// The Legendre order of the coefficient.
+        order: usize,
+    },
+    /// The settling's τ is not positive, or a value or σ not finite.
+    #[error("drift.settling: tau_s must be > 0 and every value and σ finite")]
+    Settling,
+    /// More fixed effects than the scenario has.
+    #[error("fixed_effects = {fixed} but the scenario has {effects} [[effects]]")]
+    FixedEffects {
+        /// `fixed_effects`.
+        fixed: usize,
+        /// Entries of `[[effects]]`.
+        effects: usize,
+    },
+    /// Fewer than two points or grid cells.
+    #[error("points = {points}, grid_cells = {grid_cells}: a twin needs at least two")]
+    TooFewPoints {
+        /// `points`.
+        points: usize,
+        /// `grid_cells`.
+        grid_cells: usize,
+    },
+    /// The output scales are not finite numbers.
+    #[error("unit_per_g and out_scale must be finite (out_scale ≠ 0)")]
+    OutputScale,
+    /// `simulated.ambient` does not match `ambient_channels`.
+    #[error("simulated.ambient must have one entry per ambient channel")]
+    SimulatedAmbient,
 }
 
 /// The scenario's `[twin]` section: what a member of the twin is, beyond the station.
@@ -153,8 +217,8 @@ pub struct TwinSpec {
 
 impl TwinSpec {
     /// Checks what can be checked without the driver file.
-    pub fn validate(&self, effects: usize) -> Result<(), String> {
-        self.noise.validate().map_err(|e| e.to_string())?;
+    pub fn validate(&self, effects: usize) -> Result<(), InvalidTwin> {
+        self.noise.validate()?;
         if let Some(t) = &self.transients {
             t.validate(self.grid_cells)?;
         }
@@ -162,22 +226,22 @@ impl TwinSpec {
             d.validate()?;
         }
         if self.fixed_effects > effects {
-            return Err(format!(
-                "fixed_effects = {} but the scenario has {effects} [[effects]]",
-                self.fixed_effects
-            ));
+            return Err(InvalidTwin::FixedEffects {
+                fixed: self.fixed_effects,
+                effects,
+            });
         }
         if self.points < 2 || self.grid_cells < 2 {
-            return Err(format!(
-                "points = {}, grid_cells = {}: a twin needs at least two",
-                self.points, self.grid_cells
-            ));
+            return Err(InvalidTwin::TooFewPoints {
+                points: self.points,
+                grid_cells: self.grid_cells,
+            });
         }
         if !(self.unit_per_g.is_finite() && self.out_scale.is_finite() && self.out_scale != 0.0) {
-            return Err("unit_per_g and out_scale must be finite (out_scale ≠ 0)".into());
+            return Err(InvalidTwin::OutputScale);
         }
         if self.simulated.ambient.len() != self.ambient_channels.len() {
-            return Err("simulated.ambient must have one entry per ambient channel".into());
+            return Err(InvalidTwin::SimulatedAmbient);
         }
         Ok(())
     }
@@ -264,8 +328,7 @@ impl MemberModel {
     /// its driver file beside it.
     pub fn load(scenario: &Scenario, scenario_path: &Path) -> Result<MemberModel, TwinFileError> {
         let spec = scenario.twin.as_ref().ok_or(TwinFileError::NotATwin)?;
-        spec.validate(scenario.effects.len())
-            .map_err(TwinFileError::Invalid)?;
+        spec.validate(scenario.effects.len())?;
         let dir = scenario_path.parent().unwrap_or(Path::new("."));
         let path = dir.join(&spec.drivers_file);
         if !path.exists() {
@@ -283,9 +346,10 @@ impl MemberModel {
         let (record, refused) =
             TwinRecord::new(base, t_s, drivers, spec.unit_per_g, spec.out_scale)?;
         if let Some((name, why)) = refused.first() {
-            return Err(TwinFileError::Invalid(format!(
-                "fixed effect {name} cannot be applied: {why}"
-            )));
+            return Err(TwinFileError::FixedEffect {
+                name: name.clone(),
+                why: why.clone(),
+            });
         }
         Ok(MemberModel {
             record,

@@ -18,6 +18,7 @@
 use rand::Rng;
 use serde::{Deserialize, Serialize};
 
+use super::InvalidTwin;
 use crate::noise::{gauss, SimRng};
 
 /// A first difference beyond this many robust σ starts an event (Gaussian noise: never in 10¹⁹
@@ -89,17 +90,17 @@ impl From<Transients> for TransientsFile {
 impl Transients {
     /// Checks a written twin's events: shapes of finite numbers, first cells on the grid of
     /// `grid_cells` cells.
-    pub fn validate(&self, grid_cells: usize) -> Result<(), String> {
-        for (i, (cell, shape)) in self.events.iter().enumerate() {
+    pub fn validate(&self, grid_cells: usize) -> Result<(), InvalidTwin> {
+        for (event, (cell, shape)) in self.events.iter().enumerate() {
             if *cell >= grid_cells {
-                return Err(format!(
-                    "transients event {i}: cell {cell} is not a cell of the {grid_cells}-cell grid"
-                ));
+                return Err(InvalidTwin::TransientCell {
+                    event,
+                    cell: *cell,
+                    grid_cells,
+                });
             }
             if shape.is_empty() || shape.iter().any(|v| !v.is_finite()) {
-                return Err(format!(
-                    "transients event {i}: the shape must be finite numbers (at least one)"
-                ));
+                return Err(InvalidTwin::TransientShape { event });
             }
         }
         Ok(())
