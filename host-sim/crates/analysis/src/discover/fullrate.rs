@@ -584,25 +584,26 @@ pub fn text_of(r: &Option<Result<FullRate, FullRateError>>, unit: &str) -> Strin
                 let _ = writeln!(o, "  none");
             }
             for t in &f.terms {
-                let ps: Vec<String> = t
+                let FastTerm {
+                    name,
+                    channel,
+                    static_coefficient: (a, a_sd),
+                    delta_bic,
+                    chi2_per_dof,
+                    bins,
+                    band_hz: (f_lo, f_hi),
+                    ..
+                } = t;
+                let params = t
                     .params
                     .iter()
-                    .map(|(k, v, s)| format!("{k} = {v:.5e} ± {s:.2e}"))
-                    .collect();
+                    .map(|(k, v, s)| format!("{k} = {v:.5e} ± {s:.2e}"));
+                let params = params.collect::<Vec<_>>().join(", ");
                 let _ = writeln!(
                     o,
-                    "  {} ({}): {}\n     static coupling {:.4e} ± {:.2e} {unit}/channel unit; \
-                     ΔBIC {:.1}; χ²/dof {:.2} over {} bins, {:.3e}–{:.3e} Hz",
-                    t.name,
-                    t.channel,
-                    ps.join(", "),
-                    t.static_coefficient.0,
-                    t.static_coefficient.1,
-                    t.delta_bic,
-                    t.chi2_per_dof,
-                    t.bins,
-                    t.band_hz.0,
-                    t.band_hz.1
+                    "  {name} ({channel}): {params}\n     static coupling {a:.4e} ± {a_sd:.2e} \
+                     {unit}/channel unit; ΔBIC {delta_bic:.1}; χ²/dof {chi2_per_dof:.2} over \
+                     {bins} bins, {f_lo:.3e}–{f_hi:.3e} Hz"
                 );
                 if let Some((d, sd)) = t.rate_coefficient {
                     let _ = writeln!(
