@@ -1,5 +1,6 @@
-//! Right-aligned text tables of the human-readable reports (`accomp tumble`, `accomp fit`): each
-//! column's header and width are written once, so a header cannot drift from its cells.
+//! Right-aligned text tables of the human-readable reports (`accomp tumble`, `accomp fit`,
+//! `accomp stability`): each column's header and width are written once, so a header cannot
+//! drift from its cells.
 
 use std::fmt::{Display, Write as _};
 
