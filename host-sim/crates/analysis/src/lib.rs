@@ -12,6 +12,7 @@ pub mod discover;
 pub mod fit;
 pub mod plot;
 pub mod stability;
+mod text_table;
 pub mod tumble;
 pub mod tumble_sim;
 pub mod twin;

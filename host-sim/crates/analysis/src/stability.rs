@@ -31,6 +31,7 @@
 
 use crate::allan::{AllanPoint, Phase, Statistic, TauSet};
 use crate::log::{event_kind, unit_suffix, Event, Log, LogError, TIME_COLUMN};
+use crate::text_table::Columns;
 use serde::Serialize;
 
 /// Metadata key of the accelerometer scale factor used to convert `_v` columns to g.
@@ -758,6 +759,17 @@ struct ReportJson<'a> {
     columns: Vec<ColumnJson<'a>>,
 }
 
+/// The table of an Allan curve in [`Report::to_table`]; the `alpha` cell carries a `*` when the
+/// noise exponent was carried from the shorter τ.
+const ALLAN_TABLE: Columns<6> = Columns([
+    ("tau_s", 12),
+    ("dev", 13),
+    ("ci_low", 13),
+    ("ci_high", 13),
+    ("edf", 10),
+    ("alpha", 5),
+]);
+
 impl Report {
     /// The JSON object printed by `accomp stability --json` (serde views of the report).
     pub fn to_json(&self) -> serde_json::Value {
@@ -829,27 +841,22 @@ impl Report {
                 if pts.is_empty() {
                     continue;
                 }
-                let _ = writeln!(
-                    s,
-                    "  {title:<6} {:>12} {:>13} {:>13} {:>13} {:>10} {:>5}",
-                    "tau_s", "dev", "ci_low", "ci_high", "edf", "alpha"
-                );
+                let _ = writeln!(s, "  {title:<6} {}", ALLAN_TABLE.header());
                 for p in pts {
-                    let _ = writeln!(
-                        s,
-                        "         {:>12} {:>13.5e} {:>13.5e} {:>13.5e} {:>10.1} {:>4}{}",
-                        format!("{}", p.tau_s),
-                        p.dev,
-                        p.ci_low,
-                        p.ci_high,
-                        p.edf,
-                        p.alpha_used,
-                        if p.alpha_identified.is_some() {
-                            " "
-                        } else {
-                            "*"
-                        }
-                    );
+                    let carried = if p.alpha_identified.is_some() {
+                        " "
+                    } else {
+                        "*"
+                    };
+                    let cells = [
+                        p.tau_s.to_string(),
+                        format!("{:.5e}", p.dev),
+                        format!("{:.5e}", p.ci_low),
+                        format!("{:.5e}", p.ci_high),
+                        format!("{:.1}", p.edf),
+                        format!("{:>4}{carried}", p.alpha_used),
+                    ];
+                    let _ = writeln!(s, "         {}", ALLAN_TABLE.row(cells));
                 }
             }
         }

@@ -2,6 +2,7 @@
 //! of a gapless record.
 
 use super::Phase;
+use std::ops::Range;
 
 impl Phase {
     /// OADEV sum of squares and term count at factor `m`.
@@ -59,7 +60,7 @@ pub(super) fn oadev_sums_gapless(x: &[f64], ms: &[usize]) -> Vec<(f64, usize)> {
             } else if n > k0 {
                 let len = (n - k0) / LANES * LANES;
                 let mut a = [acc[i]];
-                accumulate_block::<1>(&mut a, x, k0, len, [ms[i]]);
+                accumulate_block::<1>(&mut a, x, k0..k0 + len, [ms[i]]);
                 acc[i] = a[0];
             }
         }
@@ -67,14 +68,14 @@ pub(super) fn oadev_sums_gapless(x: &[f64], ms: &[usize]) -> Vec<(f64, usize)> {
         for g in &mut groups {
             let idx: [usize; TAUS_PER_KERNEL] = std::array::from_fn(|t| g[t]);
             let mut a = idx.map(|i| acc[i]);
-            accumulate_block(&mut a, x, k0, BLOCK, idx.map(|i| ms[i]));
+            accumulate_block(&mut a, x, k0..k0 + BLOCK, idx.map(|i| ms[i]));
             for (t, &i) in idx.iter().enumerate() {
                 acc[i] = a[t];
             }
         }
         for &i in groups.remainder() {
             let mut a = [acc[i]];
-            accumulate_block::<1>(&mut a, x, k0, BLOCK, [ms[i]]);
+            accumulate_block::<1>(&mut a, x, k0..k0 + BLOCK, [ms[i]]);
             acc[i] = a[0];
         }
     }
@@ -92,25 +93,24 @@ pub(super) fn oadev_sums_gapless(x: &[f64], ms: &[usize]) -> Vec<(f64, usize)> {
         .collect()
 }
 
-/// Adds the squared second differences of terms `k0 .. k0 + len` (`len` a multiple of
-/// [`LANES`], all terms existing) of `T` taus to their lane accumulators; AVX2 when the CPU
-/// has it (same operations in the same order, so the same result).
+/// Adds the squared second differences of `terms` (their count a multiple of [`LANES`], all
+/// terms existing) of `T` taus to their lane accumulators; AVX2 when the CPU has it (same
+/// operations in the same order, so the same result).
 fn accumulate_block<const T: usize>(
     acc: &mut [[f64; LANES]; T],
     x: &[f64],
-    k0: usize,
-    len: usize,
+    terms: Range<usize>,
     ms: [usize; T],
 ) {
     #[cfg(target_arch = "x86_64")]
     {
         if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU supports AVX2, checked just above.
-            unsafe { accumulate_block_avx2(acc, x, k0, len, ms) };
+            unsafe { accumulate_block_avx2(acc, x, terms, ms) };
             return;
         }
     }
-    accumulate_block_portable(acc, x, k0, len, ms);
+    accumulate_block_portable(acc, x, terms, ms);
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -118,24 +118,23 @@ fn accumulate_block<const T: usize>(
 fn accumulate_block_avx2<const T: usize>(
     acc: &mut [[f64; LANES]; T],
     x: &[f64],
-    k0: usize,
-    len: usize,
+    terms: Range<usize>,
     ms: [usize; T],
 ) {
-    accumulate_block_portable(acc, x, k0, len, ms);
+    accumulate_block_portable(acc, x, terms, ms);
 }
 
 #[inline(always)]
 fn accumulate_block_portable<const T: usize>(
     acc: &mut [[f64; LANES]; T],
     x: &[f64],
-    k0: usize,
-    len: usize,
+    terms: Range<usize>,
     ms: [usize; T],
 ) {
-    let a = &x[k0..k0 + len];
-    let b: [&[f64]; T] = ms.map(|m| &x[k0 + m..k0 + m + len]);
-    let c: [&[f64]; T] = ms.map(|m| &x[k0 + 2 * m..k0 + 2 * m + len]);
+    let Range { start, end } = terms;
+    let a = &x[start..end];
+    let b: [&[f64]; T] = ms.map(|m| &x[start + m..end + m]);
+    let c: [&[f64]; T] = ms.map(|m| &x[start + 2 * m..end + 2 * m]);
     let mut lanes = *acc;
     for (j, ka) in a.chunks_exact(LANES).enumerate() {
         let r = j * LANES..(j + 1) * LANES;

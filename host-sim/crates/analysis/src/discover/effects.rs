@@ -399,20 +399,15 @@ pub fn candidates(
             "no tilt channel, or the tilt gain is already fitted (unit per g unknown)",
         );
     }
-    let mut any_other = false;
-    for c in &ds.channels {
-        let is_main_temp = c.kind == ChannelKind::Temperature;
-        if c.kind == ChannelKind::Other && !is_main_temp && super::baseline::std(&c.values) > 0.0 {
-            yes.push(Effect::AmbientCoupling(c.name.clone()));
-            any_other = true;
-        }
-    }
-    if !any_other {
+    let ambient =
+        moving_channel_couplings(ds, &[ChannelKind::Other], 0.0, &[Effect::AmbientCoupling]);
+    if ambient.is_empty() {
         say(
             "ambient_coupling",
             "no auxiliary channel besides temperature, tilt, pressure, input",
         );
     }
+    yes.extend(ambient);
     match ds.channel(ChannelKind::Pressure) {
         Some(_) => yes.push(Effect::PressureAdmittance),
         None => say("pressure_admittance", "no pressure channel"),
@@ -421,19 +416,17 @@ pub fn candidates(
     // Every channel that moves is a driver: the transfer functions the fixed entries above do
     // not hold (a gain on its rate, a second-order lag), one per channel, the order chosen by
     // the criterion against the entries above. The tilt acts through eq. (5) (`tilt_coupling`).
-    let mut drivers = false;
-    for c in &ds.channels {
-        let driver = matches!(
-            c.kind,
-            ChannelKind::Temperature | ChannelKind::Pressure | ChannelKind::Other
-        );
-        if driver && super::baseline::std(&c.values) > 1e-9 {
-            yes.push(Effect::RateCoupling(c.name.clone()));
-            yes.push(Effect::Lag2Coupling(c.name.clone()));
-            drivers = true;
-        }
-    }
-    if !drivers {
+    let drivers = moving_channel_couplings(
+        ds,
+        &[
+            ChannelKind::Temperature,
+            ChannelKind::Pressure,
+            ChannelKind::Other,
+        ],
+        1e-9,
+        &[Effect::RateCoupling, Effect::Lag2Coupling],
+    );
+    if drivers.is_empty() {
         say(
             "rate_coupling",
             "no temperature, pressure or auxiliary channel that moves",
@@ -443,8 +436,25 @@ pub fn candidates(
             "no temperature, pressure or auxiliary channel that moves",
         );
     }
+    yes.extend(drivers);
     yes.push(Effect::CreepDrift);
     (yes, no)
+}
+
+/// The couplings `make` of every channel of one of the `kinds` whose readings scatter by more
+/// than `min_std` (a channel that does not move cannot be told from the offset), channel by
+/// channel in the dataset's order.
+fn moving_channel_couplings(
+    ds: &Dataset,
+    kinds: &[ChannelKind],
+    min_std: f64,
+    make: &[fn(String) -> Effect],
+) -> Vec<Effect> {
+    ds.channels
+        .iter()
+        .filter(|c| kinds.contains(&c.kind) && super::baseline::std(&c.values) > min_std)
+        .flat_map(|c| make.iter().map(|m| m(c.name.clone())))
+        .collect()
 }
 
 /// The 1-D grid of the nonlinear parameter (empty for purely linear effects).

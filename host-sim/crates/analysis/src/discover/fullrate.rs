@@ -227,16 +227,38 @@ fn fit(b: &Band, shapes: &[Vec<(f64, f64)>]) -> Option<(f64, Vec<f64>, Vec<Vec<f
     Some((ls.rss, ls.coeffs.clone(), ls.unscaled_covariance()))
 }
 
+/// Why the stage could not run on a full-rate dataset (printed as `full rate: not run (…)` and
+/// as the JSON `{"not_run": …}`).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum FullRateError {
+    /// Fewer than two rows: no row spacing.
+    #[error("no rows")]
+    NoRows,
+    /// Too few gap-free segments of the length the bins call for to average the spectra over.
+    #[error(
+        "fewer than {min} gap-free segments of {segment_rows} rows ({segment_s:.0} s): {found}",
+        min = MIN_SEGMENTS
+    )]
+    TooFewSegments {
+        /// Rows per segment.
+        segment_rows: usize,
+        /// The segment's length, s.
+        segment_s: f64,
+        /// Gap-free segments found.
+        found: usize,
+    },
+}
+
 /// Runs the stage on the full-rate dataset `full` for the selection on `binned` (whose accepted
 /// lags on a channel are kept in that channel's model at their τ). `Err` says why it did not run.
 pub fn analyse(
     full: &Dataset,
     binned: &Dataset,
     accepted: &[Accepted],
-) -> Result<FullRate, String> {
+) -> Result<FullRate, FullRateError> {
     let mut dts: Vec<f64> = full.t_s.windows(2).map(|w| w[1] - w[0]).collect();
     if dts.is_empty() {
-        return Err("no rows".into());
+        return Err(FullRateError::NoRows);
     }
     let mid = dts.len() / 2;
     let dt = *dts.select_nth_unstable_by(mid, f64::total_cmp).1;
@@ -251,11 +273,11 @@ pub fn analyse(
         }
     }
     if segs.len() < MIN_SEGMENTS {
-        return Err(format!(
-            "fewer than {MIN_SEGMENTS} gap-free segments of {len} rows ({:.0} s): {}",
-            len as f64 * dt,
-            segs.len()
-        ));
+        return Err(FullRateError::TooFewSegments {
+            segment_rows: len,
+            segment_s: len as f64 * dt,
+            found: segs.len(),
+        });
     }
     let mut out = FullRate {
         row_spacing_s: dt,
@@ -539,7 +561,7 @@ pub fn param(t: &FastTerm, key: &str) -> Option<Param> {
 }
 
 /// The text report's section (empty when the stage did not apply).
-pub fn text_of(r: &Option<Result<FullRate, String>>, unit: &str) -> String {
+pub fn text_of(r: &Option<Result<FullRate, FullRateError>>, unit: &str) -> String {
     use std::fmt::Write as _;
     let mut o = String::new();
     match r {
@@ -562,25 +584,26 @@ pub fn text_of(r: &Option<Result<FullRate, String>>, unit: &str) -> String {
                 let _ = writeln!(o, "  none");
             }
             for t in &f.terms {
-                let ps: Vec<String> = t
+                let FastTerm {
+                    name,
+                    channel,
+                    static_coefficient: (a, a_sd),
+                    delta_bic,
+                    chi2_per_dof,
+                    bins,
+                    band_hz: (f_lo, f_hi),
+                    ..
+                } = t;
+                let params = t
                     .params
                     .iter()
-                    .map(|(k, v, s)| format!("{k} = {v:.5e} ± {s:.2e}"))
-                    .collect();
+                    .map(|(k, v, s)| format!("{k} = {v:.5e} ± {s:.2e}"));
+                let params = params.collect::<Vec<_>>().join(", ");
                 let _ = writeln!(
                     o,
-                    "  {} ({}): {}\n     static coupling {:.4e} ± {:.2e} {unit}/channel unit; \
-                     ΔBIC {:.1}; χ²/dof {:.2} over {} bins, {:.3e}–{:.3e} Hz",
-                    t.name,
-                    t.channel,
-                    ps.join(", "),
-                    t.static_coefficient.0,
-                    t.static_coefficient.1,
-                    t.delta_bic,
-                    t.chi2_per_dof,
-                    t.bins,
-                    t.band_hz.0,
-                    t.band_hz.1
+                    "  {name} ({channel}): {params}\n     static coupling {a:.4e} ± {a_sd:.2e} \
+                     {unit}/channel unit; ΔBIC {delta_bic:.1}; χ²/dof {chi2_per_dof:.2} over \
+                     {bins} bins, {f_lo:.3e}–{f_hi:.3e} Hz"
                 );
                 if let Some((d, sd)) = t.rate_coefficient {
                     let _ = writeln!(
@@ -600,10 +623,10 @@ pub fn text_of(r: &Option<Result<FullRate, String>>, unit: &str) -> String {
 
 /// The JSON `full_rate` value: null when the stage did not apply, `{"not_run": why}` when it
 /// could not run.
-pub fn json_of(r: &Option<Result<FullRate, String>>) -> serde_json::Value {
+pub fn json_of(r: &Option<Result<FullRate, FullRateError>>) -> serde_json::Value {
     match r {
         None => serde_json::Value::Null,
-        Some(Err(why)) => serde_json::json!({ "not_run": why }),
+        Some(Err(why)) => serde_json::json!({ "not_run": why.to_string() }),
         Some(Ok(f)) => serde_json::json!({
             "row_spacing_s": f.row_spacing_s,
             "bin_s": f.bin_s,
@@ -650,5 +673,28 @@ mod tests {
             let want = hr * (w * i as f64).cos() - hi * (w * i as f64).sin();
             assert!((xi - want).abs() < 1e-9, "{xi} vs {want}");
         }
+    }
+
+    /// The reasons the stage did not run read as they always have in the text and the JSON.
+    #[test]
+    fn why_the_stage_did_not_run_reads_as_before() {
+        assert_eq!(FullRateError::NoRows.to_string(), "no rows");
+        let few = FullRateError::TooFewSegments {
+            segment_rows: 512,
+            segment_s: 512.4,
+            found: 3,
+        };
+        assert_eq!(
+            few.to_string(),
+            "fewer than 8 gap-free segments of 512 rows (512 s): 3"
+        );
+        assert_eq!(
+            json_of(&Some(Err(few))),
+            serde_json::json!({ "not_run": "fewer than 8 gap-free segments of 512 rows (512 s): 3" })
+        );
+        assert_eq!(
+            text_of(&Some(Err(FullRateError::NoRows)), "g"),
+            "full rate: not run (no rows)\n"
+        );
     }
 }

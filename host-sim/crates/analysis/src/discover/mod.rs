@@ -96,7 +96,7 @@ pub struct Discovery {
     /// The fast terms fitted on the full-rate rows ([`fullrate`]) when the selection ran on bins
     /// of at least [`fullrate::MIN_ROWS_PER_BIN`] rows; `Err` says why it could not run; `None`
     /// when the record was not binned that coarsely.
-    pub full_rate: Option<Result<fullrate::FullRate, String>>,
+    pub full_rate: Option<Result<fullrate::FullRate, fullrate::FullRateError>>,
     /// With a calibration table: the test of its temperature models ([`table_error`]).
     pub table_check: Option<table_error::TableCheck>,
     /// Structure the final model leaves that no cause explains ([`unexplained`]).

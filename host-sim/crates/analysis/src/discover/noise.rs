@@ -98,30 +98,9 @@ impl NoiseModel {
         let mut best: Option<(f64, [f64; 3])> = None;
         for mask in 1u8..8 {
             let act: Vec<usize> = (0..3).filter(|j| mask & (1 << j) != 0).collect();
-            let k = act.len();
-            // Normal equations (k ≤ 3, well scaled by the relative weighting).
-            let mut a = [[0.0f64; 3]; 3];
-            let mut b = [0.0f64; 3];
-            for &(t, m, w) in &pts {
-                let f = basis(t);
-                for (p, &jp) in act.iter().enumerate() {
-                    let xp = w * f[jp] / m;
-                    b[p] += xp * w;
-                    for (q, &jq) in act.iter().enumerate() {
-                        a[p][q] += xp * w * f[jq] / m;
-                    }
-                }
-            }
-            let Some(sol) = solve_small(&a, &b, k) else {
+            let Some(h) = active_terms_fit(&pts, basis, &act) else {
                 continue;
             };
-            if sol[..k].iter().any(|v| *v < 0.0 || !v.is_finite()) {
-                continue;
-            }
-            let mut h = [0.0; 3];
-            for (p, &j) in act.iter().enumerate() {
-                h[j] = sol[p];
-            }
             let cost: f64 = pts
                 .iter()
                 .map(|&(t, m, w)| {
@@ -695,16 +674,39 @@ impl NoiseModel {
     }
 }
 
-/// Solves the leading k×k block of `a`·x = `b` through the host's one linear-algebra module
-/// (`numerics::linalg::solve_square`, LU with partial pivoting); None when singular.
-fn solve_small(a: &[[f64; 3]; 3], b: &[f64; 3], k: usize) -> Option<[f64; 3]> {
-    let rows: Vec<Vec<f64>> = a.iter().take(k).map(|r| r[..k].to_vec()).collect();
-    let x = crate::numerics::linalg::solve_square(&rows, &b[..k])?;
-    let mut out = [0.0; 3];
-    for (o, xi) in out.iter_mut().zip(x) {
-        *o = xi;
+/// One subset of the three-term NNLS of [`NoiseModel::fit`]: the weighted least-squares
+/// coefficients of the basis terms `active` alone (the others zero) for the points `(τ, measured
+/// Allan variance, weight)`, solved through the host's one linear-algebra module
+/// (`numerics::linalg::solve_square`, LU with partial pivoting). None when singular, or when a
+/// coefficient is negative or not finite: that subset is then no solution of the NNLS.
+fn active_terms_fit(
+    pts: &[(f64, f64, f64)],
+    basis: impl Fn(f64) -> [f64; 3],
+    active: &[usize],
+) -> Option<[f64; 3]> {
+    // Normal equations (k ≤ 3, well scaled by the relative weighting).
+    let k = active.len();
+    let mut a = vec![vec![0.0f64; k]; k];
+    let mut b = vec![0.0f64; k];
+    for &(t, m, w) in pts {
+        let f = basis(t);
+        for (p, &jp) in active.iter().enumerate() {
+            let xp = w * f[jp] / m;
+            b[p] += xp * w;
+            for (q, &jq) in active.iter().enumerate() {
+                a[p][q] += xp * w * f[jq] / m;
+            }
+        }
     }
-    Some(out)
+    let sol = crate::numerics::linalg::solve_square(&a, &b)?;
+    if sol.iter().any(|v| *v < 0.0 || !v.is_finite()) {
+        return None;
+    }
+    let mut h = [0.0; 3];
+    for (&j, v) in active.iter().zip(sol) {
+        h[j] = v;
+    }
+    Some(h)
 }
 
 /// Transition factors `a` and process noise `q` of the model's states over `dt_s` (flicker OU

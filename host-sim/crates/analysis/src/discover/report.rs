@@ -4,10 +4,13 @@
 //! the residual before/after vs time, its Lomb–Scargle spectrum with the significant lines
 //! marked, and its Allan deviation before/after with confidence bands.
 
+use super::eiv::ChannelNoise;
+use super::shape::ShapeCheck;
 use super::{residual, DiscoverError, Discovery};
 use crate::plot::decimate::buckets;
 use crate::plot::draw::{
-    self, AdevCurve, AdevFigure, Figure, Marker, Panel, TimeFigure, Trace, XYCurve, XYFigure,
+    self, AdevCurve, AdevFigure, Figure, Marker, Panel, TimeFigure, Trace, XYAxis, XYCurve,
+    XYFigure,
 };
 use crate::plot::Format;
 use plotters::style::RGBColor;
@@ -192,26 +195,29 @@ pub fn text(d: &Discovery) -> String {
     );
     let _ = writeln!(o, "  noise: {}", noise_text(&s.baseline_noise, unit));
     for c in &d.channel_noise {
+        let ChannelNoise {
+            channel,
+            noise,
+            unit: channel_unit,
+            std,
+            smoothing_s,
+            ..
+        } = c;
+        let used = match (c.resolved, c.smoothed) {
+            (true, true) => {
+                format!("the model uses its smoothed state (zero-phase, width {smoothing_s:.0} s)")
+            }
+            (true, false) => {
+                format!("smoother of width {smoothing_s:.0} s fitted, the model uses the reading")
+            }
+            _ => "not resolved (the true value moves more than that from one point to the next, \
+                  so no smoother can separate it): used as read"
+                .to_owned(),
+        };
         let _ = writeln!(
             o,
-            "  channel_noise: {} reads with {:.3e} {} white noise per point (channel std {:.3e}); {}",
-            c.channel,
-            c.noise,
-            c.unit,
-            c.std,
-            match (c.resolved, c.smoothed) {
-                (true, true) => format!(
-                    "the model uses its smoothed state (zero-phase, width {:.0} s)",
-                    c.smoothing_s
-                ),
-                (true, false) => format!(
-                    "smoother of width {:.0} s fitted, the model uses the reading",
-                    c.smoothing_s
-                ),
-                _ => "not resolved (the true value moves more than that from one point to the \
-                      next, so no smoother can separate it): used as read"
-                    .to_owned(),
-            }
+            "  channel_noise: {channel} reads with {noise:.3e} {channel_unit} white noise per point \
+             (channel std {std:.3e}); {used}"
         );
     }
     let _ = writeln!(o, "what the baseline gets wrong:");
@@ -315,18 +321,22 @@ pub fn text(d: &Discovery) -> String {
         let _ = writeln!(o, "  refused: {n}: {why}");
     }
     for c in &d.shape_checks {
+        let ShapeCheck {
+            effect,
+            second_theta,
+            delta_chi2,
+            threshold,
+            ..
+        } = c;
+        let verdict = if c.poor {
+            " — POOR FIT: the catalogue shape does not describe the data; the name is the closest cause"
+        } else {
+            ": shape adequate"
+        };
         let _ = writeln!(
             o,
-            "  shape check {}: two of its kind in its place (the other at {:.5e}) improve χ² by {:.1} (charged {:.1}){}",
-            c.effect,
-            c.second_theta,
-            c.delta_chi2,
-            c.threshold,
-            if c.poor {
-                " — POOR FIT: the catalogue shape does not describe the data; the name is the closest cause"
-            } else {
-                ": shape adequate"
-            }
+            "  shape check {effect}: two of its kind in its place (the other at {second_theta:.5e}) \
+             improve χ² by {delta_chi2:.1} (charged {threshold:.1}){verdict}"
         );
     }
     let rest: Vec<String> = s
@@ -519,17 +529,13 @@ fn residual_spectrum_figure(d: &Discovery) -> Figure {
             d.dataset.output_name,
             100.0 * FAP_MARKED
         ),
-        x_desc: "frequency (Hz)".into(),
-        y_desc: "normalised power".into(),
-        x_log: true,
-        y_log: true,
+        x: XYAxis::log("frequency (Hz)".into(), x_markers),
+        y: XYAxis::log("normalised power".into(), fap_level),
         y_floor: (peak > 0.0).then(|| peak * 10f64.powf(-SPECTRUM_DECADES)),
         curves: vec![
             curve("baseline residual", &d.spectrum_before, BEFORE),
             curve("final residual", &d.spectrum_after, AFTER),
         ],
-        x_markers,
-        y_markers: fap_level,
         x_spans: Vec::new(),
     })
 }

@@ -162,19 +162,6 @@ pub struct Selection {
 /// Candidates re-scored with a re-fitted noise model per round.
 pub(super) const RESCORE: usize = 4;
 
-/// Runs the greedy selection from a baseline (target and free columns) and the final joint fit.
-pub fn select(
-    ds: &Dataset,
-    target: &[f64],
-    base_cols: &[Vec<f64>],
-    cands: &[Effect],
-    ctx: &Context,
-    cfg: &Config,
-) -> Selection {
-    let r = rounds(ds, target, base_cols, cands, ctx, cfg);
-    finish(ds, target, base_cols, cfg, r, &[])
-}
-
 /// The selection after its greedy rounds, before the final joint fit ([`finish`]).
 pub struct Rounds {
     /// Accepted so far.
@@ -679,14 +666,11 @@ mod tests {
             .collect();
         let ds = Dataset::test_g(t.clone(), y.clone(), 60.0);
         let base = vec![vec![1.0; n], t.iter().map(|x| x / 86_400.0).collect()];
-        select(
-            &ds,
-            &y,
-            &base,
-            &[Effect::Step { duration_s: 0.0 }],
-            &Context::default(),
-            &Config::default(),
-        )
+        // The greedy rounds, then the final joint fit, with no full-rate columns.
+        let cfg = Config::default();
+        let cands = [Effect::Step { duration_s: 0.0 }];
+        let r = rounds(&ds, &y, &base, &cands, &Context::default(), &cfg);
+        finish(&ds, &y, &base, &cfg, r, &[])
     }
 
     fn step_params(s: &Selection) -> Vec<(f64, f64, f64)> {

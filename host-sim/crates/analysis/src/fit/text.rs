@@ -1,6 +1,7 @@
 //! The human-readable fit report.
 
 use super::*;
+use crate::text_table::Columns;
 
 fn unit_of(column: &str) -> &str {
     match column {
@@ -12,14 +13,25 @@ fn unit_of(column: &str) -> &str {
     }
 }
 
-fn opt(v: Option<f64>, width: usize, prec: usize, sci: bool) -> String {
+fn opt(v: Option<f64>, prec: usize, sci: bool) -> String {
     match v {
-        Some(x) if x.is_finite() && sci => format!("{x:>width$.prec$e}"),
-        Some(x) if x.is_finite() => format!("{x:>width$.prec$}"),
-        Some(_) => format!("{:>width$}", "inf"),
-        None => format!("{:>width$}", "—"),
+        Some(x) if x.is_finite() && sci => format!("{x:.prec$e}"),
+        Some(x) if x.is_finite() => format!("{x:.prec$}"),
+        Some(_) => "inf".to_owned(),
+        None => "—".to_owned(),
     }
 }
+
+/// The table of a coefficient's fitted orders (the monomials follow, unaligned).
+const ORDERS: Columns<7> = Columns([
+    ("order", 5),
+    ("s", 11),
+    ("rms", 11),
+    ("AICc", 9),
+    ("LOO rms", 11),
+    ("F p", 9),
+    ("dK/dT /°C", 13),
+]);
 
 /// The human-readable report: one table per coefficient.
 pub fn render_text(report: &FitReport, at: Celsius, paper_source: Option<&Path>) -> String {
@@ -47,33 +59,32 @@ pub fn render_text(report: &FitReport, at: Celsius, paper_source: Option<&Path>)
             "\n{} [{}]  selected order {} (lowest AICc)",
             c.name, unit, c.selected_order
         );
-        let _ = writeln!(
-            s,
-            "  {:>5} {:>11} {:>11} {:>9} {:>11} {:>9} {:>13}  monomial °C c0..cn",
-            "order", "s", "rms", "AICc", "LOO rms", "F p", "dK/dT /°C"
-        );
+        let _ = writeln!(s, "  {}  monomial °C c0..cn", ORDERS.header());
         for m in &c.models {
             let mono: Vec<String> = m
                 .monomial_celsius
                 .iter()
                 .map(|v| format!("{v:.4e}"))
                 .collect();
+            let cells = [
+                m.order.to_string(),
+                format!("{:.3e}", m.residual_std),
+                format!("{:.3e}", m.residual_rms),
+                opt(m.aicc, 2, false),
+                format!("{:.3e}", m.loo_rms),
+                opt(m.f_test_p, 2, true),
+                format!("{:.4e}", m.sensitivity_per_c),
+            ];
+            let selected = if m.order == c.selected_order {
+                "  ←"
+            } else {
+                ""
+            };
             let _ = writeln!(
                 s,
-                "  {:>5} {:>11.3e} {:>11.3e} {} {:>11.3e} {} {:>13.4e}  [{}]{}",
-                m.order,
-                m.residual_std,
-                m.residual_rms,
-                opt(m.aicc, 9, 2, false),
-                m.loo_rms,
-                opt(m.f_test_p, 9, 2, true),
-                m.sensitivity_per_c,
-                mono.join(", "),
-                if m.order == c.selected_order {
-                    "  ←"
-                } else {
-                    ""
-                }
+                "  {}  [{}]{selected}",
+                ORDERS.row(cells),
+                mono.join(", ")
             );
         }
         if let Some(m) = c.selected() {

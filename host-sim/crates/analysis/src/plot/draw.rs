@@ -113,25 +113,39 @@ pub struct Marker {
 pub struct XYFigure {
     /// Title.
     pub title: String,
-    /// X axis description, with unit.
-    pub x_desc: String,
-    /// Y axis description, with unit.
-    pub y_desc: String,
-    /// Logarithmic x axis.
-    pub x_log: bool,
-    /// Logarithmic y axis.
-    pub y_log: bool,
+    /// The x axis; its markers are vertical lines (e.g. significant spectral lines).
+    pub x: XYAxis,
+    /// The y axis; its markers are horizontal lines (e.g. a significance level).
+    pub y: XYAxis,
     /// Y values below this are drawn at it (a log axis otherwise spans the deep, empty troughs
     /// of a periodogram). `None`: the data's own minimum.
     pub y_floor: Option<f64>,
     /// Curves.
     pub curves: Vec<XYCurve>,
-    /// Vertical reference lines (e.g. significant spectral lines).
-    pub x_markers: Vec<Marker>,
-    /// Horizontal reference lines (e.g. a significance level).
-    pub y_markers: Vec<Marker>,
     /// X ranges shaded across the plot (e.g. where a record leaves a simulation's envelope).
     pub x_spans: Vec<(f64, f64)>,
+}
+
+/// One axis of an [`XYFigure`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct XYAxis {
+    /// Description, with unit.
+    pub desc: String,
+    /// Logarithmic rather than linear.
+    pub log: bool,
+    /// Labelled reference lines across the plot at values of this axis.
+    pub markers: Vec<Marker>,
+}
+
+impl XYAxis {
+    /// A logarithmic axis.
+    pub fn log(desc: String, markers: Vec<Marker>) -> Self {
+        XYAxis {
+            desc,
+            log: true,
+            markers,
+        }
+    }
 }
 
 /// Any figure this module draws.
@@ -147,6 +161,9 @@ pub enum Figure {
     /// Y against x, linear or log axes.
     XY(XYFigure),
 }
+
+/// The drawing area of a whole figure (pixel coordinates from its top left corner).
+type FigureArea<DB> = DrawingArea<DB, Shift>;
 
 /// Width of every figure, px. The decimation uses one bucket per pixel column of it.
 pub const WIDTH_PX: u32 = 1100;
@@ -190,7 +207,7 @@ pub fn render(fig: &Figure, path: &Path, format: Format) -> Result<(), DrawError
     }
 }
 
-fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, fig: &Figure) -> Result<(), DrawError>
+fn draw<DB: DrawingBackend>(root: &FigureArea<DB>, fig: &Figure) -> Result<(), DrawError>
 where
     DB::ErrorType: 'static,
 {
@@ -316,7 +333,7 @@ where
 
 /// A one-panel chart with its title, room for the axis labels and descriptions.
 fn captioned<'a, 'b, DB: DrawingBackend>(
-    root: &'a DrawingArea<DB, Shift>,
+    root: &'a FigureArea<DB>,
     title: &str,
 ) -> ChartBuilder<'a, 'b, DB> {
     let mut builder = ChartBuilder::on(root);
@@ -329,7 +346,7 @@ fn captioned<'a, 'b, DB: DrawingBackend>(
 }
 
 fn draw_time<DB: DrawingBackend>(
-    root: &DrawingArea<DB, Shift>,
+    root: &FigureArea<DB>,
     fig: &TimeFigure,
     x_markers: &[Marker],
 ) -> Result<(), DrawError>
@@ -447,10 +464,7 @@ fn dashed_vertical(x: f64, y0: f64, y1: f64) -> Vec<Vec<(f64, f64)>> {
         .collect()
 }
 
-fn draw_adev<DB: DrawingBackend>(
-    root: &DrawingArea<DB, Shift>,
-    fig: &AdevFigure,
-) -> Result<(), DrawError>
+fn draw_adev<DB: DrawingBackend>(root: &FigureArea<DB>, fig: &AdevFigure) -> Result<(), DrawError>
 where
     DB::ErrorType: 'static,
 {
@@ -517,7 +531,7 @@ fn floored(fig: &XYFigure, y: f64) -> f64 {
 /// True when a point can be drawn on the figure's axes.
 fn drawable(fig: &XYFigure, (x, y): (f64, f64)) -> bool {
     let y = floored(fig, y);
-    x.is_finite() && y.is_finite() && (!fig.x_log || x > 0.0) && (!fig.y_log || y > 0.0)
+    x.is_finite() && y.is_finite() && (!fig.x.log || x > 0.0) && (!fig.y.log || y > 0.0)
 }
 
 /// Axis range over `values`: a log axis starts just under a power of ten (see [`draw_adev`]) and
@@ -537,10 +551,7 @@ fn axis_range(values: impl Iterator<Item = f64>, log: bool) -> Option<(f64, f64)
     })
 }
 
-fn draw_xy<DB: DrawingBackend>(
-    root: &DrawingArea<DB, Shift>,
-    fig: &XYFigure,
-) -> Result<(), DrawError>
+fn draw_xy<DB: DrawingBackend>(root: &FigureArea<DB>, fig: &XYFigure) -> Result<(), DrawError>
 where
     DB::ErrorType: 'static,
 {
@@ -551,13 +562,13 @@ where
             .filter(|&p| drawable(fig, p))
     };
     let (Some(xr), Some(yr)) = (
-        axis_range(pts().map(|p| p.0), fig.x_log),
-        axis_range(pts().map(|p| floored(fig, p.1)), fig.y_log),
+        axis_range(pts().map(|p| p.0), fig.x.log),
+        axis_range(pts().map(|p| floored(fig, p.1)), fig.y.log),
     ) else {
         return Err(DrawError("no finite point to draw".into()));
     };
     // plotters gives log and linear axes different coordinate types: one call per combination.
-    match (fig.x_log, fig.y_log) {
+    match (fig.x.log, fig.y.log) {
         (false, false) => draw_xy_on(root, fig, xr.0..xr.1, yr.0..yr.1, yr),
         (true, false) => draw_xy_on(root, fig, (xr.0..xr.1).log_scale(), yr.0..yr.1, yr),
         (false, true) => draw_xy_on(root, fig, xr.0..xr.1, (yr.0..yr.1).log_scale(), yr),
@@ -572,7 +583,7 @@ where
 }
 
 fn draw_xy_on<DB, X, Y>(
-    root: &DrawingArea<DB, Shift>,
+    root: &FigureArea<DB>,
     fig: &XYFigure,
     x_spec: X,
     y_spec: Y,
@@ -593,7 +604,7 @@ where
     };
     let x_dec = tick_decimals(x_hi - x_lo);
     let y_dec = tick_decimals(y_hi - y_lo);
-    let (x_log, y_log) = (fig.x_log, fig.y_log);
+    let (x_log, y_log) = (fig.x.log, fig.y.log);
     let x_fmt = move |v: &f64| {
         if x_log {
             log_label_125(*v)
@@ -610,8 +621,8 @@ where
     };
     chart
         .configure_mesh()
-        .x_desc(fig.x_desc.as_str())
-        .y_desc(fig.y_desc.as_str())
+        .x_desc(fig.x.desc.as_str())
+        .y_desc(fig.y.desc.as_str())
         .label_style((FONT, 14))
         .axis_desc_style((FONT, 16))
         // Log y: key points for 1..9 in every decade (grid lines), labels on 1, 2, 5 only.
@@ -632,7 +643,7 @@ where
         }
     }
     let marker_style = BLACK.mix(0.45).stroke_width(1);
-    let inside = fig.x_markers.iter().filter(|m| m.at > x_lo && m.at < x_hi);
+    let inside = fig.x.markers.iter().filter(|m| m.at > x_lo && m.at < x_hi);
     for (i, m) in inside.enumerate() {
         chart.draw_series(std::iter::once(PathElement::new(
             vec![(m.at, y_lo), (m.at, y_hi)],
@@ -652,7 +663,7 @@ where
             (FONT, 13).into_font().color(&BLACK.mix(0.7)),
         )))?;
     }
-    for m in fig.y_markers.iter().filter(|m| m.at > y_lo && m.at < y_hi) {
+    for m in fig.y.markers.iter().filter(|m| m.at > y_lo && m.at < y_hi) {
         chart
             .draw_series(std::iter::once(PathElement::new(
                 vec![(x_lo, m.at), (x_hi, m.at)],
@@ -696,18 +707,21 @@ mod tests {
 
     #[test]
     fn tick_decimals_resolve_a_tenth_of_the_span() {
-        assert_eq!(tick_decimals(41.0), 0);
-        assert_eq!(tick_decimals(0.02), 3);
-        assert_eq!(tick_decimals(1.0), 1);
-        assert_eq!(tick_decimals(0.0), 0);
+        for (span, decimals) in [(41.0, 0), (0.02, 3), (1.0, 1), (0.0, 0)] {
+            assert_eq!(tick_decimals(span), decimals, "span {span}");
+        }
     }
 
     #[test]
     fn fixed_labels_never_show_negative_zero() {
-        assert_eq!(fixed(-0.001, 2), "0.00");
-        assert_eq!(fixed(-0.0, 0), "0");
-        assert_eq!(fixed(-0.1, 2), "-0.10");
-        assert_eq!(fixed(12.345, 1), "12.3");
+        for (v, decimals, label) in [
+            (-0.001, 2, "0.00"),
+            (-0.0, 0, "0"),
+            (-0.1, 2, "-0.10"),
+            (12.345, 1, "12.3"),
+        ] {
+            assert_eq!(fixed(v, decimals), label);
+        }
     }
 
     #[test]
@@ -718,11 +732,15 @@ mod tests {
 
     #[test]
     fn log_ticks_are_plain_in_the_middle_and_scientific_at_the_ends() {
-        assert_eq!(log_tick(10.0), "10");
-        assert_eq!(log_tick(0.5), "0.5");
-        assert_eq!(log_tick(1e-6), "1e-6");
-        assert_eq!(log_tick(1e6), "1e6");
-        assert_eq!(log_tick(1e4), "1e4");
-        assert_eq!(log_tick(2e-7), "2e-7");
+        for (v, label) in [
+            (10.0, "10"),
+            (0.5, "0.5"),
+            (1e-6, "1e-6"),
+            (1e6, "1e6"),
+            (1e4, "1e4"),
+            (2e-7, "2e-7"),
+        ] {
+            assert_eq!(log_tick(v), label);
+        }
     }
 }

@@ -10,40 +10,74 @@ const DELTA_RAD: f64 = 2.0 * std::f64::consts::PI / 10_800.0;
 
 /// A log whose outputs are equation (1) written out by hand (not through the core), with the
 /// head at `angle + tilt` and one row per entry of `readings` (offsets added to E).
-fn hand_log(
-    axis: &str,
-    angles_deg: &[f64],
+#[derive(Clone, Copy)]
+struct HandLog<'a> {
+    axis: &'a str,
+    angles_deg: &'a [f64],
+    /// Local gravity, standard g.
     g: f64,
     k3: f64,
     tilt_rad: f64,
-    readings: &[f64],
-    extra_meta: &str,
-) -> String {
-    let mut s = format!("# rotation_axis: {axis}\n{extra_meta}angle_deg,output_v\n");
-    for &a in angles_deg {
-        let th = a.to_radians() + tilt_rad;
-        let ai = g * th.sin();
-        let cross = g * th.cos();
-        let mis = if axis == "output" {
-            DELTA_RAD * cross
-        } else {
-            -DELTA_RAD * cross
-        };
-        let e = K1 * (K0 + ai + K2 * ai * ai + k3 * ai * ai * ai + mis);
-        for d in readings {
-            s.push_str(&format!("{a},{}\n", e + d));
-        }
-    }
-    s
+    readings: &'a [f64],
+    /// `# key: value` lines written before the header.
+    extra_meta: &'a str,
 }
 
 /// The classic four-position test (0°, 90°, 180°, 270°).
 const FOUR_POSITIONS_DEG: [f64; 4] = [0.0, 90.0, 180.0, 270.0];
 
-/// An exact four-position log about `axis` at 1 g: no K3, no tilt, one noiseless reading per
-/// position.
+impl<'a> HandLog<'a> {
+    /// An exact four-position log about `axis` at 1 g: no K3, no tilt, one noiseless reading
+    /// per position.
+    fn four_positions(axis: &'a str) -> Self {
+        HandLog::at(axis, &FOUR_POSITIONS_DEG)
+    }
+
+    /// The same exact log at `angles_deg`.
+    fn at(axis: &'a str, angles_deg: &'a [f64]) -> Self {
+        HandLog {
+            axis,
+            angles_deg,
+            g: 1.0,
+            k3: 0.0,
+            tilt_rad: 0.0,
+            readings: &[0.0],
+            extra_meta: "",
+        }
+    }
+
+    fn text(self) -> String {
+        let HandLog {
+            axis,
+            angles_deg,
+            g,
+            k3,
+            tilt_rad,
+            readings,
+            extra_meta,
+        } = self;
+        let mut s = format!("# rotation_axis: {axis}\n{extra_meta}angle_deg,output_v\n");
+        for &a in angles_deg {
+            let th = a.to_radians() + tilt_rad;
+            let ai = g * th.sin();
+            let cross = g * th.cos();
+            let mis = if axis == "output" {
+                DELTA_RAD * cross
+            } else {
+                -DELTA_RAD * cross
+            };
+            let e = K1 * (K0 + ai + K2 * ai * ai + k3 * ai * ai * ai + mis);
+            for d in readings {
+                s.push_str(&format!("{a},{}\n", e + d));
+            }
+        }
+        s
+    }
+}
+
+/// [`HandLog::four_positions`] as text.
 fn four_position_log(axis: &str) -> String {
-    hand_log(axis, &FOUR_POSITIONS_DEG, 1.0, 0.0, 0.0, &[0.0], "")
+    HandLog::four_positions(axis).text()
 }
 
 fn solve(text: &str) -> Result<TumbleReport, TumbleError> {
@@ -88,7 +122,14 @@ fn rotation_about_the_output_axis_identifies_delta_o_with_its_own_sign() {
 #[test]
 fn eight_positions_add_k3_and_recover_it() {
     let angles: Vec<f64> = (0..8).map(|i| 45.0 * f64::from(i)).collect();
-    let r = solve(&hand_log("pendulum", &angles, 1.0, 3e-5, 0.0, &[0.0], "")).unwrap();
+    let r = solve(
+        &HandLog {
+            k3: 3e-5,
+            ..HandLog::at("pendulum", &angles)
+        }
+        .text(),
+    )
+    .unwrap();
     let t = &r.tests[0];
     assert_eq!((t.unknowns, t.dof), (5, 3));
     assert!((t.k3_g_per_g3.unwrap().value - 3e-5).abs() < 1e-13);
@@ -101,15 +142,12 @@ fn eight_positions_add_k3_and_recover_it() {
 #[test]
 fn local_gravity_from_metadata_is_divided_by_standard_gravity() {
     let g = 9.7940 / 9.80665;
-    let text = hand_log(
-        "pendulum",
-        &FOUR_POSITIONS_DEG,
+    let text = HandLog {
         g,
-        0.0,
-        0.0,
-        &[0.0],
-        "# local_gravity_m_s2: 9.7940\n",
-    );
+        extra_meta: "# local_gravity_m_s2: 9.7940\n",
+        ..HandLog::four_positions("pendulum")
+    }
+    .text();
     let r = solve(&text).unwrap();
     assert!((r.gravity_g - g).abs() < 1e-15);
     assert!((r.tests[0].k1_v_per_g.value - K1).abs() < 1e-13);
@@ -153,15 +191,13 @@ fn reading_scatter_gives_the_noise_se_when_the_design_is_exactly_determined() {
     // c0 = (E0+E180)/2 and c1 = (E90−E270)/2 independent, each of variance d²/2, so
     // σ²(K0) = (d²/2)·(1 + K0²)/K1².
     let d = 1e-6;
-    let log = parse_log(&hand_log(
-        "pendulum",
-        &FOUR_POSITIONS_DEG,
-        1.0,
-        0.0,
-        0.0,
-        &[-d, d],
-        "",
-    ))
+    let log = parse_log(
+        &HandLog {
+            readings: &[-d, d],
+            ..HandLog::four_positions("pendulum")
+        }
+        .text(),
+    )
     .unwrap();
     let r = solve_log(&log, &zero_index()).unwrap();
     let t = &r.tests[0];
@@ -178,14 +214,15 @@ fn residual_se_is_used_when_there_are_more_positions_than_unknowns() {
     // Twelve positions, one reading each, one output off by ε: the residuals are non-zero
     // and sum to zero (the constant column), and the SE basis is the residuals.
     let angles: Vec<f64> = (0..12).map(|i| 30.0 * f64::from(i)).collect();
-    let mut text = hand_log("pendulum", &angles, 1.0, 0.0, 0.0, &[0.0], "");
+    let mut text = HandLog::at("pendulum", &angles).text();
     text = text.replacen("\n30,", "\n30,1e-6+", 1);
     // "1e-6+x" is not a number: this checks the malformed-row path on the way.
     assert!(matches!(
         solve(&text),
         Err(TumbleError::Malformed { line: 4, .. })
     ));
-    let mut lines: Vec<String> = hand_log("pendulum", &angles, 1.0, 0.0, 0.0, &[0.0], "")
+    let mut lines: Vec<String> = HandLog::at("pendulum", &angles)
+        .text()
         .lines()
         .map(String::from)
         .collect();
@@ -207,15 +244,13 @@ fn foundation_tilt_cancels_in_the_bias_and_enters_the_misalignment_fully() {
     // Tilt φ = 1": the zero difference E0 − E180 grows by 2·K1·φ (tilt counted twice), so
     // δ = difference/(2·K1·g) is off by φ = 1/60 arcmin; the sum (bias) is unchanged.
     let phi = 4.848_136_811e-6;
-    let r = solve(&hand_log(
-        "output",
-        &FOUR_POSITIONS_DEG,
-        1.0,
-        0.0,
-        phi,
-        &[0.0],
-        "",
-    ))
+    let r = solve(
+        &HandLog {
+            tilt_rad: phi,
+            ..HandLog::four_positions("output")
+        }
+        .text(),
+    )
     .unwrap();
     let f = r.tests[0].four_point.unwrap();
     // Sum: 2·K1·(K0 + K2·sin²φ); K2·φ² is 5e-16 g, the rest is rounding of π in the
@@ -230,15 +265,7 @@ fn foundation_tilt_cancels_in_the_bias_and_enters_the_misalignment_fully() {
 
 #[test]
 fn fewer_positions_than_unknowns_is_refused_with_counts() {
-    let e = solve(&hand_log(
-        "pendulum",
-        &[0.0, 120.0, 240.0],
-        1.0,
-        0.0,
-        0.0,
-        &[0.0],
-        "",
-    ));
+    let e = solve(&HandLog::at("pendulum", &[0.0, 120.0, 240.0]).text());
     assert_eq!(
         e,
         Err(TumbleError::TooFewPositions {
@@ -251,15 +278,7 @@ fn fewer_positions_than_unknowns_is_refused_with_counts() {
 
 #[test]
 fn positions_within_half_a_circle_are_refused() {
-    let e = solve(&hand_log(
-        "pendulum",
-        &[0.0, 45.0, 90.0, 135.0, 180.0],
-        1.0,
-        0.0,
-        0.0,
-        &[0.0],
-        "",
-    ));
+    let e = solve(&HandLog::at("pendulum", &[0.0, 45.0, 90.0, 135.0, 180.0]).text());
     assert!(matches!(
         e,
         Err(TumbleError::AnglesDoNotCoverCircle { largest_gap_deg, .. }) if (largest_gap_deg - 180.0).abs() < 1e-9
@@ -271,7 +290,7 @@ fn six_equally_spaced_positions_fit_four_unknowns_but_would_alias_k3() {
     // At multiples of 60°, sin 3θ = 0, so sin³θ = ¾·sin θ: K3 is not separable from K1.
     // Below 8 positions K3 is not fitted, so six positions solve with 2 dof.
     let angles: Vec<f64> = (0..6).map(|i| 60.0 * f64::from(i)).collect();
-    let r = solve(&hand_log("pendulum", &angles, 1.0, 0.0, 0.0, &[0.0], "")).unwrap();
+    let r = solve(&HandLog::at("pendulum", &angles).text()).unwrap();
     assert_eq!((r.tests[0].unknowns, r.tests[0].dof), (4, 2));
     for th in &angles {
         let s = th.to_radians().sin();
@@ -363,18 +382,22 @@ fn regression_on_time_matches_a_hand_computed_example() {
 #[test]
 fn table_combines_a_pendulum_and_an_output_log_into_both_misalignment_columns() {
     let with_t = |axis: &str| {
-        hand_log(axis, &FOUR_POSITIONS_DEG, 1.0, 0.0, 0.0, &[-1e-6, 1e-6], "")
-            .replace("angle_deg,output_v\n", "angle_deg,output_v,temperature_c\n")
-            .lines()
-            .map(|l| {
-                if l.starts_with('#') || l.starts_with("angle") {
-                    l.to_string()
-                } else {
-                    format!("{l},50.0")
-                }
-            })
-            .collect::<Vec<_>>()
-            .join("\n")
+        HandLog {
+            readings: &[-1e-6, 1e-6],
+            ..HandLog::four_positions(axis)
+        }
+        .text()
+        .replace("angle_deg,output_v\n", "angle_deg,output_v,temperature_c\n")
+        .lines()
+        .map(|l| {
+            if l.starts_with('#') || l.starts_with("angle") {
+                l.to_string()
+            } else {
+                format!("{l},50.0")
+            }
+        })
+        .collect::<Vec<_>>()
+        .join("\n")
     };
     let a = parse_log(&with_t("pendulum")).unwrap();
     let b = parse_log(&with_t("output")).unwrap();

@@ -1,10 +1,20 @@
 //! The human-readable report.
 
 use super::*;
+use crate::text_table::Columns;
 
 pub(super) fn fmt_est(e: &Estimate) -> String {
     format!("{:>16.9e} ± {:.2e}", e.value, e.se)
 }
+
+/// The table of a test's positions.
+const POSITIONS: Columns<5> = Columns([
+    ("angle_deg", 10),
+    ("n", 4),
+    ("mean_v", 16),
+    ("scatter_v", 11),
+    ("residual_v", 12),
+]);
 
 /// A human-readable report.
 pub fn render_text(r: &TumbleReport) -> String {
@@ -29,21 +39,16 @@ pub fn render_text(r: &TumbleReport) -> String {
             t.time_s
                 .map_or(String::new(), |x| format!(", t = {x:.0} s")),
         );
-        let _ = writeln!(
-            s,
-            "  {:>10} {:>4} {:>16} {:>11} {:>12}",
-            "angle_deg", "n", "mean_v", "scatter_v", "residual_v"
-        );
+        let _ = writeln!(s, "  {}", POSITIONS.header());
         for p in &t.positions {
-            let _ = writeln!(
-                s,
-                "  {:>10.4} {:>4} {:>16.10} {:>11} {:>12.3e}",
-                p.angle_deg,
-                p.readings,
-                p.mean_v,
+            let cells = [
+                format!("{:.4}", p.angle_deg),
+                p.readings.to_string(),
+                format!("{:.10}", p.mean_v),
                 p.scatter_v.map_or("-".into(), |v| format!("{v:.2e}")),
-                p.residual_v
-            );
+                format!("{:.3e}", p.residual_v),
+            ];
+            let _ = writeln!(s, "  {}", POSITIONS.row(cells));
         }
         let _ = writeln!(
             s,

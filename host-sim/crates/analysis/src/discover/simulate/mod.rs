@@ -729,11 +729,15 @@ mod tests {
     /// scatters by `edge_error(N)` of the half-width 1.645σ.
     #[test]
     fn the_default_ensemble_grows_as_the_record_shortens_within_its_bounds() {
-        assert_eq!(default_ensemble(50_000), 30);
-        assert_eq!(default_ensemble(72_000), 30);
-        assert_eq!(default_ensemble(25_000), 60);
-        assert_eq!(default_ensemble(11_765), 100);
-        assert_eq!(default_ensemble(0), 100);
+        for (points, members) in [
+            (50_000, 30),
+            (72_000, 30),
+            (25_000, 60),
+            (11_765, 100),
+            (0, 100),
+        ] {
+            assert_eq!(default_ensemble(points), members, "{points} points");
+        }
     }
 
     #[test]

@@ -3,7 +3,7 @@
 
 use super::mismatch::{sentence, Comparison, Quantity};
 use super::{Scores, Simulation};
-use crate::plot::draw::{Figure, Marker, XYCurve, XYFigure};
+use crate::plot::draw::{Figure, Marker, XYAxis, XYCurve, XYFigure};
 use plotters::style::RGBColor;
 use serde_json::{json, Map, Value};
 use std::fmt::Write as _;
@@ -426,10 +426,8 @@ fn figure(c: &Comparison, q: Quantity, title: String, unit: &str, labels: &[Stri
         .collect();
     Figure::XY(XYFigure {
         title,
-        x_desc,
-        y_desc,
-        x_log: true,
-        y_log: true,
+        x: XYAxis::log(x_desc, x_markers),
+        y: XYAxis::log(y_desc, Vec::new()),
         y_floor: None,
         curves: vec![
             XYCurve {
@@ -463,8 +461,6 @@ fn figure(c: &Comparison, q: Quantity, title: String, unit: &str, labels: &[Stri
                 points: pts(&m),
             },
         ],
-        x_markers,
-        y_markers: Vec::new(),
         x_spans,
     })
 }
