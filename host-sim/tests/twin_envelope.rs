@@ -27,18 +27,15 @@ fn gravimeter_days(seed: u64, days: f64) -> Dataset {
     s.run.interval_s = 300.0;
     s.tide.step_s = 300.0;
     s.instrument = Some(InstrumentParams::Gravimeter(GravimeterParams {
-        name: "test gravimeter".into(),
-        unit: "ugal".into(),
         offset: 1000.0,
         drift_per_day: 50.0,
         tide_factor: 1.16,
-        tide_delay_s: 0.0,
-        pressure_admittance_per_hpa: 0.0,
         noise: AllanParams {
             white_adev_1s: 20.0,
             flicker_floor: 0.3,
             random_walk_per_sqrt_s: 0.002,
         },
+        ..GravimeterParams::ideal("test gravimeter", "ugal")
     }));
     let log = simulate_log(&s, seed).unwrap();
     dataset_from_log(&log, &DatasetOptions::with_max_points(1_000_000)).unwrap()

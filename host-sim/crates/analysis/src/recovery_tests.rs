@@ -445,16 +445,10 @@ fn tide_group_corrections_of_a_gravimeter_are_what_the_tidal_analysis_reports() 
     s.run.duration_s = 30.0 * DAY;
     s.run.interval_s = 1800.0;
     s.tide.step_s = 1800.0;
-    s.instrument = Some(InstrumentParams::Gravimeter(GravimeterParams {
-        name: "quiet gravimeter".into(),
-        unit: "nm_s2".into(),
-        offset: 0.0,
-        drift_per_day: 0.0,
-        tide_factor: 1.0,
-        tide_delay_s: 0.0,
-        pressure_admittance_per_hpa: 0.0,
-        noise: AllanParams::NONE,
-    }));
+    s.instrument = Some(InstrumentParams::Gravimeter(GravimeterParams::ideal(
+        "quiet gravimeter",
+        "nm_s2",
+    )));
     let (ds, r) = residual(
         &s,
         ScenarioEffect::TidalGravity {

@@ -67,6 +67,22 @@ pub enum InstrumentParams {
 }
 
 impl GravimeterParams {
+    /// A gravimeter that reads the model's tide exactly (factor 1, no delay), with no drift, no
+    /// barometric admittance and no noise, reading 0 at t = 0. A station's instrument is this
+    /// one with what it does differently set on top (`..GravimeterParams::ideal(name, unit)`).
+    pub fn ideal(name: impl Into<String>, unit: impl Into<String>) -> Self {
+        GravimeterParams {
+            name: name.into(),
+            unit: unit.into(),
+            offset: 0.0,
+            drift_per_day: 0.0,
+            tide_factor: 1.0,
+            tide_delay_s: 0.0,
+            pressure_admittance_per_hpa: 0.0,
+            noise: AllanParams::NONE,
+        }
+    }
+
     /// Output units per g.
     pub fn unit_per_g(&self) -> Option<f64> {
         accomp_log::unit_per_g_for_suffix(&self.unit)

@@ -135,13 +135,8 @@ impl Twin {
             let per_nm =
                 unit_per_g_for_suffix(&unit).unwrap_or(1.0) / (STANDARD_GRAVITY_M_S2 * 1e9);
             let g = GravimeterParams {
-                name: format!("twin of {}", ds.output_name),
-                unit: unit.clone(),
                 offset: a,
                 drift_per_day: b * 86_400.0,
-                tide_factor: 1.0,
-                tide_delay_s: 0.0,
-                pressure_admittance_per_hpa: 0.0,
                 // A spring gravimeter's reading noise: ≈ 1 µGal (10 nm/s²) at 1 s, flicker floor
                 // 0.05 µGal.
                 noise: AllanParams {
@@ -149,6 +144,7 @@ impl Twin {
                     flicker_floor: 0.5 * per_nm,
                     random_walk_per_sqrt_s: 0.0,
                 },
+                ..GravimeterParams::ideal(format!("twin of {}", ds.output_name), unit.clone())
             };
             prov.push(format!(
                 "instrument: gravimeter, unit {unit}: from the record's output column {}",

@@ -13,18 +13,14 @@ fn gravimeter_scenario() -> Scenario {
     s.run.interval_s = 300.0;
     s.tide.step_s = 300.0;
     s.instrument = Some(InstrumentParams::Gravimeter(GravimeterParams {
-        name: "test gravimeter".into(),
-        unit: "ugal".into(),
         offset: 1000.0,
         drift_per_day: 50.0,
-        tide_factor: 1.0,
-        tide_delay_s: 0.0,
         pressure_admittance_per_hpa: -0.3,
         noise: AllanParams {
             white_adev_1s: 2.0,
-            flicker_floor: 0.0,
-            random_walk_per_sqrt_s: 0.0,
+            ..AllanParams::NONE
         },
+        ..GravimeterParams::ideal("test gravimeter", "ugal")
     }));
     s
 }
