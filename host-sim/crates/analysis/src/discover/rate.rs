@@ -18,10 +18,11 @@
 //! without biasing the gain. The floor is the white level N of the fit N + A·(2 sin(ω/2))^(−α)
 //! to the periodogram's upper three quarters ([`reading_floor`]): white reading noise under a
 //! power law, which is what a sampled thermostat's controller noise (an AR(1), α = 2 above its
-//! corner) or a programme's slow ramps (A ≈ 0) look like there. The lowest band mean of that
-//! part, which a mean of signal + noise never falls below, bounds N from above: on controller
-//! noise of tens of mK/min read with ≈ 1 mK that lowest part is still signal, and a floor taken
-//! there would stop the band at a fifth of the frequencies.
+//! corner) or a programme's slow ramps (A ≈ 0) look like there. On controller noise of tens of
+//! mK/min read with ≈ 1 mK the lowest band mean of that part is still signal, and a floor taken
+//! there would stop the band at a fifth of the frequencies. A white signal component at the top
+//! of the spectrum is not told from reading noise by any spectrum: the floor is then taken too
+//! high, and the band stops early.
 //!
 //! # The timing within a row
 //!
