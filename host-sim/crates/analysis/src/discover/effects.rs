@@ -841,6 +841,32 @@ mod tests {
         }
     }
 
+    /// A rate coupling with its timing column reports the gain at its position in the row,
+    /// p = β₁/β₀ with the ratio's σ (orthogonal columns); with the rate alone, no position.
+    #[test]
+    fn a_rate_coupling_reports_its_position_in_the_row_from_its_two_gains() {
+        let ds = Dataset {
+            unit_per_g: None,
+            ..Dataset::test_g(vec![0.0, 1.0], vec![0.0, 0.0], 1.0)
+        };
+        let e = Effect::RateCoupling("temperature_c".into());
+        let theta = Param {
+            value: f64::NAN,
+            sigma: f64::NAN,
+        };
+        let two = parameters(&e, &ds, theta, &[2.0, 1.8], &[0.1, 0.2]);
+        let pos = two
+            .iter()
+            .find(|(k, _)| k == "position_in_row")
+            .map(|(_, p)| *p)
+            .expect("position_in_row");
+        assert!((pos.value - 0.9).abs() < 1e-12);
+        let want = (0.2f64.powi(2) + (0.9f64 * 0.1).powi(2)).sqrt() / 2.0;
+        assert!((pos.sigma - want).abs() < 1e-12, "{}", pos.sigma);
+        let one = parameters(&e, &ds, theta, &[2.0], &[0.1]);
+        assert!(one.iter().all(|(k, _)| k != "position_in_row"));
+    }
+
     #[test]
     fn lag_filter_reaches_63_percent_after_one_time_constant() {
         let t: Vec<f64> = (0..=100).map(f64::from).collect();
