@@ -8,16 +8,15 @@
 //! - `wiener`: regression calibration — E[true rate | readings] by a Wiener filter of the
 //!   reading, S_signal/(S_signal + S_noise) per frequency, S_noise the reading's white floor
 //!   fitted to the upper three quarters of its own spectrum as N + A·(2 sin πfΔt)^(−α)
-//!   (`white_floor`),
+//!   (`discover::rate::reading_floor`, the floor `rate_coupling`'s band uses),
 //!   S_signal + S_noise its periodogram smoothed over ±10 % of each frequency;
 //! - `eiv`: the same filter with the reading noise the discovery's errors-in-variables model
 //!   fits to the channel (`discover::eiv::denoise`, the local-linear-trend maximum likelihood
 //!   reported as `channel_noise`);
 //! - `oracle`: the same filter with the true reading noise as the floor;
 //! - `band`: what `rate_coupling` uses (`discover::rate::band_limited_rate`) — the rate kept
-//!   only where the reading's smoothed periodogram stands 10× above its white floor (gain 1
-//!   there, 0 elsewhere), the floor the lowest mean over 10 % bands of the upper three quarters
-//!   of the spectrum (an upper bound: it narrows the band, it does not bias the gain).
+//!   only where the reading's smoothed periodogram stands 10× above that white floor (gain 1
+//!   there, 0 elsewhere).
 //!
 //! Two channels: slow ramps (a ±0.5 °C programme of 2–6 h ramps, 14 days at 120 s, RTD noise
 //! 1–5 mK) and a thermostat's fast controller noise (AR(1) of 0.165 °C, correlation 15 min,
@@ -44,69 +43,13 @@ fn moving_average(x: &[f64], half: usize) -> Vec<f64> {
         .collect()
 }
 
-/// The reading's white floor: the band means of the periodogram `p` (bins of a length-2n FFT
-/// at spacing `dt`) over its upper three quarters, in bands of 10 % of the frequency, fitted
-/// as N + A·(2 sin πfΔt)^(−α) in relative error (α on a grid 0–4, N and A ≥ 0 by least
-/// squares: a sampled random walk or AR(1) is α = 2 to the Nyquist frequency, where f^(−2) is
-/// not); N.
-fn white_floor(p: &[f64], dt: f64) -> f64 {
-    let k = p.len();
-    let big = 2 * k;
-    let mut bands: Vec<(f64, f64)> = Vec::new();
-    let mut j = k / 4;
-    while j < k {
-        let w = (j / 10).max(1);
-        let e = (j + w).min(k);
-        let m = p[j..e].iter().sum::<f64>() / (e - j) as f64;
-        let f = (j + e - 1) as f64 / 2.0 / (big as f64 * dt);
-        bands.push((f, m));
-        j = e;
-    }
-    let mut best = (f64::INFINITY, 0.0);
-    for ai in 0..=40 {
-        let alpha = ai as f64 * 0.1;
-        // Weighted normal equations of Σ((N + A·f^−α − P)/P)², then the non-negative fits.
-        let (mut s11, mut s12, mut s22, mut b1, mut b2) = (0.0, 0.0, 0.0, 0.0, 0.0);
-        for &(f, m) in &bands {
-            let g = (2.0 * (std::f64::consts::PI * f * dt).sin()).powf(-alpha);
-            let w = 1.0 / (m * m);
-            s11 += w;
-            s12 += w * g;
-            s22 += w * g * g;
-            b1 += w * m;
-            b2 += w * m * g;
-        }
-        let det = s11 * s22 - s12 * s12;
-        let mut cands = vec![(b1 / s11, 0.0), (0.0, b2 / s22)];
-        if det.abs() > 0.0 {
-            cands.push(((b1 * s22 - b2 * s12) / det, (s11 * b2 - s12 * b1) / det));
-        }
-        for (n0, a0) in cands {
-            if n0 < 0.0 || a0 < 0.0 {
-                continue;
-            }
-            let cost: f64 = bands
-                .iter()
-                .map(|&(f, m)| {
-                    let g = (2.0 * (std::f64::consts::PI * f * dt).sin()).powf(-alpha);
-                    ((n0 + a0 * g - m) / m).powi(2)
-                })
-                .sum();
-            if cost < best.0 {
-                best = (cost, n0);
-            }
-        }
-    }
-    best.1
-}
-
 /// E[true rate | readings] by a Wiener filter of the reading (see the top); `floor`: the
 /// reading noise variance, None to take it from the spectrum's top quarter.
 fn wiener_rate(w: &[f64], dt: f64, floor: Option<f64>) -> Vec<f64> {
     // The discovery's frequency-domain rate with the Wiener weight 1 − noise/S in place of its
     // band (S: the periodogram smoothed as there).
     accomp_host::discover::rate::filtered_rate(w, dt, |p| {
-        let noise = floor.unwrap_or_else(|| white_floor(p, dt));
+        let noise = floor.unwrap_or_else(|| accomp_host::discover::rate::reading_floor(p));
         move |ps| (1.0 - noise / ps).max(0.0)
     })
 }

@@ -159,15 +159,19 @@ pub(super) fn implausible(
         // Measured: on 40 null logs it refused the one rate coupling accepted (ΔBIC −0.1, model
         // t 2.91, jackknife t 2.64); the true tilt couplings of the 0 g logs had jackknife t
         // 8.5–31.5 and the true rate couplings 21.6–62.7.
+        // A rate coupling's timing column is charged ln n of its own: the gain's share of the
+        // charge is the rest.
         Effect::RateCoupling(_)
         | Effect::PressureAdmittance
         | Effect::TiltCoupling
         | Effect::AmbientCoupling(_)
-            if s.cols.len() == 1 =>
+            if s.cols.len() == 1 || matches!(s.effect, Effect::RateCoupling(_)) =>
         {
             let noise = s.noise_with.as_ref().unwrap_or(&cur.noise.model);
-            let j = super::plausibility::jackknife_gain(ds, &trial, target, noise)?;
-            (j.chi2() < s.penalty).then(|| {
+            let j = super::plausibility::jackknife_gain_of(ds, &trial, target, noise, k0)?;
+            let charge =
+                s.penalty - (s.cols.len() - 1) as f64 * (cur.r_w.len() as f64).max(2.0).ln();
+            (j.chi2() < charge).then(|| {
                 format!(
                     "its gain {:.3e} scatters over the record's {} time blocks: its jackknife \
                      standard error {:.3e} ({:.2}× the noise model's {:.3e}) leaves a χ² of \
@@ -179,7 +183,7 @@ pub(super) fn implausible(
                     j.se_jackknife / j.se_model.max(f64::MIN_POSITIVE),
                     j.se_model,
                     j.chi2(),
-                    s.penalty
+                    charge
                 )
             })
         }

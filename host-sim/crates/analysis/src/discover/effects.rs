@@ -146,9 +146,77 @@ pub struct Context {
     /// means of the lag computed at the rows' own rate. [`columns`] returns it for that effect
     /// at exactly that τ.
     pub full_rate: Vec<FastColumn>,
-    /// The `rate_coupling` column of each channel, from the channel as read
-    /// ([`rate_columns`]); a channel not here takes its column from the dataset's values.
-    pub rate_columns: Vec<(String, Vec<f64>)>,
+    /// The `rate_coupling` columns of each channel, from the channel as read
+    /// ([`rate_columns`]); a channel not here takes its columns from the dataset's values.
+    pub rate_columns: Vec<RateColumn>,
+}
+
+/// A channel's `rate_coupling` columns: its band-limited rate and, where it matters, the
+/// timing of that rate within a row ([`super::rate`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct RateColumn {
+    /// The channel.
+    pub channel: String,
+    /// The centred band-limited rate, channel unit per s.
+    pub rate: Vec<f64>,
+    /// The timing column (backward − centred rate), `None` when left out: its rms is below
+    /// [`super::rate::TIMING_MIN_RATIO`] × the rate's.
+    pub timing: Option<Vec<f64>>,
+    /// rms of the timing column / rms of the rate.
+    pub timing_ratio: f64,
+    /// Taken on the full-rate rows and averaged into the bins (bins of fewer than
+    /// [`super::fullrate::MIN_ROWS_PER_BIN`] rows), not on the bins.
+    pub from_rows: bool,
+}
+
+impl RateColumn {
+    /// The columns of a channel from its [`super::rate::RateColumns`], the timing kept when it
+    /// matters.
+    fn new(channel: &str, c: super::rate::RateColumns, from_rows: bool) -> Self {
+        let timing_ratio = c.timing_ratio();
+        Self {
+            channel: channel.to_owned(),
+            rate: c.rate,
+            timing: (timing_ratio >= super::rate::TIMING_MIN_RATIO).then_some(c.timing),
+            timing_ratio,
+            from_rows,
+        }
+    }
+
+    /// Its design columns: the rate, then the timing if fitted.
+    pub fn columns(&self) -> Vec<Vec<f64>> {
+        std::iter::once(self.rate.clone())
+            .chain(self.timing.clone())
+            .collect()
+    }
+
+    /// What the output says about how the columns were made (the fallbacks that change the
+    /// coupling's fit).
+    pub fn note(&self) -> String {
+        format!(
+            "rate_coupling ({}): rate band-limited above the channel's reading floor{}; {}",
+            self.channel,
+            if self.from_rows {
+                " on the full-rate rows, averaged into the bins (bins of fewer than 4 rows: a \
+                 rate on their uneven means would not be the rows' rate)"
+            } else {
+                ""
+            },
+            match self.timing {
+                Some(_) => format!(
+                    "its timing within a row fitted as position_in_row (1 = backward, \
+                     0 = centred; its column {:.0} % of the rate's)",
+                    100.0 * self.timing_ratio
+                ),
+                None => format!(
+                    "position_in_row not fitted: its column is {:.1} % of the rate's (below \
+                     {:.0} %), the rate taken as centred",
+                    100.0 * self.timing_ratio,
+                    100.0 * super::rate::TIMING_MIN_RATIO
+                ),
+            }
+        )
+    }
 }
 
 /// A lag of the full-rate stage as a column of the binned model (see [`Context::full_rate`]).
@@ -306,24 +374,48 @@ pub fn step_durations(ds: &Dataset) -> Vec<f64> {
 /// ±15 min keeps it and cuts the reading noise by √(30 min/Δt).
 pub const TILT_COUPLING_SMOOTHING_S: f64 = 900.0;
 
-/// The `rate_coupling` column of every driver channel of `ds`, from its values `as_read` (the
+/// The `rate_coupling` columns of every driver channel of `ds`, from its values `as_read` (the
 /// channels before the errors-in-variables smoothing, same names and rows): the rate
-/// band-limited to where the channel stands above its reading noise ([`super::rate`]).
-pub fn rate_columns(ds: &Dataset, as_read: &[super::import::Channel]) -> Vec<(String, Vec<f64>)> {
+/// band-limited to where the channel stands above its reading noise, and its timing within a
+/// row ([`super::rate`]). With `full` (the same log's rows, unbinned) and bins of more than one
+/// and fewer than [`super::fullrate::MIN_ROWS_PER_BIN`] rows, they are taken on the rows and
+/// averaged into the bins: bins of 1 or 2 rows (70.8 s bins of 60 s rows) have uneven counts
+/// and times, which a rate on the bins, spaced as if even, does not follow (measured: its gain
+/// 6 % high), while the bin mean of the rows' rate is what the output's bin mean holds.
+pub fn rate_columns(
+    ds: &Dataset,
+    as_read: &[super::import::Channel],
+    full: Option<&Dataset>,
+) -> Vec<RateColumn> {
+    let rpp = ds.rows_per_point();
+    let rows = full.filter(|_| rpp > 1.0 && rpp < super::fullrate::MIN_ROWS_PER_BIN);
+    let driver = |c: &&super::import::Channel| {
+        matches!(
+            c.kind,
+            ChannelKind::Temperature | ChannelKind::Pressure | ChannelKind::Other
+        )
+    };
     as_read
         .iter()
         .filter(|c| c.values.len() == ds.t_s.len())
-        .filter(|c| {
-            matches!(
-                c.kind,
-                ChannelKind::Temperature | ChannelKind::Pressure | ChannelKind::Other
-            )
-        })
+        .filter(driver)
         .map(|c| {
-            (
-                c.name.clone(),
-                super::rate::band_limited_rate(&c.values, &ds.t_s, &ds.segment_start),
-            )
+            let on_rows = rows.and_then(|f| {
+                let ch = f.channels.iter().find(|r| r.name == c.name)?;
+                let r = super::rate::band_limited_rates(&ch.values, &f.t_s, &f.segment_start);
+                Some(super::rate::RateColumns {
+                    rate: super::import::block_means_like(f, ds, &r.rate)?,
+                    timing: super::import::block_means_like(f, ds, &r.timing)?,
+                })
+            });
+            match on_rows {
+                Some(r) => RateColumn::new(&c.name, r, true),
+                None => RateColumn::new(
+                    &c.name,
+                    super::rate::band_limited_rates(&c.values, &ds.t_s, &ds.segment_start),
+                    false,
+                ),
+            }
         })
         .collect()
 }
@@ -583,10 +675,13 @@ pub fn columns(e: &Effect, ds: &Dataset, ctx: &Context, theta: f64) -> Vec<Vec<f
                 t.iter().map(|x| (w * x).cos()).collect(),
             ]
         }
-        Effect::RateCoupling(name) => match ctx.rate_columns.iter().find(|(c, _)| c == name) {
-            Some((_, col)) => vec![col.clone()],
+        Effect::RateCoupling(name) => match ctx.rate_columns.iter().find(|c| &c.channel == name) {
+            Some(c) => c.columns(),
             None => channel_values(ds, name)
-                .map(|v| vec![super::rate::band_limited_rate(v, t, seg)])
+                .map(|v| {
+                    RateColumn::new(name, super::rate::band_limited_rates(v, t, seg), false)
+                        .columns()
+                })
                 .unwrap_or_default(),
         },
         Effect::Lag2Coupling(name) => channel_values(ds, name)
@@ -669,7 +764,20 @@ pub fn parameters(
             vec![("coefficient".into(), p(b0, s0)), ("lag_s".into(), theta)]
         }
         Effect::PressureAdmittance => vec![("coefficient".into(), p(b0, s0))],
-        Effect::RateCoupling(_) => vec![("coefficient".into(), p(b0, s0))],
+        // With its timing column: the gain at position p in the row, b·(rate + p·timing), so
+        // p = β₁/β₀; the two columns are orthogonal (odd and even in time), so its σ is the
+        // ratio's without a covariance term.
+        Effect::RateCoupling(_) => {
+            let mut v = vec![("coefficient".into(), p(b0, s0))];
+            if let (Some(&b1), Some(&s1)) = (beta.get(1), se.get(1)) {
+                let pos = b1 / b0;
+                v.push((
+                    "position_in_row".into(),
+                    p(pos, (s1 * s1 + (pos * s0).powi(2)).sqrt() / b0.abs()),
+                ));
+            }
+            v
+        }
         Effect::Lag2Coupling(_) => vec![("tau_s".into(), theta), ("coefficient".into(), p(b0, s0))],
         Effect::CreepDrift => vec![("exponent".into(), theta), ("amplitude".into(), p(b0, s0))],
     };
@@ -732,9 +840,41 @@ mod tests {
         };
         for e in &all {
             let named = parameters(e, &ds, theta, &[1.0, 1.0], &[0.1, 0.1]);
-            let keys: Vec<&str> = named.iter().map(|(k, _)| k.as_str()).collect();
+            // A rate coupling's timing within the row is the discovery's own (the simulator's
+            // rate is a backward difference, its position fixed).
+            let keys: Vec<&str> = named
+                .iter()
+                .map(|(k, _)| k.as_str())
+                .filter(|k| !(*k == "position_in_row" && matches!(e, Effect::RateCoupling(_))))
+                .collect();
             assert_eq!(keys, e.kind().parameter_names(), "{}", e.name());
         }
+    }
+
+    /// A rate coupling with its timing column reports the gain at its position in the row,
+    /// p = β₁/β₀ with the ratio's σ (orthogonal columns); with the rate alone, no position.
+    #[test]
+    fn a_rate_coupling_reports_its_position_in_the_row_from_its_two_gains() {
+        let ds = Dataset {
+            unit_per_g: None,
+            ..Dataset::test_g(vec![0.0, 1.0], vec![0.0, 0.0], 1.0)
+        };
+        let e = Effect::RateCoupling("temperature_c".into());
+        let theta = Param {
+            value: f64::NAN,
+            sigma: f64::NAN,
+        };
+        let two = parameters(&e, &ds, theta, &[2.0, 1.8], &[0.1, 0.2]);
+        let pos = two
+            .iter()
+            .find(|(k, _)| k == "position_in_row")
+            .map(|(_, p)| *p)
+            .expect("position_in_row");
+        assert!((pos.value - 0.9).abs() < 1e-12);
+        let want = (0.2f64.powi(2) + (0.9f64 * 0.1).powi(2)).sqrt() / 2.0;
+        assert!((pos.sigma - want).abs() < 1e-12, "{}", pos.sigma);
+        let one = parameters(&e, &ds, theta, &[2.0], &[0.1]);
+        assert!(one.iter().all(|(k, _)| k != "position_in_row"));
     }
 
     #[test]

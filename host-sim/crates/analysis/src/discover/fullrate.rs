@@ -17,8 +17,9 @@
 //! are weighted as they are at each frequency; the slow terms (tide, drift, the binned model)
 //! are below the band or removed by each segment's detrending. Neighbouring bins of a Hann window
 //! are correlated: χ² is divided by its equivalent noise bandwidth (1.5 bins). The channel's
-//! white reading noise (the floor of S_xx) attenuates Ĥ: it is subtracted from S_xx and the band
-//! stops where the channel's spectrum falls below [`FLOOR_FACTOR`] × that floor.
+//! white reading noise (the floor of S_xx, [`super::rate::reading_floor`]) attenuates Ĥ: it is
+//! subtracted from S_xx and the band stops where the channel's spectrum falls below
+//! [`FLOOR_FACTOR`] × that floor.
 
 use super::effects::{self, log_grid, Effect, FastColumn, Param};
 use super::import::{block_means_like, ChannelKind, Dataset};
@@ -184,7 +185,10 @@ struct Band {
 
 fn band(s: &Spectra) -> Option<Band> {
     let m = s.sxx.len();
-    let floor = s.sxx[1..].iter().copied().fold(f64::INFINITY, f64::min);
+    // The channel's white reading noise under its signal (`rate::reading_floor`: the white
+    // level of a power law + white fit to the upper three quarters, never above their lowest
+    // band mean).
+    let floor = super::rate::reading_floor(&s.sxx);
     if !(floor.is_finite() && floor >= 0.0) {
         return None;
     }

@@ -140,9 +140,11 @@ pub fn discover(
 }
 
 /// [`discover`] on a binned dataset with its full-rate rows (`full`, the same log unbinned):
-/// after the binned rounds the full-rate stage ([`fullrate`]) fits the lags faster than the
-/// bins, and what it finds joins the final model (its column averaged into the bins, τ held)
-/// before the joint fit, so the parameters, the residual and the checks after it hold it.
+/// on bins of at least [`fullrate::MIN_ROWS_PER_BIN`] rows, after the binned rounds the
+/// full-rate stage ([`fullrate`]) fits the lags faster than the bins, and what it finds joins
+/// the final model (its column averaged into the bins, τ held) before the joint fit, so the
+/// parameters, the residual and the checks after it hold it; on fewer, the rows give the rate
+/// columns ([`effects::rate_columns`]).
 pub fn discover_binned(
     ds: Dataset,
     full: Option<Dataset>,
@@ -152,7 +154,7 @@ pub fn discover_binned(
     let measured_channels = ds.channels.clone();
     // Errors in variables: each channel's reading noise and smoother are fitted and reported;
     // see FIT_ON_SMOOTHED_CHANNELS for whether the effects are fitted on the smoothed states.
-    let (ds, channel_noise) = eiv::denoise(&ds, FIT_ON_SMOOTHED_CHANNELS);
+    let (mut ds, channel_noise) = eiv::denoise(&ds, FIT_ON_SMOOTHED_CHANNELS);
     // With a table, its temperature models are tested first: an error found there enters the
     // baseline, so the catalogue is searched on what the table does not explain.
     let (base, table_check) = match table {
@@ -167,9 +169,13 @@ pub fn discover_binned(
     // A rate coupling's column is the band-limited rate of the channel as read ([`rate`]): the
     // smoothed state's filter is set by an estimated reading noise whose error would pass into
     // the gain.
-    ctx.rate_columns = effects::rate_columns(&ds, &measured_channels);
+    ctx.rate_columns = effects::rate_columns(&ds, &measured_channels, full.as_ref());
+    ds.notes
+        .extend(ctx.rate_columns.iter().map(effects::RateColumn::note));
     let (cands, not_candidates) = effects::candidates(&ds, &ctx, base.tilt_subtracted);
     let rounds = select::rounds(&ds, &base.target, &base.columns, &cands, &ctx, cfg);
+    // The rows of bins of fewer than `MIN_ROWS_PER_BIN` served the rate columns only.
+    let full = full.filter(|_| ds.rows_per_point() >= fullrate::MIN_ROWS_PER_BIN);
     let mut full_rate = full.map(|f| fullrate::analyse(&f, &ds, &rounds.accepted).map(|r| (f, r)));
     let fast = match &mut full_rate {
         Some(Ok((f, r))) => {
@@ -280,8 +286,9 @@ pub fn discover_log(
     let mut ds = import::dataset_from_log(&log, &opts)?;
     note_bad_rows(&mut ds, bad);
     // Bins of several rows hide what is faster than two of them: the full-rate rows are kept
-    // for the fast terms (the log itself is dropped first: it holds every column read).
-    let full = if ds.rows_per_point() >= fullrate::MIN_ROWS_PER_BIN {
+    // for the fast terms, and on bins of a few rows for the rate columns
+    // (`effects::rate_columns`); the log itself is dropped first: it holds every column read.
+    let full = if ds.rows_per_point() > 1.0 {
         Some(import::full_rate_from_log(&log, &opts)?)
     } else {
         None

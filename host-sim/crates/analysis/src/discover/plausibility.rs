@@ -172,10 +172,22 @@ pub fn jackknife_gain(
     target: &[f64],
     noise: &NoiseModel,
 ) -> Option<JackknifeGain> {
+    jackknife_gain_of(ds, cols, target, noise, cols.len().checked_sub(1)?)
+}
+
+/// [`jackknife_gain`] of the gain of column `at` (a coupling with columns after its gain: a
+/// rate's timing within the row).
+pub fn jackknife_gain_of(
+    ds: &Dataset,
+    cols: &[Vec<f64>],
+    target: &[f64],
+    noise: &NoiseModel,
+    at: usize,
+) -> Option<JackknifeGain> {
     use super::baseline::{gls, Rows};
     let n = target.len();
     let k = cols.len();
-    if k == 0 || n < JACKKNIFE_BLOCKS * (k + 2) {
+    if at >= k || n < JACKKNIFE_BLOCKS * (k + 2) {
         return None;
     }
     let full = gls(cols, target, 0.0, &Rows::with_noise(noise, &ds.t_s, None));
@@ -188,14 +200,14 @@ pub fn jackknife_gain(
             0.0,
             &Rows::with_noise(noise, &ds.t_s, Some(&keep)),
         )
-        .beta[k - 1]
+        .beta[at]
     });
     let g = JACKKNIFE_BLOCKS as f64;
     let mean = gains.iter().sum::<f64>() / g;
     let var = (g - 1.0) / g * gains.iter().map(|x| (x - mean).powi(2)).sum::<f64>();
     Some(JackknifeGain {
-        gain: full.beta[k - 1],
-        se_model: full.se[k - 1],
+        gain: full.beta[at],
+        se_model: full.se[at],
         se_jackknife: var.sqrt(),
     })
 }
