@@ -19,7 +19,6 @@ use crate::discover::import::{dataset_from_log, Dataset, DatasetOptions};
 use crate::log::Log;
 use crate::numerics::linalg::least_squares;
 use crate::sim::effects::ScenarioEffect;
-use crate::sim::noise::AllanParams;
 use crate::sim::scenario::Scenario;
 use crate::sim::simulate_log;
 use crate::sim::twin::record::silence_readings;
