@@ -276,8 +276,8 @@ fn off_catalogue_shapes_are_named_by_their_closest_cause_and_a_poor_fit_is_said(
     hidden::assert_at_least_percent(named, DRAWS, 75, "closest cause named at SNR 8–15");
     // Stated before measuring: ≥ 50 % of the shapes the catalogue cannot describe. Measured 2/4:
     // both settling steps; not the power laws, never told from ln(1 + t/τ) over 3 days
-    // (docs/discovery.md, "Shape check"). The exact controls: 1/4 (an exact lag at SNR 54 on the
-    // true temperature, fitted on the smoothed RTD reading), at the stated limit. The two-stage
+    // (docs/discovery.md, "Shape check"). The exact controls: 0/4 (1/4 with plays alone: an exact
+    // lag at SNR 54 on the true temperature, fitted on the smoothed RTD reading). The two-stage
     // lags: named `lag2_coupling` 2/2 with a good shape check.
     hidden::assert_at_least_percent(poor_off, n_off, 50, "poor fit said at SNR 40–80");
     assert_eq!(
