@@ -637,6 +637,59 @@ mod tests {
     }
 
     #[test]
+    fn a_relay_switches_at_its_thresholds_and_its_loop_area_is_twice_its_gap() {
+        let t = [0.5, 0.8, 0.6, 0.2, 0.4, 0.8, 0.1];
+        let (r, ups, downs) = relay(&t, 0.3, 0.7);
+        // Virgin between the thresholds, up at 0.8, held at 0.6, down at 0.2, held, up, down.
+        assert_eq!(r, vec![0.0, 1.0, 1.0, -1.0, -1.0, 1.0, -1.0]);
+        assert_eq!(
+            (ups, downs),
+            (1, 2),
+            "the virgin state's first setting is no switch"
+        );
+        assert_eq!(relay_branch(&t, 0.3, 0.7)[2], -1.0);
+        // One relay of weight 1: +1 on heating, −1 on cooling over its 0.4 °C gap.
+        let p = Preisach::from_weights(&[], &[], &[[0.3, 0.7]], &[2.0]).expect("a relay");
+        assert_eq!(p.relay_weights, vec![1.0]);
+        assert!((p.width_c() - 0.2).abs() < 1e-12);
+        let a = p.major_loop_area_c(0.0, 1.0);
+        assert!((a - 0.8).abs() < 0.02, "{a}");
+        // A play of half-width 0.1 on the same range: 2 over the middle 0.6 °C, a linear turn
+        // of 0.2 °C at each end (0.2 each): 1.6.
+        let q = Preisach::from_weights(&[0.1], &[1.0], &[], &[]).expect("a play");
+        let b = q.major_loop_area_c(0.0, 1.0);
+        assert!((b - 1.6).abs() < 0.02, "{b}");
+    }
+
+    #[test]
+    fn a_relay_among_plays_is_found_by_the_nnls_and_a_useless_one_is_pruned() {
+        // Triangle cycles of 0.6–1 °C swings around 0: a relay [−0.1, 0.2] of weight 2 and a
+        // play of 0.05 of weight 1, in small deterministic noise.
+        let mut temp = Vec::new();
+        for c in 0..30 {
+            let amp = 0.3 + 0.2 * f64::from(c % 3) / 2.0;
+            for i in 0..100 {
+                temp.push(-amp + 2.0 * amp * f64::from(i) / 100.0);
+            }
+            for i in 0..100 {
+                temp.push(amp - 2.0 * amp * f64::from(i) / 100.0);
+            }
+        }
+        let widths = [0.02, 0.05, 0.1];
+        let relays = [[-0.1, 0.2], [-0.25, 0.05], [0.0, 0.25]];
+        let mut cols: Vec<Vec<f64>> = widths.iter().map(|&r| branch(&temp, r)).collect();
+        cols.extend(relays.iter().map(|r| relay_branch(&temp, r[0], r[1])));
+        let y: Vec<f64> = (0..temp.len())
+            .map(|i| cols[1][i] + 2.0 * cols[3][i] + 0.01 * (f64::from(i as u32) * 1.3).sin())
+            .collect();
+        let (p, sign, active) = fit_preisach(&widths, &relays, &cols, &y).expect("a fit");
+        assert_eq!(sign, 1.0);
+        assert_eq!(p.relays_c, vec![[-0.1, 0.2]], "{p:?}");
+        assert!((p.relay_weights[0] - 2.0 / 3.0).abs() < 0.01, "{p:?}");
+        assert!(active <= 3, "{p:?}");
+    }
+
+    #[test]
     fn a_lag_and_a_loop_within_the_margin_are_said_to_be_indistinguishable() {
         let w = lag_or_loop_warning("thermal_lag", -120.0, -115.0).expect("said");
         assert!(w.contains("thermal_hysteresis (ΔBIC -115.0)"), "{w}");
