@@ -260,6 +260,7 @@ mod tests {
             S::ThermalHysteresis {
                 half_width: 1.0,
                 play_half_width_c: 1.0,
+                relays: Vec::new(),
             },
             S::SelfHeating {
                 tau_s: 1.0,

@@ -46,6 +46,23 @@ pub struct TideGroupTerm {
     pub phase_deg: f64,
 }
 
+/// A relay hysteron of `thermal_hysteresis`: its state R is +1 once the mount temperature has
+/// risen to `upper_c`, −1 once it has fallen to `lower_c`, unchanged in between (unknown, 0,
+/// until the first of these); it adds `half_width`·(−R), so that between the thresholds the bias
+/// is `half_width` higher on the heating branch than the mean of the branches — the sense of the
+/// play term and of the discovery's relays (JSON `preisach.relays_c` = [[`lower_c`, `upper_c`]],
+/// `relay_weights` × the reported `half_width` for a saturated loop).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Relay {
+    /// Lower threshold β, °C.
+    pub lower_c: f64,
+    /// Upper threshold α > β, °C.
+    pub upper_c: f64,
+    /// Branch half-width between the thresholds, unit.
+    pub half_width: f64,
+}
+
 /// One catalogue effect with its parameters (units as `accomp discover` reports them; "unit" is
 /// the output unit of the instrument: V for the accelerometer, the gravity unit for the
 /// gravimeter).
@@ -59,12 +76,16 @@ pub enum ScenarioEffect {
         /// Output per °C of lag error, unit/°C.
         coefficient: f64,
     },
-    /// `half_width`·(T − p_r[T])/r: a play operator of half-width r on the mount temperature.
+    /// `half_width`·(T − p_r[T])/r: a play operator of half-width r on the mount temperature,
+    /// plus Σ h_j·(−R_j[T]) over `relays` (the Preisach model's switching elements, [`Relay`]).
     ThermalHysteresis {
         /// Bias half-difference between the heating and cooling branches, unit.
         half_width: f64,
         /// Play half-width r, °C.
         play_half_width_c: f64,
+        /// Relay hysterons beside the play (none by default).
+        #[serde(default, skip_serializing_if = "Vec::is_empty")]
+        relays: Vec<Relay>,
     },
     /// `coefficient`·(L_τ[a²] − a²): torquer self-heating after an input change (unit/g²).
     SelfHeating {
@@ -268,8 +289,18 @@ impl ScenarioEffect {
             ScenarioEffect::ThermalHysteresis {
                 half_width,
                 play_half_width_c,
+                relays,
             } => {
                 positive("play_half_width_c", *play_half_width_c)?;
+                for r in relays {
+                    finite("relays.half_width", r.half_width)?;
+                    finite("relays.lower_c", r.lower_c)?;
+                    check(
+                        r.upper_c > r.lower_c && r.upper_c.is_finite(),
+                        "relays.upper_c",
+                        "must be finite and above lower_c",
+                    )?;
+                }
                 finite("half_width", *half_width)
             }
             ScenarioEffect::Warmup { tau_s, amplitude }
@@ -454,9 +485,10 @@ enum State {
     Lag {
         x: Option<(f64, f64)>,
     },
-    /// Play operator output.
+    /// Play operator output and the relays' states (+1, −1; 0 before the first switch).
     Play {
         p: Option<f64>,
+        relays: Vec<f64>,
     },
     /// Index of the ambient channel and its lag state.
     Ambient {
@@ -554,7 +586,10 @@ impl EffectChain {
                 ScenarioEffect::ThermalLag { .. } | ScenarioEffect::SelfHeating { .. } => {
                     State::Lag { x: None }
                 }
-                ScenarioEffect::ThermalHysteresis { .. } => State::Play { p: None },
+                ScenarioEffect::ThermalHysteresis { relays, .. } => State::Play {
+                    p: None,
+                    relays: vec![0.0; relays.len()],
+                },
                 ScenarioEffect::AmbientCoupling { channel, .. } => {
                     let i = setup
                         .ambient
@@ -654,14 +689,24 @@ impl EffectChain {
                     ScenarioEffect::ThermalHysteresis {
                         half_width,
                         play_half_width_c,
+                        relays,
                     },
-                    State::Play { p },
+                    State::Play { p, relays: states },
                 ) => {
                     let r = *play_half_width_c;
                     let tc = d.temperature_c;
                     let q = p.unwrap_or(tc).max(tc - r).min(tc + r);
                     *p = Some(q);
-                    half_width * (tc - q) / r
+                    let mut sum = half_width * (tc - q) / r;
+                    for (rel, st) in relays.iter().zip(states.iter_mut()) {
+                        if tc >= rel.upper_c {
+                            *st = 1.0;
+                        } else if tc <= rel.lower_c {
+                            *st = -1.0;
+                        }
+                        sum -= rel.half_width * *st;
+                    }
+                    sum
                 }
                 (ScenarioEffect::Warmup { tau_s, amplitude }, _) => amplitude * (-t / tau_s).exp(),
                 (ScenarioEffect::AgingDrift { tau_s, amplitude }, _) => {
@@ -1228,6 +1273,7 @@ mod tests {
                 ScenarioEffect::ThermalHysteresis {
                     half_width: 1.0,
                     play_half_width_c: 0.5,
+                    relays: Vec::new(),
                 },
             ],
             setup(),
@@ -1252,6 +1298,41 @@ mod tests {
         .unwrap();
         assert_eq!(s.output_term(&drive(49.9, 0.0)), 0.0);
         assert_eq!(s.output_term(&drive(50.0, 0.0)), 3.0);
+    }
+
+    #[test]
+    fn a_relay_switches_at_its_thresholds_and_holds_in_between() {
+        // A play of zero weight and one relay, thresholds 0.2 and 0.6 °C, half-width 2.
+        let mut c = EffectChain::new(
+            &[ScenarioEffect::ThermalHysteresis {
+                half_width: 0.0,
+                play_half_width_c: 0.1,
+                relays: vec![Relay {
+                    lower_c: 0.2,
+                    upper_c: 0.6,
+                    half_width: 2.0,
+                }],
+            }],
+            setup(),
+        )
+        .unwrap();
+        // Virgin between the thresholds: no term until a threshold is reached.
+        let up = [0.4, 0.5, 0.59, 0.6, 0.7, 0.5, 0.3, 0.21, 0.2, 0.1, 0.4];
+        let want = [0.0, 0.0, 0.0, -2.0, -2.0, -2.0, -2.0, -2.0, 2.0, 2.0, 2.0];
+        for (k, (t, w)) in up.iter().zip(want).enumerate() {
+            let y = c.output_term(&drive(k as f64, *t));
+            assert_eq!(y, w, "at {t} °C");
+        }
+        let bad = ScenarioEffect::ThermalHysteresis {
+            half_width: 0.0,
+            play_half_width_c: 0.1,
+            relays: vec![Relay {
+                lower_c: 0.6,
+                upper_c: 0.2,
+                half_width: 1.0,
+            }],
+        };
+        assert!(bad.validate(0).is_err());
     }
 
     #[test]

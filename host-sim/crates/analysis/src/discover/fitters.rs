@@ -65,34 +65,54 @@ fn best_theta(cur: &Current, e: &Effect, ctx: &Context) -> Option<(f64, f64, boo
     })
 }
 
-/// Best Preisach distribution of play widths for `thermal_hysteresis`: each play of the width
-/// grid whitened and projected off the current model, non-negative weights by NNLS on the
-/// whitened residual (`hysteresis::fit_preisach`). Returns the distribution, its characteristic
-/// width θ, its raw column at θ, the whitened RSS with it, the number of widths with a weight
-/// and whether θ sits at an end of the grid (the distribution wants widths outside the range).
-fn best_preisach(cur: &Current) -> Option<(Preisach, f64, Vec<f64>, f64, usize, bool)> {
+/// [`best_preisach`]'s result: (distribution, θ, raw column, RSS, active, M, at edge).
+type PreisachFit = (Preisach, f64, Vec<f64>, f64, usize, usize, bool);
+
+/// Best Preisach distribution for `thermal_hysteresis`: each play of the width grid and each
+/// identifiable relay of the threshold dictionary (`hysteresis::relay_dictionary`, gaps of at
+/// least twice the narrowest play's dead band) whitened and projected off the current model,
+/// non-negative weights by NNLS on the whitened residual (`hysteresis::fit_preisach`, relays
+/// that do not pay ln n pruned). Returns the distribution (its reach and loop area on the
+/// record), its characteristic width θ, its raw column at θ, the whitened RSS with it, the
+/// number of plays and relays with a weight, the dictionary's size M (plays + relays: what the
+/// search is charged for) and whether θ sits at an end of the dictionary's widths (the
+/// distribution wants widths outside the range of plays and relay half-gaps).
+fn best_preisach(cur: &Current) -> Option<PreisachFit> {
     let ds = cur.ds;
     let temp = &ds.channel(ChannelKind::Temperature)?.values;
     let g = effects::grid(&Effect::ThermalHysteresis, ds);
     if g.len() < 2 {
         return None;
     }
-    let mut cols = Vec::with_capacity(g.len());
-    for &r in &g {
-        let mut w = cur.rows.whiten(&hysteresis::branch(temp, r), cur.phi);
+    let relays = hysteresis::relay_dictionary(temp, 4.0 * g[0]);
+    let mut cols = Vec::with_capacity(g.len() + relays.len());
+    let raw = g.iter().map(|&r| hysteresis::branch(temp, r)).chain(
+        relays
+            .iter()
+            .map(|r| hysteresis::relay_branch(temp, r[0], r[1])),
+    );
+    for c in raw {
+        let mut w = cur.rows.whiten(&c, cur.phi);
         if w.iter().any(|v| !v.is_finite()) {
             return None;
         }
         super::baseline::orthogonalize(&cur.basis.q, &mut w);
         cols.push(w);
     }
-    let (p, _, active) = hysteresis::fit_preisach(&g, &cols, &cur.r_w)?;
+    let (p, _, active) = hysteresis::fit_preisach(&g, &relays, &cols, &cur.r_w)?;
+    let p = p.on_record(temp);
     let theta = p.width_c();
     let col = p.column(temp, theta);
     let rss = cur.rss_with(std::slice::from_ref(&col));
+    // The search's range of widths: the narrowest play to the widest of the plays and the
+    // relays' half-gaps (a relay's gap reaches over most of the range, past the widest play).
     let half_step = (g[1] / g[0]).sqrt();
-    let at_edge = theta <= g[0] * half_step || theta >= g[g.len() - 1] / half_step;
-    Some((p, theta, col, rss, active, at_edge))
+    let top = relays
+        .iter()
+        .map(|r| 0.5 * (r[1] - r[0]))
+        .fold(g[g.len() - 1], f64::max);
+    let at_edge = theta <= g[0] * half_step || theta >= top / half_step;
+    Some((p, theta, col, rss, active, g.len() + relays.len(), at_edge))
 }
 
 /// Best single step: a fast scan of every position on the whitened residual (ignoring the
@@ -272,16 +292,16 @@ pub(super) fn score_all(
         // A step's transition duration is fitted here (the candidate carries 0).
         let mut effect = e.clone();
         let (theta, rss, k_nl, at_edge) = match e {
-            // A Preisach distribution: the width search is charged like the single play's grid,
-            // each width beyond the first with a weight as one more parameter.
+            // A Preisach distribution: the search over its dictionary (plays and relays) is
+            // charged like a grid of that many points, each operator beyond the first with a
+            // weight as one more parameter.
             Effect::ThermalHysteresis => match best_preisach(cur) {
-                Some((p, th, col, r, active, edge)) => {
-                    let m = effects::grid(e, cur.ds).len() as f64;
+                Some((p, th, col, r, active, m, edge)) => {
                     preisach = Some((p, col));
                     (
                         th,
                         r,
-                        nl_penalty(m) + active.saturating_sub(1) as f64 * n_eff.ln(),
+                        nl_penalty(m as f64) + active.saturating_sub(1) as f64 * n_eff.ln(),
                         edge,
                     )
                 }

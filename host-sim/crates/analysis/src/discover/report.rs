@@ -75,9 +75,15 @@ pub fn json(d: &Discovery) -> Value {
                 o["ambiguous_with"] = json!(amb);
             }
             // The Preisach distribution of play widths the hysteresis column is made of.
+            // The loop's area: the coefficient (the branch half-width) × the column's loop area.
             if a.effect == super::effects::Effect::ThermalHysteresis {
                 if let Some(p) = &s.hysteresis {
                     o["preisach"] = json!(p);
+                    let area = loop_area(a, p);
+                    o["preisach"]["loop_area"] = json!(area);
+                    if let Some(u) = u {
+                        o["preisach"]["loop_area_g"] = json!(area / u);
+                    }
                 }
             }
             o
@@ -314,6 +320,21 @@ pub fn text(d: &Discovery) -> String {
                     .map(|(r, w)| format!("{r:.4} °C × {:.0} %", 100.0 * w))
                     .collect();
                 let _ = writeln!(o, "     Preisach play half-widths: {}", w.join(", "));
+                if !p.relays_c.is_empty() {
+                    let r: Vec<String> = p
+                        .relays_c
+                        .iter()
+                        .zip(&p.relay_weights)
+                        .map(|(r, w)| format!("[{:.3}, {:.3}] °C × {:.0} %", r[0], r[1], 100.0 * w))
+                        .collect();
+                    let _ = writeln!(o, "     Preisach relays [β, α]: {}", r.join(", "));
+                }
+                let _ = writeln!(
+                    o,
+                    "     loop area ∫(heating − cooling) dT over the record's 1–99 % range: {:.4e} {}·°C",
+                    loop_area(a, p),
+                    d.dataset.output_unit
+                );
             }
         }
     }
@@ -611,6 +632,17 @@ pub fn write_report(d: &Discovery, dir: &Path, format: Format) -> Result<(), Dis
     }
     crate::log::outputs::write_file(&dir.join("report.md"), md.as_bytes())?;
     Ok(())
+}
+
+/// The accepted loop's area ∫(heating − cooling) dT, output unit·°C: its coefficient (the
+/// branch half-width) × the column's own loop area (`hysteresis::Preisach::loop_area_c`).
+fn loop_area(a: &super::select::Accepted, p: &super::hysteresis::Preisach) -> f64 {
+    let hw = a
+        .params
+        .iter()
+        .find(|(k, _)| k == "half_width")
+        .map_or(f64::NAN, |(_, v)| v.value);
+    hw * p.loop_area_c
 }
 
 #[cfg(test)]

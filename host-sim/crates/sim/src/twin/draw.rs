@@ -223,6 +223,7 @@ impl EffectDraws {
             EffectKind::ThermalHysteresis => ScenarioEffect::ThermalHysteresis {
                 half_width: need("half_width")?,
                 play_half_width_c: need("play_half_width_c")?,
+                relays: Vec::new(),
             },
             EffectKind::SelfHeating => ScenarioEffect::SelfHeating {
                 tau_s: need("tau_s")?,
