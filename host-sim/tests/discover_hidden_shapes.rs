@@ -85,6 +85,10 @@ impl Shape {
 }
 
 /// The hidden series (unit size) on the TRUE channels.
+/// The loop tests' logs: 14 days at 120 s on the temperature programme.
+const PROGRAMME_ROWS: usize = 14 * 720;
+const PROGRAMME_DT_S: f64 = 120.0;
+
 fn series(s: Shape, st: &synth::Station) -> Vec<f64> {
     let t = &st.t_s;
     let temp = &st.temp_true_c;
@@ -300,8 +304,7 @@ fn hysteresis_branch_offsets_of_a_few_microg_are_found_in_a_14_day_cycling_log()
     for i in 0..HYSTERESIS_LOGS {
         let seed = rng.random::<u64>();
         let mut r = synth::rng(seed);
-        let n = 14 * 720;
-        let dt = 120.0;
+        let (n, dt) = (PROGRAMME_ROWS, PROGRAMME_DT_S);
         let (st, noise) = synth::programme_station(n, dt, &mut r);
         let shape = draw_bouc_wen(&mut r);
         let half_width_g = r.random_range(1.0e-6..4.0e-6);
@@ -432,8 +435,7 @@ fn a_switching_relay_loop_is_named_with_its_area_and_nothing_without_it() {
     for i in 0..RELAY_LOGS {
         let seed = rng.random::<u64>();
         let mut r = synth::rng(seed);
-        let n = 14 * 720;
-        let dt = 120.0;
+        let (n, dt) = (PROGRAMME_ROWS, PROGRAMME_DT_S);
         let (st, noise) = synth::programme_station(n, dt, &mut r);
         let mut sorted = st.temp_true_c.clone();
         sorted.sort_by(f64::total_cmp);

@@ -325,18 +325,8 @@ impl Preisach {
         if !(total > 0.0 && total.is_finite()) {
             return None;
         }
-        let (widths_c, weights) = widths_c
-            .iter()
-            .zip(w)
-            .filter(|(_, v)| **v > 0.0)
-            .map(|(r, v)| (*r, v / total))
-            .unzip();
-        let (relays_c, relay_weights) = relays_c
-            .iter()
-            .zip(wr)
-            .filter(|(_, v)| **v > 0.0)
-            .map(|(r, v)| (*r, v / total))
-            .unzip();
+        let (widths_c, weights) = active_normalised(widths_c, w, total);
+        let (relays_c, relay_weights) = active_normalised(relays_c, wr, total);
         Some(Self {
             widths_c,
             weights,
@@ -520,6 +510,17 @@ pub fn lag_or_loop_warning(chosen: &str, chosen_dbic: f64, other_dbic: f64) -> O
              is not a finding of which mechanism it is"
         )
     })
+}
+
+/// The operators with a positive weight and their weights as fractions of `total` (the NNLS
+/// leaves the others at exactly 0).
+fn active_normalised<T: Copy>(operators: &[T], w: &[f64], total: f64) -> (Vec<T>, Vec<f64>) {
+    operators
+        .iter()
+        .zip(w)
+        .filter(|(_, v)| **v > 0.0)
+        .map(|(r, v)| (*r, v / total))
+        .unzip()
 }
 
 #[cfg(test)]
