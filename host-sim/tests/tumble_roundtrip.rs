@@ -96,7 +96,7 @@ fn round_trip(cfg: &TumbleSimConfig) -> Outcome {
         for (i, t) in temps.iter().enumerate() {
             let x = scale.x_unclamped(Celsius(*t));
             let fitted = order2.coeffs_x[0] + order2.coeffs_x[1] * x + order2.coeffs_x[2] * x * x;
-            let sigma = ls.leverage[i].sqrt() * order2.residual_std;
+            let sigma = ls.leverage[i].sqrt() * order2.scores.residual_std;
             let dev = (fitted - truth_at(cfg, *t)[j]).abs() / sigma;
             worst_fit_t = worst_fit_t.max(dev);
         }
