@@ -1166,6 +1166,14 @@ mod tests {
     use crate::table::CalibrationTable;
     use crate::units::{RtdOhms, Volts};
 
+    /// The table prepared, on the mixed-precision path (asserted), and its error bounds.
+    fn prepared_mixed(t: &CalibrationTable) -> (PreparedCalibration, ErrorBounds) {
+        let p = PreparedCalibration::new(t).unwrap();
+        assert_eq!(p.precision(), Precision::Mixed);
+        let bounds = p.error_bounds();
+        (p, bounds)
+    }
+
     /// The paper's table with everything the prepared path folds in made non-trivial: ADC gain
     /// and offset corrections, cross-axis inputs, x³ and x⁴ terms, T0 off the centre.
     fn busy_table() -> CalibrationTable {
@@ -1221,9 +1229,7 @@ mod tests {
     #[test]
     fn the_fixed_point_terms_are_within_the_a_i_bound_for_every_code_of_the_range() {
         let t = busy_table();
-        let p = PreparedCalibration::new(&t).unwrap();
-        assert_eq!(p.precision(), Precision::Mixed);
-        let bounds = p.error_bounds();
+        let (p, bounds) = prepared_mixed(&t);
         let fast = p.fast.as_ref().unwrap();
         let th = &t.thermal;
         let cross = t.orientation.cross;
@@ -1391,9 +1397,7 @@ mod tests {
     #[test]
     fn the_papers_table_is_mixed_and_a_strongly_varying_scale_factor_falls_back_to_f64() {
         let t = paper_table();
-        let p = PreparedCalibration::new(&t).unwrap();
-        assert_eq!(p.precision(), Precision::Mixed);
-        let b = p.error_bounds();
+        let (p, b) = prepared_mixed(&t);
         // Hand figure: tilt 6u·5e-4 ≈ 1.8e-10 g; K1 varies by ε ≈ 4.8e-4 of K1(Tc) over the
         // range, so 1/K1's series and f32 second order cost ≈ 3e-13 of c; T's 5e-7 °C at 65 °C
         // through the bias and K1 slopes ≈ 4e-11 g: a few 1e-10 g.

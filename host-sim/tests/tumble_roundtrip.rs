@@ -49,8 +49,13 @@ fn round_trip(cfg: &TumbleSimConfig) -> Outcome {
     // The tumble estimates against the truth, in units of their stated SE.
     let mut chi2_tumble = 0.0;
     for t in &report.tests {
-        let truth = truth_at(cfg, t.temperature_c.unwrap());
-        let est = [t.k0_g, t.k1_v_per_g, t.k2_g_per_g2, t.misalignment_arcmin];
+        let truth = truth_at(cfg, t.temperature.mean_c.unwrap());
+        let est = [
+            t.coefficients.k0_g,
+            t.coefficients.k1_v_per_g,
+            t.coefficients.k2_g_per_g2,
+            t.coefficients.misalignment_arcmin,
+        ];
         for (e, v) in est.iter().zip(truth) {
             chi2_tumble += ((e.value - v) / e.se).powi(2);
         }
@@ -77,10 +82,10 @@ fn round_trip(cfg: &TumbleSimConfig) -> Outcome {
             .tests
             .iter()
             .map(|t| match j {
-                0 => t.k0_g.se,
-                1 => t.k1_v_per_g.se,
-                2 => t.k2_g_per_g2.se,
-                _ => t.misalignment_arcmin.se,
+                0 => t.coefficients.k0_g.se,
+                1 => t.coefficients.k1_v_per_g.se,
+                2 => t.coefficients.k2_g_per_g2.se,
+                _ => t.coefficients.misalignment_arcmin.se,
             })
             .collect();
         let (order2, _) =
@@ -91,7 +96,7 @@ fn round_trip(cfg: &TumbleSimConfig) -> Outcome {
         for (i, t) in temps.iter().enumerate() {
             let x = scale.x_unclamped(Celsius(*t));
             let fitted = order2.coeffs_x[0] + order2.coeffs_x[1] * x + order2.coeffs_x[2] * x * x;
-            let sigma = ls.leverage[i].sqrt() * order2.residual_std;
+            let sigma = ls.leverage[i].sqrt() * order2.scores.residual_std;
             let dev = (fitted - truth_at(cfg, *t)[j]).abs() / sigma;
             worst_fit_t = worst_fit_t.max(dev);
         }
@@ -239,7 +244,7 @@ fn repeated_tests_give_the_bias_drift_within_its_slope_uncertainty() {
         .iter()
         .find(|c| c.coefficient == "k1_v_per_g")
         .unwrap();
-    let se1 = report.tests[0].k1_v_per_g.se;
+    let se1 = report.tests[0].coefficients.k1_v_per_g.se;
     assert!(k1.regression_sd > se1 / 3.0 && k1.regression_sd < 3.0 * se1);
     assert!((truth[9].coefficients.bias_g - truth[0].coefficients.bias_g) > 0.0);
 }

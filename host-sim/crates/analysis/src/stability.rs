@@ -358,12 +358,19 @@ pub struct ColumnReport {
     pub std: Option<f64>,
     /// Line against time.
     pub regression: Option<Regression>,
+    /// The Allan deviation curves.
+    pub allan: AllanCurves,
+}
+
+/// A column's Allan deviation curves, with why they are empty (or what limits them).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct AllanCurves {
     /// OADEV curve.
     pub adev: Vec<AllanPoint>,
     /// MDEV curve.
     pub mdev: Vec<AllanPoint>,
-    /// Why the Allan curves are empty, if they are.
-    pub allan_note: Option<String>,
+    /// Why the curves are empty, if they are, or the note on the segments they were taken over.
+    pub note: Option<String>,
 }
 
 /// What to analyse.
@@ -656,13 +663,11 @@ pub fn analyse(log: &Log, opts: &Options) -> Result<Report, StabilityError> {
             mean: ms.map(|m| m.0),
             std: ms.map(|m| m.1),
             regression,
-            adev: Vec::new(),
-            mdev: Vec::new(),
-            allan_note: None,
+            allan: AllanCurves::default(),
         };
         if opts.allan {
             match &grid {
-                Err(e) => rep.allan_note = Some(format!("time base is not a grid: {e}")),
+                Err(e) => rep.allan.note = Some(format!("time base is not a grid: {e}")),
                 Ok(g) => {
                     // A gapless grid is the column itself: no 28 MB copy for a 41-day log.
                     let on_grid: std::borrow::Cow<[f64]> = match g.index {
@@ -671,11 +676,11 @@ pub fn analyse(log: &Log, opts: &Options) -> Result<Report, StabilityError> {
                     };
                     match Phase::from_readings(&on_grid, g.tau0_s) {
                         Ok(p) => {
-                            rep.adev = p.deviation(Statistic::Oadev, opts.taus);
-                            rep.mdev = p.deviation(Statistic::Mdev, opts.taus);
-                            rep.allan_note.clone_from(&segment_note);
+                            rep.allan.adev = p.deviation(Statistic::Oadev, opts.taus);
+                            rep.allan.mdev = p.deviation(Statistic::Mdev, opts.taus);
+                            rep.allan.note.clone_from(&segment_note);
                         }
-                        Err(e) => rep.allan_note = Some(e.to_string()),
+                        Err(e) => rep.allan.note = Some(e.to_string()),
                     }
                 }
             }
@@ -794,9 +799,9 @@ impl Report {
                         slope_se: r.slope_se,
                         residual_std: r.residual_std,
                     }),
-                    adev: PointJson::list(&c.adev, Statistic::Oadev),
-                    mdev: PointJson::list(&c.mdev, Statistic::Mdev),
-                    allan_note: c.allan_note.as_deref(),
+                    adev: PointJson::list(&c.allan.adev, Statistic::Oadev),
+                    mdev: PointJson::list(&c.allan.mdev, Statistic::Mdev),
+                    allan_note: c.allan.note.as_deref(),
                 })
                 .collect(),
         };
@@ -834,10 +839,10 @@ impl Report {
                 );
                 let _ = writeln!(s, "  residual std  {:.6e}", r.residual_std);
             }
-            if let Some(n) = &c.allan_note {
+            if let Some(n) = &c.allan.note {
                 let _ = writeln!(s, "  Allan: {n}");
             }
-            for (title, pts) in [("OADEV", &c.adev), ("MDEV", &c.mdev)] {
+            for (title, pts) in [("OADEV", &c.allan.adev), ("MDEV", &c.allan.mdev)] {
                 if pts.is_empty() {
                     continue;
                 }
@@ -969,7 +974,7 @@ mod tests {
         )
         .unwrap();
         let c = &rep.columns[0];
-        assert!(c.adev.is_empty() && c.allan_note.is_some());
+        assert!(c.allan.adev.is_empty() && c.allan.note.is_some());
         assert!(c.std.is_some() && c.regression.is_some());
     }
 
@@ -995,9 +1000,10 @@ mod tests {
         // The same rows without the recorder's mark: refused as off the grid, as before.
         let plain = text.replacen("# recorder: accomp record 0.1.0\n", "", 1);
         let rep = analyse(&Log::parse_str(&plain).unwrap(), &k1_only()).unwrap();
-        assert!(rep.columns[0].adev.is_empty());
+        assert!(rep.columns[0].allan.adev.is_empty());
         assert!(rep.columns[0]
-            .allan_note
+            .allan
+            .note
             .as_deref()
             .unwrap()
             .contains("off the"));
@@ -1017,10 +1023,10 @@ mod tests {
     fn two_segments_of_9_and_10_differences(text: &str) -> String {
         let rep = analyse(&Log::parse_str(text).unwrap(), &k1_only()).unwrap();
         let c = &rep.columns[0];
-        let p = &c.adev[0];
+        let p = &c.allan.adev[0];
         assert_eq!((p.m, p.n_terms), (1, 19));
         assert!((p.dev - (9.0f64 / 38.0).sqrt()).abs() < 1e-12, "{}", p.dev);
-        c.allan_note.clone().unwrap()
+        c.allan.note.clone().unwrap()
     }
 
     #[test]
@@ -1056,10 +1062,10 @@ mod tests {
             .map(|l| format!("{l}\n"))
             .collect();
         let rep = analyse(&Log::parse_str(&unmarked).unwrap(), &k1_only()).unwrap();
-        let p = &rep.columns[0].adev[0];
+        let p = &rep.columns[0].allan.adev[0];
         assert_eq!(p.n_terms, 20);
         assert!((p.dev - (25.0f64 / 40.0).sqrt()).abs() < 1e-12, "{}", p.dev);
-        assert!(rep.columns[0].allan_note.is_none());
+        assert!(rep.columns[0].allan.note.is_none());
     }
 
     #[test]
@@ -1092,10 +1098,10 @@ mod tests {
         assert_eq!(grid.segment_rows(), vec![13]);
         let rep = analyse(&log, &k1_only()).unwrap();
         let c = &rep.columns[0];
-        let p = &c.adev[0];
+        let p = &c.allan.adev[0];
         assert_eq!((p.m, p.n_terms), (1, 25));
         assert!((p.dev - (11.0f64 / 50.0).sqrt()).abs() < 1e-12, "{}", p.dev);
-        let note = c.allan_note.as_deref().unwrap();
+        let note = c.allan.note.as_deref().unwrap();
         assert!(
             note.starts_with("2 continuous segments (1 table_changed)")
                 && note.contains("15 (table_changed event at 2026-01-01T00:00:15Z)")
@@ -1135,8 +1141,8 @@ mod tests {
         let c = &rep.columns[0];
         assert_eq!(c.name, "output_g");
         let devs = exp["oadev"]["dev"].as_array().unwrap();
-        assert_eq!(c.adev.len(), devs.len());
-        for (p, d) in c.adev.iter().zip(devs) {
+        assert_eq!(c.allan.adev.len(), devs.len());
+        for (p, d) in c.allan.adev.iter().zip(devs) {
             assert!(rel(p.dev, d.as_f64().unwrap()) < 1e-10);
         }
         let json = rep.to_json();

@@ -271,7 +271,11 @@ mod tests {
         assert!(!text.contains(",test,"));
         let r = solve_log(&parse_log(&text).unwrap(), &TumbleOptions::default()).unwrap();
         assert_eq!(r.tests.len(), 8);
-        let temps: Vec<f64> = r.tests.iter().map(|t| t.temperature_c.unwrap()).collect();
+        let temps: Vec<f64> = r
+            .tests
+            .iter()
+            .map(|t| t.temperature.mean_c.unwrap())
+            .collect();
         for (t, want) in temps
             .iter()
             .zip([30.0, 35.0, 40.0, 45.0, 50.0, 55.0, 60.0, 65.0])
@@ -293,10 +297,10 @@ mod tests {
         let t = &r.tests[0];
         let k = truth[0].coefficients;
         // Printed δo model: 1.1 − 0.01·30 = 0.8 arcmin.
-        assert!((t.misalignment_arcmin.value - 0.8).abs() < 1e-7);
+        assert!((t.coefficients.misalignment_arcmin.value - 0.8).abs() < 1e-7);
         assert!((k.misalignment_o.0 / RAD_PER_ARCMIN - 0.8).abs() < 1e-12);
         // The log keeps 1e-10 V: K0 to ~1e-10 g.
-        assert!((t.k0_g.value - k.bias_g).abs() < 2e-10);
-        assert!((t.k1_v_per_g.value - k.scale_factor_v_per_g).abs() < 2e-10);
+        assert!((t.coefficients.k0_g.value - k.bias_g).abs() < 2e-10);
+        assert!((t.coefficients.k1_v_per_g.value - k.scale_factor_v_per_g).abs() < 2e-10);
     }
 }

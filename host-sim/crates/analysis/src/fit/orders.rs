@@ -8,16 +8,9 @@ use super::*;
 pub struct OrderFit {
     /// Polynomial order.
     pub order: usize,
-    /// s = √(RSS/(n − order − 1)), in the column's unit.
-    pub residual_std: f64,
-    /// √(RSS/n), comparable with the printed models' residual RMS.
-    pub residual_rms: f64,
-    /// AICc with k = order + 1 (null when n − k − 1 ≤ 0: never selected then).
-    pub aicc: Option<f64>,
-    /// Leave-one-out RMS prediction error, exact from the hat diagonal: e_i/(1 − h_ii).
-    pub loo_rms: f64,
-    /// F test of this order against the next lower one; null for order 0.
-    pub f_test_p: Option<f64>,
+    /// How well the order fits and predicts the column: what the orders are compared by.
+    #[serde(flatten)]
+    pub scores: OrderScores,
     /// Coefficients in x = (T − Tc)/Ts, ascending.
     pub coeffs_x: Vec<f64>,
     /// Their standard errors, √(diag((RᵀR)⁻¹))·s.
@@ -28,6 +21,22 @@ pub struct OrderFit {
     pub sensitivity_per_c: f64,
     /// K at `--at`, column unit (to form relative sensitivities such as (dK1/dT)/K1).
     pub value_at: f64,
+}
+
+/// The statistics one polynomial order is judged by against the others (written into the fit
+/// JSON beside `order`, field by field).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct OrderScores {
+    /// s = √(RSS/(n − order − 1)), in the column's unit.
+    pub residual_std: f64,
+    /// √(RSS/n), comparable with the printed models' residual RMS.
+    pub residual_rms: f64,
+    /// AICc with k = order + 1 (null when n − k − 1 ≤ 0: never selected then).
+    pub aicc: Option<f64>,
+    /// Leave-one-out RMS prediction error, exact from the hat diagonal: e_i/(1 − h_ii).
+    pub loo_rms: f64,
+    /// F test of this order against the next lower one; null for order 0.
+    pub f_test_p: Option<f64>,
 }
 
 /// A printed model evaluated at the table temperatures.
@@ -139,11 +148,13 @@ pub fn fit_order(
     Ok((
         OrderFit {
             order,
-            residual_std: s,
-            residual_rms: (ls.rss / n as f64).sqrt(),
-            aicc: aicc(n, ls.rss, order + 1),
-            loo_rms: (loo_sq / n as f64).sqrt(),
-            f_test_p: None,
+            scores: OrderScores {
+                residual_std: s,
+                residual_rms: (ls.rss / n as f64).sqrt(),
+                aicc: aicc(n, ls.rss, order + 1),
+                loo_rms: (loo_sq / n as f64).sqrt(),
+                f_test_p: None,
+            },
             coeffs_x: ls.coeffs,
             std_errors_x,
             monomial_celsius,
@@ -179,18 +190,19 @@ pub fn fit_column(
             } else {
                 f64::INFINITY
             };
-            m.f_test_p = Some(
-                f_upper_tail(f, 1.0, dof).map_err(|error| FitError::Special {
-                    column: name.to_owned(),
-                    order,
-                    error,
-                })?,
-            );
+            m.scores.f_test_p =
+                Some(
+                    f_upper_tail(f, 1.0, dof).map_err(|error| FitError::Special {
+                        column: name.to_owned(),
+                        order,
+                        error,
+                    })?,
+                );
         }
         prev_rss = Some(rss);
         models.push(m);
     }
-    let selected_order = select_order(models.iter().map(|m| (m.order, m.aicc)))
+    let selected_order = select_order(models.iter().map(|m| (m.order, m.scores.aicc)))
         .ok_or_else(|| FitError::NoSelectableOrder(name.to_owned()))?;
     Ok(ColumnFit {
         name: name.to_owned(),

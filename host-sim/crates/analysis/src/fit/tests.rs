@@ -96,8 +96,8 @@ fn exact_polynomial_data_is_recovered_and_its_order_selected() {
     }
     // dK/dT at 50 °C = 2e-4 − 6e-6·10.
     assert!((m2.sensitivity_per_c - 1.4e-4).abs() < 1e-10);
-    assert!(m2.f_test_p.unwrap() < 1e-6);
-    assert!(c.models.len() == 5 && c.models[0].f_test_p.is_none());
+    assert!(m2.scores.f_test_p.unwrap() < 1e-6);
+    assert!(c.models.len() == 5 && c.models[0].scores.f_test_p.is_none());
 }
 
 #[test]
@@ -132,7 +132,7 @@ fn leave_one_out_from_the_hat_matrix_equals_explicit_refits() {
         }
         let explicit = (sq / t.len() as f64).sqrt();
         assert!(
-            (m.loo_rms - explicit).abs() < 1e-9 * explicit,
+            (m.scores.loo_rms - explicit).abs() < 1e-9 * explicit,
             "order {order}"
         );
     }
@@ -147,7 +147,7 @@ fn k2_slope_statistics_match_an_independent_regression() {
     assert!((m1.monomial_celsius[1] - 1.836_880_95e-7).abs() < 1e-15);
     // The slope in x is Ts·(slope in °C), its standard error too (Ts = 17.5 °C).
     assert!((m1.std_errors_x[1] / 17.5 - 9.749_901e-8).abs() < 1e-14);
-    assert!((m1.f_test_p.unwrap() - 0.108_551_42).abs() < 1e-8);
+    assert!((m1.scores.f_test_p.unwrap() - 0.108_551_42).abs() < 1e-8);
 }
 
 #[test]

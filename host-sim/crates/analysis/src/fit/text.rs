@@ -68,11 +68,11 @@ pub fn render_text(report: &FitReport, at: Celsius, paper_source: Option<&Path>)
                 .collect();
             let cells = [
                 m.order.to_string(),
-                format!("{:.3e}", m.residual_std),
-                format!("{:.3e}", m.residual_rms),
-                opt(m.aicc, 2, false),
-                format!("{:.3e}", m.loo_rms),
-                opt(m.f_test_p, 2, true),
+                format!("{:.3e}", m.scores.residual_std),
+                format!("{:.3e}", m.scores.residual_rms),
+                opt(m.scores.aicc, 2, false),
+                format!("{:.3e}", m.scores.loo_rms),
+                opt(m.scores.f_test_p, 2, true),
                 format!("{:.4e}", m.sensitivity_per_c),
             ];
             let selected = if m.order == c.selected_order {
@@ -115,7 +115,7 @@ pub fn render_text(report: &FitReport, at: Celsius, paper_source: Option<&Path>)
                 p.residual_rms,
                 p.residual_max,
                 p.reported_std.map_or("—".to_owned(), |v| format!("{v:.2e}")),
-                refit.map_or("—".to_owned(), |m| format!("{:.3e}", m.residual_rms)),
+                refit.map_or("—".to_owned(), |m| format!("{:.3e}", m.scores.residual_rms)),
                 p.sensitivity_per_c
             );
         }

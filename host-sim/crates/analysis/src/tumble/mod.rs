@@ -249,23 +249,34 @@ pub struct FourPoint {
     pub zero_sum_v: f64,
 }
 
-/// The solution of one test.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct TestSolution {
-    /// Test id (from the `test` column, else 1, 2, … in file order).
-    pub id: String,
-    /// First line of the test in the file.
-    pub first_line: usize,
-    /// Which misalignment this test identifies.
-    pub rotation_axis: RotationAxis,
-    /// Mean temperature over the test, when logged.
-    pub temperature_c: Option<f64>,
-    /// Standard deviation of the temperature readings.
-    pub temperature_sd_c: Option<f64>,
-    /// Mean time of the test's readings (s), when logged.
-    pub time_s: Option<f64>,
-    /// The positions.
-    pub positions: Vec<PositionResult>,
+/// The operating temperature over one test's readings.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+pub struct TemperatureSummary {
+    /// Mean temperature (°C), when logged.
+    #[serde(rename = "temperature_c")]
+    pub mean_c: Option<f64>,
+    /// Standard deviation of the temperature readings (°C), when more than one.
+    #[serde(rename = "temperature_sd_c")]
+    pub sd_c: Option<f64>,
+}
+
+impl TemperatureSummary {
+    /// Mean and standard deviation of the logged readings (none logged: both `None`).
+    pub fn of(readings_c: &[f64]) -> Self {
+        if readings_c.is_empty() {
+            return Self::default();
+        }
+        let (mean_c, sd_c) = mean_sd(readings_c);
+        Self {
+            mean_c: Some(mean_c),
+            sd_c,
+        }
+    }
+}
+
+/// The least squares fit of one test: its size and how its noise was estimated.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct FitSummary {
     /// Unknowns fitted (4, or 5 with K3).
     pub unknowns: usize,
     /// Degrees of freedom n − p.
@@ -274,6 +285,12 @@ pub struct TestSolution {
     pub noise_basis: NoiseBasis,
     /// RMS of the position residuals (V).
     pub rms_residual_v: f64,
+}
+
+/// The model equation's coefficients as least squares fits them for one test, each with its
+/// uncertainty.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct ModelCoefficients {
     /// K0 (g).
     pub k0_g: Estimate,
     /// K1 (V/g).
@@ -284,6 +301,33 @@ pub struct TestSolution {
     pub misalignment_arcmin: Estimate,
     /// K3 (g/g³), fitted when there are at least 8 positions.
     pub k3_g_per_g3: Option<Estimate>,
+}
+
+/// The solution of one test.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TestSolution {
+    /// Test id (from the `test` column, else 1, 2, … in file order).
+    pub id: String,
+    /// First line of the test in the file.
+    pub first_line: usize,
+    /// Which misalignment this test identifies.
+    pub rotation_axis: RotationAxis,
+    /// The operating temperature over the test (flattened: `temperature_c` and
+    /// `temperature_sd_c` stay fields of the test in the JSON).
+    #[serde(flatten)]
+    pub temperature: TemperatureSummary,
+    /// Mean time of the test's readings (s), when logged.
+    pub time_s: Option<f64>,
+    /// The positions.
+    pub positions: Vec<PositionResult>,
+    /// How well determined the least squares fit is (flattened: `unknowns` … `rms_residual_v`
+    /// stay fields of the test in the JSON).
+    #[serde(flatten)]
+    pub fit: FitSummary,
+    /// The model equation's coefficients (flattened: the JSON keeps `k0_g` … `k3_g_per_g3` as
+    /// fields of the test).
+    #[serde(flatten)]
+    pub coefficients: ModelCoefficients,
     /// The four-point definitions, when 0/90/180/270° are all present.
     pub four_point: Option<FourPoint>,
 }

@@ -350,12 +350,6 @@ pub(super) fn solve_test(id: &str, rows: &[&Row], p: &Params) -> Result<TestSolu
     };
     let delta = c[3] / c[1];
     let temps: Vec<f64> = rows.iter().filter_map(|r| r.temperature_c).collect();
-    let (temperature_c, temperature_sd_c) = if temps.is_empty() {
-        (None, None)
-    } else {
-        let (m, sd) = mean_sd(&temps);
-        (Some(m), sd)
-    };
     let times: Vec<f64> = rows.iter().filter_map(|r| r.time_s).collect();
     let time_s = (!times.is_empty()).then(|| times.iter().sum::<f64>() / times.len() as f64);
     let means: Vec<(f64, f64)> = groups.iter().zip(&stats).map(|(g, s)| (g.0, s.1)).collect();
@@ -363,8 +357,7 @@ pub(super) fn solve_test(id: &str, rows: &[&Row], p: &Params) -> Result<TestSolu
         id: id.into(),
         first_line: rows.first().map_or(0, |r| r.line),
         rotation_axis: p.axis,
-        temperature_c,
-        temperature_sd_c,
+        temperature: TemperatureSummary::of(&temps),
         time_s,
         positions: groups
             .iter()
@@ -378,15 +371,19 @@ pub(super) fn solve_test(id: &str, rows: &[&Row], p: &Params) -> Result<TestSolu
                 residual_v: *r,
             })
             .collect(),
-        unknowns,
-        dof,
-        noise_basis: basis,
-        rms_residual_v: (rss / n as f64).sqrt(),
-        k0_g: est(0, k.bias_g, 1.0),
-        k1_v_per_g: est(1, k.scale_factor_v_per_g, 1.0),
-        k2_g_per_g2: est(2, k.nonlinearity_g_per_g2, 1.0),
-        misalignment_arcmin: est(3, delta / RAD_PER_ARCMIN, 1.0 / RAD_PER_ARCMIN),
-        k3_g_per_g3: with_k3.then(|| est(4, k3, 1.0)),
+        fit: FitSummary {
+            unknowns,
+            dof,
+            noise_basis: basis,
+            rms_residual_v: (rss / n as f64).sqrt(),
+        },
+        coefficients: ModelCoefficients {
+            k0_g: est(0, k.bias_g, 1.0),
+            k1_v_per_g: est(1, k.scale_factor_v_per_g, 1.0),
+            k2_g_per_g2: est(2, k.nonlinearity_g_per_g2, 1.0),
+            misalignment_arcmin: est(3, delta / RAD_PER_ARCMIN, 1.0 / RAD_PER_ARCMIN),
+            k3_g_per_g3: with_k3.then(|| est(4, k3, 1.0)),
+        },
         four_point: four_point(&means, g, p.axis),
     })
 }

@@ -38,7 +38,7 @@ pub(super) fn temperature_groups(tests: &[TestSolution]) -> Vec<Vec<&TestSolutio
     for t in tests {
         let found = groups.iter_mut().find(|g| {
             g[0].rotation_axis == t.rotation_axis
-                && match (g[0].temperature_c, t.temperature_c) {
+                && match (g[0].temperature.mean_c, t.temperature.mean_c) {
                     (Some(a), Some(b)) => (a - b).abs() < TEMPERATURE_GROUP_TOLERANCE_C,
                     (None, None) => true,
                     _ => false,
@@ -67,10 +67,12 @@ pub(super) fn stability(tests: &[TestSolution]) -> Vec<StabilityGroup> {
             .map(|t| t.time_s.unwrap_or(0.0) / 86_400.0)
             .collect();
         let series: [(&str, Getter); 4] = [
-            ("k0_g", |t| t.k0_g.value),
-            ("k1_v_per_g", |t| t.k1_v_per_g.value),
-            ("k2_g_per_g2", |t| t.k2_g_per_g2.value),
-            ("misalignment_arcmin", |t| t.misalignment_arcmin.value),
+            ("k0_g", |t| t.coefficients.k0_g.value),
+            ("k1_v_per_g", |t| t.coefficients.k1_v_per_g.value),
+            ("k2_g_per_g2", |t| t.coefficients.k2_g_per_g2.value),
+            ("misalignment_arcmin", |t| {
+                t.coefficients.misalignment_arcmin.value
+            }),
         ];
         let coefficients = series
             .iter()
@@ -88,7 +90,7 @@ pub(super) fn stability(tests: &[TestSolution]) -> Vec<StabilityGroup> {
         if coefficients.is_empty() {
             continue;
         }
-        let temps: Vec<f64> = timed.iter().filter_map(|t| t.temperature_c).collect();
+        let temps: Vec<f64> = timed.iter().filter_map(|t| t.temperature.mean_c).collect();
         out.push(StabilityGroup {
             temperature_c: (!temps.is_empty())
                 .then(|| temps.iter().sum::<f64>() / temps.len() as f64),

@@ -30,10 +30,12 @@ pub fn coefficient_table(report: &TumbleReport) -> Result<Vec<TableRow>, TumbleE
     let mut groups: Vec<Vec<&TestSolution>> = Vec::new();
     for t in &report.tests {
         let temp = t
-            .temperature_c
+            .temperature
+            .mean_c
             .ok_or_else(|| TumbleError::NoTemperature(t.id.clone()))?;
         match groups.iter_mut().find(|g| {
-            g[0].temperature_c
+            g[0].temperature
+                .mean_c
                 .is_some_and(|a| (a - temp).abs() < TEMPERATURE_GROUP_TOLERANCE_C)
         }) {
             Some(g) => g.push(t),
@@ -46,14 +48,14 @@ pub fn coefficient_table(report: &TumbleReport) -> Result<Vec<TableRow>, TumbleE
         let axis = |a: RotationAxis| {
             g.iter()
                 .filter(|t| t.rotation_axis == a)
-                .map(|t| t.misalignment_arcmin)
+                .map(|t| t.coefficients.misalignment_arcmin)
                 .collect::<Vec<_>>()
         };
-        let temps: Vec<f64> = g.iter().filter_map(|t| t.temperature_c).collect();
+        let temps: Vec<f64> = g.iter().filter_map(|t| t.temperature.mean_c).collect();
         let (Some(k0), Some(k1), Some(k2)) = (
-            weighted(&pick(|t| t.k0_g)),
-            weighted(&pick(|t| t.k1_v_per_g)),
-            weighted(&pick(|t| t.k2_g_per_g2)),
+            weighted(&pick(|t| t.coefficients.k0_g)),
+            weighted(&pick(|t| t.coefficients.k1_v_per_g)),
+            weighted(&pick(|t| t.coefficients.k2_g_per_g2)),
         ) else {
             continue;
         };

@@ -95,12 +95,15 @@ fn zero_index() -> TumbleOptions {
 fn four_noise_free_positions_recover_k0_k1_k2_and_delta_p_exactly() {
     let r = solve(&four_position_log("pendulum")).unwrap();
     let t = &r.tests[0];
-    assert_eq!((t.unknowns, t.dof, t.noise_basis), (4, 0, NoiseBasis::None));
-    assert!((t.k1_v_per_g.value - K1).abs() < 1e-14);
-    assert!((t.k0_g.value - K0).abs() < 1e-15);
-    assert!((t.k2_g_per_g2.value - K2).abs() < 1e-14);
-    assert!((t.misalignment_arcmin.value - 2.0).abs() < 1e-10);
-    assert!(t.k3_g_per_g3.is_none());
+    assert_eq!(
+        (t.fit.unknowns, t.fit.dof, t.fit.noise_basis),
+        (4, 0, NoiseBasis::None)
+    );
+    assert!((t.coefficients.k1_v_per_g.value - K1).abs() < 1e-14);
+    assert!((t.coefficients.k0_g.value - K0).abs() < 1e-15);
+    assert!((t.coefficients.k2_g_per_g2.value - K2).abs() < 1e-14);
+    assert!((t.coefficients.misalignment_arcmin.value - 2.0).abs() < 1e-10);
+    assert!(t.coefficients.k3_g_per_g3.is_none());
     let f = t.four_point.unwrap();
     assert!((f.k0_g - K0).abs() < 1e-15 && (f.k1_v_per_g - K1).abs() < 1e-14);
     assert!((f.k2_g_per_g2 - K2).abs() < 1e-14);
@@ -112,7 +115,7 @@ fn rotation_about_the_output_axis_identifies_delta_o_with_its_own_sign() {
     let r = solve(&four_position_log("output")).unwrap();
     let t = &r.tests[0];
     assert_eq!(t.rotation_axis, RotationAxis::Output);
-    assert!((t.misalignment_arcmin.value - 2.0).abs() < 1e-10);
+    assert!((t.coefficients.misalignment_arcmin.value - 2.0).abs() < 1e-10);
     // E0 − E180 = +2·K1·δo·g for the output axis.
     let f = t.four_point.unwrap();
     assert!((f.zero_difference_v - 2.0 * K1 * DELTA_RAD).abs() < 1e-15);
@@ -131,9 +134,9 @@ fn eight_positions_add_k3_and_recover_it() {
     )
     .unwrap();
     let t = &r.tests[0];
-    assert_eq!((t.unknowns, t.dof), (5, 3));
-    assert!((t.k3_g_per_g3.unwrap().value - 3e-5).abs() < 1e-13);
-    assert!((t.k1_v_per_g.value - K1).abs() < 1e-13);
+    assert_eq!((t.fit.unknowns, t.fit.dof), (5, 3));
+    assert!((t.coefficients.k3_g_per_g3.unwrap().value - 3e-5).abs() < 1e-13);
+    assert!((t.coefficients.k1_v_per_g.value - K1).abs() < 1e-13);
     // The four-point K1 absorbs K3: (E90 − E270)/2 = K1·(1 + K3).
     let f = t.four_point.unwrap();
     assert!((f.k1_v_per_g - K1 * (1.0 + 3e-5)).abs() < 1e-13);
@@ -150,7 +153,7 @@ fn local_gravity_from_metadata_is_divided_by_standard_gravity() {
     .text();
     let r = solve(&text).unwrap();
     assert!((r.gravity_g - g).abs() < 1e-15);
-    assert!((r.tests[0].k1_v_per_g.value - K1).abs() < 1e-13);
+    assert!((r.tests[0].coefficients.k1_v_per_g.value - K1).abs() < 1e-13);
     // Ignoring local gravity (1 g forced) makes K1 wrong by the gravity ratio.
     let forced = solve_log(
         &parse_log(&text).unwrap(),
@@ -160,7 +163,7 @@ fn local_gravity_from_metadata_is_divided_by_standard_gravity() {
         },
     )
     .unwrap();
-    assert!((forced.tests[0].k1_v_per_g.value - K1 * g).abs() < 1e-13);
+    assert!((forced.tests[0].coefficients.k1_v_per_g.value - K1 * g).abs() < 1e-13);
 }
 
 #[test]
@@ -172,17 +175,17 @@ fn index_error_propagates_to_half_the_angle_variance_at_four_points() {
     let t = &r.tests[0];
     let sigma_rad = 0.2 * 4.848_136_811e-6;
     let half = sigma_rad / std::f64::consts::SQRT_2;
-    assert!(t.k0_g.se_noise.is_none());
+    assert!(t.coefficients.k0_g.se_noise.is_none());
     assert!(
-        (t.k0_g.se_index / half - 1.0).abs() < 1e-3,
+        (t.coefficients.k0_g.se_index / half - 1.0).abs() < 1e-3,
         "{}",
-        t.k0_g.se_index
+        t.coefficients.k0_g.se_index
     );
-    assert!((t.k2_g_per_g2.se / half - 1.0).abs() < 1e-3);
+    assert!((t.coefficients.k2_g_per_g2.se / half - 1.0).abs() < 1e-3);
     let delta_arcmin = 0.2 / 60.0 / std::f64::consts::SQRT_2;
-    assert!((t.misalignment_arcmin.se / delta_arcmin - 1.0).abs() < 1e-3);
+    assert!((t.coefficients.misalignment_arcmin.se / delta_arcmin - 1.0).abs() < 1e-3);
     // K1 only sees dE/dθ = ±K1·δ at 90°/270°: σ = K1·δ·σθ/√2 ≈ 1e-9 V/g.
-    assert!((t.k1_v_per_g.se / (K1 * DELTA_RAD * half) - 1.0).abs() < 1e-2);
+    assert!((t.coefficients.k1_v_per_g.se / (K1 * DELTA_RAD * half) - 1.0).abs() < 1e-2);
 }
 
 #[test]
@@ -201,12 +204,16 @@ fn reading_scatter_gives_the_noise_se_when_the_design_is_exactly_determined() {
     .unwrap();
     let r = solve_log(&log, &zero_index()).unwrap();
     let t = &r.tests[0];
-    assert_eq!(t.noise_basis, NoiseBasis::ReadingScatter);
+    assert_eq!(t.fit.noise_basis, NoiseBasis::ReadingScatter);
     assert_eq!(t.positions[0].readings, 2);
     assert!((t.positions[0].scatter_v.unwrap() - d * std::f64::consts::SQRT_2).abs() < 1e-12);
     let expect = d * ((1.0 + K0 * K0) / 2.0).sqrt() / K1;
-    assert!((t.k0_g.se / expect - 1.0).abs() < 1e-6, "{}", t.k0_g.se);
-    assert_eq!(t.k0_g.se_index, 0.0);
+    assert!(
+        (t.coefficients.k0_g.se / expect - 1.0).abs() < 1e-6,
+        "{}",
+        t.coefficients.k0_g.se
+    );
+    assert_eq!(t.coefficients.k0_g.se_index, 0.0);
 }
 
 #[test]
@@ -231,12 +238,12 @@ fn residual_se_is_used_when_there_are_more_positions_than_unknowns() {
     let r = solve_log(&parse_log(&lines.join("\n")).unwrap(), &zero_index()).unwrap();
     let t = &r.tests[0];
     assert_eq!(
-        (t.unknowns, t.dof, t.noise_basis),
+        (t.fit.unknowns, t.fit.dof, t.fit.noise_basis),
         (5, 7, NoiseBasis::Residuals)
     );
     let sum: f64 = t.positions.iter().map(|p| p.residual_v).sum();
     assert!(sum.abs() < 1e-15);
-    assert!(t.rms_residual_v > 1e-8 && t.k0_g.se_noise.unwrap() > 0.0);
+    assert!(t.fit.rms_residual_v > 1e-8 && t.coefficients.k0_g.se_noise.unwrap() > 0.0);
 }
 
 #[test]
@@ -260,7 +267,7 @@ fn foundation_tilt_cancels_in_the_bias_and_enters_the_misalignment_fully() {
     assert!((f.k0_g - K0).abs() < 1e-10);
     assert!((f.zero_difference_v - 2.0 * K1 * (DELTA_RAD + phi)).abs() < 1e-12);
     assert!((f.misalignment_arcmin - (2.0 + 1.0 / 60.0)).abs() < 1e-6);
-    assert!((r.tests[0].misalignment_arcmin.value - (2.0 + 1.0 / 60.0)).abs() < 1e-6);
+    assert!((r.tests[0].coefficients.misalignment_arcmin.value - (2.0 + 1.0 / 60.0)).abs() < 1e-6);
 }
 
 #[test]
@@ -291,7 +298,7 @@ fn six_equally_spaced_positions_fit_four_unknowns_but_would_alias_k3() {
     // Below 8 positions K3 is not fitted, so six positions solve with 2 dof.
     let angles: Vec<f64> = (0..6).map(|i| 60.0 * f64::from(i)).collect();
     let r = solve(&HandLog::at("pendulum", &angles).text()).unwrap();
-    assert_eq!((r.tests[0].unknowns, r.tests[0].dof), (4, 2));
+    assert_eq!((r.tests[0].fit.unknowns, r.tests[0].fit.dof), (4, 2));
     for th in &angles {
         let s = th.to_radians().sin();
         assert!((s.powi(3) - 0.75 * s).abs() < 1e-15);

@@ -34,7 +34,8 @@ pub fn render_text(r: &TumbleReport) -> String {
                 RotationAxis::Output => "output",
                 RotationAxis::Pendulum => "pendulum",
             },
-            t.temperature_c
+            t.temperature
+                .mean_c
                 .map_or(String::new(), |c| format!(", {c:.3} °C")),
             t.time_s
                 .map_or(String::new(), |x| format!(", t = {x:.0} s")),
@@ -53,11 +54,19 @@ pub fn render_text(r: &TumbleReport) -> String {
         let _ = writeln!(
             s,
             "  least squares ({} unknowns, {} dof, noise from {:?}, rms residual {:.2e} V):",
-            t.unknowns, t.dof, t.noise_basis, t.rms_residual_v
+            t.fit.unknowns, t.fit.dof, t.fit.noise_basis, t.fit.rms_residual_v
         );
-        let _ = writeln!(s, "    K0 (g)       {}", fmt_est(&t.k0_g));
-        let _ = writeln!(s, "    K1 (V/g)     {}", fmt_est(&t.k1_v_per_g));
-        let _ = writeln!(s, "    K2 (g/g²)    {}", fmt_est(&t.k2_g_per_g2));
+        let _ = writeln!(s, "    K0 (g)       {}", fmt_est(&t.coefficients.k0_g));
+        let _ = writeln!(
+            s,
+            "    K1 (V/g)     {}",
+            fmt_est(&t.coefficients.k1_v_per_g)
+        );
+        let _ = writeln!(
+            s,
+            "    K2 (g/g²)    {}",
+            fmt_est(&t.coefficients.k2_g_per_g2)
+        );
         let _ = writeln!(
             s,
             "    {} {}",
@@ -65,9 +74,9 @@ pub fn render_text(r: &TumbleReport) -> String {
                 RotationAxis::Output => "δo (arcmin) ",
                 RotationAxis::Pendulum => "δp (arcmin) ",
             },
-            fmt_est(&t.misalignment_arcmin)
+            fmt_est(&t.coefficients.misalignment_arcmin)
         );
-        if let Some(k3) = &t.k3_g_per_g3 {
+        if let Some(k3) = &t.coefficients.k3_g_per_g3 {
             let _ = writeln!(s, "    K3 (g/g³)    {}", fmt_est(k3));
         }
         if let Some(f) = &t.four_point {
