@@ -1397,7 +1397,7 @@ mod tests {
     #[test]
     fn the_papers_table_is_mixed_and_a_strongly_varying_scale_factor_falls_back_to_f64() {
         let t = paper_table();
-        let (p, b) = prepared_mixed(&t);
+        let (_, b) = prepared_mixed(&t);
         // Hand figure: tilt 6u·5e-4 ≈ 1.8e-10 g; K1 varies by ε ≈ 4.8e-4 of K1(Tc) over the
         // range, so 1/K1's series and f32 second order cost ≈ 3e-13 of c; T's 5e-7 °C at 65 °C
         // through the bias and K1 slopes ≈ 4e-11 g: a few 1e-10 g.
