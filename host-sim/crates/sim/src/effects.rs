@@ -46,6 +46,19 @@ pub struct TideGroupTerm {
     pub phase_deg: f64,
 }
 
+/// One step of a relay hysteron's state R at temperature `t_c`: +1 at or above `upper_c`, −1 at
+/// or below `lower_c`, held in between (0 until the first switch). The simulator's injection and
+/// the discovery's relay columns both step with it.
+pub fn relay_step(state: f64, t_c: f64, lower_c: f64, upper_c: f64) -> f64 {
+    if t_c >= upper_c {
+        1.0
+    } else if t_c <= lower_c {
+        -1.0
+    } else {
+        state
+    }
+}
+
 /// A relay hysteron of `thermal_hysteresis`: its state R is +1 once the mount temperature has
 /// risen to `upper_c`, −1 once it has fallen to `lower_c`, unchanged in between (unknown, 0,
 /// until the first of these); it adds `half_width`·(−R), so that between the thresholds the bias
@@ -699,11 +712,7 @@ impl EffectChain {
                     *p = Some(q);
                     let mut sum = half_width * (tc - q) / r;
                     for (rel, st) in relays.iter().zip(states.iter_mut()) {
-                        if tc >= rel.upper_c {
-                            *st = 1.0;
-                        } else if tc <= rel.lower_c {
-                            *st = -1.0;
-                        }
+                        *st = relay_step(*st, tc, rel.lower_c, rel.upper_c);
                         sum -= rel.half_width * *st;
                     }
                     sum

@@ -221,13 +221,10 @@ pub fn relay(temp_c: &[f64], lower_c: f64, upper_c: f64) -> (Vec<f64>, usize, us
     let out = temp_c
         .iter()
         .map(|&t| {
-            if t >= upper_c && state <= 0.0 {
-                ups += usize::from(state < 0.0);
-                state = 1.0;
-            } else if t <= lower_c && state >= 0.0 {
-                downs += usize::from(state > 0.0);
-                state = -1.0;
-            }
+            let next = crate::sim::effects::relay_step(state, t, lower_c, upper_c);
+            ups += usize::from(state < 0.0 && next > 0.0);
+            downs += usize::from(state > 0.0 && next < 0.0);
+            state = next;
             state
         })
         .collect();
