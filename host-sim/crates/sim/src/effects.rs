@@ -90,7 +90,8 @@ pub enum ScenarioEffect {
         coefficient: f64,
     },
     /// `half_width`·(T − p_r[T])/r: a play operator of half-width r on the mount temperature,
-    /// plus Σ h_j·(−R_j[T]) over `relays` (the Preisach model's switching elements, [`Relay`]).
+    /// plus Σ h_j·(−R_j[T]) over `relays` (the Preisach model's switching elements, [`Relay`]),
+    /// the sum reaching the output through a first-order lag of `lag_s` (0: at once).
     ThermalHysteresis {
         /// Bias half-difference between the heating and cooling branches, unit.
         half_width: f64,
@@ -99,6 +100,11 @@ pub enum ScenarioEffect {
         /// Relay hysterons beside the play (none by default).
         #[serde(default, skip_serializing_if = "Vec::is_empty")]
         relays: Vec<Relay>,
+        /// Time constant with which the loop's output reaches the sensor, s (a switching
+        /// element's own switching time, or the thermal path from the hysteretic part to the
+        /// proof mass); 0: at once.
+        #[serde(default, skip_serializing_if = "is_zero")]
+        lag_s: f64,
     },
     /// `coefficient`·(L_τ[a²] − a²): torquer self-heating after an input change (unit/g²).
     SelfHeating {
@@ -303,8 +309,14 @@ impl ScenarioEffect {
                 half_width,
                 play_half_width_c,
                 relays,
+                lag_s,
             } => {
                 positive("play_half_width_c", *play_half_width_c)?;
+                check(
+                    lag_s.is_finite() && *lag_s >= 0.0,
+                    "lag_s",
+                    "must be finite and ≥ 0",
+                )?;
                 for r in relays {
                     finite("relays.half_width", r.half_width)?;
                     finite("relays.lower_c", r.lower_c)?;
@@ -498,10 +510,12 @@ enum State {
     Lag {
         x: Option<(f64, f64)>,
     },
-    /// Play operator output and the relays' states (+1, −1; 0 before the first switch).
+    /// Play operator output, the relays' states (+1, −1; 0 before the first switch) and the
+    /// output lag's state.
     Play {
         p: Option<f64>,
         relays: Vec<f64>,
+        lag: Option<(f64, f64)>,
     },
     /// Index of the ambient channel and its lag state.
     Ambient {
@@ -602,6 +616,7 @@ impl EffectChain {
                 ScenarioEffect::ThermalHysteresis { relays, .. } => State::Play {
                     p: None,
                     relays: vec![0.0; relays.len()],
+                    lag: None,
                 },
                 ScenarioEffect::AmbientCoupling { channel, .. } => {
                     let i = setup
@@ -703,8 +718,13 @@ impl EffectChain {
                         half_width,
                         play_half_width_c,
                         relays,
+                        lag_s,
                     },
-                    State::Play { p, relays: states },
+                    State::Play {
+                        p,
+                        relays: states,
+                        lag,
+                    },
                 ) => {
                     let r = *play_half_width_c;
                     let tc = d.temperature_c;
@@ -715,7 +735,11 @@ impl EffectChain {
                         *st = relay_step(*st, tc, rel.lower_c, rel.upper_c);
                         sum -= rel.half_width * *st;
                     }
-                    sum
+                    if *lag_s > 0.0 {
+                        lag_step(lag, t, sum, *lag_s)
+                    } else {
+                        sum
+                    }
                 }
                 (ScenarioEffect::Warmup { tau_s, amplitude }, _) => amplitude * (-t / tau_s).exp(),
                 (ScenarioEffect::AgingDrift { tau_s, amplitude }, _) => {
@@ -1283,6 +1307,7 @@ mod tests {
                     half_width: 1.0,
                     play_half_width_c: 0.5,
                     relays: Vec::new(),
+                    lag_s: 0.0,
                 },
             ],
             setup(),
@@ -1321,6 +1346,7 @@ mod tests {
                     upper_c: 0.6,
                     half_width: 2.0,
                 }],
+                lag_s: 0.0,
             }],
             setup(),
         )
@@ -1340,6 +1366,7 @@ mod tests {
                 upper_c: 0.2,
                 half_width: 1.0,
             }],
+            lag_s: 0.0,
         };
         assert!(bad.validate(0).is_err());
     }

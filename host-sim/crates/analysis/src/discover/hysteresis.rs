@@ -305,9 +305,23 @@ pub struct Preisach {
     /// column is divided by it).
     pub reach: f64,
     /// The area ∫(heating − cooling) dT of the column's loop per unit of its coefficient, °C,
-    /// on the major loop over the record's 1–99 % temperature range.
+    /// on the major loop over the record's 1–99 % temperature range (of the rate-independent
+    /// loop, before `lag_s`).
     pub loop_area_c: f64,
+    /// Time constant of the first-order lag through which the loop's output reaches the
+    /// sensor, s (0: at once): a switching element's own switching time, or the thermal path
+    /// from the hysteretic part to the proof mass ([`LOOP_LAGS_S`]).
+    pub lag_s: f64,
 }
+
+/// The output lags a Preisach distribution is tried with, s (0 and a factor-2 grid from 4 min
+/// to 64 min): a relay that takes minutes to switch leaves after every switch a transient the
+/// rate-independent loop cannot fit, which the noise model then takes as random walk (measured
+/// on 14-day relay logs with 2–20 min switching times: the noise model's Allan deviation at 2 h
+/// 3–5× the noise's own with the loop in the model) and which hides the loop below that
+/// inflated floor. Longer than an hour, a lag of the loop is no longer told from a lag of the
+/// temperature on 2–6 h ramps.
+pub const LOOP_LAGS_S: [f64; 5] = [240.0, 480.0, 960.0, 1920.0, 3840.0];
 
 impl Preisach {
     /// From NNLS weights over `widths_c` (plays) and `relays_c` (zero weights dropped); `None`
@@ -331,7 +345,31 @@ impl Preisach {
             relay_weights,
             reach: 1.0,
             loop_area_c: f64::NAN,
+            lag_s: 0.0,
         })
+    }
+
+    /// The distribution with its output lagged by `lag_s` (s; 0: at once).
+    pub fn with_lag(mut self, lag_s: f64) -> Self {
+        self.lag_s = lag_s;
+        self
+    }
+
+    /// [`Preisach::column`] through the output lag `lag_s` on the record's time grid `t_s`
+    /// (restarted at each segment start, like every lag of the catalogue).
+    pub fn lagged_column(
+        &self,
+        temp_c: &[f64],
+        t_s: &[f64],
+        segment_start: &[bool],
+        theta: f64,
+    ) -> Vec<f64> {
+        let c = self.column(temp_c, theta);
+        if self.lag_s > 0.0 {
+            super::effects::lag_filter(&c, t_s, segment_start, self.lag_s)
+        } else {
+            c
+        }
     }
 
     /// Sets `reach` (half the peak-to-peak of the operators' sum over `temp_c`) and
