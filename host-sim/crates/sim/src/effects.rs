@@ -1372,6 +1372,37 @@ mod tests {
     }
 
     #[test]
+    fn a_lagged_loop_reaches_its_branch_through_the_lag_and_a_negative_lag_is_refused() {
+        // One relay (thresholds 0.2, 0.6 °C, half-width 2) whose output lags by 100 s: once
+        // the temperature reaches 0.6 °C at t = 0 the term relaxes towards −2 as 1 − e^(−t/τ).
+        let relay = |lag_s| ScenarioEffect::ThermalHysteresis {
+            half_width: 0.0,
+            play_half_width_c: 0.1,
+            relays: vec![Relay {
+                lower_c: 0.2,
+                upper_c: 0.6,
+                half_width: 2.0,
+            }],
+            lag_s,
+        };
+        let mut c = EffectChain::new(&[relay(100.0)], setup()).unwrap();
+        assert_eq!(
+            c.output_term(&drive(0.0, 0.6)),
+            -2.0,
+            "the lag starts settled"
+        );
+        assert_eq!(
+            c.output_term(&drive(10.0, 0.1)),
+            -2.0 + 4.0 * (1.0 - (-0.1f64).exp())
+        );
+        let y = c.output_term(&drive(110.0, 0.1));
+        let want = 2.0 - 4.0 * (-1.1f64).exp();
+        assert!((y - want).abs() < 1e-12, "{y} vs {want}");
+        assert!(relay(-1.0).validate(0).is_err());
+        assert!(relay(f64::NAN).validate(0).is_err());
+    }
+
+    #[test]
     fn an_unknown_ambient_channel_is_refused_by_name() {
         let e = [ScenarioEffect::AmbientCoupling {
             channel: "humidity".into(),

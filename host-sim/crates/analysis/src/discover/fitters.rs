@@ -97,15 +97,45 @@ fn best_preisach(cur: &Current) -> Option<PreisachFit> {
         .collect();
     // The dictionary at each output lag (0 first); a lag is kept when it pays, against no lag,
     // the look-elsewhere charge of its grid (as `score_all` charges it) and the operators'.
+    // Behind a lag, only the operators whose switching shows through it: the record must take
+    // longer than the lag to cross the operator (a play's 2r, a relay's gap). A narrower one
+    // switches within the lag, and behind it is a lagged sign of the temperature's rate — a
+    // rate coupling through a low pass, i.e. a thermal lag's column, not a loop (measured: such
+    // a rate coupling through a 30-min low pass was named a loop of a 0.009 °C play behind a
+    // 16-min lag).
     let n_eff = (cur.r_w.len() as f64).max(2.0);
     let lag_charge = look_elsewhere(n_eff, hysteresis::LOOP_LAGS_S.len() as f64);
+    let moves = hysteresis::median_change_c(temp, ds.dt_s);
     let mut best: Option<(Preisach, Vec<f64>, f64, usize, f64)> = None;
     for lag_s in std::iter::once(0.0).chain(hysteresis::LOOP_LAGS_S) {
         if lag_s > 0.0 && lag_s < 2.0 * ds.dt_s {
             continue;
         }
-        let mut cols = Vec::with_capacity(raw.len());
-        for c in &raw {
+        let shows =
+            |span_c: f64| lag_s == 0.0 || hysteresis::crossing_time_s(&moves, span_c) > lag_s;
+        let plays: Vec<f64> = g.iter().copied().filter(|r| shows(2.0 * r)).collect();
+        let rel: Vec<[f64; 2]> = relays
+            .iter()
+            .copied()
+            .filter(|r| shows(r[1] - r[0]))
+            .collect();
+        if plays.len() < 2 {
+            continue;
+        }
+        let mut cols = Vec::with_capacity(plays.len() + rel.len());
+        let ops = g
+            .iter()
+            .zip(&raw)
+            .filter(|(r, _)| shows(2.0 * **r))
+            .map(|(_, c)| c)
+            .chain(
+                relays
+                    .iter()
+                    .zip(&raw[g.len()..])
+                    .filter(|(r, _)| shows(r[1] - r[0]))
+                    .map(|(_, c)| c),
+            );
+        for c in ops {
             let lagged;
             let c = if lag_s > 0.0 {
                 lagged = effects::lag_filter(c, &ds.t_s, &ds.segment_start, lag_s);
@@ -120,10 +150,12 @@ fn best_preisach(cur: &Current) -> Option<PreisachFit> {
             super::baseline::orthogonalize(&cur.basis.q, &mut w);
             cols.push(w);
         }
-        let Some((p, _, active)) = hysteresis::fit_preisach(&g, &relays, &cols, &cur.r_w) else {
+        let Some((p, _, active)) = hysteresis::fit_preisach(&plays, &rel, &cols, &cur.r_w) else {
             continue;
         };
-        let p = p.on_record(temp).with_lag(lag_s);
+        let p = p
+            .on_record(temp)
+            .with_lag(lag_s, temp, &ds.t_s, &ds.segment_start, ds.dt_s);
         let col = p.lagged_column(temp, &ds.t_s, &ds.segment_start, p.width_c());
         let rss = cur.rss_with(std::slice::from_ref(&col));
         let charge = if lag_s > 0.0 { lag_charge } else { 0.0 };
