@@ -65,6 +65,9 @@ fn best_theta(cur: &Current, e: &Effect, ctx: &Context) -> Option<(f64, f64, boo
     })
 }
 
+/// Least ratio of a lagged loop's area as the record shows it to its rate-independent area.
+const LOOP_SHOWN_MIN: f64 = 0.5;
+
 /// [`best_preisach`]'s result: (distribution, θ, raw column, RSS, active, M, at edge, 1 when
 /// an output lag was fitted).
 type PreisachFit = (Preisach, f64, Vec<f64>, f64, usize, usize, bool, usize);
@@ -78,7 +81,7 @@ type PreisachFit = (Preisach, f64, Vec<f64>, f64, usize, usize, bool, usize);
 /// number of plays and relays with a weight, the dictionary's size M (plays + relays: what the
 /// search is charged for) and whether θ sits at an end of the dictionary's widths (the
 /// distribution wants widths outside the range of plays and relay half-gaps).
-fn best_preisach(cur: &Current) -> Option<PreisachFit> {
+fn best_preisach(cur: &Current, with_lags: bool) -> Option<PreisachFit> {
     let ds = cur.ds;
     let temp = &ds.channel(ChannelKind::Temperature)?.values;
     let g = effects::grid(&Effect::ThermalHysteresis, ds);
@@ -107,7 +110,12 @@ fn best_preisach(cur: &Current) -> Option<PreisachFit> {
     let lag_charge = look_elsewhere(n_eff, hysteresis::LOOP_LAGS_S.len() as f64);
     let moves = hysteresis::median_change_c(temp, ds.dt_s);
     let mut best: Option<(Preisach, Vec<f64>, f64, usize, f64)> = None;
-    for lag_s in std::iter::once(0.0).chain(hysteresis::LOOP_LAGS_S) {
+    let lags: &[f64] = if with_lags {
+        &hysteresis::LOOP_LAGS_S
+    } else {
+        &[]
+    };
+    for lag_s in std::iter::once(0.0).chain(lags.iter().copied()) {
         if lag_s > 0.0 && lag_s < 2.0 * ds.dt_s {
             continue;
         }
@@ -156,6 +164,14 @@ fn best_preisach(cur: &Current) -> Option<PreisachFit> {
         let p = p
             .on_record(temp)
             .with_lag(lag_s, temp, &ds.t_s, &ds.segment_start, ds.dt_s);
+        // Behind its lag the loop must still show as a loop on the record: its area there at
+        // least half its rate-independent one, of the same sign (measured: a hidden 22-min
+        // thermal lag was fitted as a 0.22 °C play behind a 64-min lag whose record area was
+        // −0.06 × its own; the relay loops' ratios were 0.97–1.7).
+        let shown = p.record_loop_area_c / p.loop_area_c;
+        if lag_s > 0.0 && (shown.is_nan() || shown < LOOP_SHOWN_MIN) {
+            continue;
+        }
         let col = p.lagged_column(temp, &ds.t_s, &ds.segment_start, p.width_c());
         let rss = cur.rss_with(std::slice::from_ref(&col));
         let charge = if lag_s > 0.0 { lag_charge } else { 0.0 };
@@ -173,7 +189,10 @@ fn best_preisach(cur: &Current) -> Option<PreisachFit> {
         .iter()
         .map(|r| 0.5 * (r[1] - r[0]))
         .fold(g[g.len() - 1], f64::max);
-    let at_edge = theta <= g[0] * half_step || theta >= top / half_step;
+    // The longest output lag is the end of its grid: a loop that wants a longer one is a lag of
+    // the temperature, not a finding.
+    let longest = hysteresis::LOOP_LAGS_S.last().is_some_and(|l| p.lag_s >= *l);
+    let at_edge = theta <= g[0] * half_step || theta >= top / half_step || longest;
     let lags = if p.lag_s > 0.0 { 1 } else { 0 };
     Some((
         p,
@@ -360,28 +379,13 @@ pub(super) fn score_all(
                 continue;
             }
         }
-        let mut preisach = None;
         // A step's transition duration is fitted here (the candidate carries 0).
         let mut effect = e.clone();
         let (theta, rss, k_nl, at_edge) = match e {
-            // A Preisach distribution: the search over its dictionary (plays and relays) is
-            // charged like a grid of that many points, each operator beyond the first with a
-            // weight as one more parameter.
-            // An output lag is one more parameter found by a search over its grid.
-            Effect::ThermalHysteresis => match best_preisach(cur) {
-                Some((p, th, col, r, active, m, edge, lags)) => {
-                    preisach = Some((p, col));
-                    (
-                        th,
-                        r,
-                        nl_penalty(m as f64)
-                            + active.saturating_sub(1) as f64 * n_eff.ln()
-                            + lags as f64 * nl_penalty(hysteresis::LOOP_LAGS_S.len() as f64),
-                        edge,
-                    )
-                }
-                None => continue,
-            },
+            Effect::ThermalHysteresis => {
+                out.extend(best_preisach(cur, true).and_then(|f| preisach_scored(cur, f)));
+                continue;
+            }
             Effect::Step { .. } => match fit_step(cur, ctx) {
                 Some((step, th, r, k, edge)) => {
                     effect = step;
@@ -419,10 +423,7 @@ pub(super) fn score_all(
                 false,
             ),
         };
-        let (cols, preisach) = match preisach {
-            Some((p, col)) => (vec![col], Some(p)),
-            None => (columns(&effect, cur.ds, ctx, theta), None),
-        };
+        let cols = columns(&effect, cur.ds, ctx, theta);
         if cols.is_empty() || rss <= 0.0 || cur.rss <= 0.0 {
             continue;
         }
@@ -436,12 +437,57 @@ pub(super) fn score_all(
             delta_bic,
             penalty,
             at_edge,
-            preisach,
+            preisach: None,
             noise_with: None,
         });
     }
+    // A loop behind an output lag and a thermal lag are both lags of something the temperature
+    // drives; the loop keeps its output lag only where it beats the thermal lag clearly (by
+    // `hysteresis::LAG_OR_LOOP_DBIC`), and is otherwise offered as the rate-independent loop
+    // (measured: a hidden 22-min thermal lag at SNR 7.9 was named a lagged loop).
+    let lagged_loop = out.iter().position(|s| {
+        s.effect == Effect::ThermalHysteresis && s.preisach.as_ref().is_some_and(|p| p.lag_s > 0.0)
+    });
+    let lag = out.iter().find(|s| s.effect == Effect::ThermalLag);
+    if let (Some(i), Some(lag)) = (lagged_loop, lag) {
+        if out[i].delta_bic > lag.delta_bic - hysteresis::LAG_OR_LOOP_DBIC {
+            match best_preisach(cur, false).and_then(|f| preisach_scored(cur, f)) {
+                Some(s) => out[i] = s,
+                None => {
+                    out.remove(i);
+                }
+            }
+        }
+    }
     out.sort_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic));
     out
+}
+
+/// The `thermal_hysteresis` candidate of a [`best_preisach`] fit. The search over its
+/// dictionary (plays and relays) is charged like a grid of that many points, each operator
+/// beyond the first with a weight as one more parameter, and an output lag as one more
+/// parameter found by a search over its grid.
+fn preisach_scored(cur: &Current, fit: PreisachFit) -> Option<Scored> {
+    let (p, theta, col, rss, active, m, at_edge, lags) = fit;
+    if rss <= 0.0 || cur.rss <= 0.0 {
+        return None;
+    }
+    let n_eff = (cur.r_w.len() as f64).max(2.0);
+    let penalty = n_eff.ln()
+        + look_elsewhere(n_eff, m as f64)
+        + active.saturating_sub(1) as f64 * n_eff.ln()
+        + lags as f64 * look_elsewhere(n_eff, hysteresis::LOOP_LAGS_S.len() as f64);
+    Some(Scored {
+        effect: Effect::ThermalHysteresis,
+        theta,
+        cols: vec![col],
+        rss,
+        delta_bic: n_eff * (rss / cur.rss).ln() + penalty,
+        penalty,
+        at_edge,
+        preisach: Some(p),
+        noise_with: None,
+    })
 }
 
 /// The best step on top of the current model: the position scan ([`best_step`]) for the jump,
