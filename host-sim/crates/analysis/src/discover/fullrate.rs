@@ -340,7 +340,10 @@ fn chi_grid(
     dt: f64,
     taus: &[f64],
 ) -> (Vec<f64>, usize) {
-    let grid: Vec<f64> = taus.iter().map(|&t| chi_with(b, cols, len, dt, t)).collect();
+    let grid: Vec<f64> = taus
+        .iter()
+        .map(|&t| chi_with(b, cols, len, dt, t))
+        .collect();
     let ib = (0..grid.len())
         .min_by(|&i, &j| grid[i].total_cmp(&grid[j]))
         .unwrap_or(0);
@@ -603,8 +606,17 @@ pub fn analyse(
             Ok(_) => format!("max(curvature, jackknife ({n_groups} groups))"),
             Err(why) => format!("curvature (no jackknife: {why})"),
         };
-        let sd = |n: &str| sigmas.iter().find(|s| s.name == n).map_or(f64::NAN, |s| s.used);
-        let sigma_tau = sd(if name == "thermal_lag" { "tau_s" } else { "lag_s" });
+        let sd = |n: &str| {
+            sigmas
+                .iter()
+                .find(|s| s.name == n)
+                .map_or(f64::NAN, |s| s.used)
+        };
+        let sigma_tau = sd(if name == "thermal_lag" {
+            "tau_s"
+        } else {
+            "lag_s"
+        });
         if sigma_tau.is_nan() || sigma_tau >= tau {
             out.refused.push((
                 label,
