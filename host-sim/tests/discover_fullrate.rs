@@ -207,18 +207,20 @@ fn full_rate_lag(log: &Log) -> Option<disc::fullrate::FastTerm> {
 }
 
 /// The σ of τ reported at the full rate covers the true τ over independent records: ten seeds
-/// of the paper-1g day with the rate coupling of 4e-3 V·s/°C beside its 60 s lag (21
-/// segments of 4096 s, so 21 jackknife groups), 60 s within ±2σ for at least 8 of the 10.
-/// Measured: τ 53.1–66.2 s (std 3.9 s over the seeds) while the χ² curvature's σ_τ is
-/// 1.8–2.3 s: ±2 curvature σ hold 60 s for 6 of the 10 (seeds 2, 3, 4 and 6 outside, seed 4
-/// by 0.01 s), the reported σ (the jackknife's, 3.0–11.2 s, larger than the curvature's on
-/// every seed) for 10 of the 10. Without the rate coupling the two agree (curvature 1.9–2.3 s,
-/// jackknife 1.8–2.6 s, τ std 2.3 s): there the rate's gain, which trades with the lag's
-/// low-frequency part, is not in the fit. ≈ 1–2 s a seed in the dev profile.
+/// of the paper-1g day with the rate coupling of 4e-3 V·s/°C beside its 60 s lag (10 segments
+/// of 8192 s, so 10 jackknife groups); 60 s within ±1σ for at least 5 of the 10 (≈ 7 expected;
+/// 5 or more holds with 95 % probability) and within ±2σ for at least 8.
+/// Measured: τ 56.2–65.5 s (std 3.4 s over the seeds) while the χ² curvature's σ_τ is
+/// 1.8–2.3 s: ±1 curvature σ hold 60 s for 1 of the 10, ±2 for 8; the reported σ (the
+/// jackknife's on 9 seeds, 2.9–8.1 s; on seed 8 the curvature's, 1.8 s against 1.78) holds it
+/// within ±1σ for 8 and ±2σ for 10. Without the rate coupling the two are closer (τ std 2.4 s,
+/// curvature σ ≈ 2 s: ±2 curvature σ hold 60 s for 8 of the 10, the reported σ for 10).
+/// ≈ 1 s a seed in the dev profile.
 #[test]
 fn the_lags_sigma_covers_the_true_tau_over_independent_records() {
     let (tau_true, n) = (60.0, 10u64);
-    let (mut inside, mut inside_curvature) = (0, 0);
+    // Within ±1σ and ±2σ: reported, curvature alone.
+    let (mut one, mut two, mut one_curvature, mut two_curvature) = (0, 0, 0, 0);
     for seed in 1..=n {
         let log = paper_1g_day(
             vec![accomp_host::sim::effects::ScenarioEffect::RateCoupling {
@@ -233,13 +235,18 @@ fn the_lags_sigma_covers_the_true_tau_over_independent_records() {
         assert_eq!(s.used, tau.sigma);
         assert!(t.sigma_method.contains("jackknife"), "{}", t.sigma_method);
         let err = (tau.value - tau_true).abs();
-        inside += usize::from(err <= 2.0 * tau.sigma);
-        inside_curvature += usize::from(err <= 2.0 * s.curvature);
+        one += usize::from(err <= tau.sigma);
+        two += usize::from(err <= 2.0 * tau.sigma);
+        one_curvature += usize::from(err <= s.curvature);
+        two_curvature += usize::from(err <= 2.0 * s.curvature);
         println!(
             "seed {seed}: τ = {:.2} s, σ {:.2} s ({}; curvature {:.2}, jackknife {:.2?})",
             tau.value, tau.sigma, s.method, s.curvature, s.jackknife
         );
     }
-    println!("within ±2σ: {inside}/{n} (curvature alone {inside_curvature}/{n})");
-    assert!(inside >= 8, "{inside}/{n} within ±2σ");
+    println!(
+        "within ±1σ: {one}/{n}, ±2σ: {two}/{n} (curvature alone: {one_curvature}/{n}, \
+         {two_curvature}/{n})"
+    );
+    assert!(one >= 5 && two >= 8, "within ±1σ {one}/{n}, ±2σ {two}/{n}");
 }
