@@ -977,4 +977,56 @@ mod tests {
             "full rate: not run (no rows)\n"
         );
     }
+
+    /// Each parameter reports the larger of its two σ and names it; without the jackknife the
+    /// curvature's stands, and the text and the JSON say which was used and why.
+    #[test]
+    fn the_larger_sigma_is_reported_and_named_and_a_missing_jackknife_is_announced() {
+        let s = Sigma::new("tau_s", 0.3, Some(0.4));
+        assert_eq!((s.used, s.method), (0.4, "jackknife"));
+        let s = Sigma::new("static_coefficient", 2e-7, Some(1e-7));
+        assert_eq!((s.used, s.method), (2e-7, "curvature"));
+        let s = Sigma::new("tau_s", 0.3, None);
+        assert_eq!((s.used, s.method), (0.3, "curvature"));
+        // Fewer groups than the jackknife needs: it does not run, and says why.
+        let few = vec![Spectra::zeros(16); MIN_JACKKNIFE_GROUPS - 1];
+        let why = jackknife(&few, &[2, 3], 32, 1.0, false, &[], &[2.0, 4.0]).unwrap_err();
+        assert_eq!(why, "7 segments, it needs at least 8");
+        let term = FastTerm {
+            name: "thermal_lag",
+            channel: "temperature_c".into(),
+            params: vec![
+                ("tau_s".into(), 60.0, 0.3),
+                ("coefficient".into(), 1e-4, 1e-6),
+            ],
+            static_coefficient: (1e-4, 1e-6),
+            delta_bic: -100.0,
+            chi2_per_dof: 1.0,
+            band_hz: (1e-3, 0.5),
+            bins: 100,
+            rate_coefficient: None,
+            sigma_method: format!("curvature (no jackknife: {why})"),
+            sigmas: vec![s],
+        };
+        let f = FullRate {
+            row_spacing_s: 1.0,
+            bin_s: 70.0,
+            segment_rows: 4096,
+            segments: 7,
+            rows: 7 * 4096,
+            terms: vec![term],
+            refused: Vec::new(),
+        };
+        let r = Some(Ok(f));
+        assert!(text_of(&r, "v").contains(
+            "σ: curvature (no jackknife: 7 segments, it needs at least 8): tau_s curvature"
+        ));
+        let j = json_of(&r);
+        assert_eq!(
+            j["terms"][0]["sigma_method"],
+            "curvature (no jackknife: 7 segments, it needs at least 8)"
+        );
+        assert_eq!(j["terms"][0]["sigma_used"]["tau_s"], "curvature");
+        assert!(j["terms"][0]["uncertainties_jackknife"]["tau_s"].is_null());
+    }
 }
