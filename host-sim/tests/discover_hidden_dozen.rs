@@ -339,8 +339,9 @@ fn score(d: &Discovery, h: &Hidden) -> (bool, usize) {
     (right, acc.len() - matched.len())
 }
 
-/// Right logs measured when this test was written (10 of 14); the test fails below it.
-const RIGHT_AT_LEAST: usize = 10;
+/// Right logs measured (11 of 14: the transition named by `sigmoid_drift`); the test fails
+/// below it.
+const RIGHT_AT_LEAST: usize = 11;
 /// Extra effects over all logs, at most (the goal).
 const EXTRAS_AT_MOST: usize = 2;
 
