@@ -111,6 +111,16 @@ fn accepted_on(trouble: Trouble, seed: u64) -> Vec<String> {
         log = thinned(&log, &keep);
     }
     let (_, d) = hidden::discover_blind(&log);
+    let j = accomp_host::discover::report::json(&d);
+    if let Some(h) = j["effects"]
+        .as_array()
+        .and_then(|v| v.iter().find(|e| e["name"] == "thermal_hysteresis"))
+    {
+        eprintln!(
+            "  the loop named: {}; refused {:?}; last round {:?}",
+            h["preisach"], d.selection.refused, d.selection.last_round
+        );
+    }
     hidden::accepted_with_params(&d)
 }
 

@@ -359,9 +359,11 @@ const HYSTERESIS_LOGS: usize = 8;
 
 /// A relay hysteron (the general Preisach model's elementary operator): +1 after the
 /// temperature rose to `upper_c`, −1 after it fell to `lower_c`, unchanged in between; the bias
-/// follows the relay's state through a first-order switching time `tau_s` (a real switching
-/// element does not flip instantly — so the shape is not the detector's rate-independent one).
-/// Written here from the definition, not with the detector's operator.
+/// follows the relay's state through a critically damped second-order switching of time
+/// `tau_s` (two first-order stages of τ/2: a real switching element does not flip instantly),
+/// each relay with its own — so the shape is neither the detector's rate-independent loop nor
+/// its loop behind one first-order lag. Written here from the definition, not with the
+/// detector's operator.
 #[derive(Debug, Clone, Copy)]
 struct Relay {
     lower_c: f64,
@@ -376,16 +378,21 @@ fn relay_series(relays: &[Relay], temp: &[f64], dt_s: f64) -> Vec<f64> {
     for r in relays {
         let mid = 0.5 * (r.lower_c + r.upper_c);
         let mut state = if temp[0] >= mid { 1.0 } else { -1.0 };
-        let mut x = state;
-        let a = (-dt_s / r.tau_s).exp();
+        let (mut x1, mut x2) = (state, state);
+        let a = if r.tau_s > 0.0 {
+            (-dt_s / (0.5 * r.tau_s)).exp()
+        } else {
+            0.0
+        };
         for (o, &t) in out.iter_mut().zip(temp) {
             if t >= r.upper_c {
                 state = 1.0;
             } else if t <= r.lower_c {
                 state = -1.0;
             }
-            x = a * x + (1.0 - a) * state;
-            *o += r.size_g * x;
+            x1 = a * x1 + (1.0 - a) * state;
+            x2 = a * x2 + (1.0 - a) * x1;
+            *o += r.size_g * x2;
         }
     }
     out
@@ -454,7 +461,15 @@ fn a_switching_relay_loop_is_named_with_its_area_and_nothing_without_it() {
             })
             .collect();
         let extra = relay_series(&relays, &st.temp_true_c, dt);
+        // The loop as the record shows it (switching times included), what
+        // `preisach.record_loop_area` reports; and the relays' own loop switched at once
+        // (printed beside `preisach.loop_area`, the fitted rate-independent loop's).
         let truth = branch_area(&extra, &st.temp_true_c);
+        let instant: Vec<Relay> = relays.iter().map(|r| Relay { tau_s: 0.0, ..*r }).collect();
+        let still = branch_area(
+            &relay_series(&instant, &st.temp_true_c, dt),
+            &st.temp_true_c,
+        );
         // The null: the same station and noise draws, no loop.
         let mut r0 = r.clone();
         let y = synth::output_g(&st, &noise, &extra, &mut r);
@@ -465,7 +480,17 @@ fn a_switching_relay_loop_is_named_with_its_area_and_nothing_without_it() {
         let est = j["effects"]
             .as_array()
             .and_then(|v| v.iter().find(|e| e["name"] == "thermal_hysteresis"))
+            .and_then(|e| e["preisach"]["record_loop_area"].as_f64())
+            .unwrap_or(f64::NAN);
+        let still_est = j["effects"]
+            .as_array()
+            .and_then(|v| v.iter().find(|e| e["name"] == "thermal_hysteresis"))
             .and_then(|e| e["preisach"]["loop_area"].as_f64())
+            .unwrap_or(f64::NAN);
+        let lag = j["effects"]
+            .as_array()
+            .and_then(|v| v.iter().find(|e| e["name"] == "thermal_hysteresis"))
+            .and_then(|e| e["preisach"]["lag_s"].as_f64())
             .unwrap_or(f64::NAN);
         let names = hidden::accepted_names(&d);
         let named = names.iter().any(|n| n == "thermal_hysteresis");
@@ -475,10 +500,13 @@ fn a_switching_relay_loop_is_named_with_its_area_and_nothing_without_it() {
         }
         let null_hyst = hidden::accepted(&d0, "thermal_hysteresis").is_some();
         eprintln!(
-            "relay log {i}: {relays:?}, area {:.3} µg·°C → {:.3} µg·°C ok={hit}; {}\n  \
-             null: accepted {:?}",
+            "relay log {i}: {relays:?}, area as the record shows it {:.3} µg·°C → {:.3} \
+             µg·°C; switched at once {:.3} → rate-independent loop {:.3}; output lag {lag:.0} \
+             s; ok={hit}; {}\n  null: accepted {:?}",
             truth * 1e6,
             est * 1e6,
+            still * 1e6,
+            still_est * 1e6,
             describe(&d),
             hidden::accepted_with_params(&d0)
         );
@@ -491,10 +519,10 @@ fn a_switching_relay_loop_is_named_with_its_area_and_nothing_without_it() {
          {null_named}/{RELAY_LOGS}"
     );
     // Goal stated before measuring: ≥ 4/6. Measured: 0/6 with plays alone (a lag named in 5/6),
-    // 1/6 with the relays (10 levels; 2/6 at 16), that one with a rate coupling beside it; the
-    // other logs name a thermal lag, the loop refused below the noise floor
-    // (docs/discovery-causes.md). Asserted: the measured figure.
-    assert!(ok >= 1, "relay loops named in {ok}/{RELAY_LOGS}");
+    // 1/6 with rate-independent relays (the loops refused below a noise floor their own
+    // switching transients had inflated); 6/6 with the loop behind an output lag, areas +16 …
+    // +25 % and −7 % (docs/discovery-causes.md), nothing beside them. Asserted: the goal.
+    assert!(ok >= 4, "relay loops named in {ok}/{RELAY_LOGS}");
     assert_eq!(null_named, 0, "hysteresis named on loop-free logs");
 }
 

@@ -206,6 +206,7 @@ fn thermal_effects_are_recovered_with_their_time_constant_and_size() {
             half_width: 5e-5,
             play_half_width_c: 0.1,
             relays: Vec::new(),
+            lag_s: 0.0,
         },
     );
     // The catalogue's play grid starts at 3× the reading noise; the quiet RTD has none, so the

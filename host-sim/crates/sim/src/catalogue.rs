@@ -287,6 +287,7 @@ mod tests {
                 half_width: 1.0,
                 play_half_width_c: 1.0,
                 relays: Vec::new(),
+                lag_s: 0.0,
             },
             S::SelfHeating {
                 tau_s: 1.0,

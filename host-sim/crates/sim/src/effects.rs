@@ -90,7 +90,8 @@ pub enum ScenarioEffect {
         coefficient: f64,
     },
     /// `half_width`·(T − p_r[T])/r: a play operator of half-width r on the mount temperature,
-    /// plus Σ h_j·(−R_j[T]) over `relays` (the Preisach model's switching elements, [`Relay`]).
+    /// plus Σ h_j·(−R_j[T]) over `relays` (the Preisach model's switching elements, [`Relay`]),
+    /// the sum reaching the output through a first-order lag of `lag_s` (0: at once).
     ThermalHysteresis {
         /// Bias half-difference between the heating and cooling branches, unit.
         half_width: f64,
@@ -99,6 +100,11 @@ pub enum ScenarioEffect {
         /// Relay hysterons beside the play (none by default).
         #[serde(default, skip_serializing_if = "Vec::is_empty")]
         relays: Vec<Relay>,
+        /// Time constant with which the loop's output reaches the sensor, s (a switching
+        /// element's own switching time, or the thermal path from the hysteretic part to the
+        /// proof mass); 0: at once.
+        #[serde(default, skip_serializing_if = "is_zero")]
+        lag_s: f64,
     },
     /// `coefficient`·(L_τ[a²] − a²): torquer self-heating after an input change (unit/g²).
     SelfHeating {
@@ -314,8 +320,14 @@ impl ScenarioEffect {
                 half_width,
                 play_half_width_c,
                 relays,
+                lag_s,
             } => {
                 positive("play_half_width_c", *play_half_width_c)?;
+                check(
+                    lag_s.is_finite() && *lag_s >= 0.0,
+                    "lag_s",
+                    "must be finite and ≥ 0",
+                )?;
                 for r in relays {
                     finite("relays.half_width", r.half_width)?;
                     finite("relays.lower_c", r.lower_c)?;
@@ -518,10 +530,12 @@ enum State {
     Lag {
         x: Option<(f64, f64)>,
     },
-    /// Play operator output and the relays' states (+1, −1; 0 before the first switch).
+    /// Play operator output, the relays' states (+1, −1; 0 before the first switch) and the
+    /// output lag's state.
     Play {
         p: Option<f64>,
         relays: Vec<f64>,
+        lag: Option<(f64, f64)>,
     },
     /// Index of the ambient channel and its lag state.
     Ambient {
@@ -622,6 +636,7 @@ impl EffectChain {
                 ScenarioEffect::ThermalHysteresis { relays, .. } => State::Play {
                     p: None,
                     relays: vec![0.0; relays.len()],
+                    lag: None,
                 },
                 ScenarioEffect::AmbientCoupling { channel, .. } => {
                     let i = setup
@@ -723,8 +738,13 @@ impl EffectChain {
                         half_width,
                         play_half_width_c,
                         relays,
+                        lag_s,
                     },
-                    State::Play { p, relays: states },
+                    State::Play {
+                        p,
+                        relays: states,
+                        lag,
+                    },
                 ) => {
                     let r = *play_half_width_c;
                     let tc = d.temperature_c;
@@ -735,7 +755,11 @@ impl EffectChain {
                         *st = relay_step(*st, tc, rel.lower_c, rel.upper_c);
                         sum -= rel.half_width * *st;
                     }
-                    sum
+                    if *lag_s > 0.0 {
+                        lag_step(lag, t, sum, *lag_s)
+                    } else {
+                        sum
+                    }
                 }
                 (ScenarioEffect::Warmup { tau_s, amplitude }, _) => amplitude * (-t / tau_s).exp(),
                 (ScenarioEffect::AgingDrift { tau_s, amplitude }, _) => {
@@ -1311,6 +1335,7 @@ mod tests {
                     half_width: 1.0,
                     play_half_width_c: 0.5,
                     relays: Vec::new(),
+                    lag_s: 0.0,
                 },
             ],
             setup(),
@@ -1349,6 +1374,7 @@ mod tests {
                     upper_c: 0.6,
                     half_width: 2.0,
                 }],
+                lag_s: 0.0,
             }],
             setup(),
         )
@@ -1368,8 +1394,40 @@ mod tests {
                 upper_c: 0.2,
                 half_width: 1.0,
             }],
+            lag_s: 0.0,
         };
         assert!(bad.validate(0).is_err());
+    }
+
+    #[test]
+    fn a_lagged_loop_reaches_its_branch_through_the_lag_and_a_negative_lag_is_refused() {
+        // One relay (thresholds 0.2, 0.6 °C, half-width 2) whose output lags by 100 s: once
+        // the temperature reaches 0.6 °C at t = 0 the term relaxes towards −2 as 1 − e^(−t/τ).
+        let relay = |lag_s| ScenarioEffect::ThermalHysteresis {
+            half_width: 0.0,
+            play_half_width_c: 0.1,
+            relays: vec![Relay {
+                lower_c: 0.2,
+                upper_c: 0.6,
+                half_width: 2.0,
+            }],
+            lag_s,
+        };
+        let mut c = EffectChain::new(&[relay(100.0)], setup()).unwrap();
+        assert_eq!(
+            c.output_term(&drive(0.0, 0.6)),
+            -2.0,
+            "the lag starts settled"
+        );
+        assert_eq!(
+            c.output_term(&drive(10.0, 0.1)),
+            -2.0 + 4.0 * (1.0 - (-0.1f64).exp())
+        );
+        let y = c.output_term(&drive(110.0, 0.1));
+        let want = 2.0 - 4.0 * (-1.1f64).exp();
+        assert!((y - want).abs() < 1e-12, "{y} vs {want}");
+        assert!(relay(-1.0).validate(0).is_err());
+        assert!(relay(f64::NAN).validate(0).is_err());
     }
 
     #[test]

@@ -689,7 +689,7 @@ pub fn columns(e: &Effect, ds: &Dataset, ctx: &Context, theta: f64) -> Vec<Vec<f
         Effect::ThermalHysteresis => temp()
             .map(|tc| {
                 vec![match &ctx.hysteresis {
-                    Some(p) => p.column(&tc, theta),
+                    Some(p) => p.lagged_column(&tc, t, seg, theta),
                     None => super::hysteresis::branch(&tc, theta),
                 }]
             })

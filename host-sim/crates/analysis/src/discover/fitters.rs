@@ -65,8 +65,9 @@ fn best_theta(cur: &Current, e: &Effect, ctx: &Context) -> Option<(f64, f64, boo
     })
 }
 
-/// [`best_preisach`]'s result: (distribution, θ, raw column, RSS, active, M, at edge).
-type PreisachFit = (Preisach, f64, Vec<f64>, f64, usize, usize, bool);
+/// [`best_preisach`]'s result: (distribution, θ, raw column, RSS, active, M, at edge, 1 when
+/// an output lag was fitted).
+type PreisachFit = (Preisach, f64, Vec<f64>, f64, usize, usize, bool, usize);
 
 /// Best Preisach distribution for `thermal_hysteresis`: each play of the width grid and each
 /// identifiable relay of the threshold dictionary (`hysteresis::relay_dictionary`, gaps of at
@@ -85,25 +86,86 @@ fn best_preisach(cur: &Current) -> Option<PreisachFit> {
         return None;
     }
     let relays = hysteresis::relay_dictionary(temp, 4.0 * g[0]);
-    let mut cols = Vec::with_capacity(g.len() + relays.len());
-    let raw = g.iter().map(|&r| hysteresis::branch(temp, r)).chain(
-        relays
-            .iter()
-            .map(|r| hysteresis::relay_branch(temp, r[0], r[1])),
-    );
-    for c in raw {
-        let mut w = cur.rows.whiten(&c, cur.phi);
-        if w.iter().any(|v| !v.is_finite()) {
-            return None;
+    let raw: Vec<Vec<f64>> = g
+        .iter()
+        .map(|&r| hysteresis::branch(temp, r))
+        .chain(
+            relays
+                .iter()
+                .map(|r| hysteresis::relay_branch(temp, r[0], r[1])),
+        )
+        .collect();
+    // The dictionary at each output lag (0 first); a lag is kept when it pays, against no lag,
+    // the look-elsewhere charge of its grid (as `score_all` charges it) and the operators'.
+    // Behind a lag, only the operators whose switching shows through it: the record must take
+    // longer than the lag to cross the operator (a play's 2r, a relay's gap). A narrower one
+    // switches within the lag, and behind it is a lagged sign of the temperature's rate — a
+    // rate coupling through a low pass, i.e. a thermal lag's column, not a loop (measured: such
+    // a rate coupling through a 30-min low pass was named a loop of a 0.009 °C play behind a
+    // 16-min lag).
+    let n_eff = (cur.r_w.len() as f64).max(2.0);
+    let lag_charge = look_elsewhere(n_eff, hysteresis::LOOP_LAGS_S.len() as f64);
+    let moves = hysteresis::median_change_c(temp, ds.dt_s);
+    let mut best: Option<(Preisach, Vec<f64>, f64, usize, f64)> = None;
+    for lag_s in std::iter::once(0.0).chain(hysteresis::LOOP_LAGS_S) {
+        if lag_s > 0.0 && lag_s < 2.0 * ds.dt_s {
+            continue;
         }
-        super::baseline::orthogonalize(&cur.basis.q, &mut w);
-        cols.push(w);
+        let shows =
+            |span_c: f64| lag_s == 0.0 || hysteresis::crossing_time_s(&moves, span_c) > lag_s;
+        let plays: Vec<f64> = g.iter().copied().filter(|r| shows(2.0 * r)).collect();
+        let rel: Vec<[f64; 2]> = relays
+            .iter()
+            .copied()
+            .filter(|r| shows(r[1] - r[0]))
+            .collect();
+        if plays.len() < 2 {
+            continue;
+        }
+        let mut cols = Vec::with_capacity(plays.len() + rel.len());
+        let ops = g
+            .iter()
+            .zip(&raw)
+            .filter(|(r, _)| shows(2.0 * **r))
+            .map(|(_, c)| c)
+            .chain(
+                relays
+                    .iter()
+                    .zip(&raw[g.len()..])
+                    .filter(|(r, _)| shows(r[1] - r[0]))
+                    .map(|(_, c)| c),
+            );
+        for c in ops {
+            let lagged;
+            let c = if lag_s > 0.0 {
+                lagged = effects::lag_filter(c, &ds.t_s, &ds.segment_start, lag_s);
+                &lagged
+            } else {
+                c
+            };
+            let mut w = cur.rows.whiten(c, cur.phi);
+            if w.iter().any(|v| !v.is_finite()) {
+                return None;
+            }
+            super::baseline::orthogonalize(&cur.basis.q, &mut w);
+            cols.push(w);
+        }
+        let Some((p, _, active)) = hysteresis::fit_preisach(&plays, &rel, &cols, &cur.r_w) else {
+            continue;
+        };
+        let p = p
+            .on_record(temp)
+            .with_lag(lag_s, temp, &ds.t_s, &ds.segment_start, ds.dt_s);
+        let col = p.lagged_column(temp, &ds.t_s, &ds.segment_start, p.width_c());
+        let rss = cur.rss_with(std::slice::from_ref(&col));
+        let charge = if lag_s > 0.0 { lag_charge } else { 0.0 };
+        let score = n_eff * rss.max(1e-300).ln() + charge + active as f64 * n_eff.ln();
+        if best.as_ref().is_none_or(|b| score < b.4) {
+            best = Some((p, col, rss, active, score));
+        }
     }
-    let (p, _, active) = hysteresis::fit_preisach(&g, &relays, &cols, &cur.r_w)?;
-    let p = p.on_record(temp);
+    let (p, col, rss, active, _) = best?;
     let theta = p.width_c();
-    let col = p.column(temp, theta);
-    let rss = cur.rss_with(std::slice::from_ref(&col));
     // The search's range of widths: the narrowest play to the widest of the plays and the
     // relays' half-gaps (a relay's gap reaches over most of the range, past the widest play).
     let half_step = (g[1] / g[0]).sqrt();
@@ -112,7 +174,17 @@ fn best_preisach(cur: &Current) -> Option<PreisachFit> {
         .map(|r| 0.5 * (r[1] - r[0]))
         .fold(g[g.len() - 1], f64::max);
     let at_edge = theta <= g[0] * half_step || theta >= top / half_step;
-    Some((p, theta, col, rss, active, g.len() + relays.len(), at_edge))
+    let lags = if p.lag_s > 0.0 { 1 } else { 0 };
+    Some((
+        p,
+        theta,
+        col,
+        rss,
+        active,
+        g.len() + relays.len(),
+        at_edge,
+        lags,
+    ))
 }
 
 /// Best single step: a fast scan of every position on the whitened residual (ignoring the
@@ -346,13 +418,16 @@ pub(super) fn score_all(
             // A Preisach distribution: the search over its dictionary (plays and relays) is
             // charged like a grid of that many points, each operator beyond the first with a
             // weight as one more parameter.
+            // An output lag is one more parameter found by a search over its grid.
             Effect::ThermalHysteresis => match best_preisach(cur) {
-                Some((p, th, col, r, active, m, edge)) => {
+                Some((p, th, col, r, active, m, edge, lags)) => {
                     preisach = Some((p, col));
                     (
                         th,
                         r,
-                        nl_penalty(m as f64) + active.saturating_sub(1) as f64 * n_eff.ln(),
+                        nl_penalty(m as f64)
+                            + active.saturating_sub(1) as f64 * n_eff.ln()
+                            + lags as f64 * nl_penalty(hysteresis::LOOP_LAGS_S.len() as f64),
                         edge,
                     )
                 }

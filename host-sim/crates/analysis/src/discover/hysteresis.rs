@@ -305,9 +305,116 @@ pub struct Preisach {
     /// column is divided by it).
     pub reach: f64,
     /// The area ∫(heating − cooling) dT of the column's loop per unit of its coefficient, °C,
-    /// on the major loop over the record's 1–99 % temperature range.
+    /// on the major loop over the record's 1–99 % temperature range (of the rate-independent
+    /// loop, before `lag_s`).
     pub loop_area_c: f64,
+    /// Time constant of the first-order lag through which the loop's output reaches the
+    /// sensor, s (0: at once): a switching element's own switching time, or the thermal path
+    /// from the hysteretic part to the proof mass ([`LOOP_LAGS_S`]).
+    pub lag_s: f64,
+    /// The loop as the record shows it, per unit coefficient, °C ([`record_loop_area_c`] of the
+    /// column, lag included): with an output lag the record's ramps widen the loop by the
+    /// distance they cover in the lag, and on ramps of similar rates the split between the
+    /// thresholds' gap and the lag is not determined while this area is.
+    pub record_loop_area_c: f64,
 }
+
+/// The area ∫(heating − cooling) dT of `column` as the record `temp_c` (spacing `dt_s`) shows
+/// it, per unit of the column: the temperature's 2–98 % range in 24 bins; in each, the mean of
+/// the column on the rows where the temperature is rising minus its mean where it is falling,
+/// times the bin's width, summed over the bins with at least 5 rows of each. Rising and falling
+/// from the change over ± 10 min (at least one row); rows whose change is within 4× the
+/// reading noise (holds, turnovers) are neither. NaN when no bin qualifies.
+pub fn record_loop_area_c(column: &[f64], temp_c: &[f64], dt_s: f64) -> f64 {
+    const BINS: usize = 24;
+    let n = temp_c.len().min(column.len());
+    let w = ((600.0 / dt_s).round() as usize).max(1);
+    if n < 2 * w + 2 {
+        return f64::NAN;
+    }
+    let mut sorted: Vec<f64> = temp_c[..n]
+        .iter()
+        .copied()
+        .filter(|v| v.is_finite())
+        .collect();
+    if sorted.len() < 2 {
+        return f64::NAN;
+    }
+    sorted.sort_by(f64::total_cmp);
+    let q = |p: f64| sorted[((sorted.len() - 1) as f64 * p).round() as usize];
+    let (lo, hi) = (q(0.02), q(0.98));
+    let width = (hi - lo) / BINS as f64;
+    // A NaN width (a flat or non-finite record) is no range either.
+    if width.is_nan() || width <= 0.0 {
+        return f64::NAN;
+    }
+    let still = 4.0 * reading_noise_c(&temp_c[..n]);
+    // Per bin: (sum rising, rows rising, sum falling, rows falling).
+    let mut acc = [[0.0f64; 4]; BINS];
+    for i in w..n - w {
+        let d = temp_c[i + w] - temp_c[i - w];
+        let b = ((temp_c[i] - lo) / width).floor();
+        // A NaN change is neither rising nor falling.
+        let moving = d.abs() > still;
+        if !(0.0..BINS as f64).contains(&b) || !moving || !column[i].is_finite() {
+            continue;
+        }
+        let a = &mut acc[b as usize];
+        let k = if d > 0.0 { 0 } else { 2 };
+        a[k] += column[i];
+        a[k + 1] += 1.0;
+    }
+    let used: Vec<f64> = acc
+        .iter()
+        .filter(|a| a[1] >= 5.0 && a[3] >= 5.0)
+        .map(|a| (a[0] / a[1] - a[2] / a[3]) * width)
+        .collect();
+    if used.is_empty() {
+        f64::NAN
+    } else {
+        used.iter().sum()
+    }
+}
+
+/// How far the temperature typically moves in a time: (k·`dt_s`, median |T[i + k] − T[i]|) for
+/// k doubling from 1 up to a quarter of the record.
+pub fn median_change_c(temp_c: &[f64], dt_s: f64) -> Vec<(f64, f64)> {
+    let n = temp_c.len();
+    let mut out = Vec::new();
+    let mut k = 1;
+    while 4 * k <= n {
+        let mut d: Vec<f64> = (0..n - k)
+            .map(|i| (temp_c[i + k] - temp_c[i]).abs())
+            .filter(|v| v.is_finite())
+            .collect();
+        if !d.is_empty() {
+            let mid = d.len() / 2;
+            let (_, m, _) = d.select_nth_unstable_by(mid, f64::total_cmp);
+            out.push((k as f64 * dt_s, *m));
+        }
+        k *= 2;
+    }
+    out
+}
+
+/// The typical time the temperature takes to move by `delta_c`, s, from its
+/// [`median_change_c`]: the shortest time whose median change reaches it (∞ when none does).
+/// Holds lengthen it.
+pub fn crossing_time_s(median_change: &[(f64, f64)], delta_c: f64) -> f64 {
+    median_change
+        .iter()
+        .find(|(_, m)| *m >= delta_c)
+        .map_or(f64::INFINITY, |(t, _)| *t)
+}
+
+/// The output lags a Preisach distribution is tried with, s (0 and a factor-2 grid from 4 min
+/// to 64 min): a relay that takes minutes to switch leaves after every switch a transient the
+/// rate-independent loop cannot fit, which the noise model then takes as random walk (measured
+/// on 14-day relay logs with 2–20 min switching times: the noise model's Allan deviation at 2 h
+/// 3–5× the noise's own with the loop in the model) and which hides the loop below that
+/// inflated floor. Longer than an hour, a lag of the loop is no longer told from a lag of the
+/// temperature on 2–6 h ramps.
+pub const LOOP_LAGS_S: [f64; 5] = [240.0, 480.0, 960.0, 1920.0, 3840.0];
 
 impl Preisach {
     /// From NNLS weights over `widths_c` (plays) and `relays_c` (zero weights dropped); `None`
@@ -331,7 +438,42 @@ impl Preisach {
             relay_weights,
             reach: 1.0,
             loop_area_c: f64::NAN,
+            lag_s: 0.0,
+            record_loop_area_c: f64::NAN,
         })
+    }
+
+    /// The distribution with its output lagged by `lag_s` (s; 0: at once) and the loop area
+    /// the record (`temp_c` at times `t_s`, nominal spacing `dt_s`) then shows.
+    pub fn with_lag(
+        mut self,
+        lag_s: f64,
+        temp_c: &[f64],
+        t_s: &[f64],
+        segment_start: &[bool],
+        dt_s: f64,
+    ) -> Self {
+        self.lag_s = lag_s;
+        let c = self.lagged_column(temp_c, t_s, segment_start, self.width_c());
+        self.record_loop_area_c = record_loop_area_c(&c, temp_c, dt_s);
+        self
+    }
+
+    /// [`Preisach::column`] through the output lag `lag_s` on the record's time grid `t_s`
+    /// (restarted at each segment start, like every lag of the catalogue).
+    pub fn lagged_column(
+        &self,
+        temp_c: &[f64],
+        t_s: &[f64],
+        segment_start: &[bool],
+        theta: f64,
+    ) -> Vec<f64> {
+        let c = self.column(temp_c, theta);
+        if self.lag_s > 0.0 {
+            super::effects::lag_filter(&c, t_s, segment_start, self.lag_s)
+        } else {
+            c
+        }
     }
 
     /// Sets `reach` (half the peak-to-peak of the operators' sum over `temp_c`) and
@@ -553,6 +695,48 @@ mod tests {
         let s = reading_noise_c(&u[100..]);
         // The estimate is tuned for Gaussian noise; this sine is not: same order is what counts.
         assert!(s > 0.001 && s < 0.006, "{s}");
+    }
+
+    #[test]
+    fn a_lagged_loop_is_the_first_order_lag_of_the_loop_and_no_lag_is_the_loop_itself() {
+        // A triangle 0 → 1 → 0 °C of 100 rows a leg at 60 s, one relay [0.3, 0.7] °C.
+        let temp: Vec<f64> = (0..400)
+            .map(|i| {
+                let x = f64::from(i % 200) / 100.0;
+                if x <= 1.0 {
+                    x
+                } else {
+                    2.0 - x
+                }
+            })
+            .collect();
+        let t: Vec<f64> = (0..400).map(|i| 60.0 * f64::from(i)).collect();
+        let mut seg = vec![false; 400];
+        seg[0] = true;
+        let p = Preisach::from_weights(&[], &[], &[[0.3, 0.7]], &[1.0]).expect("one relay");
+        let still = p.column(&temp, p.width_c());
+        assert_eq!(p.lagged_column(&temp, &t, &seg, p.width_c()), still);
+        let lagged = p
+            .clone()
+            .with_lag(600.0, &temp, &t, &seg, 60.0)
+            .lagged_column(&temp, &t, &seg, p.width_c());
+        let a = (-60.0f64 / 600.0).exp();
+        let mut x = still[0];
+        for i in 1..400 {
+            x = a * x + (1.0 - a) * still[i];
+            assert!((lagged[i] - x).abs() < 1e-12, "row {i}");
+        }
+    }
+
+    #[test]
+    fn the_crossing_time_is_the_lag_at_which_the_median_change_reaches_the_width() {
+        // A ramp of 0.01 °C a row (60 s): 0.08 °C takes 8 rows, 0.1 °C the next doubling (16).
+        let temp: Vec<f64> = (0..1000).map(|i| 0.01 * f64::from(i)).collect();
+        let m = median_change_c(&temp, 60.0);
+        assert_eq!(crossing_time_s(&m, 0.08), 8.0 * 60.0);
+        assert_eq!(crossing_time_s(&m, 0.1), 16.0 * 60.0);
+        // A constant temperature never crosses.
+        assert!(crossing_time_s(&median_change_c(&[5.0; 100], 60.0), 0.01).is_infinite());
     }
 
     #[test]

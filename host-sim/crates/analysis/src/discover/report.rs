@@ -81,8 +81,11 @@ pub fn json(d: &Discovery) -> Value {
                     o["preisach"] = json!(p);
                     let area = loop_area(a, p);
                     o["preisach"]["loop_area"] = json!(area);
+                    let shown = record_loop_area(a, p);
+                    o["preisach"]["record_loop_area"] = json!(shown);
                     if let Some(u) = u {
                         o["preisach"]["loop_area_g"] = json!(area / u);
+                        o["preisach"]["record_loop_area_g"] = json!(shown / u);
                     }
                 }
             }
@@ -333,6 +336,22 @@ pub fn text(d: &Discovery) -> String {
                     o,
                     "     loop area ∫(heating − cooling) dT over the record's 1–99 % range: {:.4e} {}·°C",
                     loop_area(a, p),
+                    d.dataset.output_unit
+                );
+                if p.lag_s > 0.0 {
+                    let _ = writeln!(
+                        o,
+                        "     the loop's output reaches the sensor through a first-order lag of \
+                         {:.0} s (a switching time or a thermal path; the area above is the \
+                         rate-independent loop's)",
+                        p.lag_s
+                    );
+                }
+                let _ = writeln!(
+                    o,
+                    "     loop area as the record shows it (heating − cooling over its ramps): \
+                     {:.4e} {}·°C",
+                    record_loop_area(a, p),
                     d.dataset.output_unit
                 );
             }
@@ -637,12 +656,21 @@ pub fn write_report(d: &Discovery, dir: &Path, format: Format) -> Result<(), Dis
 /// The accepted loop's area ∫(heating − cooling) dT, output unit·°C: its coefficient (the
 /// branch half-width) × the column's own loop area (`hysteresis::Preisach::loop_area_c`).
 fn loop_area(a: &super::select::Accepted, p: &super::hysteresis::Preisach) -> f64 {
-    let hw = a
-        .params
+    half_width(a) * p.loop_area_c
+}
+
+/// The accepted loop's area as the record shows it, output unit·°C: its coefficient × the
+/// column's record loop area (`hysteresis::Preisach::record_loop_area_c`, the lag included).
+fn record_loop_area(a: &super::select::Accepted, p: &super::hysteresis::Preisach) -> f64 {
+    half_width(a) * p.record_loop_area_c
+}
+
+/// The accepted loop's coefficient, the branch half-width (NaN when absent).
+fn half_width(a: &super::select::Accepted) -> f64 {
+    a.params
         .iter()
         .find(|(k, _)| k == "half_width")
-        .map_or(f64::NAN, |(_, v)| v.value);
-    hw * p.loop_area_c
+        .map_or(f64::NAN, |(_, v)| v.value)
 }
 
 #[cfg(test)]

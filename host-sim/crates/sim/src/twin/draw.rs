@@ -224,6 +224,7 @@ impl EffectDraws {
                 half_width: need("half_width")?,
                 play_half_width_c: need("play_half_width_c")?,
                 relays: Vec::new(),
+                lag_s: 0.0,
             },
             EffectKind::SelfHeating => ScenarioEffect::SelfHeating {
                 tau_s: need("tau_s")?,
