@@ -39,8 +39,17 @@ fn lag_of(d: &Discovery) -> Option<f64> {
 
 /// The paper-1g preset one day at 1 Hz with `effects` added, simulated from `seed`, as a log.
 fn paper_1g_day(effects: Vec<accomp_host::sim::effects::ScenarioEffect>, seed: u64) -> Log {
+    paper_1g(effects, seed, ROWS)
+}
+
+/// The paper-1g preset for `rows` s at 1 Hz with `effects` added, simulated from `seed`.
+fn paper_1g(
+    effects: Vec<accomp_host::sim::effects::ScenarioEffect>,
+    seed: u64,
+    rows: usize,
+) -> Log {
     let mut sc = Scenario::preset("paper-1g").expect("preset");
-    sc.run.duration_s = ROWS as f64;
+    sc.run.duration_s = rows as f64;
     sc.run.interval_s = 1.0;
     sc.effects.extend(effects);
     let mut sim = Simulator::new(&sc, seed).expect("simulator");
@@ -181,4 +190,63 @@ fn a_rate_coupling_beside_the_lag_leaves_the_lag_found_and_is_measured_at_the_fu
         .expect("the channel's gain on its rate beside the lag");
     assert!((rate.0 / g - 1.0).abs() < 0.25, "rate gain {rate:?}");
     assert!(d.selection.accepted.iter().any(|a| a.full_rate));
+}
+
+/// The full-rate stage alone (no binned selection: its lags held in H are none here) on one
+/// day of `log` binned as [`run`] bins it: its `thermal_lag`, if found.
+fn full_rate_lag(log: &Log) -> Option<disc::fullrate::FastTerm> {
+    use accomp_host::discover::import::{dataset_from_log, full_rate_from_log};
+    let opts = DatasetOptions {
+        max_points: MAX_POINTS,
+        ..DatasetOptions::default()
+    };
+    let binned = dataset_from_log(log, &opts).expect("binned");
+    let full = full_rate_from_log(log, &opts).expect("full rate");
+    let f = disc::fullrate::analyse(&full, &binned, &[]).expect("the stage runs");
+    f.terms.into_iter().find(|t| t.name == "thermal_lag")
+}
+
+/// The σ of τ reported at the full rate covers the true τ over independent records: ten seeds
+/// of the paper-1g day with the rate coupling of 4e-3 V·s/°C beside its 60 s lag (10 segments
+/// of 8192 s, so 10 jackknife groups); 60 s within ±1σ for at least 5 of the 10 (≈ 7 expected;
+/// 5 or more holds with 95 % probability) and within ±2σ for at least 8.
+/// Measured: τ 56.2–65.5 s (std 3.4 s over the seeds) while the χ² curvature's σ_τ is
+/// 1.8–2.3 s: ±1 curvature σ hold 60 s for 1 of the 10, ±2 for 8; the reported σ (the
+/// jackknife's on 9 seeds, 2.9–8.1 s; on seed 8 the curvature's, 1.8 s against 1.78) holds it
+/// within ±1σ for 8 and ±2σ for 10. Without the rate coupling the two are closer (τ std 2.4 s,
+/// curvature σ ≈ 2 s: ±2 curvature σ hold 60 s for 8 of the 10, the reported σ for 10).
+/// ≈ 1 s a seed in the dev profile.
+#[test]
+fn the_lags_sigma_covers_the_true_tau_over_independent_records() {
+    let (tau_true, n) = (60.0, 10u64);
+    // Within ±1σ and ±2σ: reported, curvature alone.
+    let (mut one, mut two, mut one_curvature, mut two_curvature) = (0, 0, 0, 0);
+    for seed in 1..=n {
+        let log = paper_1g_day(
+            vec![accomp_host::sim::effects::ScenarioEffect::RateCoupling {
+                channel: "temperature_c".into(),
+                coefficient: 4e-3,
+            }],
+            seed,
+        );
+        let t = full_rate_lag(&log).unwrap_or_else(|| panic!("seed {seed}: no thermal_lag"));
+        let tau = disc::fullrate::param(&t, "tau_s").expect("tau_s");
+        let s = t.sigmas.iter().find(|s| s.name == "tau_s").expect("σ of τ");
+        assert_eq!(s.used, tau.sigma);
+        assert!(t.sigma_method.contains("jackknife"), "{}", t.sigma_method);
+        let err = (tau.value - tau_true).abs();
+        one += usize::from(err <= tau.sigma);
+        two += usize::from(err <= 2.0 * tau.sigma);
+        one_curvature += usize::from(err <= s.curvature);
+        two_curvature += usize::from(err <= 2.0 * s.curvature);
+        println!(
+            "seed {seed}: τ = {:.2} s, σ {:.2} s ({}; curvature {:.2}, jackknife {:.2?})",
+            tau.value, tau.sigma, s.method, s.curvature, s.jackknife
+        );
+    }
+    println!(
+        "within ±1σ: {one}/{n}, ±2σ: {two}/{n} (curvature alone: {one_curvature}/{n}, \
+         {two_curvature}/{n})"
+    );
+    assert!(one >= 5 && two >= 8, "within ±1σ {one}/{n}, ±2σ {two}/{n}");
 }

@@ -3,7 +3,9 @@
 //! The selection works on block means (`import`: a 41-day 1 Hz record becomes 71 s bins), where a
 //! lag of a minute is only its low-frequency limit −τ·dT/dt: its coefficient × τ is seen, τ is
 //! not. Here the lags faster than a few bins are fitted on the full-rate rows, in the frequency
-//! domain: the record is cut into gap-free segments of L rows (detrended, Hann window), and the
+//! domain: the record is cut into gap-free segments of L rows (first-differenced, so that a
+//! random walk's low frequencies do not leak through the window into the band, then detrended
+//! and Hann-windowed; the spectra are divided by the difference's |1 − e^{−iω}|²), and the
 //! transfer function from each channel to the output is estimated as the averaged cross-spectrum
 //! over the channel's spectrum, H_k = S_yx/S_xx. A lag term of the catalogue, c·(L_τ[x] − x),
 //! with the static coupling a beside it, is H(f) = a + c·(G_τ(f) − 1), G_τ the discrete
@@ -20,6 +22,11 @@
 //! white reading noise (the floor of S_xx, [`super::rate::reading_floor`]) attenuates Ĥ: it is
 //! subtracted from S_xx and the band stops where the channel's spectrum falls below
 //! [`FLOOR_FACTOR`] × that floor.
+//!
+//! The band's points are not independent and white as χ² takes them (neighbouring bins, P
+//! estimated from the same segments, what the model leaves in the band): besides χ²'s curvature
+//! each parameter's σ is measured on the record by a delete-one-group jackknife over contiguous
+//! groups of segments ([`jackknife`]), and the larger is reported ([`Sigma`]).
 
 use super::effects::{self, log_grid, Effect, FastColumn, Param};
 use super::import::{block_means_like, ChannelKind, Dataset};
@@ -31,8 +38,13 @@ use crate::numerics::optimize::golden_section_min as golden;
 /// selection's lag grid (from two bins) already reaches the fast terms.
 pub const MIN_ROWS_PER_BIN: f64 = 4.0;
 /// A segment spans at least this many bins (its lowest frequencies overlap the binned model's
-/// resolution, so a lag near the upper end of the grid still shows its roll-over).
-pub const SEGMENT_BINS: f64 = 32.0;
+/// resolution, so a lag near the upper end of the grid still shows its roll-over). Measured on
+/// the 41-day 1 Hz preset (60 s lag, σ the jackknife's): τ 58.6 ± 0.4 s with segments of 32
+/// bins, 59.5 ± 0.4 s with 64 (57.7 and 59.2 s without the first differences).
+pub const SEGMENT_BINS: f64 = 64.0;
+/// Segments of this many bins when the record holds fewer than [`MIN_SEGMENTS`] of
+/// [`SEGMENT_BINS`].
+pub const MIN_SEGMENT_BINS: f64 = 32.0;
 /// At least this many segments (the residual spectrum P is estimated from them).
 pub const MIN_SEGMENTS: usize = 8;
 /// The band ends where the channel's spectrum falls below this factor × its white floor
@@ -44,6 +56,11 @@ pub const TAU_MAX_BINS: f64 = 4.0;
 pub const TAU_GRID: usize = 24;
 /// Equivalent noise bandwidth of the Hann window, bins.
 pub const HANN_ENBW: f64 = 1.5;
+/// The segments are split into this many contiguous groups (or one a segment when there are
+/// fewer) for the delete-one-group jackknife of the fit's σ.
+pub const JACKKNIFE_GROUPS: usize = 32;
+/// Below this many groups the jackknife's σ is too rough to use: the curvature's stands alone.
+pub const MIN_JACKKNIFE_GROUPS: usize = 8;
 
 /// A fast term found at the full rate.
 #[derive(Debug, Clone, serde::Serialize)]
@@ -74,6 +91,45 @@ pub struct FastTerm {
     /// as a rate's, so without this term a rate coupling beside a fast lag pulls τ (measured: a
     /// 60 s lag with 4e-3 V·s/°C on the rate beside it ended at the lower edge of the grid).
     pub rate_coefficient: Option<(f64, f64)>,
+    /// How the σ above were obtained: `max(curvature, jackknife (G groups))`, or `curvature
+    /// (no jackknife: why)`.
+    pub sigma_method: String,
+    /// Each parameter's σ from either method (the parameters, then `static_coefficient` and
+    /// `rate_coefficient`).
+    pub sigmas: Vec<Sigma>,
+}
+
+/// One parameter's σ: the χ² curvature's (scaled by χ²/dof when above 1; of τ from the profile
+/// in ln τ, of the coefficients from the least-squares covariance), the delete-one-group
+/// jackknife's over the record's segments, and the one reported (the larger).
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct Sigma {
+    /// The parameter (`tau_s`, `coefficient`, `lag_s`, `static_coefficient`, `rate_coefficient`).
+    pub name: String,
+    /// From the curvature of χ².
+    pub curvature: f64,
+    /// From the jackknife; `None` when it did not run (`FastTerm::sigma_method` says why).
+    pub jackknife: Option<f64>,
+    /// The larger: the one reported.
+    pub used: f64,
+    /// Which one that is (`curvature`, `jackknife`).
+    pub method: &'static str,
+}
+
+impl Sigma {
+    fn new(name: &str, curvature: f64, jackknife: Option<f64>) -> Self {
+        let (used, method) = match jackknife {
+            Some(j) if j > curvature => (j, "jackknife"),
+            _ => (curvature, "curvature"),
+        };
+        Self {
+            name: name.to_owned(),
+            curvature,
+            jackknife,
+            used,
+            method,
+        }
+    }
 }
 
 /// The full-rate stage's result.
@@ -95,7 +151,9 @@ pub struct FullRate {
     pub refused: Vec<(String, String)>,
 }
 
-/// Cross-spectra of the output with one channel, averaged over segments.
+/// Cross-spectra of the output with one channel: summed over a group of segments
+/// ([`group_spectra`]) or averaged over the segments of several groups ([`pooled`]).
+#[derive(Clone)]
 struct Spectra {
     /// Channel auto-spectrum.
     sxx: Vec<f64>,
@@ -104,6 +162,17 @@ struct Spectra {
     /// Cross-spectrum Y·conj(X) (re, im).
     syx: Vec<(f64, f64)>,
     segments: usize,
+}
+
+impl Spectra {
+    fn zeros(m: usize) -> Self {
+        Self {
+            sxx: vec![0.0; m],
+            syy: vec![0.0; m],
+            syx: vec![(0.0, 0.0); m],
+            segments: 0,
+        }
+    }
 }
 
 /// Gap-free runs of uniformly spaced rows (spacing within 1 % of `dt`), as index ranges.
@@ -131,20 +200,21 @@ fn detrend_window(x: &[f64], hann: &[f64]) -> Vec<f64> {
     d
 }
 
-fn spectra(y: &[f64], x: &[f64], segs: &[usize], len: usize) -> Spectra {
+/// The segments' spectra summed in `groups` contiguous groups (segment i of K in group
+/// ⌊i·G/K⌋): the record's spectra and those with one group left out are sums of them.
+fn group_spectra(y: &[f64], x: &[f64], segs: &[usize], len: usize, groups: usize) -> Vec<Spectra> {
     let hann: Vec<f64> = (0..len)
         .map(|k| (std::f64::consts::PI * k as f64 / len as f64).sin().powi(2))
         .collect();
     let m = len / 2;
-    let mut s = Spectra {
-        sxx: vec![0.0; m],
-        syy: vec![0.0; m],
-        syx: vec![(0.0, 0.0); m],
-        segments: segs.len(),
-    };
-    for &a in segs {
-        let mut yw = detrend_window(&y[a..a + len], &hann);
-        let mut xw = detrend_window(&x[a..a + len], &hann);
+    let mut out = vec![Spectra::zeros(m); groups];
+    for (i, &a) in segs.iter().enumerate() {
+        let s = &mut out[i * groups / segs.len()];
+        s.segments += 1;
+        let d =
+            |v: &[f64]| -> Vec<f64> { v[a - 1..a + len].windows(2).map(|w| w[1] - w[0]).collect() };
+        let mut yw = detrend_window(&d(y), &hann);
+        let mut xw = detrend_window(&d(x), &hann);
         let fy = crate::numerics::fft::half_spectrum(&mut yw);
         let fx = crate::numerics::fft::half_spectrum(&mut xw);
         for k in 0..m {
@@ -156,7 +226,35 @@ fn spectra(y: &[f64], x: &[f64], segs: &[usize], len: usize) -> Spectra {
             s.syx[k].1 += yi * xr - yr * xi;
         }
     }
-    let kf = segs.len() as f64;
+    // The differences' spectra are the series' times |1 − e^{−iω}|² = 2(1 − cos ω): divided
+    // by it, they are the series' own, without the leakage of a random walk's low frequencies
+    // through the window into the band.
+    for s in &mut out {
+        for k in 1..m {
+            let g = 2.0 * (1.0 - (2.0 * std::f64::consts::PI * k as f64 / len as f64).cos());
+            s.sxx[k] /= g;
+            s.syy[k] /= g;
+            s.syx[k].0 /= g;
+            s.syx[k].1 /= g;
+        }
+    }
+    out
+}
+
+/// The spectra averaged over the segments of all groups but `skip`.
+fn pooled(groups: &[Spectra], skip: Option<usize>) -> Spectra {
+    let m = groups.first().map_or(0, |g| g.sxx.len());
+    let mut s = Spectra::zeros(m);
+    for (_, g) in groups.iter().enumerate().filter(|(i, _)| Some(*i) != skip) {
+        s.segments += g.segments;
+        for k in 0..m {
+            s.sxx[k] += g.sxx[k];
+            s.syy[k] += g.syy[k];
+            s.syx[k].0 += g.syx[k].0;
+            s.syx[k].1 += g.syx[k].1;
+        }
+    }
+    let kf = s.segments.max(1) as f64;
     for k in 0..m {
         s.sxx[k] /= kf;
         s.syy[k] /= kf;
@@ -183,7 +281,9 @@ struct Band {
     w: Vec<f64>,
 }
 
-fn band(s: &Spectra) -> Option<Band> {
+/// The band of `s` (from bin 2 up to where the channel's spectrum falls to [`FLOOR_FACTOR`] ×
+/// its floor), or its bins `only` (a jackknife replicate is fitted on the record's band).
+fn band(s: &Spectra, only: Option<&[usize]>) -> Option<Band> {
     let m = s.sxx.len();
     // The channel's white reading noise under its signal (`rate::reading_floor`: the white
     // level of a power law + white fit to the upper three quarters, never above their lowest
@@ -199,8 +299,12 @@ fn band(s: &Spectra) -> Option<Band> {
         w: Vec::new(),
     };
     // Bin 1 carries the detrending's leakage; the band starts at bin 2.
-    for k in 2..m {
-        if s.sxx[k] <= FLOOR_FACTOR * floor {
+    let bins: Box<dyn Iterator<Item = usize>> = match only {
+        Some(ks) => Box::new(ks.iter().copied()),
+        None => Box::new(2..m),
+    };
+    for k in bins {
+        if only.is_none() && s.sxx[k] <= FLOOR_FACTOR * floor {
             break;
         }
         let sig = s.sxx[k] - floor;
@@ -216,6 +320,104 @@ fn band(s: &Spectra) -> Option<Band> {
     (b.k.len() >= 8).then_some(b)
 }
 
+/// The lag's column of H on the band: G_τ − 1.
+fn lag_shape(b: &Band, len: usize, dt: f64, tau: f64) -> Vec<(f64, f64)> {
+    b.k.iter()
+        .map(|&k| {
+            let (r, i) = lag_response(k, len, dt, tau);
+            (r - 1.0, i)
+        })
+        .collect()
+}
+
+/// The channel's gain on its rate, D = (1 − e^{−iωΔt})/Δt, on the band.
+fn rate_shape(b: &Band, len: usize, dt: f64) -> Vec<(f64, f64)> {
+    b.k.iter()
+        .map(|&k| {
+            let w = 2.0 * std::f64::consts::PI * k as f64 / len as f64;
+            ((1.0 - w.cos()) / dt, w.sin() / dt)
+        })
+        .collect()
+}
+
+/// H's columns beside the searched lag, in the order of its coefficients: the static coupling,
+/// the gain on the rate when `rate`, the lags at the τ `held` (the binned selection's).
+fn columns(b: &Band, len: usize, dt: f64, rate: bool, held: &[f64]) -> Vec<Vec<(f64, f64)>> {
+    let mut c = vec![vec![(1.0, 0.0); b.k.len()]];
+    if rate {
+        c.push(rate_shape(b, len, dt));
+    }
+    c.extend(held.iter().map(|&t| lag_shape(b, len, dt, t)));
+    c
+}
+
+/// `g` on the band as the weighted fit's real rows: (re, im) of each bin times √w.
+fn stacked(b: &Band, g: &[(f64, f64)]) -> Vec<f64> {
+    g.iter()
+        .zip(&b.w)
+        .flat_map(|(&(r, i), &w)| [r * w.sqrt(), i * w.sqrt()])
+        .collect()
+}
+
+/// χ² of the band with the columns `cols` and the lag beside them, as a function of τ: the
+/// weighted columns' orthonormal basis and the transfer function's residual on it are made
+/// once, each τ projects only the lag's column (χ² = |r|² − (g⊥·r)²/|g⊥|², the least squares of
+/// [`fit`] without refactoring the fixed columns at every point of the τ search).
+struct Profile<'a> {
+    b: &'a Band,
+    len: usize,
+    dt: f64,
+    basis: crate::numerics::linalg::OrthonormalBasis,
+    resid: Vec<f64>,
+    rss: f64,
+}
+
+impl<'a> Profile<'a> {
+    fn new(b: &'a Band, cols: &[Vec<(f64, f64)>], len: usize, dt: f64) -> Self {
+        let cs: Vec<Vec<f64>> = cols.iter().map(|c| stacked(b, c)).collect();
+        let basis = crate::numerics::linalg::OrthonormalBasis::new(&cs);
+        let resid = basis.residual(&stacked(b, &b.h));
+        let rss = resid.iter().map(|v| v * v).sum();
+        Self {
+            b,
+            len,
+            dt,
+            basis,
+            resid,
+            rss,
+        }
+    }
+
+    fn chi(&self, tau: f64) -> f64 {
+        let mut g = stacked(self.b, &lag_shape(self.b, self.len, self.dt, tau));
+        crate::numerics::linalg::project_out(&self.basis.q, &mut g);
+        let gg: f64 = g.iter().map(|v| v * v).sum();
+        let gr: f64 = g.iter().zip(&self.resid).map(|(a, b)| a * b).sum();
+        if gg > 0.0 && gg.is_finite() {
+            self.rss - gr * gr / gg
+        } else if gg == 0.0 {
+            self.rss
+        } else {
+            f64::INFINITY
+        }
+    }
+}
+
+/// χ² on the τ grid and its best index.
+fn chi_grid(p: &Profile, taus: &[f64]) -> (Vec<f64>, usize) {
+    let grid: Vec<f64> = taus.iter().map(|&t| p.chi(t)).collect();
+    let ib = (0..grid.len())
+        .min_by(|&i, &j| grid[i].total_cmp(&grid[j]))
+        .unwrap_or(0);
+    (grid, ib)
+}
+
+/// ln τ of least χ² between the grid's neighbours of index `ib` (golden section).
+fn refine(p: &Profile, taus: &[f64], ib: usize) -> f64 {
+    let (lo, hi) = (ib.saturating_sub(1), (ib + 1).min(taus.len() - 1));
+    golden(|l| p.chi(l.exp()), taus[lo].ln(), taus[hi].ln(), 40)
+}
+
 /// Weighted fit of H_k = Σ β_j g_j(k) (β real) to the band: (χ², β, covariance).
 fn fit(b: &Band, shapes: &[Vec<(f64, f64)>]) -> Option<(f64, Vec<f64>, Vec<Vec<f64>>)> {
     let mut rows = Vec::with_capacity(2 * b.k.len());
@@ -229,6 +431,56 @@ fn fit(b: &Band, shapes: &[Vec<(f64, f64)>]) -> Option<(f64, Vec<f64>, Vec<Vec<f
     }
     let ls = least_squares(&rows, &rhs).ok()?;
     Some((ls.rss, ls.coeffs.clone(), ls.unscaled_covariance()))
+}
+
+/// The delete-one-group jackknife of the fit: with each of the G groups of segments left out
+/// in turn, the spectra are re-averaged, the transfer function re-estimated on the record's
+/// band `ks` (the floor re-measured) and the fit repeated with the same columns (the rate's
+/// gain in or out as the record decided, τ searched on the grid and refined);
+/// σ² = (G − 1)/G · Σ(θ_g − θ̄)² for θ = (τ, the coefficients in the fit's order). The band's
+/// points are neither independent nor white (neighbouring bins, the residual spectrum's
+/// estimate, what the model leaves in the band), so χ²'s curvature can understate σ; the groups
+/// are contiguous in time and hold what the record's own variation does to the estimate.
+/// `Err` says why it did not run.
+fn jackknife(
+    groups: &[Spectra],
+    ks: &[usize],
+    len: usize,
+    dt: f64,
+    rate: bool,
+    held: &[f64],
+    taus: &[f64],
+) -> Result<Vec<f64>, String> {
+    let g = groups.len();
+    if g < MIN_JACKKNIFE_GROUPS {
+        return Err(format!(
+            "{g} segments, it needs at least {MIN_JACKKNIFE_GROUPS}"
+        ));
+    }
+    let idx: Vec<usize> = (0..g).collect();
+    let reps = crate::numerics::parallel::par_map(&idx, |&i| {
+        let s = pooled(groups, Some(i));
+        let b = band(&s, Some(ks))?;
+        let cols = columns(&b, len, dt, rate, held);
+        let p = Profile::new(&b, &cols, len, dt);
+        let tau = refine(&p, taus, chi_grid(&p, taus).1).exp();
+        let mut sh = cols;
+        sh.push(lag_shape(&b, len, dt, tau));
+        let (_, beta, _) = fit(&b, &sh)?;
+        Some(std::iter::once(tau).chain(beta).collect::<Vec<f64>>())
+    });
+    let reps: Vec<Vec<f64>> = reps
+        .into_iter()
+        .collect::<Option<_>>()
+        .ok_or_else(|| "a group left out leaves too few bins in the band".to_owned())?;
+    let gf = g as f64;
+    Ok((0..reps[0].len())
+        .map(|j| {
+            let mean = reps.iter().map(|r| r[j]).sum::<f64>() / gf;
+            let ss = reps.iter().map(|r| (r[j] - mean).powi(2)).sum::<f64>();
+            ((gf - 1.0) / gf * ss).sqrt()
+        })
+        .collect())
 }
 
 /// Why the stage could not run on a full-rate dataset (printed as `full rate: not run (…)` and
@@ -267,14 +519,23 @@ pub fn analyse(
     let mid = dts.len() / 2;
     let dt = *dts.select_nth_unstable_by(mid, f64::total_cmp).1;
     let bin = binned.dt_s;
-    let len = ((SEGMENT_BINS * bin / dt).ceil() as usize).next_power_of_two();
-    let mut segs = Vec::new();
-    for (a, b) in uniform_runs(full, dt) {
-        let mut s = a;
-        while s + len <= b {
-            segs.push(s);
-            s += len;
+    // Segments of SEGMENT_BINS bins, or of MIN_SEGMENT_BINS when the record holds too few of
+    // those. Each starts one row into its run: its first difference takes the row before it.
+    let cut = |bins: f64| {
+        let len = ((bins * bin / dt).ceil() as usize).next_power_of_two();
+        let mut segs = Vec::new();
+        for (a, b) in uniform_runs(full, dt) {
+            let mut s = a + 1;
+            while s + len <= b {
+                segs.push(s);
+                s += len;
+            }
         }
+        (len, segs)
+    };
+    let (mut len, mut segs) = cut(SEGMENT_BINS);
+    if segs.len() < MIN_SEGMENTS {
+        (len, segs) = cut(MIN_SEGMENT_BINS);
     }
     if segs.len() < MIN_SEGMENTS {
         return Err(FullRateError::TooFewSegments {
@@ -301,75 +562,46 @@ pub fn analyse(
             ChannelKind::Other => "ambient_coupling",
             _ => continue,
         };
-        let s = spectra(&full.y, &ch.values, &segs, len);
-        let Some(b) = band(&s) else {
+        let n_groups = JACKKNIFE_GROUPS.min(segs.len());
+        let groups = group_spectra(&full.y, &ch.values, &segs, len, n_groups);
+        let s = pooled(&groups, None);
+        let Some(b) = band(&s, None) else {
             out.refused.push((
                 format!("{name} ({})", ch.name),
                 "the channel's spectrum is at its reading-noise floor over the whole band".into(),
             ));
             continue;
         };
-        let shape = |tau: f64| -> Vec<(f64, f64)> {
-            b.k.iter()
-                .map(|&k| {
-                    let (r, i) = lag_response(k, len, dt, tau);
-                    (r - 1.0, i)
-                })
-                .collect()
-        };
-        // The static coupling, and the lags the binned selection accepted on this channel.
-        let mut base: Vec<Vec<(f64, f64)>> = vec![vec![(1.0, 0.0); b.k.len()]];
-        for a in accepted {
-            let on_channel = match &a.effect {
+        // The lags the binned selection accepted on this channel stay in H at their τ.
+        let held: Vec<f64> = accepted
+            .iter()
+            .filter(|a| match &a.effect {
                 Effect::ThermalLag => ch.kind == ChannelKind::Temperature,
                 Effect::AmbientCoupling(c) => *c == ch.name,
                 _ => false,
-            };
-            if on_channel && a.theta.value.is_finite() && a.theta.value > 0.0 {
-                base.push(shape(a.theta.value));
-            }
-        }
+            })
+            .map(|a| a.theta.value)
+            .filter(|t| t.is_finite() && *t > 0.0)
+            .collect();
         // The channel's gain on its rate beside the lag: searched with it, kept when the band
         // shows it (χ² lower by more than ln n at the lag's τ), else the search is the lag's alone.
-        let rate_shape: Vec<(f64, f64)> =
-            b.k.iter()
-                .map(|&k| {
-                    let w = 2.0 * std::f64::consts::PI * k as f64 / len as f64;
-                    ((1.0 - w.cos()) / dt, w.sin() / dt)
-                })
-                .collect();
-        // χ² of the columns `cols` with the lag at τ beside them, and the τ grid's best index.
-        let chi_with = |cols: &[Vec<(f64, f64)>], tau: f64| -> f64 {
-            let mut sh = cols.to_vec();
-            sh.push(shape(tau));
-            fit(&b, &sh).map_or(f64::INFINITY, |f| f.0)
+        let rate_in = {
+            let cols = columns(&b, len, dt, true, &held);
+            let p = Profile::new(&b, &cols, len, dt);
+            let (grid, ib) = chi_grid(&p, &taus);
+            ib > 0 && ib + 1 < grid.len() && {
+                let t = refine(&p, &taus, ib).exp();
+                let without = Profile::new(&b, &columns(&b, len, dt, false, &held), len, dt);
+                without.chi(t) - p.chi(t) > rows_used.ln()
+            }
         };
-        let best_on_grid = |chi: &dyn Fn(f64) -> f64| -> (Vec<f64>, usize) {
-            let grid: Vec<f64> = taus.iter().map(|&t| chi(t)).collect();
-            let ib = (0..grid.len())
-                .min_by(|&i, &j| grid[i].total_cmp(&grid[j]))
-                .unwrap_or(0);
-            (grid, ib)
-        };
-        let with_rate = {
-            let mut br = base.clone();
-            br.insert(1, rate_shape.clone());
-            let chi_r = |tau: f64| chi_with(&br, tau);
-            let (grid, ib) = best_on_grid(&chi_r);
-            let interior = ib > 0 && ib + 1 < grid.len();
-            let shows = interior && {
-                let lt = golden(|l| chi_r(l.exp()), taus[ib - 1].ln(), taus[ib + 1].ln(), 40);
-                chi_with(&base, lt.exp()) - chi_r(lt.exp()) > rows_used.ln()
-            };
-            shows.then_some(br)
-        };
-        let rate_in = with_rate.is_some();
-        let base = with_rate.unwrap_or(base);
+        let base = columns(&b, len, dt, rate_in, &held);
         let Some((chi0, _, _)) = fit(&b, &base) else {
             continue;
         };
-        let chi_at = |tau: f64| chi_with(&base, tau);
-        let (grid, ib) = best_on_grid(&chi_at);
+        let profile = Profile::new(&b, &base, len, dt);
+        let chi_at = |tau: f64| profile.chi(tau);
+        let (grid, ib) = chi_grid(&profile, &taus);
         let delta_bic = grid[ib] - chi0 + charge;
         let label = format!("{name} ({})", ch.name);
         if delta_bic >= 0.0 {
@@ -397,16 +629,11 @@ pub fn analyse(
             ));
             continue;
         }
-        let lt = golden(
-            |l| chi_at(l.exp()),
-            taus[ib - 1].ln(),
-            taus[ib + 1].ln(),
-            40,
-        );
+        let lt = refine(&profile, &taus, ib);
         let tau = lt.exp();
         let Some((chi, beta, cov)) = fit(&b, &{
             let mut sh = base.clone();
-            sh.push(shape(tau));
+            sh.push(lag_shape(&b, len, dt, tau));
             sh
         }) else {
             continue;
@@ -417,39 +644,69 @@ pub fn analyse(
         // σ_τ from the curvature of χ² in ln τ: Δχ² = 1 at ±σ.
         let h = 0.05;
         let curv = (chi_at((lt + h).exp()) - 2.0 * chi + chi_at((lt - h).exp())) / (h * h);
-        let sigma_tau = if curv > 0.0 {
+        let curv_tau = if curv > 0.0 {
             tau * (2.0 * scale / curv).sqrt()
         } else {
             f64::INFINITY
         };
+        // The curvature's σ: of τ, then of each coefficient in the fit's order.
+        let curvature: Vec<f64> = std::iter::once(curv_tau)
+            .chain((0..beta.len()).map(|j| (cov[j][j] * scale).sqrt()))
+            .collect();
+        let jk = jackknife(&groups, &b.k, len, dt, rate_in, &held, &taus);
         let last = beta.len() - 1;
-        let sd = |j: usize| (cov[j][j] * scale).sqrt();
+        // Each parameter: (name, value, index into `curvature` and the jackknife's σ).
+        let mut named = if name == "thermal_lag" {
+            vec![("tau_s", tau, 0), ("coefficient", beta[last], last + 1)]
+        } else {
+            vec![("coefficient", beta[last], last + 1), ("lag_s", tau, 0)]
+        };
+        named.push(("static_coefficient", beta[0], 1));
+        if rate_in {
+            named.push(("rate_coefficient", beta[1], 2));
+        }
+        let sigmas: Vec<Sigma> = named
+            .iter()
+            .map(|&(n, _, j)| Sigma::new(n, curvature[j], jk.as_ref().ok().map(|s| s[j])))
+            .collect();
+        let sigma_method = match &jk {
+            Ok(_) => format!("max(curvature, jackknife ({n_groups} groups))"),
+            Err(why) => format!("curvature (no jackknife: {why})"),
+        };
+        let sd = |n: &str| {
+            sigmas
+                .iter()
+                .find(|s| s.name == n)
+                .map_or(f64::NAN, |s| s.used)
+        };
+        let sigma_tau = sd(if name == "thermal_lag" {
+            "tau_s"
+        } else {
+            "lag_s"
+        });
         if sigma_tau.is_nan() || sigma_tau >= tau {
             out.refused.push((
                 label,
                 format!(
-                    "τ = {tau:.1} s is not determined by the band (σ {sigma_tau:.1} s): the \
-                     channel has too little power near 1/(2πτ)"
+                    "τ = {tau:.1} s is not determined by the band (σ {sigma_tau:.1} s, {}): the \
+                     channel has too little power near 1/(2πτ)",
+                    sigmas
+                        .iter()
+                        .find(|s| s.name.ends_with("_s"))
+                        .map_or("curvature", |s| s.method)
                 ),
             ));
             continue;
         }
-        let params = if name == "thermal_lag" {
-            vec![
-                ("tau_s".to_owned(), tau, sigma_tau),
-                ("coefficient".to_owned(), beta[last], sd(last)),
-            ]
-        } else {
-            vec![
-                ("coefficient".to_owned(), beta[last], sd(last)),
-                ("lag_s".to_owned(), tau, sigma_tau),
-            ]
-        };
+        let params = named[..2]
+            .iter()
+            .map(|&(n, v, _)| (n.to_owned(), v, sd(n)))
+            .collect();
         out.terms.push(FastTerm {
             name,
             channel: ch.name.clone(),
             params,
-            static_coefficient: (beta[0], sd(0)),
+            static_coefficient: (beta[0], sd("static_coefficient")),
             delta_bic: chi - chi0 + charge,
             chi2_per_dof: chi / dof,
             band_hz: (
@@ -457,7 +714,9 @@ pub fn analyse(
                 b.k[b.k.len() - 1] as f64 / (len as f64 * dt),
             ),
             bins: b.k.len(),
-            rate_coefficient: rate_in.then(|| (beta[1], sd(1))),
+            rate_coefficient: rate_in.then(|| (beta[1], sd("rate_coefficient"))),
+            sigma_method,
+            sigmas,
         });
     }
     Ok(out)
@@ -616,6 +875,19 @@ pub fn text_of(r: &Option<Result<FullRate, FullRateError>>, unit: &str) -> Strin
                          {unit}·s/channel unit"
                     );
                 }
+                let each = t.sigmas.iter().map(|s| match s.jackknife {
+                    Some(j) => format!(
+                        "{} {} (curvature {:.2e}, jackknife {j:.2e})",
+                        s.name, s.method, s.curvature
+                    ),
+                    None => format!("{} curvature", s.name),
+                });
+                let _ = writeln!(
+                    o,
+                    "     σ: {}: {}",
+                    t.sigma_method,
+                    each.collect::<Vec<_>>().join("; ")
+                );
             }
             for (n, why) in &f.refused {
                 let _ = writeln!(o, "  refused: {n}: {why}");
@@ -650,6 +922,10 @@ pub fn json_of(r: &Option<Result<FullRate, FullRateError>>) -> serde_json::Value
                 "bins": t.bins,
                 "rate_coefficient": t.rate_coefficient.map(|r| r.0),
                 "rate_coefficient_sigma": t.rate_coefficient.map(|r| r.1),
+                "sigma_method": t.sigma_method,
+                "sigma_used": t.sigmas.iter().map(|s| (s.name.clone(), serde_json::json!(s.method))).collect::<serde_json::Map<_, _>>(),
+                "uncertainties_curvature": t.sigmas.iter().map(|s| (s.name.clone(), serde_json::json!(s.curvature))).collect::<serde_json::Map<_, _>>(),
+                "uncertainties_jackknife": t.sigmas.iter().map(|s| (s.name.clone(), serde_json::json!(s.jackknife))).collect::<serde_json::Map<_, _>>(),
             })).collect::<Vec<_>>(),
             "refused": f.refused.iter().map(|(n, w)| serde_json::json!({"name": n, "why": w})).collect::<Vec<_>>(),
         }),
@@ -700,5 +976,57 @@ mod tests {
             text_of(&Some(Err(FullRateError::NoRows)), "g"),
             "full rate: not run (no rows)\n"
         );
+    }
+
+    /// Each parameter reports the larger of its two σ and names it; without the jackknife the
+    /// curvature's stands, and the text and the JSON say which was used and why.
+    #[test]
+    fn the_larger_sigma_is_reported_and_named_and_a_missing_jackknife_is_announced() {
+        let s = Sigma::new("tau_s", 0.3, Some(0.4));
+        assert_eq!((s.used, s.method), (0.4, "jackknife"));
+        let s = Sigma::new("static_coefficient", 2e-7, Some(1e-7));
+        assert_eq!((s.used, s.method), (2e-7, "curvature"));
+        let s = Sigma::new("tau_s", 0.3, None);
+        assert_eq!((s.used, s.method), (0.3, "curvature"));
+        // Fewer groups than the jackknife needs: it does not run, and says why.
+        let few = vec![Spectra::zeros(16); MIN_JACKKNIFE_GROUPS - 1];
+        let why = jackknife(&few, &[2, 3], 32, 1.0, false, &[], &[2.0, 4.0]).unwrap_err();
+        assert_eq!(why, "7 segments, it needs at least 8");
+        let term = FastTerm {
+            name: "thermal_lag",
+            channel: "temperature_c".into(),
+            params: vec![
+                ("tau_s".into(), 60.0, 0.3),
+                ("coefficient".into(), 1e-4, 1e-6),
+            ],
+            static_coefficient: (1e-4, 1e-6),
+            delta_bic: -100.0,
+            chi2_per_dof: 1.0,
+            band_hz: (1e-3, 0.5),
+            bins: 100,
+            rate_coefficient: None,
+            sigma_method: format!("curvature (no jackknife: {why})"),
+            sigmas: vec![s],
+        };
+        let f = FullRate {
+            row_spacing_s: 1.0,
+            bin_s: 70.0,
+            segment_rows: 4096,
+            segments: 7,
+            rows: 7 * 4096,
+            terms: vec![term],
+            refused: Vec::new(),
+        };
+        let r = Some(Ok(f));
+        assert!(text_of(&r, "v").contains(
+            "σ: curvature (no jackknife: 7 segments, it needs at least 8): tau_s curvature"
+        ));
+        let j = json_of(&r);
+        assert_eq!(
+            j["terms"][0]["sigma_method"],
+            "curvature (no jackknife: 7 segments, it needs at least 8)"
+        );
+        assert_eq!(j["terms"][0]["sigma_used"]["tau_s"], "curvature");
+        assert!(j["terms"][0]["uncertainties_jackknife"]["tau_s"].is_null());
     }
 }
