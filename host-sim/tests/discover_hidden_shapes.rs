@@ -520,8 +520,9 @@ fn a_switching_relay_loop_is_named_with_its_area_and_nothing_without_it() {
     );
     // Goal stated before measuring: ≥ 4/6. Measured: 0/6 with plays alone (a lag named in 5/6),
     // 1/6 with rate-independent relays (the loops refused below a noise floor their own
-    // switching transients had inflated); 6/6 with the loop behind an output lag, areas +16 …
-    // +25 % and −7 % (docs/discovery-causes.md), nothing beside them. Asserted: the goal.
+    // switching transients had inflated); 4/6 with the loop behind an output lag, areas +15 …
+    // +25 %, nothing beside them, the other two named a thermal lag (docs/discovery-causes.md).
+    // Asserted: the goal.
     assert!(ok >= 4, "relay loops named in {ok}/{RELAY_LOGS}");
     assert_eq!(null_named, 0, "hysteresis named on loop-free logs");
 }
