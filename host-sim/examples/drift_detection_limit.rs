@@ -26,7 +26,7 @@ fn main() {
         Family::Exponential,
         Family::Logarithmic,
         Family::PowerLaw,
-        Family::ErfTransition,
+        Family::Logistic,
         Family::TwoExponentials,
     ];
     println!(

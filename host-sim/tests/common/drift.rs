@@ -33,11 +33,8 @@ pub enum Family {
     Logarithmic,
     /// Power-law creep A·(t/span)^p, p 1.6–2.8: `creep_drift` (power law), exponent ±0.3.
     PowerLaw,
-    /// A transition between two levels as an error function A·(1 + erf((t − t_c)/(σ√2)))/2
-    /// (`hidden::erf_transition`), t_c at 40–60 % of the span, σ = 1.702 w with w 0.7–1.5 d (the
-    /// logistic of width w it is closest to; the catalogue's `sigmoid_drift` is that logistic,
-    /// not this).
-    ErfTransition,
+    /// A logistic A/(1 + e^(−(t − t_c)/w)), t_c at 40–60 % of the span, w 0.7–1.5 d.
+    Logistic,
     /// Two exponential agings A·((1 − e^(−t/τ₁)) + (1 − e^(−t/τ₂)))/2, τ₁ 0.4–1 d, τ₂ 2–4 d
     /// (the detector fits one τ).
     TwoExponentials,
@@ -50,7 +47,7 @@ impl Family {
             Family::Exponential => Some("warmup"),
             Family::Logarithmic => Some("aging_drift"),
             Family::PowerLaw => Some("creep_drift"),
-            Family::ErfTransition | Family::TwoExponentials => None,
+            Family::Logistic | Family::TwoExponentials => None,
         }
     }
 }
@@ -75,14 +72,14 @@ pub fn unit_shape(family: Family, t_s: &[f64], rng: &mut ChaCha8Rng) -> (Vec<f64
             let p = rng.random_range(1.6..2.8);
             (t_s.iter().map(|t| (t / span).powf(p)).collect(), vec![p])
         }
-        Family::ErfTransition => {
+        Family::Logistic => {
             let tc = rng.random_range(0.4..0.6) * span;
-            let sigma = 1.702 * rng.random_range(0.7..1.5) * DAY_S;
+            let w = rng.random_range(0.7..1.5) * DAY_S;
             let s = t_s
                 .iter()
-                .map(|&t| super::hidden::erf_transition(t, tc, sigma))
+                .map(|t| 1.0 / (1.0 + (-(t - tc) / w).exp()))
                 .collect();
-            (s, vec![tc, sigma])
+            (s, vec![tc, w])
         }
         Family::TwoExponentials => {
             let t1 = rng.random_range(0.4..1.0) * DAY_S;
@@ -104,17 +101,13 @@ pub fn random_walk_chi2(s: &[f64], dt_s: f64, q_per_sqrt_s: f64) -> f64 {
 }
 
 /// A family's curve as the detector reports it (written here from the report's definitions):
-/// `warmup` e^(−t/τ), `aging_drift` ln(1 + t/τ), `creep_drift` (t/1 day)^θ, t from the first row;
-/// `sigmoid_drift` 1/(1 + e^(−(t − centre)/width)) on the record's clock (`width_s` given).
-pub fn reported_curve(name: &str, shape_param: f64, width_s: f64, t_s: &[f64]) -> Option<Vec<f64>> {
+/// `warmup` e^(−t/τ), `aging_drift` ln(1 + t/τ), `creep_drift` (t/1 day)^θ, t from the first row.
+pub fn reported_curve(name: &str, shape_param: f64, t_s: &[f64]) -> Option<Vec<f64>> {
     let t0 = t_s.first().copied().unwrap_or(0.0);
     let f: Box<dyn Fn(f64) -> f64> = match name {
         "warmup" => Box::new(move |t| (-t / shape_param).exp()),
         "aging_drift" => Box::new(move |t| (1.0 + t / shape_param).ln()),
         "creep_drift" => Box::new(move |t| (t.max(0.0) / DAY_S).powf(shape_param)),
-        "sigmoid_drift" => {
-            Box::new(move |t| 1.0 / (1.0 + (-(t + t0 - shape_param) / width_s).exp()))
-        }
         _ => return None,
     };
     Some(t_s.iter().map(|t| f(t - t0)).collect())
@@ -162,10 +155,12 @@ pub fn verdict(d: &Discovery, t_s: &[f64], shape: &[f64], family: Family) -> Ver
     };
     let name = a.effect.name().to_owned();
     let or = a.ambiguous_with.as_ref().map(|x| x.other.clone());
-    let key = |n: &str| match n {
-        "creep_drift" => "exponent",
-        "sigmoid_drift" => "centre_s",
-        _ => "tau_s",
+    let key = |n: &str| {
+        if n == "creep_drift" {
+            "exponent"
+        } else {
+            "tau_s"
+        }
     };
     let get = |ps: &[(String, Param)], k: &str| ps.iter().find(|(q, _)| q == k).map(|(_, p)| *p);
     let shape_param = match family.entry() {
@@ -182,8 +177,7 @@ pub fn verdict(d: &Discovery, t_s: &[f64], shape: &[f64], family: Family) -> Ver
         let n = b.effect.name();
         let theta = get(&b.params, key(n)).map_or(f64::NAN, |p| p.value);
         let amp = get(&b.params, "amplitude").map_or(f64::NAN, |p| p.value);
-        let width = get(&b.params, "width_s").map_or(f64::NAN, |p| p.value);
-        if let Some(c) = reported_curve(n, theta, width, t_s) {
+        if let Some(c) = reported_curve(n, theta, t_s) {
             fit.iter_mut().zip(&c).for_each(|(f, v)| *f += amp * v);
         }
     }
@@ -209,7 +203,7 @@ pub fn named_right(v: &Verdict, family: Family, truth: &[f64], max_mismatch: f64
             Family::Exponential => (p.value / truth[0]).ln().abs() <= 0.405,
             Family::Logarithmic => (p.value / truth[0]).ln().abs() <= 1.6,
             Family::PowerLaw => (p.value - truth[0]).abs() <= 0.3,
-            Family::ErfTransition | Family::TwoExponentials => true,
+            Family::Logistic | Family::TwoExponentials => true,
         }
     };
     match family.entry() {

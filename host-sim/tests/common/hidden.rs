@@ -110,25 +110,6 @@ pub fn param_value(a: &Accepted, key: &str) -> f64 {
         .map_or(f64::NAN, |(_, p)| p.value)
 }
 
-/// An error-function transition from 0 to 1 centred on `centre_s`: (1 + erf((t − t_c)/(σ√2)))/2,
-/// the normal distribution's CDF of standard deviation `sigma_s` (its 10–90 % rise 2.563 σ). A
-/// smooth transition the catalogue's `sigmoid_drift` (a logistic) does not hold exactly. erf by
-/// Abramowitz & Stegun 7.1.26 (|error| < 1.5e-7).
-pub fn erf_transition(t: f64, centre_s: f64, sigma_s: f64) -> f64 {
-    let x = (t - centre_s) / (sigma_s * std::f64::consts::SQRT_2);
-    let z = x.abs();
-    let k = 1.0 / (1.0 + 0.327_591_1 * z);
-    let poly = k
-        * (0.254_829_592
-            + k * (-0.284_496_736
-                + k * (1.421_413_741 + k * (-1.453_152_027 + k * 1.061_405_429))));
-    let erf = 1.0 - poly * (-z * z).exp();
-    0.5 * (1.0 + erf.copysign(x))
-}
-
-/// The 10–90 % rise of [`erf_transition`] in σ: 2 × 1.28155.
-pub const ERF_RISE_PER_SIGMA: f64 = 2.563_103;
-
 /// ±1 with equal probability.
 pub fn sign(rng: &mut ChaCha8Rng) -> f64 {
     if rng.random::<bool>() {

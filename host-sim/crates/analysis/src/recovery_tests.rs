@@ -224,7 +224,7 @@ fn thermal_effects_are_recovered_with_their_time_constant_and_size() {
 #[test]
 fn transients_steps_and_lines_are_recovered_where_they_were_put() {
     let s = quiet_station("paper-1g");
-    let cases: [(ScenarioEffect, Effect, &str, f64, &str, f64); 4] = [
+    let cases: [(ScenarioEffect, Effect, &str, f64, &str, f64); 3] = [
         (
             ScenarioEffect::Warmup {
                 tau_s: 6.0 * 3600.0,
@@ -259,27 +259,12 @@ fn transients_steps_and_lines_are_recovered_where_they_were_put() {
             "size",
             2e-5,
         ),
-        // A smooth transition at its simulated width: its centre and level change.
-        (
-            ScenarioEffect::SigmoidDrift {
-                centre_s: 1.4 * DAY,
-                width_s: 0.25 * DAY,
-                amplitude: 4e-5,
-            },
-            Effect::SigmoidDrift {
-                width_s: 0.25 * DAY,
-            },
-            "centre_s",
-            1.4 * DAY,
-            "amplitude",
-            4e-5,
-        ),
     ];
     for (inject, kind, k1, v1, k2, v2) in cases {
         let (ds, r) = residual(&s, inject);
         let grid = match kind {
-            // The step's time, the transition's centre: every sample time.
-            Effect::Step { .. } | Effect::SigmoidDrift { .. } => ds.t_s.clone(),
+            // The step's time: every sample time (the selection scans them the same way).
+            Effect::Step { .. } => ds.t_s.clone(),
             _ => effects::grid(&kind, &ds),
         };
         let p = recover(&kind, &ds, &r, &grid);

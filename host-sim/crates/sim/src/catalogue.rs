@@ -43,9 +43,6 @@ pub enum EffectKind {
     Lag2Coupling,
     /// A drift that is a power of the time since the start, [`creep`] (quadratic at exponent 2).
     CreepDrift,
-    /// A smooth transition between two levels, [`sigmoid`]: a settling after an event mid-record
-    /// (a thermal or mechanical relaxation), its 10–90 % rise [`SIGMOID_RISE_PER_WIDTH`] widths.
-    SigmoidDrift,
     /// White reading noise on a measured channel: simulated, not a discovery candidate (the
     /// discovery reports a channel's noise with its channels, not as an effect).
     ChannelNoise,
@@ -69,7 +66,7 @@ macro_rules! params {
 
 impl EffectKind {
     /// Every entry, in the catalogue's order.
-    pub const ALL: [EffectKind; 18] = [
+    pub const ALL: [EffectKind; 17] = [
         EffectKind::ThermalLag,
         EffectKind::ThermalHysteresis,
         EffectKind::SelfHeating,
@@ -86,7 +83,6 @@ impl EffectKind {
         EffectKind::RateCoupling,
         EffectKind::Lag2Coupling,
         EffectKind::CreepDrift,
-        EffectKind::SigmoidDrift,
         EffectKind::ChannelNoise,
     ];
 
@@ -109,7 +105,6 @@ impl EffectKind {
             EffectKind::RateCoupling => "rate_coupling",
             EffectKind::Lag2Coupling => "lag2_coupling",
             EffectKind::CreepDrift => "creep_drift",
-            EffectKind::SigmoidDrift => "sigmoid_drift",
             EffectKind::ChannelNoise => "channel_noise",
         }
     }
@@ -160,9 +155,6 @@ impl EffectKind {
                 params!["tau_s": "s", "coefficient": "output/channel unit"]
             }
             EffectKind::CreepDrift => params!["exponent": "1", "amplitude": "output"],
-            EffectKind::SigmoidDrift => {
-                params!["centre_s": "s", "width_s": "s", "amplitude": "output"]
-            }
             EffectKind::ChannelNoise => params!["noise": "channel unit (°C, rad, Pa)"],
         }
     }
@@ -242,24 +234,6 @@ pub const CREEP_TIME_UNIT_S: f64 = 86_400.0;
 #[inline]
 pub fn creep(since_start_s: f64, exponent: f64) -> f64 {
     (since_start_s.max(0.0) / CREEP_TIME_UNIT_S).powf(exponent)
-}
-
-/// The 10–90 % rise of a [`sigmoid`] in widths: 2 ln 9 ≈ 4.39.
-pub const SIGMOID_RISE_PER_WIDTH: f64 = 4.394_449_154_672_439;
-
-/// A smooth transition's shape at `t`: the logistic 1/(1 + e^(−(t − centre_s)/width_s)), 0 long
-/// before the centre, ½ at it, 1 long after; its rise from 10 to 90 % takes
-/// [`SIGMOID_RISE_PER_WIDTH`] × `width_s`, centred on `centre_s`.
-#[inline]
-pub fn sigmoid(t: f64, centre_s: f64, width_s: f64) -> f64 {
-    let x = (t - centre_s) / width_s;
-    // Written so that neither tail overflows the exponential.
-    if x >= 0.0 {
-        1.0 / (1.0 + (-x).exp())
-    } else {
-        let e = x.exp();
-        e / (1.0 + e)
-    }
 }
 
 #[cfg(test)]
@@ -344,11 +318,6 @@ mod tests {
                 exponent: 1.0,
                 amplitude: 1.0,
             },
-            S::SigmoidDrift {
-                centre_s: 1.0,
-                width_s: 1.0,
-                amplitude: 1.0,
-            },
             S::ChannelNoise {
                 channel: "temperature_c".into(),
                 noise: 1.0,
@@ -396,16 +365,6 @@ mod tests {
         assert_eq!(r.step(2.0, 5.0), 2.0);
         assert_eq!(creep(2.0 * CREEP_TIME_UNIT_S, 2.0), 4.0);
         assert_eq!(creep(-1.0, 2.0), 0.0);
-    }
-
-    #[test]
-    fn a_sigmoid_is_half_way_at_its_centre_and_rises_10_to_90_percent_over_its_rise() {
-        assert_eq!(sigmoid(5.0, 5.0, 2.0), 0.5);
-        let half = 0.5 * SIGMOID_RISE_PER_WIDTH * 2.0;
-        assert!((sigmoid(5.0 - half, 5.0, 2.0) - 0.1).abs() < 1e-12);
-        assert!((sigmoid(5.0 + half, 5.0, 2.0) - 0.9).abs() < 1e-12);
-        assert_eq!(sigmoid(-1e6, 0.0, 1.0), 0.0);
-        assert_eq!(sigmoid(1e6, 0.0, 1.0), 1.0);
     }
 
     #[test]

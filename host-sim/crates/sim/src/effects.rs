@@ -224,16 +224,6 @@ pub enum ScenarioEffect {
         /// Drift after one day, unit.
         amplitude: f64,
     },
-    /// `amplitude`·[`sigmoid`](crate::catalogue::sigmoid)(t, centre_s, width_s): a smooth
-    /// transition between two levels (a settling after an event), t from the start of the run.
-    SigmoidDrift {
-        /// Middle of the transition, seconds from the start of the run.
-        centre_s: f64,
-        /// Width w of the logistic, s (its 10–90 % rise is 2 ln 9 · w ≈ 4.39 w).
-        width_s: f64,
-        /// Level change across the transition, unit.
-        amplitude: f64,
-    },
     /// White reading noise on a measured channel (`temperature_c` °C, `tilt_arcsec` in rad,
     /// `pressure_hpa` in Pa: the units the discovery stores them in).
     ChannelNoise {
@@ -282,7 +272,6 @@ impl ScenarioEffect {
             ScenarioEffect::RateCoupling { .. } => EffectKind::RateCoupling,
             ScenarioEffect::Lag2Coupling { .. } => EffectKind::Lag2Coupling,
             ScenarioEffect::CreepDrift { .. } => EffectKind::CreepDrift,
-            ScenarioEffect::SigmoidDrift { .. } => EffectKind::SigmoidDrift,
             ScenarioEffect::ChannelNoise { .. } => EffectKind::ChannelNoise,
         }
     }
@@ -446,15 +435,6 @@ impl ScenarioEffect {
                 amplitude,
             } => {
                 positive("exponent", *exponent)?;
-                finite("amplitude", *amplitude)
-            }
-            ScenarioEffect::SigmoidDrift {
-                centre_s,
-                width_s,
-                amplitude,
-            } => {
-                finite("centre_s", *centre_s)?;
-                positive("width_s", *width_s)?;
                 finite("amplitude", *amplitude)
             }
             ScenarioEffect::ChannelNoise { channel, noise } => {
@@ -849,14 +829,6 @@ impl EffectChain {
                     },
                     _,
                 ) => amplitude * crate::catalogue::creep(t, *exponent),
-                (
-                    ScenarioEffect::SigmoidDrift {
-                        centre_s,
-                        width_s,
-                        amplitude,
-                    },
-                    _,
-                ) => amplitude * crate::catalogue::sigmoid(t, *centre_s, *width_s),
                 (
                     ScenarioEffect::Periodic {
                         period_s,

@@ -28,23 +28,6 @@ pub(super) fn edge_hint(e: &Effect, theta: f64, ds: &Dataset) -> String {
         .first()
         .is_some_and(|g| theta <= *g * 1.0001);
     match e {
-        Effect::SigmoidDrift { width_s } => {
-            let width_s = *width_s;
-            let g = effects::sigmoid_widths(ds);
-            if g.first()
-                .is_some_and(|&lo| width_s <= lo * 1.0001 * (g[1] / g[0]).sqrt())
-            {
-                format!(
-                    "; centred at {theta:.0} s, its width {width_s:.0} s is the shortest \
-                     searched: a transition this fast is a step's"
-                )
-            } else {
-                format!(
-                    "; centred at {theta:.0} s, its width {width_s:.0} s is the longest \
-                     searched: a transition this slow is the record's trend"
-                )
-            }
-        }
         Effect::Step { duration_s } => format!(
             "; the position is {theta:.0} s, and its transition duration {duration_s:.0} s is the \
              longest searched: a change this slow is a drift, not a step"
@@ -162,7 +145,6 @@ pub(super) fn implausible(
                 )
             })
         }
-        Effect::SigmoidDrift { width_s } => effects::sigmoid_rise_outside(ds, s.theta, width_s),
         Effect::Periodic => driver_harmonic(ds, s.theta).map(|(channel, k, p0)| {
             format!(
                 "its period {:.0} s is harmonic {k} of the {channel} programme's period \

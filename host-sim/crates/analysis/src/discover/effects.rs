@@ -1,13 +1,10 @@
 //! The catalogue of named physical effects. Each is a parametric extension of the design matrix:
 //! linear parameters (amplitudes, coefficients, gains) are solved by least squares with the rest
 //! of the model, nonlinear ones (`tau_s`, `lag_s`, `period_s`, `time_s`) by a 1-D grid followed
-//! by a golden-section refinement (a smooth transition's centre and width by a 2-D grid,
-//! [`sigmoid_widths`] × [`sigmoid_centres`]). Physics and magnitudes: `docs/discovery.md`.
+//! by a golden-section refinement. Physics and magnitudes: `docs/discovery.md`.
 
 use super::import::{ChannelKind, Dataset};
-use crate::sim::catalogue::{
-    creep, sigmoid, step_fraction, EffectKind, RateOfChange, SecondOrderLag, SIGMOID_RISE_PER_WIDTH,
-};
+use crate::sim::catalogue::{creep, step_fraction, EffectKind, RateOfChange, SecondOrderLag};
 use accomp::tide::Station;
 
 /// One effect of the catalogue, bound to a channel where it needs one.
@@ -58,13 +55,6 @@ pub enum Effect {
     Lag2Coupling(String),
     /// A power-law drift: column (t − t₀)^θ in days ([`creep`]), θ the exponent.
     CreepDrift,
-    /// A smooth transition between two levels: column 1/(1 + e^(−(t − time)/w)) ([`sigmoid`]),
-    /// its centre the nonlinear parameter `time_s`, its width w fitted with it on the 2-D grid
-    /// [`sigmoid_widths`] × [`sigmoid_centres`] (the candidate carries 0).
-    SigmoidDrift {
-        /// Width w of the logistic, s (10–90 % rise: [`SIGMOID_RISE_PER_WIDTH`] × w).
-        width_s: f64,
-    },
 }
 
 impl Effect {
@@ -88,7 +78,6 @@ impl Effect {
             Effect::RateCoupling(_) => EffectKind::RateCoupling,
             Effect::Lag2Coupling(_) => EffectKind::Lag2Coupling,
             Effect::CreepDrift => EffectKind::CreepDrift,
-            Effect::SigmoidDrift { .. } => EffectKind::SigmoidDrift,
         }
     }
 
@@ -128,17 +117,7 @@ impl Effect {
             Effect::Warmup => Some("exponential"),
             Effect::AgingDrift => Some("logarithmic"),
             Effect::CreepDrift => Some("power law"),
-            Effect::SigmoidDrift { .. } => Some("sigmoid"),
             _ => None,
-        }
-    }
-
-    /// Whether `other` is the same entry bound to the same channel (a smooth transition's
-    /// fitted width aside): what a non-repeatable effect may be accepted as only once.
-    pub fn same_entry(&self, other: &Effect) -> bool {
-        match (self, other) {
-            (Effect::SigmoidDrift { .. }, Effect::SigmoidDrift { .. }) => true,
-            _ => self == other,
         }
     }
 
@@ -384,64 +363,6 @@ pub fn step_durations(ds: &Dataset) -> Vec<f64> {
     log_grid(lo, hi, 12)
 }
 
-/// Shortest width of a `sigmoid_drift`, s: half the longest step ([`STEP_DURATION_MAX_S`]), so
-/// that its 10–90 % rise (4.39 w, 13.2 h) is at least twice the longest ramp a step may take —
-/// a faster change is a step's, and a width at this end of the grid is not a finding.
-pub const SIGMOID_WIDTH_MIN_S: f64 = 0.5 * STEP_DURATION_MAX_S;
-
-/// Widths on the `sigmoid_drift` grid.
-pub const SIGMOID_WIDTH_POINTS: usize = 10;
-
-/// The widths of a smooth transition's 2-D scan: [`SIGMOID_WIDTH_POINTS`] log-spaced from
-/// [`SIGMOID_WIDTH_MIN_S`] (at least 4 spacings) to a sixth of the record (a rise of 0.73 of
-/// the span: a slower one is the record's trend). A best width at either end is not a finding
-/// (a step below, a trend above). Empty when the record is shorter than 12 × the shortest.
-pub fn sigmoid_widths(ds: &Dataset) -> Vec<f64> {
-    let lo = SIGMOID_WIDTH_MIN_S.max(4.0 * ds.dt_s);
-    let hi = ds.span_s() / 6.0;
-    if hi < 2.0 * lo {
-        return Vec::new();
-    }
-    log_grid(lo, hi, SIGMOID_WIDTH_POINTS)
-}
-
-/// The centres of a smooth transition of width `width_s` on the 2-D scan: every half-width
-/// from the record's first instant to its last (the centre inside the record; whether the rise
-/// is, [`sigmoid_rise_outside`] says after the fit).
-pub fn sigmoid_centres(ds: &Dataset, width_s: f64) -> Vec<f64> {
-    let (Some(&t0), Some(&t1)) = (ds.t_s.first(), ds.t_s.last()) else {
-        return Vec::new();
-    };
-    let step = 0.5 * width_s;
-    let k = ((t1 - t0) / step).floor() as usize;
-    (0..=k)
-        .map(|i| t0 + (i as f64 + 0.5) * step)
-        .filter(|&c| c < t1)
-        .collect()
-}
-
-/// A smooth transition's column: [`sigmoid`] at each instant.
-pub fn sigmoid_column(t: &[f64], centre_s: f64, width_s: f64) -> Vec<f64> {
-    t.iter().map(|&x| sigmoid(x, centre_s, width_s)).collect()
-}
-
-/// Why a smooth transition centred on `centre_s` of width `width_s` is not one the record
-/// shows, if it is not: its 10–90 % rise must lie inside the record, else the record holds a
-/// tail of it only, which is a trend (an exponential, a logarithm, a power law or the linear
-/// drift), not a transition between two levels.
-pub fn sigmoid_rise_outside(ds: &Dataset, centre_s: f64, width_s: f64) -> Option<String> {
-    let (t0, t1) = (*ds.t_s.first()?, *ds.t_s.last()?);
-    let half = 0.5 * SIGMOID_RISE_PER_WIDTH * width_s;
-    let (a, b) = (centre_s - half, centre_s + half);
-    (a < t0 || b > t1).then(|| {
-        format!(
-            "its 10–90 % rise ({a:.0} s to {b:.0} s, width {width_s:.0} s) is not inside the \
-             record ({t0:.0} s to {t1:.0} s): the record holds one side of it, a trend, not a \
-             transition between two levels"
-        )
-    })
-}
-
 /// Half-width of the centred moving average applied to the `tilt_coupling` column, seconds.
 ///
 /// A tiltmeter's own reading noise (white noise, quantisation: 0.035" rms per sample for the
@@ -609,14 +530,6 @@ pub fn candidates(
     }
     yes.extend(drivers);
     yes.push(Effect::CreepDrift);
-    if sigmoid_widths(ds).is_empty() {
-        say(
-            "sigmoid_drift",
-            "the record is shorter than 12 × the shortest transition width (3 h)",
-        );
-    } else {
-        yes.push(Effect::SigmoidDrift { width_s: 0.0 });
-    }
     (yes, no)
 }
 
@@ -778,7 +691,6 @@ pub fn columns(e: &Effect, ds: &Dataset, ctx: &Context, theta: f64) -> Vec<Vec<f
             })
             .unwrap_or_default(),
         Effect::CreepDrift => vec![t.iter().map(|x| creep(x - t0, theta)).collect()],
-        Effect::SigmoidDrift { width_s } => vec![sigmoid_column(t, theta, *width_s)],
     }
 }
 
@@ -868,12 +780,6 @@ pub fn parameters(
         }
         Effect::Lag2Coupling(_) => vec![("tau_s".into(), theta), ("coefficient".into(), p(b0, s0))],
         Effect::CreepDrift => vec![("exponent".into(), theta), ("amplitude".into(), p(b0, s0))],
-        Effect::SigmoidDrift { width_s } => vec![
-            ("centre_s".into(), theta),
-            // Its σ is not estimated: the best of the width grid, refined.
-            ("width_s".into(), p(*width_s, f64::NAN)),
-            ("amplitude".into(), p(b0, s0)),
-        ],
     };
     // Output-unit amplitudes also in g when the unit is known.
     if let Some(u) = ds.unit_per_g {
@@ -918,7 +824,6 @@ mod tests {
             Effect::RateCoupling("room_c".into()),
             Effect::Lag2Coupling("room_c".into()),
             Effect::CreepDrift,
-            Effect::SigmoidDrift { width_s: 1.0 },
         ];
         let discovered: Vec<EffectKind> = EffectKind::ALL
             .into_iter()
@@ -970,35 +875,6 @@ mod tests {
         assert!((pos.sigma - want).abs() < 1e-12, "{}", pos.sigma);
         let one = parameters(&e, &ds, theta, &[2.0], &[0.1]);
         assert!(one.iter().all(|(k, _)| k != "position_in_row"));
-    }
-
-    #[test]
-    fn a_sigmoid_column_is_the_logistic_and_its_rise_must_lie_inside_the_record() {
-        // 6 days at 120 s.
-        let t: Vec<f64> = (0..6 * 720).map(|i| 120.0 * f64::from(i)).collect();
-        let ds = Dataset::test_g(t.clone(), vec![0.0; t.len()], 120.0);
-        let w = 0.4 * 86_400.0;
-        let c = columns(
-            &Effect::SigmoidDrift { width_s: w },
-            &ds,
-            &Context::default(),
-            3.0 * 86_400.0,
-        );
-        assert_eq!(c[0][3 * 720], 0.5);
-        assert!(c[0][0] < 1e-3 && c[0][t.len() - 1] > 1.0 - 1e-3);
-        // Widths from 3 h to a day (a sixth of the record), centres every half-width inside it.
-        let g = sigmoid_widths(&ds);
-        assert_eq!(g.len(), SIGMOID_WIDTH_POINTS);
-        assert!((g[0] - 3.0 * 3600.0).abs() < 1e-9 && (g[9] - ds.span_s() / 6.0).abs() < 1e-6);
-        assert!(sigmoid_centres(&ds, w)
-            .iter()
-            .all(|&x| x > 0.0 && x < t[t.len() - 1]));
-        // The rise (±2.2 w, ±0.88 d) inside the record at 3 d; not at 5.5 d or 0.5 d.
-        assert!(sigmoid_rise_outside(&ds, 3.0 * 86_400.0, w).is_none());
-        for centre in [5.5 * 86_400.0, 0.5 * 86_400.0] {
-            let why = sigmoid_rise_outside(&ds, centre, w).expect("outside");
-            assert!(why.contains("not inside the record"), "{why}");
-        }
     }
 
     #[test]

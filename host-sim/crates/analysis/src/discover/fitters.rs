@@ -320,63 +320,6 @@ fn best_ramp(cur: &Current, centre: f64) -> Option<(f64, f64, f64, bool)> {
     Some((best.0, best.1, best.2, at_edge))
 }
 
-/// [`best_sigmoid`]'s result: (centre, width, whitened RSS, width at an end of its grid, grid
-/// points scanned).
-type SigmoidFit = (f64, f64, f64, bool, usize);
-
-/// Best smooth transition: every (width, centre) of the 2-D grid ([`effects::sigmoid_widths`] ×
-/// [`effects::sigmoid_centres`], the pairs on all cores), then the best pair refined by golden
-/// section, the centre within ± half a width, the width (in log) between its grid neighbours,
-/// the centre once more. Returns the centre, the width, the whitened RSS, whether the best
-/// width is an end of the grid, and the number M of grid points scanned (what the search is
-/// charged for).
-fn best_sigmoid(cur: &Current) -> Option<SigmoidFit> {
-    let ds = cur.ds;
-    let g = effects::sigmoid_widths(ds);
-    if g.len() < 2 {
-        return None;
-    }
-    let eval = |c: f64, w: f64| cur.rss_with(&[effects::sigmoid_column(&ds.t_s, c, w)]);
-    let pairs: Vec<(usize, f64)> = g
-        .iter()
-        .enumerate()
-        .flat_map(|(i, &w)| {
-            effects::sigmoid_centres(ds, w)
-                .into_iter()
-                .map(move |c| (i, c))
-        })
-        .collect();
-    // Every other centre (a width apart) is scored and the best refined over ± a width: the
-    // search covers the half-width grid it is charged for at half the whitenings (a 51-day
-    // record's catalogue search spent most of its time here).
-    let coarse: Vec<(usize, f64)> = pairs.iter().copied().step_by(2).collect();
-    let vals = crate::numerics::parallel::par_map(&coarse, |&(i, c)| eval(c, g[i]));
-    let (k, &r0) = vals.iter().enumerate().min_by(|a, b| a.1.total_cmp(b.1))?;
-    let (iw, c0) = coarse[k];
-    let at_edge = iw == 0 || iw + 1 == g.len();
-    let mut best = (c0, g[iw], r0);
-    let mut reach = 1.0;
-    let mut centre = |best: &mut (f64, f64, f64)| {
-        let (c, w, _) = *best;
-        let x = golden(|x| eval(x, w), c - reach * w, c + reach * w, 14);
-        reach = 0.5;
-        let r = eval(x, w);
-        if r < best.2 {
-            *best = (x, w, r);
-        }
-    };
-    centre(&mut best);
-    let (lo, hi) = (g[iw.saturating_sub(1)], g[(iw + 1).min(g.len() - 1)]);
-    let c = best.0;
-    let w = golden(|lw| eval(c, lw.exp()), lo.ln(), hi.ln(), 12).exp();
-    let rw = eval(c, w);
-    if rw < best.2 {
-        best = (c, w, rw);
-    }
-    centre(&mut best);
-    Some((best.0, best.1, best.2, at_edge, pairs.len()))
-}
-
 /// Known tide and solar-day periods, s (M2, S2, N2, K2, K1, O1, P1, S1, M3, M4, Q1).
 pub const TIDAL_PERIODS_S: [f64; 11] = [
     44_714.16, 43_200.0, 45_570.05, 43_082.05, 86_164.09, 92_949.63, 86_635.5, 86_400.0, 29_809.44,
@@ -428,7 +371,7 @@ pub(super) fn score_all(
     let nl_penalty = |trials: f64| look_elsewhere(n_eff, trials);
     let mut out = Vec::new();
     for e in cands {
-        if !e.repeatable() && done.iter().any(|d| d.same_entry(e)) {
+        if !e.repeatable() && done.contains(e) {
             continue;
         }
         // One transfer function per channel: its order (gain, lag, rate, second-order lag) is
@@ -449,16 +392,6 @@ pub(super) fn score_all(
                 out.extend(best_preisach(cur, with_lags).and_then(|f| preisach_scored(cur, f)));
                 continue;
             }
-            // Two nonlinear parameters searched together on M grid points: each charged at least
-            // the BIC's ln n, the search at least 2 ln M (Bonferroni over the grid's points,
-            // which overlap, so M is more than the independent trials): max(2 ln n, 2 ln M).
-            Effect::SigmoidDrift { .. } => match best_sigmoid(cur) {
-                Some((c, w, r, edge, m)) => {
-                    effect = Effect::SigmoidDrift { width_s: w };
-                    (c, r, look_elsewhere_2d(n_eff, m as f64), edge)
-                }
-                None => continue,
-            },
             Effect::Step { .. } => match fit_step(cur, ctx) {
                 Some((step, th, r, k, edge)) => {
                     effect = step;
@@ -639,7 +572,6 @@ pub(super) fn theta_sigma(cur: &Current, s: &Scored, ctx: &Context, base_k: usiz
     }
     let h = match s.effect {
         Effect::Step { .. } => cur.ds.dt_s,
-        Effect::SigmoidDrift { width_s } => (0.05 * width_s).max(cur.ds.dt_s),
         _ => 0.02 * s.theta.abs().max(cur.ds.dt_s),
     };
     // The centre again under this round's noise model (a step's RSS may come from the
@@ -673,11 +605,4 @@ pub(super) fn profile_sigma(rss: (f64, f64, f64), h: f64, n: usize, k: usize) ->
 /// among `n_eff` rows: max(ln n, 2 ln M) (look-elsewhere).
 fn look_elsewhere(n_eff: f64, trials: f64) -> f64 {
     n_eff.ln().max(2.0 * trials.max(1.0).ln())
-}
-
-/// Charge of two nonlinear parameters found together by searching `trials` grid points among
-/// `n_eff` rows: max(2 ln n, 2 ln M) (each at least the BIC's ln n; the 2-D search's
-/// look-elsewhere over all its points).
-pub(super) fn look_elsewhere_2d(n_eff: f64, trials: f64) -> f64 {
-    (2.0 * n_eff.ln()).max(2.0 * trials.max(1.0).ln())
 }

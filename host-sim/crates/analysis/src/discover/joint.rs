@@ -70,12 +70,6 @@ pub(super) fn joint_fit(
                 let w = (3.0 * ds.dt_s).max(0.5 * duration_s);
                 (th - w, th + w, ds.dt_s)
             }
-            // A smooth transition's centre, within ± half its width (the width held).
-            Effect::SigmoidDrift { width_s } => (
-                th - 0.5 * width_s,
-                th + 0.5 * width_s,
-                (0.05 * width_s).max(ds.dt_s),
-            ),
             Effect::Periodic => {
                 let span = ds.span_s().max(ds.dt_s);
                 let f = 1.0 / th;

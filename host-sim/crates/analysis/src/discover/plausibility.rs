@@ -310,18 +310,6 @@ pub fn separating_measurement(a: &Effect, b: &Effect) -> String {
         "a longer record (an exponential settles, a logarithm keeps growing, a power law \
          accelerates or settles as t^p)"
             .into()
-    } else if pair(&SigmoidDrift { width_s: 0.0 }, &Warmup)
-        || pair(&SigmoidDrift { width_s: 0.0 }, &AgingDrift)
-        || pair(&SigmoidDrift { width_s: 0.0 }, &CreepDrift)
-    {
-        "a record that continues past the transition (a sigmoid levels off at its new level as \
-         it began, flat on both sides; an exponential settles from the record's start, a \
-         logarithm or a power law keeps changing)"
-            .into()
-    } else if pair(&SigmoidDrift { width_s: 0.0 }, &Step { duration_s: 0.0 }) {
-        "a record sampled through the change (a step ramps linearly over at most 6 h, a sigmoid \
-         rises smoothly over 4.4 widths of at least 3 h)"
-            .into()
     } else if pair(&TiltCoupling, &BuildingTilt) || pair(&TiltCoupling, &TidalTilt) {
         "a tilt excursion off the solar day (a deliberate tilt of the pier or the mount)".into()
     } else if pair(&Step { duration_s: 0.0 }, &Warmup)

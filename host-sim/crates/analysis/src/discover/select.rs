@@ -702,66 +702,6 @@ mod tests {
         assert!((duration / d).ln().abs() < 0.5, "{p:?}");
     }
 
-    /// 6 days at 120 s of white noise (σ 1) plus `shape`, offset and drift in the baseline, the
-    /// smooth transition the only candidate.
-    fn select_sigmoid(shape: impl Fn(f64) -> f64, seed: u64) -> Selection {
-        let n = 6 * 720;
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-        let t: Vec<f64> = (0..n).map(|i| 120.0 * i as f64).collect();
-        let y: Vec<f64> = t
-            .iter()
-            .map(|&x| {
-                let e: f64 = StandardNormal.sample(&mut rng);
-                shape(x) + e
-            })
-            .collect();
-        let ds = Dataset::test_g(t.clone(), y.clone(), 120.0);
-        let base = vec![vec![1.0; n], t.iter().map(|x| x / 86_400.0).collect()];
-        let cfg = Config::default();
-        let cands = [Effect::SigmoidDrift { width_s: 0.0 }];
-        let r = rounds(&ds, &y, &base, &cands, &Context::default(), &cfg);
-        finish(&ds, &y, &base, &cfg, r, &[])
-    }
-
-    #[test]
-    fn a_smooth_transition_is_recovered_with_its_centre_width_and_amplitude() {
-        // 3 σ over a width of 0.4 d centred at 2.7 d of 6 (its 10–90 % rise 1.8 d).
-        let (tc, w, a) = (2.7 * 86_400.0, 0.4 * 86_400.0, 3.0);
-        let s = select_sigmoid(|x| a * crate::sim::catalogue::sigmoid(x, tc, w), 11);
-        assert_eq!(s.accepted.len(), 1, "refused {:?}", s.refused);
-        let p = |k: &str| {
-            s.accepted[0]
-                .params
-                .iter()
-                .find(|(n, _)| n == k)
-                .map(|(_, p)| *p)
-                .expect(k)
-        };
-        let (c, width, amp) = (p("centre_s"), p("width_s"), p("amplitude"));
-        assert!((c.value - tc).abs() < 0.1 * 86_400.0, "{c:?}");
-        assert!(
-            c.sigma > 0.0 && (c.value - tc).abs() < 4.0 * c.sigma,
-            "{c:?}"
-        );
-        assert!((width.value / w).ln().abs() < 0.3, "{width:?}");
-        assert!((amp.value - a).abs() < 0.15 * a, "{amp:?}");
-    }
-
-    #[test]
-    fn a_transition_whose_rise_is_not_inside_the_record_is_refused_as_a_trend() {
-        // The same transition centred 0.3 d before the end: the record holds its first part.
-        let (tc, w, a) = (5.7 * 86_400.0, 0.4 * 86_400.0, 3.0);
-        let s = select_sigmoid(|x| a * crate::sim::catalogue::sigmoid(x, tc, w), 12);
-        assert!(s.accepted.is_empty(), "{:?}", s.accepted);
-        let why = s
-            .refused
-            .iter()
-            .find(|(n, _)| n == "sigmoid_drift")
-            .map(|(_, w)| w.as_str())
-            .unwrap_or_default();
-        assert!(why.contains("is not inside the record"), "{:?}", s.refused);
-    }
-
     #[test]
     fn an_abrupt_step_keeps_no_duration() {
         let tc = 100_030.0;

@@ -326,13 +326,6 @@ impl EffectDraws {
                 exponent: need("exponent")?,
                 amplitude: need("amplitude")?,
             },
-            // The discovery's centre is on the record's clock, the scenario's on the run's: the
-            // same instant (as a step's time).
-            EffectKind::SigmoidDrift => ScenarioEffect::SigmoidDrift {
-                centre_s: need("centre_s")?,
-                width_s: need("width_s")?,
-                amplitude: need("amplitude")?,
-            },
             EffectKind::ChannelNoise => {
                 let channel = channel.unwrap_or_default().to_owned();
                 ScenarioEffect::ChannelNoise {
