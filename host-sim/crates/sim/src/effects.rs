@@ -1337,20 +1337,7 @@ mod tests {
     #[test]
     fn a_relay_switches_at_its_thresholds_and_holds_in_between() {
         // A play of zero weight and one relay, thresholds 0.2 and 0.6 °C, half-width 2.
-        let mut c = EffectChain::new(
-            &[ScenarioEffect::ThermalHysteresis {
-                half_width: 0.0,
-                play_half_width_c: 0.1,
-                relays: vec![Relay {
-                    lower_c: 0.2,
-                    upper_c: 0.6,
-                    half_width: 2.0,
-                }],
-                lag_s: 0.0,
-            }],
-            setup(),
-        )
-        .unwrap();
+        let mut c = EffectChain::new(&[one_relay(0.2, 0.6, 2.0, 0.0)], setup()).unwrap();
         // Virgin between the thresholds: no term until a threshold is reached.
         let up = [0.4, 0.5, 0.59, 0.6, 0.7, 0.5, 0.3, 0.21, 0.2, 0.1, 0.4];
         let want = [0.0, 0.0, 0.0, -2.0, -2.0, -2.0, -2.0, -2.0, 2.0, 2.0, 2.0];
@@ -1358,33 +1345,28 @@ mod tests {
             let y = c.output_term(&drive(k as f64, *t));
             assert_eq!(y, w, "at {t} °C");
         }
-        let bad = ScenarioEffect::ThermalHysteresis {
+        assert!(one_relay(0.6, 0.2, 1.0, 0.0).validate(0).is_err());
+    }
+
+    /// A `thermal_hysteresis` of one relay and a play of zero weight.
+    fn one_relay(lower_c: f64, upper_c: f64, half_width: f64, lag_s: f64) -> ScenarioEffect {
+        ScenarioEffect::ThermalHysteresis {
             half_width: 0.0,
             play_half_width_c: 0.1,
             relays: vec![Relay {
-                lower_c: 0.6,
-                upper_c: 0.2,
-                half_width: 1.0,
+                lower_c,
+                upper_c,
+                half_width,
             }],
-            lag_s: 0.0,
-        };
-        assert!(bad.validate(0).is_err());
+            lag_s,
+        }
     }
 
     #[test]
     fn a_lagged_loop_reaches_its_branch_through_the_lag_and_a_negative_lag_is_refused() {
         // One relay (thresholds 0.2, 0.6 °C, half-width 2) whose output lags by 100 s: once
         // the temperature reaches 0.6 °C at t = 0 the term relaxes towards −2 as 1 − e^(−t/τ).
-        let relay = |lag_s| ScenarioEffect::ThermalHysteresis {
-            half_width: 0.0,
-            play_half_width_c: 0.1,
-            relays: vec![Relay {
-                lower_c: 0.2,
-                upper_c: 0.6,
-                half_width: 2.0,
-            }],
-            lag_s,
-        };
+        let relay = |lag_s| one_relay(0.2, 0.6, 2.0, lag_s);
         let mut c = EffectChain::new(&[relay(100.0)], setup()).unwrap();
         assert_eq!(
             c.output_term(&drive(0.0, 0.6)),

@@ -119,30 +119,33 @@ fn best_preisach(cur: &Current, with_lags: bool) -> Option<PreisachFit> {
         if lag_s > 0.0 && lag_s < 2.0 * ds.dt_s {
             continue;
         }
-        let shows =
-            |span_c: f64| lag_s == 0.0 || hysteresis::crossing_time_s(&moves, span_c) > lag_s;
-        let plays: Vec<f64> = g.iter().copied().filter(|r| shows(2.0 * r)).collect();
+        // Which operators of the dictionary (plays, then relays) are offered at this lag.
+        let keep: Vec<bool> = g
+            .iter()
+            .map(|r| 2.0 * r)
+            .chain(relays.iter().map(|r| r[1] - r[0]))
+            .map(|span_c| lag_s == 0.0 || hysteresis::crossing_time_s(&moves, span_c) > lag_s)
+            .collect();
+        let (keep_plays, keep_relays) = keep.split_at(g.len());
+        let kept = |v: &[f64], k: &[bool]| -> Vec<f64> {
+            v.iter()
+                .zip(k)
+                .filter(|(_, k)| **k)
+                .map(|(x, _)| *x)
+                .collect()
+        };
+        let plays = kept(&g, keep_plays);
         let rel: Vec<[f64; 2]> = relays
             .iter()
-            .copied()
-            .filter(|r| shows(r[1] - r[0]))
+            .zip(keep_relays)
+            .filter(|(_, k)| **k)
+            .map(|(r, _)| *r)
             .collect();
         if plays.len() < 2 {
             continue;
         }
         let mut cols = Vec::with_capacity(plays.len() + rel.len());
-        let ops = g
-            .iter()
-            .zip(&raw)
-            .filter(|(r, _)| shows(2.0 * **r))
-            .map(|(_, c)| c)
-            .chain(
-                relays
-                    .iter()
-                    .zip(&raw[g.len()..])
-                    .filter(|(r, _)| shows(r[1] - r[0]))
-                    .map(|(_, c)| c),
-            );
+        let ops = raw.iter().zip(&keep).filter(|(_, k)| **k).map(|(c, _)| c);
         for c in ops {
             let lagged;
             let c = if lag_s > 0.0 {
