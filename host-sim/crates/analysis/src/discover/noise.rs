@@ -188,7 +188,7 @@ pub fn neg2_loglik(model: &NoiseModel, t_s: &[f64], idx: &[usize], x: &[f64]) ->
 
 /// (Σ e²/S, Σ ln S) of the Kalman innovations.
 fn innovation_sums(model: &NoiseModel, t_s: &[f64], idx: &[usize], x: &[f64]) -> (f64, f64) {
-    let mut ric = Riccati::new(model);
+    let mut ric = Riccati::for_rows(model, t_s, idx);
     let mut state = vec![0.0; ric.k];
     let mut prev_t: Option<f64> = None;
     let (mut chi2, mut log_det) = (0.0, 0.0);
@@ -196,11 +196,7 @@ fn innovation_sums(model: &NoiseModel, t_s: &[f64], idx: &[usize], x: &[f64]) ->
         let dt = prev_t.map_or(0.0, |pt| (t_s[i] - pt).max(0.0));
         prev_t = Some(t_s[i]);
         ric.step(dt, i, true);
-        let mut pred = 0.0;
-        for (s, f) in state.iter_mut().zip(&ric.a) {
-            *s *= f;
-            pred += *s;
-        }
+        let pred = predict_state(&mut state, &ric.a);
         let s = ric.s;
         let e = x[i] - pred;
         for (st, h) in state.iter_mut().zip(&ric.ph) {
@@ -249,9 +245,93 @@ struct Riccati<'m> {
     last_dt: f64,
     last_observed: bool,
     steady: bool,
+    /// The rank-2 increments of a regular pass ([`Riccati::for_rows`]); `None`: the full
+    /// update on every step.
+    low_rank: Option<LowRank>,
+}
+
+/// The covariance's increment δₙ = Pₙ₊₁ − Pₙ = L S Lᵀ of a time-invariant filter (one step
+/// length, one white variance, every row observed) started from the stationary prior.
+///
+/// Why: the slowest flicker states (correlation times up to 3× the span) keep P changing to
+/// the record's end, so the steady state is seldom reached and the O(k²) update is the
+/// discovery's inner loop on long records. For a time-invariant filter the difference of two
+/// Riccati iterates obeys δₙ₊₁ = F̄ₙ (δₙ − δₙHᵀHδₙ/Sₙ₊₁) F̄ₙᵀ with F̄ₙ = A − A PₙHᵀH/Sₙ (the
+/// Chandrasekhar recursions, Morf, Sidhu & Kailath 1974), so δ keeps the rank of δ₀; from
+/// P₀ = the stationary OU variances and a random walk at 0, δ₀ = Q_rw e eᵀ − (A P₀Hᵀ)(A P₀Hᵀ)ᵀ/S₀
+/// is rank 2, and each step costs O(k) instead of O(k²). P itself is not kept.
+#[derive(Debug, Clone)]
+struct LowRank {
+    /// L, k × 2, column-major (`l[c * k + j]`).
+    l: Vec<f64>,
+    /// S, 2 × 2 symmetric.
+    s: [[f64; 2]; 2],
+    /// Steps taken in this mode (the first one sets δ₀ up).
+    steps: usize,
+    /// The pass's last row when its step or white variance differs from the others'.
+    tail: Option<Tail>,
+}
+
+/// The last row of a [`LowRank`] pass, of another step length or white variance: its
+/// prediction needs P only through P·a_tail, which is carried along (z = Pₙ a_tail, moved by
+/// δₙ a_tail = L S Lᵀ a_tail each step), so P is never formed.
+#[derive(Debug, Clone)]
+struct Tail {
+    /// The last step's transition factors and process noise.
+    a: Vec<f64>,
+    q: Vec<f64>,
+    /// Pₙ a (the current prediction's covariance times `a`).
+    z: Vec<f64>,
 }
 
 impl<'m> Riccati<'m> {
+    /// The filter for one pass over the rows `idx` of `t_s`, all observed. When the pass is
+    /// time-invariant after its first row (one step length within the `step`'s tolerance, one
+    /// white variance) up to its last row, which may differ in both (a record's last bin holds
+    /// fewer samples), the covariance moves by rank-2 increments ([`LowRank`]).
+    fn for_rows(model: &'m NoiseModel, t_s: &[f64], idx: &[usize]) -> Self {
+        let mut ric = Self::new(model);
+        let (Some(&i0), Some(&i1), Some(body)) = (
+            idx.first(),
+            idx.get(1),
+            idx.get(..idx.len().saturating_sub(1)),
+        ) else {
+            return ric;
+        };
+        let dt = t_s[i1] - t_s[i0];
+        let r = model.white_var_at(i0);
+        let regular = |w: &[usize]| {
+            let d = t_s[w[1]] - t_s[w[0]];
+            (d - dt).abs() <= 1e-9 * dt && model.white_var_at(w[1]) == r
+        };
+        if idx.len() < 3 || dt.is_nan() || dt <= 0.0 || !body.windows(2).all(regular) {
+            return ric;
+        }
+        let k = ric.k;
+        let last = &idx[idx.len() - 2..];
+        let tail = (!regular(last)).then(|| {
+            let (mut a, mut q) = (vec![0.0; k], vec![0.0; k]);
+            transition(
+                model,
+                (t_s[last[1]] - t_s[last[0]]).max(0.0),
+                &mut a,
+                &mut q,
+            );
+            Tail {
+                z: vec![0.0; k],
+                a,
+                q,
+            }
+        });
+        ric.low_rank = Some(LowRank {
+            l: vec![0.0; 2 * k],
+            s: [[0.0; 2]; 2],
+            steps: 0,
+            tail,
+        });
+        ric
+    }
+
     fn new(model: &'m NoiseModel) -> Self {
         let k = model.flicker.len() + 1;
         // Initial covariance: stationary OU states, random walk at zero (offset is a column).
@@ -274,6 +354,7 @@ impl<'m> Riccati<'m> {
             last_dt: f64::NAN,
             last_observed: false,
             steady: false,
+            low_rank: None,
         }
     }
 
@@ -314,6 +395,19 @@ impl<'m> Riccati<'m> {
         if compare {
             self.old_ph.copy_from_slice(&self.ph);
         }
+        if was_observed && self.low_rank.is_some() {
+            self.low_rank_step(dt_s, same_dt, same_r && observed, old_s);
+            self.steady = compare
+                && (self.s - old_s).abs() <= STEADY_TOL * self.s
+                && self
+                    .old_ph
+                    .iter()
+                    .zip(&self.ph)
+                    .all(|(o, n)| (n - o).abs() <= STEADY_TOL * self.s);
+            self.last_dt = dt_s;
+            self.last_observed = observed;
+            return;
+        }
         if !same_dt {
             self.set_transition(dt_s);
         }
@@ -325,11 +419,12 @@ impl<'m> Riccati<'m> {
             .enumerate()
         {
             let ar = self.a[r];
-            let mut sum = 0.0;
             for (pc, ac) in row.iter_mut().zip(&self.a) {
                 *pc *= ar * ac;
-                sum += *pc;
             }
+            // The row sum apart, on independent partial sums: summed in the loop above, every
+            // element would wait on the addition before it (this is the discovery's inner loop).
+            let sum = sum_unchained(row);
             row[r] += self.q[r];
             *ph = sum + self.q[r];
         }
@@ -354,6 +449,115 @@ impl<'m> Riccati<'m> {
         self.last_dt = dt_s;
         self.last_observed = observed;
     }
+
+    /// One step of the [`LowRank`] mode: from Pₙ's PHᵀ and S (in `ph`, `s` = `old_s`) and
+    /// δₙ = L S Lᵀ to Pₙ₊₁'s, and δₙ₊₁. The first step after the first row sets δ₀ up.
+    fn low_rank_step(&mut self, dt_s: f64, same_dt: bool, invariant: bool, old_s: f64) {
+        let k = self.k;
+        let Some(lr) = self.low_rank.as_mut() else {
+            return;
+        };
+        if !(invariant && (same_dt || lr.steps == 0)) {
+            // `for_rows` proved the pass time-invariant after its first row but for its last:
+            // this is the last row. Pₙ⁺ a = z − PHᵀ (PHᵀ·a)/S, and the prediction's PHᵀ is
+            // a ∘ (Pₙ⁺ a) + q.
+            debug_assert!(lr.tail.is_some(), "an irregular row inside a low-rank pass");
+            if let Some(t) = &lr.tail {
+                let c = self.ph.iter().zip(&t.a).map(|(p, a)| p * a).sum::<f64>() / old_s;
+                for ((ph, (z, a)), q) in self.ph.iter_mut().zip(t.z.iter().zip(&t.a)).zip(&t.q) {
+                    *ph = a * (z - *ph * c) + q;
+                }
+                self.a.copy_from_slice(&t.a);
+                self.q.copy_from_slice(&t.q);
+                self.s = self.ph.iter().sum::<f64>() + self.r_var;
+                self.ln_s = self.s.ln();
+            }
+            self.low_rank = None;
+            return;
+        }
+        if lr.steps == 0 {
+            transition(self.model, dt_s, &mut self.a, &mut self.q);
+            // δ₀ = Φ(P₀) − P₀ with P₀ diagonal and stationary for the OU states: the random
+            // walk's diffusion, less the update's (A P₀Hᵀ)(A P₀Hᵀ)ᵀ/S₀.
+            lr.l.iter_mut().for_each(|v| *v = 0.0);
+            lr.l[k - 1] = 1.0;
+            for (l, (a, ph)) in lr.l[k..].iter_mut().zip(self.a.iter().zip(&self.ph)) {
+                *l = a * ph;
+            }
+            lr.s = [[self.q[k - 1], 0.0], [0.0, -1.0 / old_s]];
+            if let Some(t) = lr.tail.as_mut() {
+                // z₀ = P₀ a: the stationary OU variances, the random walk at 0.
+                t.z.iter_mut().for_each(|z| *z = 0.0);
+                for (z, (&(_, v), a)) in t.z.iter_mut().zip(self.model.flicker.iter().zip(&t.a)) {
+                    *z = v * a;
+                }
+            }
+        }
+        lr.steps += 1;
+        let (l0, l1) = lr.l.split_at_mut(k);
+        // u = Lᵀ Hᵀ (column sums), w = S u, v = L w = δₙ Hᵀ.
+        let u = [sum_unchained(l0), sum_unchained(l1)];
+        let w = [
+            lr.s[0][0] * u[0] + lr.s[0][1] * u[1],
+            lr.s[1][0] * u[0] + lr.s[1][1] * u[1],
+        ];
+        let s_new = old_s + u[0] * w[0] + u[1] * w[1];
+        if let Some(t) = lr.tail.as_mut() {
+            // z ← z + L S (Lᵀ a_tail), with this step's L.
+            let dot = |l: &[f64]| l.iter().zip(&t.a).map(|(x, a)| x * a).sum::<f64>();
+            let (g0, g1) = (dot(l0), dot(l1));
+            let (h0, h1) = (
+                lr.s[0][0] * g0 + lr.s[0][1] * g1,
+                lr.s[1][0] * g0 + lr.s[1][1] * g1,
+            );
+            for ((z, x0), x1) in t.z.iter_mut().zip(l0.iter()).zip(l1.iter()) {
+                *z += x0 * h0 + x1 * h1;
+            }
+        }
+        // L ← F̄ₙ L = A L − (A PₙHᵀ) uᵀ/Sₙ, with Pₙ's PHᵀ; then PHᵀ ← PHᵀ + L w.
+        let (c0, c1) = (u[0] / old_s, u[1] / old_s);
+        for (((x0, x1), a), ph) in l0
+            .iter_mut()
+            .zip(l1.iter_mut())
+            .zip(&self.a)
+            .zip(&mut self.ph)
+        {
+            let v = *x0 * w[0] + *x1 * w[1];
+            let aph = a * *ph;
+            *x0 = a * *x0 - aph * c0;
+            *x1 = a * *x1 - aph * c1;
+            *ph += v;
+        }
+        // S ← S − (S u)(S u)ᵀ/Sₙ₊₁.
+        for (r, wr) in lr.s.iter_mut().zip(w) {
+            for (sc, wc) in r.iter_mut().zip(w) {
+                *sc -= wr * wc / s_new;
+            }
+        }
+        self.s = s_new;
+        self.ln_s = s_new.ln();
+    }
+}
+
+/// The state moved by the transition factors `a`, and the prediction H x (the states' sum).
+/// The sum apart from the products, on independent partial sums: it is the whitening's inner
+/// loop (one pass per column per noise model), and a running sum waits on every addition.
+fn predict_state(state: &mut [f64], a: &[f64]) -> f64 {
+    state.iter_mut().zip(a).for_each(|(s, f)| *s *= f);
+    sum_unchained(state)
+}
+
+/// Σ `x` on four independent partial sums (the additions do not wait on each other).
+fn sum_unchained(x: &[f64]) -> f64 {
+    let mut acc = [0.0; 4];
+    let mut chunks = x.chunks_exact(4);
+    for c in &mut chunks {
+        for (a, v) in acc.iter_mut().zip(c) {
+            *a += v;
+        }
+    }
+    let tail: f64 = chunks.remainder().iter().sum();
+    (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
 }
 
 /// Range of the flicker slope β (component variance ∝ (τ_c/τ_mid)^β): 0 is a flat Allan
@@ -739,7 +943,7 @@ pub struct Whitener {
 impl Whitener {
     /// Gains of `model` for observations at `t_s[i]` for the rows in `idx`.
     pub fn new(model: &NoiseModel, t_s: &[f64], idx: Vec<usize>) -> Self {
-        let mut ric = Riccati::new(model);
+        let mut ric = Riccati::for_rows(model, t_s, &idx);
         let k = ric.k;
         let mut a_all = Vec::with_capacity(idx.len() * k);
         let mut g_all = Vec::with_capacity(idx.len() * k);
@@ -772,11 +976,7 @@ impl Whitener {
         for (r, &i) in self.idx.iter().enumerate() {
             let a = &self.a[r * k..(r + 1) * k];
             let g = &self.gain[r * k..(r + 1) * k];
-            let mut pred = 0.0;
-            for j in 0..k {
-                s[j] *= a[j];
-                pred += s[j];
-            }
+            let pred = predict_state(&mut s, a);
             let e = x[i] - pred;
             for j in 0..k {
                 s[j] += g[j] * e;
@@ -844,11 +1044,7 @@ pub fn held_out_prediction(
         let dt = prev_t.map_or(0.0, |pt| (t - pt).max(0.0));
         prev_t = Some(t);
         ric.step(dt, i, obs);
-        let mut pred = 0.0;
-        for (s, f) in state.iter_mut().zip(&ric.a) {
-            *s *= f;
-            pred += *s;
-        }
+        let pred = predict_state(&mut state, &ric.a);
         let s = ric.s;
         let e = xi - pred;
         if obs {
@@ -884,6 +1080,89 @@ pub(crate) mod tests {
         (0..n)
             .map(|_| (-2.0 * u().ln()).sqrt() * (2.0 * std::f64::consts::PI * u()).cos())
             .collect()
+    }
+
+    /// (PHᵀ, S) of every step and −2 ln L of `x` through the filter `ric` over `idx`.
+    fn filter_trace(mut ric: Riccati, t: &[f64], idx: &[usize], x: &[f64]) -> (Vec<f64>, f64) {
+        let mut st = vec![0.0; ric.k];
+        let (mut trace, mut n2ll) = (Vec::new(), 0.0);
+        let mut prev: Option<f64> = None;
+        for &i in idx {
+            ric.step(prev.map_or(0.0, |p| t[i] - p), i, true);
+            prev = Some(t[i]);
+            let mut pred = 0.0;
+            for (s, f) in st.iter_mut().zip(&ric.a) {
+                *s *= f;
+                pred += *s;
+            }
+            let e = x[i] - pred;
+            for (s, h) in st.iter_mut().zip(&ric.ph) {
+                *s += h / ric.s * e;
+            }
+            n2ll += e * e / ric.s + ric.ln_s;
+            trace.extend_from_slice(&ric.ph);
+            trace.push(ric.s);
+        }
+        (trace, n2ll)
+    }
+
+    #[test]
+    fn the_rank_two_recursion_of_a_regular_pass_is_the_full_riccati_recursion() {
+        // 20 000 rows at 71 s (a regular binned record): flicker from 71 s to 3× the span, with
+        // and without a random walk, and white alone; each also with a last bin of 68 samples
+        // (its mean 69.5 s after the one before, its white variance 71/68 of the others').
+        // Every step's PHᵀ and S of the low-rank mode against the full O(k²) update, and the
+        // likelihood of a series through both.
+        let (n, dt) = (20_000, 71.0);
+        let regular: Vec<f64> = (0..n).map(|i| i as f64 * dt).collect();
+        let mut short_last = regular.clone();
+        short_last[n - 1] -= 1.5;
+        let idx: Vec<usize> = (0..n).collect();
+        let x = normals(n, 7);
+        let mut scale = vec![1.0; n];
+        scale[n - 1] = 71.0 / 68.0;
+        let scale: Arc<[f64]> = scale.into();
+        for base in [
+            NoiseModel::from_levels(1.0, 0.3, -0.2, 1e-6, dt, n as f64 * dt),
+            NoiseModel::from_levels(1.0, 2.0, 0.5, 0.0, dt, n as f64 * dt),
+            NoiseModel::from_levels(1.0, 0.0, 0.0, 1e-5, dt, n as f64 * dt),
+        ] {
+            for (t, m) in [
+                (&regular, base.clone()),
+                (
+                    &short_last,
+                    base.clone().with_white_scale(Some(scale.clone())),
+                ),
+            ] {
+                let fast = Riccati::for_rows(&m, t, &idx);
+                assert!(fast.low_rank.is_some());
+                let (a, la) = filter_trace(fast, t, &idx, &x);
+                let (b, lb) = filter_trace(Riccati::new(&m), t, &idx, &x);
+                let worst = a
+                    .chunks(m.flicker.len() + 2)
+                    .zip(b.chunks(m.flicker.len() + 2))
+                    .flat_map(|(p, q)| {
+                        let s = q[q.len() - 1];
+                        p.iter().zip(q).map(move |(u, v)| (u - v).abs() / s)
+                    })
+                    .fold(0.0, f64::max);
+                assert!(worst < 1e-9, "largest relative difference {worst:e}");
+                assert!((la - lb).abs() < 1e-9 * lb.abs(), "{la} against {lb}");
+                // The likelihood goes through the low-rank mode (sums in another order).
+                assert!((neg2_loglik(&m, t, &idx, &x) - la).abs() < 1e-12 * la.abs());
+            }
+        }
+        // A gap or a row of another white variance before the last keeps the full update.
+        let mut gapped = idx.clone();
+        gapped.remove(500);
+        let m = NoiseModel::from_levels(1.0, 0.3, -0.2, 1e-6, dt, n as f64 * dt);
+        assert!(Riccati::for_rows(&m, &regular, &gapped).low_rank.is_none());
+        let mut scale = vec![1.0; n];
+        scale[700] = 0.5;
+        let scaled = m.clone().with_white_scale(Some(scale.into()));
+        assert!(Riccati::for_rows(&scaled, &regular, &idx)
+            .low_rank
+            .is_none());
     }
 
     #[test]
