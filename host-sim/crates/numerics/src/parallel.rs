@@ -27,6 +27,41 @@ pub fn par_map<T: Sync, U: Send>(items: &[T], f: impl Fn(&T) -> U + Sync) -> Vec
     })
 }
 
+/// [`par_map`] for items of very unequal cost: the threads take the next item as they finish
+/// one (a shared counter) instead of a fixed run each, so one slow item does not leave the other
+/// cores idle behind a run of quick ones. The results are in the items' order.
+pub fn par_map_balanced<T: Sync, U: Send>(items: &[T], f: impl Fn(&T) -> U + Sync) -> Vec<U> {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    let threads = std::thread::available_parallelism()
+        .map_or(1, |n| n.get())
+        .clamp(1, items.len().max(1));
+    if threads == 1 {
+        return items.iter().map(f).collect();
+    }
+    let next = AtomicUsize::new(0);
+    let work = || {
+        let mut done = Vec::new();
+        loop {
+            let i = next.fetch_add(1, Ordering::Relaxed);
+            let Some(item) = items.get(i) else {
+                break done;
+            };
+            done.push((i, f(item)));
+        }
+    };
+    let work = &work;
+    let mut all: Vec<(usize, U)> = std::thread::scope(|s| {
+        let handles: Vec<_> = (1..threads).map(|_| s.spawn(work)).collect();
+        let mut all = work();
+        for h in handles {
+            all.extend(h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)));
+        }
+        all
+    });
+    all.sort_unstable_by_key(|(i, _)| *i);
+    all.into_iter().map(|(_, u)| u).collect()
+}
+
 /// Progress of a long parallel run as plain lines on stderr when stderr is not a terminal
 /// (where the progress bars are not drawn): one line at most every [`ProgressLines::every`]
 /// (a minute; `ACCOMP_PROGRESS_EVERY_S` sets another), and nothing on a terminal.
@@ -112,5 +147,22 @@ mod tests {
             items.iter().map(|x| x * x).collect::<Vec<_>>()
         );
         assert!(par_map(&[] as &[u64], |x| *x).is_empty());
+    }
+
+    #[test]
+    fn balanced_results_come_back_in_the_order_of_the_items_whatever_their_cost() {
+        // The first items slow, the rest quick: the threads finish them out of order.
+        let items: Vec<u64> = (0..41).collect();
+        let f = |x: &u64| {
+            if *x < 3 {
+                std::thread::sleep(std::time::Duration::from_millis(20));
+            }
+            x * x + 1
+        };
+        assert_eq!(
+            par_map_balanced(&items, f),
+            items.iter().map(f).collect::<Vec<_>>()
+        );
+        assert!(par_map_balanced(&[] as &[u64], |x| *x).is_empty());
     }
 }

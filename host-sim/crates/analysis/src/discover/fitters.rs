@@ -372,16 +372,18 @@ pub(super) fn score_all(
     // χ²₁ values of pure noise is ≈ 2 ln M), at least the BIC's ln n.
     let m_rows = cur.r_w.len() as f64;
     let nl_penalty = |trials: f64| look_elsewhere(n_eff, trials);
-    let mut out = Vec::new();
-    for e in cands {
+    // Each candidate's search is independent of the others' (its grid, its columns): they run
+    // on all cores, taken one at a time (their costs differ by orders), and are kept in the
+    // candidates' order.
+    let one = |e: &Effect| -> Option<Scored> {
         if !e.repeatable() && done.contains(e) {
-            continue;
+            return None;
         }
         // One transfer function per channel: its order (gain, lag, rate, second-order lag) is
         // the candidate the criterion chose first.
         if let Some(ch) = e.coupled_channel(cur.ds) {
             if done.iter().any(|d| d.coupled_channel(cur.ds) == Some(ch)) {
-                continue;
+                return None;
             }
         }
         // A step's transition duration is fitted here (the candidate carries 0).
@@ -392,15 +394,14 @@ pub(super) fn score_all(
             // hidden 22-min lag was named, then a loop behind a lag beside it).
             Effect::ThermalHysteresis => {
                 let with_lags = !done.contains(&Effect::ThermalLag);
-                out.extend(best_preisach(cur, with_lags).and_then(|f| preisach_scored(cur, f)));
-                continue;
+                return best_preisach(cur, with_lags).and_then(|f| preisach_scored(cur, f));
             }
             Effect::Step { .. } => match fit_step(cur, ctx) {
                 Some((step, th, r, k, edge)) => {
                     effect = step;
                     (th, r, k, edge)
                 }
-                None => continue,
+                None => return None,
             },
             // Independent frequencies up to the periodogram's Nyquist (≤ 4096 bins), M, and
             // the frequency refined continuously between them: the false-alarm probability of
@@ -414,7 +415,7 @@ pub(super) fn score_all(
                     let m = m_rows.min(4096.0) / 2.0;
                     (p, r, nl_penalty(m) + m.ln().max(1.0).ln(), false)
                 }
-                None => continue,
+                None => return None,
             },
             _ if !effects::grid(e, cur.ds).is_empty() => match best_theta(cur, e, ctx) {
                 Some((th, r, edge)) => (
@@ -423,7 +424,7 @@ pub(super) fn score_all(
                     nl_penalty(effects::grid(e, cur.ds).len() as f64),
                     edge,
                 ),
-                None => continue,
+                None => return None,
             },
             _ => (
                 f64::NAN,
@@ -434,11 +435,11 @@ pub(super) fn score_all(
         };
         let cols = columns(&effect, cur.ds, ctx, theta);
         if cols.is_empty() || rss <= 0.0 || cur.rss <= 0.0 {
-            continue;
+            return None;
         }
         let penalty = cols.len() as f64 * n_eff.ln() + k_nl;
         let delta_bic = n_eff * (rss / cur.rss).ln() + penalty;
-        out.push(Scored {
+        Some(Scored {
             effect,
             theta,
             cols,
@@ -448,8 +449,12 @@ pub(super) fn score_all(
             at_edge,
             preisach: None,
             noise_with: None,
-        });
-    }
+        })
+    };
+    let mut out: Vec<Scored> = crate::numerics::parallel::par_map_balanced(cands, one)
+        .into_iter()
+        .flatten()
+        .collect();
     // A loop behind an output lag and a thermal lag are both lags of something the temperature
     // drives; the loop keeps its output lag only where it beats the thermal lag clearly (by
     // `hysteresis::LAG_OR_LOOP_DBIC`), and is otherwise offered as the rate-independent loop

@@ -932,8 +932,12 @@ pub struct Whitener {
     pub idx: Vec<usize>,
     /// Number of states.
     k: usize,
-    /// Per observed row: state transition factors (k each).
+    /// The distinct state transitions (k factors each): a regular record has two or three (its
+    /// first row, its step, a shorter last bin), and reading one per row would double what the
+    /// whitening of each column streams from memory.
     a: Vec<f64>,
+    /// Per observed row: which of `a` it takes.
+    a_of_row: Vec<u32>,
     /// Per observed row: Kalman gains (k each).
     gain: Vec<f64>,
     /// Per observed row: innovation standard deviation.
@@ -945,7 +949,8 @@ impl Whitener {
     pub fn new(model: &NoiseModel, t_s: &[f64], idx: Vec<usize>) -> Self {
         let mut ric = Riccati::for_rows(model, t_s, &idx);
         let k = ric.k;
-        let mut a_all = Vec::with_capacity(idx.len() * k);
+        let mut a_all: Vec<f64> = Vec::new();
+        let mut a_of_row = Vec::with_capacity(idx.len());
         let mut g_all = Vec::with_capacity(idx.len() * k);
         let mut s_all = Vec::with_capacity(idx.len());
         let mut prev_t: Option<f64> = None;
@@ -953,7 +958,19 @@ impl Whitener {
             let dt = prev_t.map_or(0.0, |pt| (t_s[i] - pt).max(0.0));
             prev_t = Some(t_s[i]);
             ric.step(dt, i, true);
-            a_all.extend_from_slice(&ric.a);
+            // The same transition as one of the last few kept (an irregular record's step
+            // lengths alternate), else a new one.
+            let kept = a_all.len() / k.max(1);
+            let found = (kept.saturating_sub(TRANSITIONS_KEPT)..kept)
+                .rev()
+                .find(|&j| a_all[j * k..(j + 1) * k] == ric.a[..]);
+            a_of_row.push(match found {
+                Some(j) => j as u32,
+                None => {
+                    a_all.extend_from_slice(&ric.a);
+                    kept as u32
+                }
+            });
             let s = ric.s;
             g_all.extend(ric.ph.iter().map(|v| v / s));
             s_all.push(s.sqrt());
@@ -962,6 +979,7 @@ impl Whitener {
             idx,
             k,
             a: a_all,
+            a_of_row,
             gain: g_all,
             s_sqrt: s_all,
         }
@@ -973,8 +991,9 @@ impl Whitener {
         let k = self.k;
         let mut s = vec![0.0; k];
         let mut out = Vec::with_capacity(self.idx.len());
-        for (r, &i) in self.idx.iter().enumerate() {
-            let a = &self.a[r * k..(r + 1) * k];
+        for (r, (&i, &ai)) in self.idx.iter().zip(&self.a_of_row).enumerate() {
+            let ai = ai as usize;
+            let a = &self.a[ai * k..(ai + 1) * k];
             let g = &self.gain[r * k..(r + 1) * k];
             let pred = predict_state(&mut s, a);
             let e = x[i] - pred;
