@@ -37,7 +37,14 @@ fn main() {
     let x: Vec<f64> = (0..n).map(|i| ((i * 7919) % 1000) as f64 * 1e-6).collect();
     // The final model's levels on that record (white 8.8e-10 V² a bin, flicker 1.4 µV at τ_mid,
     // nearly flat, random walk 4.9e-14 V²/s).
-    let m = NoiseModel::from_levels(8.8e-10, 1.4e-6_f64.powi(2), -0.016, 4.9e-14, dt, n as f64 * dt);
+    let m = NoiseModel::from_levels(
+        8.8e-10,
+        1.4e-6_f64.powi(2),
+        -0.016,
+        4.9e-14,
+        dt,
+        n as f64 * dt,
+    );
     let regular: Vec<usize> = (0..n).collect();
     let mut gapped = regular.clone();
     gapped.remove(n / 2);

@@ -17,7 +17,8 @@ use accomp_host::sim::Simulator;
 
 /// One day at 1 Hz.
 const ROWS: usize = 86_400;
-/// Binned to 86.4 s: the binned lag grid starts at two bins (173 s).
+/// Binned to 87 s (86.4 s rounded up to whole samples): the binned lag grid starts at two bins
+/// (174 s).
 const MAX_POINTS: usize = 1_000;
 
 fn run(log: Log) -> Discovery {
