@@ -1,13 +1,18 @@
 //! Independent evaluations on all cores (std scoped threads, no thread pool): the discovery's
 //! likelihood fits of several candidate models, the start points of one noise fit.
 
+/// Threads for `n` items: the cores there are, at most one per item, at least one.
+fn threads_for(n: usize) -> usize {
+    std::thread::available_parallelism()
+        .map_or(1, |c| c.get())
+        .clamp(1, n.max(1))
+}
+
 /// `f` of every item, in order, the items split into contiguous runs over
 /// [`std::thread::available_parallelism`] threads (this thread takes the first run). A panic in
 /// `f` is resumed on the caller's thread.
 pub fn par_map<T: Sync, U: Send>(items: &[T], f: impl Fn(&T) -> U + Sync) -> Vec<U> {
-    let threads = std::thread::available_parallelism()
-        .map_or(1, |n| n.get())
-        .clamp(1, items.len().max(1));
+    let threads = threads_for(items.len());
     if threads == 1 {
         return items.iter().map(f).collect();
     }
@@ -32,9 +37,7 @@ pub fn par_map<T: Sync, U: Send>(items: &[T], f: impl Fn(&T) -> U + Sync) -> Vec
 /// cores idle behind a run of quick ones. The results are in the items' order.
 pub fn par_map_balanced<T: Sync, U: Send>(items: &[T], f: impl Fn(&T) -> U + Sync) -> Vec<U> {
     use std::sync::atomic::{AtomicUsize, Ordering};
-    let threads = std::thread::available_parallelism()
-        .map_or(1, |n| n.get())
-        .clamp(1, items.len().max(1));
+    let threads = threads_for(items.len());
     if threads == 1 {
         return items.iter().map(f).collect();
     }

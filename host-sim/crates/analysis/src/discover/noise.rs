@@ -397,15 +397,7 @@ impl<'m> Riccati<'m> {
         }
         if was_observed && self.low_rank.is_some() {
             self.low_rank_step(dt_s, same_dt, same_r && observed, old_s);
-            self.steady = compare
-                && (self.s - old_s).abs() <= STEADY_TOL * self.s
-                && self
-                    .old_ph
-                    .iter()
-                    .zip(&self.ph)
-                    .all(|(o, n)| (n - o).abs() <= STEADY_TOL * self.s);
-            self.last_dt = dt_s;
-            self.last_observed = observed;
+            self.finish_step(compare, old_s, dt_s, observed);
             return;
         }
         if !same_dt {
@@ -439,6 +431,13 @@ impl<'m> Riccati<'m> {
                 }
             }
         }
+        self.finish_step(compare, old_s, dt_s, observed);
+    }
+
+    /// After a step's prediction: whether the filter has reached its steady state (`compare`:
+    /// this step and the one before are of the same length and white variance, both observed;
+    /// then S and PHᵀ moved by less than [`STEADY_TOL`]), and what the next step compares with.
+    fn finish_step(&mut self, compare: bool, old_s: f64, dt_s: f64, observed: bool) {
         self.steady = compare
             && (self.s - old_s).abs() <= STEADY_TOL * self.s
             && self
