@@ -32,6 +32,24 @@ pub fn par_map<T: Sync, U: Send>(items: &[T], f: impl Fn(&T) -> U + Sync) -> Vec
     })
 }
 
+/// `a()` and `b()` at once, `b` on a second thread when there is a second core (else one after
+/// the other on this thread). A panic in either is resumed on the caller's thread.
+pub fn join<A: Send, B: Send>(
+    a: impl FnOnce() -> A + Send,
+    b: impl FnOnce() -> B + Send,
+) -> (A, B) {
+    if threads_for(2) == 1 {
+        let ra = a();
+        return (ra, b());
+    }
+    std::thread::scope(|s| {
+        let hb = s.spawn(b);
+        let ra = a();
+        let rb = hb.join().unwrap_or_else(|p| std::panic::resume_unwind(p));
+        (ra, rb)
+    })
+}
+
 /// [`par_map`] for items of very unequal cost: the threads take the next item as they finish
 /// one (a shared counter) instead of a fixed run each, so one slow item does not leave the other
 /// cores idle behind a run of quick ones. The results are in the items' order.
@@ -167,5 +185,12 @@ mod tests {
             items.iter().map(f).collect::<Vec<_>>()
         );
         assert!(par_map_balanced(&[] as &[u64], |x| *x).is_empty());
+    }
+
+    #[test]
+    fn join_returns_each_closures_result_in_its_place() {
+        let data: Vec<u64> = (1..=100).collect();
+        let (sum, max) = join(|| data.iter().sum::<u64>(), || data.iter().max().copied());
+        assert_eq!((sum, max), (5050, Some(100)));
     }
 }

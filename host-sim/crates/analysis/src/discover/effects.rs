@@ -395,29 +395,30 @@ pub fn rate_columns(
             ChannelKind::Temperature | ChannelKind::Pressure | ChannelKind::Other
         )
     };
-    as_read
+    let drivers: Vec<&super::import::Channel> = as_read
         .iter()
         .filter(|c| c.values.len() == ds.t_s.len())
         .filter(driver)
-        .map(|c| {
-            let on_rows = rows.and_then(|f| {
-                let ch = f.channels.iter().find(|r| r.name == c.name)?;
-                let r = super::rate::band_limited_rates(&ch.values, &f.t_s, &f.segment_start);
-                Some(super::rate::RateColumns {
-                    rate: super::import::block_means_like(f, ds, &r.rate)?,
-                    timing: super::import::block_means_like(f, ds, &r.timing)?,
-                })
-            });
-            match on_rows {
-                Some(r) => RateColumn::new(&c.name, r, true),
-                None => RateColumn::new(
-                    &c.name,
-                    super::rate::band_limited_rates(&c.values, &ds.t_s, &ds.segment_start),
-                    false,
-                ),
-            }
-        })
-        .collect()
+        .collect();
+    // The channels on all cores: each is a filter over the record's rows or points.
+    crate::numerics::parallel::par_map_balanced(&drivers, |c| {
+        let on_rows = rows.and_then(|f| {
+            let ch = f.channels.iter().find(|r| r.name == c.name)?;
+            let r = super::rate::band_limited_rates(&ch.values, &f.t_s, &f.segment_start);
+            Some(super::rate::RateColumns {
+                rate: super::import::block_means_like(f, ds, &r.rate)?,
+                timing: super::import::block_means_like(f, ds, &r.timing)?,
+            })
+        });
+        match on_rows {
+            Some(r) => RateColumn::new(&c.name, r, true),
+            None => RateColumn::new(
+                &c.name,
+                super::rate::band_limited_rates(&c.values, &ds.t_s, &ds.segment_start),
+                false,
+            ),
+        }
+    })
 }
 
 /// Centred moving average over ±`half_window_s` inside each segment (the window shrinks at the

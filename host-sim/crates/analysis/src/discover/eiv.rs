@@ -255,31 +255,26 @@ fn smoothing_width_s(dt: f64, ll: [f64; 2]) -> f64 {
 /// smoothed states (the output and the input channel untouched); without, the channels as
 /// read — with what was found per channel.
 pub fn denoise(ds: &Dataset, apply: bool) -> (Dataset, Vec<ChannelNoise>) {
-    let mut model = ds.clone();
-    let mut report = Vec::new();
     let dt = ds.dt_s.max(1e-9);
     let segs = segments(ds);
-    for c in model.channels.iter_mut() {
+    // One model per channel, the channels on all cores: its levels are fitted on the longest
+    // segment (the levels are a property of the sensor, not of the segment), then every segment
+    // is smoothed with them. `None`: not modelled (the input, too short a record, no fit).
+    let one = |c: &super::import::Channel| -> Option<(Option<Vec<f64>>, ChannelNoise)> {
         if c.kind == ChannelKind::Input {
-            continue;
+            return None;
         }
         let raw_std = crate::numerics::stats::std(&c.values);
-        // One model per channel: its levels are fitted on the longest segment (the levels are a
-        // property of the sensor, not of the segment), then every segment is smoothed with them.
-        let Some(longest) = segs.iter().max_by_key(|r| r.len()).cloned() else {
-            continue;
-        };
+        let longest = segs.iter().max_by_key(|r| r.len()).cloned()?;
         if longest.len() < 10 {
-            continue;
+            return None;
         }
-        let Some((ll, r)) = fit(&ds.t_s[longest.clone()], &c.values[longest], dt) else {
-            continue;
-        };
+        let (ll, r) = fit(&ds.t_s[longest.clone()], &c.values[longest], dt)?;
         // When the reading noise is below the true value's change over one spacing (the
         // smoother would average over less than a spacing) the white part is not resolved: the
         // channel is used as read.
         let resolved = r > 0.0 && smoothing_width_s(dt, ll) >= dt;
-        if resolved && apply {
+        let smoothed = (resolved && apply).then(|| {
             let mut v = c.values.clone();
             for s in &segs {
                 if s.len() >= 3 {
@@ -287,9 +282,9 @@ pub fn denoise(ds: &Dataset, apply: bool) -> (Dataset, Vec<ChannelNoise>) {
                     v[s.clone()].copy_from_slice(&sm);
                 }
             }
-            c.values = v;
-        }
-        report.push(ChannelNoise {
+            v
+        });
+        let noise = ChannelNoise {
             channel: c.name.clone(),
             noise: r.max(0.0).sqrt(),
             unit: match c.kind {
@@ -309,7 +304,19 @@ pub fn denoise(ds: &Dataset, apply: bool) -> (Dataset, Vec<ChannelNoise>) {
             resolved,
             smoothed: resolved && apply,
             method: METHOD_LOCAL_TREND_ML,
-        });
+        };
+        Some((smoothed, noise))
+    };
+    let found = crate::numerics::parallel::par_map_balanced(&ds.channels, one);
+    let mut model = ds.clone();
+    let mut report = Vec::new();
+    for (c, f) in model.channels.iter_mut().zip(found) {
+        if let Some((smoothed, noise)) = f {
+            if let Some(v) = smoothed {
+                c.values = v;
+            }
+            report.push(noise);
+        }
     }
     (model, report)
 }

@@ -283,15 +283,22 @@ pub fn discover_log(
             .ok()
             .map(|(k, _)| k.scale_factor_v_per_g);
     }
-    let mut ds = import::dataset_from_log(&log, &opts)?;
-    note_bad_rows(&mut ds, bad);
     // Bins of several rows hide what is faster than two of them: the full-rate rows are kept
     // for the fast terms, and on bins of a few rows for the rate columns
-    // (`effects::rate_columns`); the log itself is dropped first: it holds every column read.
-    let full = if ds.rows_per_point() > 1.0 {
-        Some(import::full_rate_from_log(&log, &opts)?)
-    } else {
-        None
+    // (`effects::rate_columns`). Both reductions read the same log and are made at once, the
+    // rows whenever the log has more of them than points may be kept (they are then binned
+    // unless gaps drop enough rows, which the binned reduction tells); the log itself is dropped
+    // first: it holds every column read.
+    let may_bin = log.time_s().len() > opts.max_points;
+    let (ds, full) = crate::numerics::parallel::join(
+        || import::dataset_from_log(&log, &opts),
+        || may_bin.then(|| import::full_rate_from_log(&log, &opts)),
+    );
+    let mut ds = ds?;
+    note_bad_rows(&mut ds, bad);
+    let full = match full.filter(|_| ds.rows_per_point() > 1.0) {
+        Some(f) => Some(f?),
+        None => None,
     };
     drop(log);
     Ok(discover_binned(ds, full, table, cfg)?)
