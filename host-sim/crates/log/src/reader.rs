@@ -870,6 +870,18 @@ impl RowStream for BlockRows<'_> {
 }
 
 /// What [`Records::take_block`] found.
+/// What follows the blocks [`Records::take_blocks`] took.
+enum After {
+    /// Maybe more blocks.
+    More,
+    /// The end of the file.
+    End,
+    /// Lines that need the csv crate.
+    Sequential,
+    /// The file could not be read on.
+    Failed(ReadError),
+}
+
 enum Taken {
     Block(Block),
     /// The file is read.
@@ -1110,12 +1122,28 @@ impl<R: BufRead> Records<R> {
         Ok(Taken::Block(block))
     }
 
+    /// Up to `n` blocks, and what follows them.
+    fn take_blocks(&mut self, n: usize) -> (Vec<Block>, After) {
+        let mut blocks = Vec::with_capacity(n);
+        while blocks.len() < n {
+            match self.take_block() {
+                Ok(Taken::Block(b)) => blocks.push(b),
+                Ok(Taken::End) => return (blocks, After::End),
+                Ok(Taken::Sequential) => return (blocks, After::Sequential),
+                Err(e) => return (blocks, After::Failed(e)),
+            }
+        }
+        (blocks, After::More)
+    }
+
     /// Reads every remaining record: blocks of lines that need no csv crate are parsed by
-    /// `work` on up to [`std::thread::available_parallelism`] threads at once, and their results
-    /// handed to `merge` in file order on this thread; from the first line that needs the csv
-    /// crate on, `work` reads the rest of the file here (one last result). `merge` stops the
-    /// reading by returning an error; a worker reports its own errors inside its result (it
-    /// stops at its first), so `merge` decides which comes first in the file.
+    /// `work` on up to [`std::thread::available_parallelism`] threads at once while this thread
+    /// reads the next blocks from the file and hands the previous blocks' results to `merge`,
+    /// in file order; from the first line that needs the csv crate on, `work` reads the rest of
+    /// the file here (one last result). `merge` stops the reading by returning an error; a
+    /// worker reports its own errors inside its result (it stops at its first), so `merge`
+    /// decides which comes first in the file; an error reading the file is returned after every
+    /// block before it is merged.
     pub fn for_each_block<T: Send, E: From<ReadError>>(
         &mut self,
         work: impl Fn(&mut dyn RowStream) -> T + Sync,
@@ -1123,42 +1151,36 @@ impl<R: BufRead> Records<R> {
     ) -> Result<(), E> {
         let threads = std::thread::available_parallelism().map_or(1, |n| n.get().min(8));
         let expected = self.header.len();
+        let work = &work;
+        // The results of the blocks parsed last, merged while the next ones are parsed.
+        let mut parsed: Vec<T> = Vec::new();
+        let (mut blocks, mut after) = self.take_blocks(threads);
         loop {
-            let mut blocks = Vec::with_capacity(threads);
-            let mut sequential = false;
-            while blocks.len() < threads {
-                match self.take_block()? {
-                    Taken::Block(b) => blocks.push(b),
-                    Taken::End => break,
-                    Taken::Sequential => {
-                        sequential = true;
-                        break;
-                    }
+            let (results, next, merged) = std::thread::scope(|s| {
+                let handles: Vec<_> = blocks
+                    .iter()
+                    .map(|b| s.spawn(move || work(&mut b.rows(expected))))
+                    .collect();
+                let next = matches!(after, After::More).then(|| self.take_blocks(threads));
+                let merged = parsed.drain(..).try_for_each(&mut merge);
+                let results: Vec<T> = handles
+                    .into_iter()
+                    .map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
+                    .collect();
+                (results, next, merged)
+            });
+            merged?;
+            parsed = results;
+            match next {
+                Some(n) => (blocks, after) = n,
+                None => {
+                    parsed.into_iter().try_for_each(&mut merge)?;
+                    return match after {
+                        After::Sequential => merge(work(self)),
+                        After::Failed(e) => Err(e.into()),
+                        After::End | After::More => Ok(()),
+                    };
                 }
-            }
-            let full = blocks.len() == threads && !sequential;
-            let results: Vec<T> = match blocks.split_first() {
-                None => Vec::new(),
-                Some((first, rest)) => std::thread::scope(|s| {
-                    let handles: Vec<_> = rest
-                        .iter()
-                        .map(|b| s.spawn(|| work(&mut b.rows(expected))))
-                        .collect();
-                    let mut out = vec![work(&mut first.rows(expected))];
-                    for h in handles {
-                        out.push(h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)));
-                    }
-                    out
-                }),
-            };
-            for t in results {
-                merge(t)?;
-            }
-            if sequential {
-                return merge(work(self));
-            }
-            if !full {
-                return Ok(());
             }
         }
     }
@@ -1466,6 +1488,72 @@ mod tests {
         .unwrap();
         assert!(text.len() > 10 * BLOCK_BYTES);
         assert_eq!(got, want);
+    }
+
+    #[test]
+    fn a_read_error_is_returned_after_every_line_read_before_it() {
+        /// Hands out `data` up to `fail_at` bytes, then fails.
+        struct FailAfter {
+            data: Vec<u8>,
+            pos: usize,
+            fail_at: usize,
+        }
+        impl std::io::Read for FailAfter {
+            fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+                if self.pos >= self.fail_at {
+                    return Err(std::io::Error::other("the disk went away"));
+                }
+                let n = buf.len().min(self.fail_at - self.pos).min(100);
+                buf[..n].copy_from_slice(&self.data[self.pos..self.pos + n]);
+                self.pos += n;
+                Ok(n)
+            }
+        }
+        let mut text = String::from("time_s,v\n");
+        for i in 0..2000 {
+            text.push_str(&format!("{i},{}\n", i * 7));
+        }
+        let want = rows(&text).unwrap();
+        let fail_at = text.len() * 3 / 4;
+        // The byte after each line (line k at index k − 1).
+        let line_ends: Vec<usize> = text.match_indices('\n').map(|(i, _)| i + 1).collect();
+        let reader = FailAfter {
+            data: text.into_bytes(),
+            pos: 0,
+            fail_at,
+        };
+        let mut r = Records::new(std::io::BufReader::new(reader)).unwrap();
+        let mut got = Vec::new();
+        let res = r.for_each_block(
+            |rows| {
+                let mut out = Vec::new();
+                while let Ok(Some(row)) = rows.next_row() {
+                    out.push((row.line, vec![row.text(0).unwrap().to_owned()]));
+                }
+                out
+            },
+            |part| -> Result<(), ReadError> {
+                got.extend(part);
+                Ok(())
+            },
+        );
+        assert!(matches!(res, Err(ReadError::Io(_))), "{res:?}");
+        // The lines before the failure were merged, in order, but for less than a block's
+        // bytes at its end (too few to make a block when the read failed).
+        let merged_to = got.last().map_or(0, |(line, _)| line_ends[line - 1]);
+        assert!(
+            merged_to <= fail_at && fail_at - merged_to < BLOCK_BYTES,
+            "{merged_to} of {fail_at}"
+        );
+        assert_eq!(
+            got.len(),
+            want.iter()
+                .filter(|w| line_ends[w.0 - 1] <= merged_to)
+                .count()
+        );
+        for (g, w) in got.iter().zip(&want) {
+            assert_eq!((g.0, &g.1[0]), (w.0, &w.1[0]));
+        }
     }
 
     #[test]

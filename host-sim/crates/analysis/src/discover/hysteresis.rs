@@ -114,10 +114,16 @@ pub fn nnls(cols: &[Vec<f64>], y: &[f64]) -> Vec<f64> {
 /// The normal equations of `y ≈ Σ w_j·cols[j]`: AᵀA, Aᵀy and yᵀy.
 pub fn gram(cols: &[Vec<f64>], y: &[f64]) -> (Vec<Vec<f64>>, Vec<f64>, f64) {
     let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
-    let ata = cols
-        .iter()
-        .map(|a| cols.iter().map(|b| dot(a, b)).collect())
-        .collect();
+    // Symmetric: each product once (x·y and y·x are the same sum, term by term).
+    let k = cols.len();
+    let mut ata = vec![vec![0.0; k]; k];
+    for i in 0..k {
+        for j in 0..=i {
+            let d = dot(&cols[i], &cols[j]);
+            ata[i][j] = d;
+            ata[j][i] = d;
+        }
+    }
     (ata, cols.iter().map(|a| dot(a, y)).collect(), dot(y, y))
 }
 

@@ -712,7 +712,8 @@ fn reduce(log: &Log, opts: &DatasetOptions, binning: bool) -> Result<Dataset, Im
         )));
     }
     let mut dts: Vec<f64> = keep.windows(2).map(|w| t[w[1]] - t[w[0]]).collect();
-    dts.sort_by(f64::total_cmp);
+    // Unstable: values equal under `total_cmp` are the same bits, so the order is the same.
+    dts.sort_unstable_by(f64::total_cmp);
     let median_dt = dts[dts.len() / 2];
     // The bin width comes from the time the record covers, not its span: a long gap (a year
     // between two sessions) would otherwise coarsen every bin of the data there is.
