@@ -5,7 +5,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::catalogue::EffectKind;
-use crate::effects::{InvalidEffect, ScenarioEffect, TideGroupTerm, SIMULATED_AMBIENT};
+use crate::effects::{InvalidEffect, Relay, ScenarioEffect, TideGroupTerm, SIMULATED_AMBIENT};
 use crate::noise::{gauss, stream, SimRng};
 
 /// Random stream of a member's draw of the effects' parameters (not the noise's stream).
@@ -92,6 +92,68 @@ pub struct EffectDraw {
     /// The other cause of an ambiguous pair: odd members take it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub alternative: Option<Alternative>,
+    /// A `thermal_hysteresis`'s fitted Preisach distribution; absent: one play of the fitted
+    /// half-width.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hysteresis: Option<HysteresisShape>,
+}
+
+/// A fitted Preisach distribution of a `thermal_hysteresis`: plays and relays with their weights
+/// per unit of the effect's `half_width`, at the fitted width `width_c` (a member's drawn width
+/// scales every play's half-width and every relay's gap about its centre by the same factor),
+/// reaching the output through a first-order lag of `lag_s`. The simulator writes it as one
+/// scenario entry per play, the relays and the lag with the first (the lag is linear, so the
+/// entries' lagged sum is the lagged sum).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HysteresisShape {
+    /// The width the shape is given at, °C (the effect's `play_half_width_c` as fitted).
+    pub width_c: f64,
+    /// Plays: half-width °C, weight per unit `half_width`.
+    pub plays: Vec<[f64; 2]>,
+    /// Relays: lower and upper threshold °C, weight per unit `half_width`.
+    pub relays: Vec<[f64; 3]>,
+    /// Output lag, s (0: at once).
+    pub lag_s: f64,
+}
+
+impl HysteresisShape {
+    /// The scenario entries of the distribution at coefficient `half_width` and width
+    /// `width_c`.
+    pub fn entries(&self, half_width: f64, width_c: f64) -> Vec<ScenarioEffect> {
+        let scale = width_c / self.width_c;
+        let relays: Vec<Relay> = self
+            .relays
+            .iter()
+            .map(|&[lower, upper, weight]| {
+                let (centre, gap) = (0.5 * (lower + upper), 0.5 * (upper - lower) * scale);
+                Relay {
+                    lower_c: centre - gap,
+                    upper_c: centre + gap,
+                    half_width: half_width * weight,
+                }
+            })
+            .collect();
+        let mut plays: Vec<(f64, f64)> = self
+            .plays
+            .iter()
+            .map(|&[r, weight]| (r * scale, half_width * weight))
+            .collect();
+        if plays.is_empty() {
+            // Relays alone: they ride on a play of no weight (the entry needs one).
+            plays.push((width_c, 0.0));
+        }
+        let mut relays = Some(relays);
+        plays
+            .into_iter()
+            .map(|(r, h)| ScenarioEffect::ThermalHysteresis {
+                half_width: h,
+                play_half_width_c: r,
+                relays: relays.take().unwrap_or_default(),
+                lag_s: self.lag_s,
+            })
+            .collect()
+    }
 }
 
 /// One tidal wave group's factor and phase against the model's elastic tide.
@@ -127,6 +189,30 @@ pub struct EffectDraws {
     pub admittance_per_hpa: Option<Drawn>,
 }
 
+/// A hysteresis entry with its fitted distribution as the distribution's entries at the entry's
+/// coefficient and width; any other entry as itself.
+fn shaped(e: ScenarioEffect, shape: Option<&HysteresisShape>) -> Vec<ScenarioEffect> {
+    match (&e, shape) {
+        (
+            ScenarioEffect::ThermalHysteresis {
+                half_width,
+                play_half_width_c,
+                ..
+            },
+            Some(shape),
+        ) => shape.entries(*half_width, *play_half_width_c),
+        _ => vec![e],
+    }
+}
+
+/// The entries if each passes the scenario's checks (numbered from `first`).
+fn valid(entries: Vec<ScenarioEffect>, first: usize) -> Result<Vec<ScenarioEffect>, Unexpressible> {
+    for (k, e) in entries.iter().enumerate() {
+        e.validate(first + k)?;
+    }
+    Ok(entries)
+}
+
 impl EffectDraws {
     /// The nominal entries (fitted values) and the effects that cannot be expressed, each with
     /// why.
@@ -138,11 +224,8 @@ impl EffectDraws {
             let e = kind
                 .ok_or_else(|| Unexpressible::NotInCatalogue(a.kind.clone()))
                 .and_then(|k| self.entry(k, a.channel.as_deref(), &a.params, None));
-            match e.and_then(|e| {
-                let i = out.len();
-                e.validate(i).map(|()| e).map_err(Unexpressible::from)
-            }) {
-                Ok(e) => out.push(e),
+            match e.and_then(|e| valid(shaped(e, a.hysteresis.as_ref()), out.len())) {
+                Ok(e) => out.extend(e),
                 Err(why) => refused.push((a.kind.clone(), why.to_string())),
             }
         }
@@ -166,20 +249,21 @@ impl EffectDraws {
                 .alternative
                 .as_ref()
                 .and_then(|o| EffectKind::from_name(&o.kind).map(|k| (k, o.params.as_slice())));
-            let (kind, params) = match other {
-                Some(o) if member % 2 == 1 => o,
+            let (kind, params, shape) = match other {
+                Some((k, p)) if member % 2 == 1 => (k, p, None),
                 _ => match EffectKind::from_name(&a.kind) {
-                    Some(k) => (k, a.params.as_slice()),
+                    Some(k) => (k, a.params.as_slice(), a.hysteresis.as_ref()),
                     None => continue,
                 },
             };
             let ch = a.channel.as_deref();
             let drawn = self.entry(kind, ch, params, Some(&mut rng));
             let i = out.len();
-            let ok =
-                |e: Result<ScenarioEffect, Unexpressible>| e.ok().filter(|e| e.validate(i).is_ok());
+            let ok = |e: Result<ScenarioEffect, Unexpressible>| {
+                e.and_then(|e| valid(shaped(e, shape), i)).ok()
+            };
             if let Some(e) = ok(drawn).or_else(|| ok(self.entry(kind, ch, params, None))) {
-                out.push(e);
+                out.extend(e);
             }
         }
         if let Some(p) = &self.admittance_per_hpa {

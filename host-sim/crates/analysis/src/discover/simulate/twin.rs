@@ -152,6 +152,7 @@ fn draws(d: &Discovery) -> EffectDraws {
             channel: None,
             params: Vec::new(),
             alternative: None,
+            hysteresis: None,
         });
     }
     let accepted = e.effects.iter().any(|a| a.kind == "pressure_admittance");
