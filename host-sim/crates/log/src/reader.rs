@@ -869,7 +869,6 @@ impl RowStream for BlockRows<'_> {
     }
 }
 
-/// What [`Records::take_block`] found.
 /// What follows the blocks [`Records::take_blocks`] took.
 enum After {
     /// Maybe more blocks.
@@ -882,6 +881,7 @@ enum After {
     Failed(ReadError),
 }
 
+/// What [`Records::take_block`] found.
 enum Taken {
     Block(Block),
     /// The file is read.

@@ -296,10 +296,7 @@ pub fn discover_log(
     );
     let mut ds = ds?;
     note_bad_rows(&mut ds, bad);
-    let full = match full.filter(|_| ds.rows_per_point() > 1.0) {
-        Some(f) => Some(f?),
-        None => None,
-    };
+    let full = full.filter(|_| ds.rows_per_point() > 1.0).transpose()?;
     drop(log);
     Ok(discover_binned(ds, full, table, cfg)?)
 }

@@ -122,7 +122,7 @@ impl HysteresisShape {
     /// `width_c`.
     pub fn entries(&self, half_width: f64, width_c: f64) -> Vec<ScenarioEffect> {
         let scale = width_c / self.width_c;
-        let relays: Vec<Relay> = self
+        let mut relays: Vec<Relay> = self
             .relays
             .iter()
             .map(|&[lower, upper, weight]| {
@@ -143,13 +143,13 @@ impl HysteresisShape {
             // Relays alone: they ride on a play of no weight (the entry needs one).
             plays.push((width_c, 0.0));
         }
-        let mut relays = Some(relays);
         plays
             .into_iter()
             .map(|(r, h)| ScenarioEffect::ThermalHysteresis {
                 half_width: h,
                 play_half_width_c: r,
-                relays: relays.take().unwrap_or_default(),
+                // All on the first entry.
+                relays: std::mem::take(&mut relays),
                 lag_s: self.lag_s,
             })
             .collect()
