@@ -200,6 +200,63 @@ impl RateOfChange {
     }
 }
 
+/// First-order lag τ dx/dt = u − x, exact for an input held at its new value over the interval
+/// since the previous instant; settled at the first input (and passed through for τ ≤ 0). The
+/// simulator's thermal lag, self-heating, ambient coupling and hysteresis output lag step it; the
+/// discovery's lag columns run it over each segment.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct FirstOrderLag {
+    state: Option<(f64, f64)>,
+}
+
+impl FirstOrderLag {
+    /// The lagged input at `t` (input unit).
+    #[inline]
+    pub fn step(&mut self, t: f64, u: f64, tau_s: f64) -> f64 {
+        let x = match self.state {
+            Some((t0, x0)) if tau_s > 0.0 => {
+                let a = (-(t - t0).max(0.0) / tau_s).exp();
+                a * x0 + (1.0 - a) * u
+            }
+            _ => u,
+        };
+        self.state = Some((t, x));
+        x
+    }
+}
+
+/// Play (backlash) operator of half-width r: its output p follows the input u only when u is
+/// more than r away, p ← clamp(p, u − r, u + r); it starts at the first input (the virgin state:
+/// no branch yet). `thermal_hysteresis`'s plays, simulated and fitted, are this.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Play {
+    p: Option<f64>,
+}
+
+impl Play {
+    /// The operator's output after input `u` (input unit).
+    #[inline]
+    pub fn step(&mut self, u: f64, r: f64) -> f64 {
+        let p = self.p.unwrap_or(u).max(u - r).min(u + r);
+        self.p = Some(p);
+        p
+    }
+}
+
+/// One step of a relay hysteron's state R at temperature `t_c`: +1 at or above `upper_c`, −1 at
+/// or below `lower_c`, held in between (0 until the first switch). The simulator's injection and
+/// the discovery's relay columns both step with it.
+#[inline]
+pub fn relay_step(state: f64, t_c: f64, lower_c: f64, upper_c: f64) -> f64 {
+    if t_c >= upper_c {
+        1.0
+    } else if t_c <= lower_c {
+        -1.0
+    } else {
+        state
+    }
+}
+
 /// Second-order lag: two first-order stages of time constant τ in series (critically damped),
 /// each exact for the interval since the previous instant; settled at the first input.
 #[derive(Debug, Clone, Copy, Default)]
@@ -224,6 +281,18 @@ impl SecondOrderLag {
         self.state = Some((t, x1, x2));
         x2
     }
+}
+
+/// A warm-up transient's shape `since_start_s` after the start: exp(−t/τ) (1 at the start).
+#[inline]
+pub fn warmup(since_start_s: f64, tau_s: f64) -> f64 {
+    (-since_start_s / tau_s).exp()
+}
+
+/// Logarithmic aging's shape `since_start_s` after the start: ln(1 + t/τ) (0 before the start).
+#[inline]
+pub fn aging(since_start_s: f64, tau_s: f64) -> f64 {
+    (1.0 + since_start_s.max(0.0) / tau_s).ln()
 }
 
 /// Seconds of the time unit of [`creep`]: its amplitude is the drift after one day.
@@ -375,5 +444,48 @@ mod tests {
         assert_eq!(step_fraction(10.0, 10.0, 10.0), 0.5);
         assert_eq!(step_fraction(12.5, 10.0, 10.0), 0.75);
         assert_eq!(step_fraction(16.0, 10.0, 10.0), 1.0);
+    }
+
+    #[test]
+    fn the_first_order_lag_of_a_step_is_exact_for_any_spacing() {
+        // Unit step after t = 0, τ = 10 s: 1 − e^{−t/τ} at t = 10 s, whether reached in one
+        // interval or ten unequal ones; τ = 0 passes the input through.
+        let mut one = FirstOrderLag::default();
+        one.step(0.0, 0.0, 10.0);
+        let y1 = one.step(10.0, 1.0, 10.0);
+        let mut many = FirstOrderLag::default();
+        many.step(0.0, 0.0, 10.0);
+        let mut y = 0.0;
+        for t in [0.5, 1.0, 3.0, 3.5, 6.0, 7.0, 9.9, 10.0] {
+            y = many.step(t, 1.0, 10.0);
+        }
+        let want = 1.0 - (-1.0_f64).exp();
+        assert!(
+            (y1 - want).abs() < 1e-15 && (y - want).abs() < 1e-12,
+            "{y1} {y}"
+        );
+        let mut through = FirstOrderLag::default();
+        through.step(0.0, 0.0, 0.0);
+        assert_eq!(through.step(1.0, 3.0, 0.0), 3.0);
+    }
+
+    #[test]
+    fn a_play_moves_only_once_the_input_is_its_half_width_away() {
+        // r = 1: starts at the first input, holds while the input reverses within 2r, follows
+        // one r behind beyond it; a relay holds between its thresholds.
+        let mut p = Play::default();
+        let out: Vec<f64> = [0.0, 0.5, 2.0, 1.5, 0.2, -1.0]
+            .iter()
+            .map(|&u| p.step(u, 1.0))
+            .collect();
+        assert_eq!(out, [0.0, 0.0, 1.0, 1.0, 1.0, 0.0]);
+        let states: Vec<f64> = [0.0, 0.6, 0.4, 0.2, 0.4]
+            .iter()
+            .scan(0.0, |r, &t| {
+                *r = relay_step(*r, t, 0.2, 0.6);
+                Some(*r)
+            })
+            .collect();
+        assert_eq!(states, [-1.0, 1.0, 1.0, -1.0, -1.0]);
     }
 }

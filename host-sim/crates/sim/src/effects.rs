@@ -24,7 +24,7 @@ use accomp::tide::harmonic::{sin_cos, DoodsonArguments};
 use accomp::tide::{Station, MAS_PER_RAD, NM_S2_PER_M_S2, STANDARD_GRAVITY_M_S2};
 
 use super::noise::{gauss, SimRng};
-use crate::catalogue::{step_fraction, EffectKind};
+use crate::catalogue::{aging, relay_step, step_fraction, warmup, EffectKind, FirstOrderLag, Play};
 
 /// Channels whose reading `channel_noise` can disturb (log column names).
 pub const NOISY_CHANNELS: [&str; 3] = ["temperature_c", "tilt_arcsec", "pressure_hpa"];
@@ -44,19 +44,6 @@ pub struct TideGroupTerm {
     pub factor: f64,
     /// Phase, degrees, positive = leads the model.
     pub phase_deg: f64,
-}
-
-/// One step of a relay hysteron's state R at temperature `t_c`: +1 at or above `upper_c`, −1 at
-/// or below `lower_c`, held in between (0 until the first switch). The simulator's injection and
-/// the discovery's relay columns both step with it.
-pub fn relay_step(state: f64, t_c: f64, lower_c: f64, upper_c: f64) -> f64 {
-    if t_c >= upper_c {
-        1.0
-    } else if t_c <= lower_c {
-        -1.0
-    } else {
-        state
-    }
 }
 
 /// A relay hysteron of `thermal_hysteresis`: its state R is +1 once the mount temperature has
@@ -506,21 +493,21 @@ pub struct Drive<'a> {
 /// One effect's running state.
 #[derive(Debug, Clone)]
 enum State {
-    /// Last filter output and time (first-order lag with the actual spacing).
+    /// First-order lag with the actual spacing.
     Lag {
-        x: Option<(f64, f64)>,
+        x: FirstOrderLag,
     },
-    /// Play operator output, the relays' states (+1, −1; 0 before the first switch) and the
-    /// output lag's state.
+    /// Play operator, the relays' states (+1, −1; 0 before the first switch) and the output
+    /// lag.
     Play {
-        p: Option<f64>,
+        p: Play,
         relays: Vec<f64>,
-        lag: Option<(f64, f64)>,
+        lag: FirstOrderLag,
     },
-    /// Index of the ambient channel and its lag state.
+    /// Index of the ambient channel and its lag.
     Ambient {
         index: usize,
-        x: Option<(f64, f64)>,
+        x: FirstOrderLag,
     },
     /// A channel coupling's source and transfer-function states.
     Coupling {
@@ -579,18 +566,6 @@ pub enum EffectError {
     Site(String),
 }
 
-fn lag_step(x: &mut Option<(f64, f64)>, t: f64, u: f64, tau: f64) -> f64 {
-    let y = match *x {
-        Some((t0, y0)) if tau > 0.0 => {
-            let a = (-(t - t0).max(0.0) / tau).exp();
-            a * y0 + (1.0 - a) * u
-        }
-        _ => u,
-    };
-    *x = Some((t, y));
-    y
-}
-
 impl EffectChain {
     /// The chain of `effects` (validated by the scenario) for a run described by `setup`.
     pub fn new(effects: &[ScenarioEffect], setup: ChainSetup) -> Result<Self, EffectError> {
@@ -611,12 +586,14 @@ impl EffectChain {
         for (index, e) in effects.iter().enumerate() {
             states.push(match e {
                 ScenarioEffect::ThermalLag { .. } | ScenarioEffect::SelfHeating { .. } => {
-                    State::Lag { x: None }
+                    State::Lag {
+                        x: FirstOrderLag::default(),
+                    }
                 }
                 ScenarioEffect::ThermalHysteresis { relays, .. } => State::Play {
-                    p: None,
+                    p: Play::default(),
                     relays: vec![0.0; relays.len()],
-                    lag: None,
+                    lag: FirstOrderLag::default(),
                 },
                 ScenarioEffect::AmbientCoupling { channel, .. } => {
                     let i = setup
@@ -628,7 +605,10 @@ impl EffectChain {
                             channel: channel.clone(),
                             have: setup.ambient.join(", "),
                         })?;
-                    State::Ambient { index: i, x: None }
+                    State::Ambient {
+                        index: i,
+                        x: FirstOrderLag::default(),
+                    }
                 }
                 ScenarioEffect::RateCoupling { channel, .. }
                 | ScenarioEffect::Lag2Coupling { channel, .. } => {
@@ -707,11 +687,11 @@ impl EffectChain {
         for (e, st) in self.effects.iter().zip(self.states.iter_mut()) {
             sum += match (e, st) {
                 (ScenarioEffect::ThermalLag { tau_s, coefficient }, State::Lag { x }) => {
-                    coefficient * (lag_step(x, t, d.temperature_c, *tau_s) - d.temperature_c)
+                    coefficient * (x.step(t, d.temperature_c, *tau_s) - d.temperature_c)
                 }
                 (ScenarioEffect::SelfHeating { tau_s, coefficient }, State::Lag { x }) => {
                     let a2 = d.input_g * d.input_g;
-                    coefficient * (lag_step(x, t, a2, *tau_s) - a2)
+                    coefficient * (x.step(t, a2, *tau_s) - a2)
                 }
                 (
                     ScenarioEffect::ThermalHysteresis {
@@ -728,22 +708,17 @@ impl EffectChain {
                 ) => {
                     let r = *play_half_width_c;
                     let tc = d.temperature_c;
-                    let q = p.unwrap_or(tc).max(tc - r).min(tc + r);
-                    *p = Some(q);
+                    let q = p.step(tc, r);
                     let mut sum = half_width * (tc - q) / r;
                     for (rel, st) in relays.iter().zip(states.iter_mut()) {
                         *st = relay_step(*st, tc, rel.lower_c, rel.upper_c);
                         sum -= rel.half_width * *st;
                     }
-                    if *lag_s > 0.0 {
-                        lag_step(lag, t, sum, *lag_s)
-                    } else {
-                        sum
-                    }
+                    lag.step(t, sum, *lag_s)
                 }
-                (ScenarioEffect::Warmup { tau_s, amplitude }, _) => amplitude * (-t / tau_s).exp(),
+                (ScenarioEffect::Warmup { tau_s, amplitude }, _) => amplitude * warmup(t, *tau_s),
                 (ScenarioEffect::AgingDrift { tau_s, amplitude }, _) => {
-                    amplitude * (1.0 + t.max(0.0) / tau_s).ln()
+                    amplitude * aging(t, *tau_s)
                 }
                 (
                     ScenarioEffect::Step {
@@ -804,7 +779,7 @@ impl EffectChain {
                     State::Ambient { index, x },
                 ) => {
                     let v = d.ambient.get(*index).copied().unwrap_or(0.0);
-                    coefficient * lag_step(x, t, v, *lag_s)
+                    coefficient * x.step(t, v, *lag_s)
                 }
                 (ScenarioEffect::PressureAdmittance { coefficient }, _) => {
                     coefficient * d.pressure_dev_pa

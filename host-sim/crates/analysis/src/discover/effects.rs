@@ -4,7 +4,9 @@
 //! by a golden-section refinement. Physics and magnitudes: `docs/discovery.md`.
 
 use super::import::{ChannelKind, Dataset};
-use crate::sim::catalogue::{creep, step_fraction, EffectKind, RateOfChange, SecondOrderLag};
+use crate::sim::catalogue::{
+    aging, creep, step_fraction, warmup, EffectKind, FirstOrderLag, RateOfChange, SecondOrderLag,
+};
 use accomp::tide::Station;
 
 /// One effect of the catalogue, bound to a channel where it needs one.
@@ -306,21 +308,20 @@ fn channel_values<'a>(ds: &'a Dataset, name: &str) -> Option<&'a [f64]> {
         .map(|c| c.values.as_slice())
 }
 
-/// First-order low-pass `τ dx/dt = u − x` (exact discretisation for the actual spacing),
-/// restarted at each segment with the current input.
+/// The catalogue's first-order low-pass `τ dx/dt = u − x` ([`FirstOrderLag`], exact for the
+/// actual spacing) run over `u`, restarted at each segment with the current input.
 pub fn lag_filter(u: &[f64], t: &[f64], seg_start: &[bool], tau_s: f64) -> Vec<f64> {
-    let mut out = Vec::with_capacity(u.len());
-    let mut x = 0.0;
-    for i in 0..u.len() {
-        if seg_start[i] || tau_s <= 0.0 {
-            x = u[i];
-        } else {
-            let a = (-(t[i] - t[i - 1]) / tau_s).exp();
-            x = a * x + (1.0 - a) * u[i];
-        }
-        out.push(x);
-    }
-    out
+    let mut l = FirstOrderLag::default();
+    u.iter()
+        .zip(t)
+        .zip(seg_start)
+        .map(|((&u, &t), &s)| {
+            if s {
+                l = FirstOrderLag::default();
+            }
+            l.step(t, u, tau_s)
+        })
+        .collect()
 }
 
 fn centred(v: Vec<f64>) -> Vec<f64> {
@@ -620,8 +621,8 @@ pub fn columns(e: &Effect, ds: &Dataset, ctx: &Context, theta: f64) -> Vec<Vec<f
                 vec![l.iter().zip(&a2).map(|(l, u)| l - u).collect()]
             })
             .unwrap_or_default(),
-        Effect::Warmup => vec![t.iter().map(|x| (-(x - t0) / theta).exp()).collect()],
-        Effect::AgingDrift => vec![t.iter().map(|x| (1.0 + (x - t0) / theta).ln()).collect()],
+        Effect::Warmup => vec![t.iter().map(|x| warmup(x - t0, theta)).collect()],
+        Effect::AgingDrift => vec![t.iter().map(|x| aging(x - t0, theta)).collect()],
         Effect::Step { duration_s } => vec![step_column(t, theta, *duration_s)],
         Effect::TidalGravity => ctx
             .tide_gravity_g

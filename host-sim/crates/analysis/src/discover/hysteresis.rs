@@ -42,20 +42,14 @@
 //! thermostat programme, excursions) separate them, and the selection's likelihood uses that
 //! without being told.
 
-/// Play (backlash) operator of half-width `r` on `u`, started at `u[0]` (the virgin state: no
-/// branch yet). The state is carried across gaps: hysteresis is a memory of the material, not
-/// of the recorder.
+use crate::sim::catalogue::Play;
+
+/// The catalogue's play (backlash) operator of half-width `r` ([`Play`]) run over `u`, started
+/// at `u[0]` (the virgin state: no branch yet). The state is carried across gaps: hysteresis is
+/// a memory of the material, not of the recorder.
 pub fn play(u: &[f64], r: f64) -> Vec<f64> {
-    let mut out = Vec::with_capacity(u.len());
-    let mut p = match u.first() {
-        Some(&x) => x,
-        None => return out,
-    };
-    for &x in u {
-        p = p.max(x - r).min(x + r);
-        out.push(p);
-    }
-    out
+    let mut p = Play::default();
+    u.iter().map(|&x| p.step(x, r)).collect()
 }
 
 /// The branch column (T − p_r[T])/r ∈ [−1, 1]: +1 on a heating branch, −1 on a cooling branch.
@@ -227,7 +221,7 @@ pub fn relay(temp_c: &[f64], lower_c: f64, upper_c: f64) -> (Vec<f64>, usize, us
     let out = temp_c
         .iter()
         .map(|&t| {
-            let next = crate::sim::effects::relay_step(state, t, lower_c, upper_c);
+            let next = crate::sim::catalogue::relay_step(state, t, lower_c, upper_c);
             ups += usize::from(state < 0.0 && next > 0.0);
             downs += usize::from(state > 0.0 && next < 0.0);
             state = next;

@@ -101,7 +101,7 @@ impl Settling {
     fn add_with(y: &mut [f64], t_s: &[f64], tau_s: f64, amplitude: f64) {
         let t0 = t_s.first().copied().unwrap_or(0.0);
         for (v, &t) in y.iter_mut().zip(t_s) {
-            *v += amplitude * (-(t - t0) / tau_s).exp();
+            *v += amplitude * crate::catalogue::warmup(t - t0, tau_s);
         }
     }
 }
