@@ -205,7 +205,7 @@ fn a_lag_on_a_cycling_programme_is_named_a_lag_not_a_loop_and_an_ambiguity_is_re
                 "thermal_lag" | "thermal_hysteresis" | "lag2_coupling" | "rate_coupling"
             )
         });
-        let amb = thermal.and_then(|a| a.ambiguous_with.as_ref());
+        let amb = thermal.and_then(|a| a.ambiguous_with.first());
         eprintln!(
             "one-rate lag {i}: τ {tau:.0} s, {:.1} µg/°C → {:?}; ambiguous with {:?}",
             k * 1e6,
@@ -219,8 +219,8 @@ fn a_lag_on_a_cycling_programme_is_named_a_lag_not_a_loop_and_an_ambiguity_is_re
         named += usize::from(thermal.is_some_and(|a| {
             a.effect.name() == "thermal_lag"
                 || a.ambiguous_with
-                    .as_ref()
-                    .is_some_and(|amb| amb.other == "thermal_lag")
+                    .iter()
+                    .any(|amb| amb.other == "thermal_lag")
         }));
         loops += usize::from(
             d.selection

@@ -168,9 +168,13 @@ fn a_lag_on_a_slow_cycle_is_reported_ambiguous_with_a_rate_coupling_and_what_sep
         .iter()
         .find(|a| TEMPERATURE_COUPLINGS.contains(&a.effect.name()))
         .unwrap_or_else(|| panic!("no coupling of the temperature named: {}", why(&d)));
+    // The rate coupling's side of the ambiguity when the lag is named (other equal causes, a
+    // second stage, may be listed beside it).
     let amb = a
         .ambiguous_with
-        .as_ref()
+        .iter()
+        .find(|x| x.other == "rate_coupling")
+        .or(a.ambiguous_with.first())
         .unwrap_or_else(|| panic!("{} not reported ambiguous: {}", a.effect.name(), why(&d)));
     eprintln!(
         "slow ramps: {} ambiguous with {} {:?} (overlap {:.3}); separates: {}",

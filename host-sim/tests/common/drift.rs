@@ -122,7 +122,8 @@ fn rms(x: &[f64]) -> f64 {
 pub struct Verdict {
     /// The drift entry the discovery named (None: no drift family).
     pub named: Option<String>,
-    /// The other family it reported as equally good ("ambiguous: A or B"), if one.
+    /// The other family it reported as equally good ("ambiguous: A or B"), if one: the hidden
+    /// one when it is among the alternatives, else the closest.
     pub or: Option<String>,
     /// Shape parameter (τ s or exponent) with its σ of the entry that matches the hidden
     /// family, when one does (the named one or the ambiguity's other).
@@ -154,7 +155,12 @@ pub fn verdict(d: &Discovery, t_s: &[f64], shape: &[f64], family: Family) -> Ver
         };
     };
     let name = a.effect.name().to_owned();
-    let or = a.ambiguous_with.as_ref().map(|x| x.other.clone());
+    let amb = a
+        .ambiguous_with
+        .iter()
+        .find(|x| Some(x.other.as_str()) == family.entry())
+        .or(a.ambiguous_with.first());
+    let or = amb.map(|x| x.other.clone());
     let key = |n: &str| {
         if n == "creep_drift" {
             "exponent"
@@ -165,10 +171,7 @@ pub fn verdict(d: &Discovery, t_s: &[f64], shape: &[f64], family: Family) -> Ver
     let get = |ps: &[(String, Param)], k: &str| ps.iter().find(|(q, _)| q == k).map(|(_, p)| *p);
     let shape_param = match family.entry() {
         Some(e) if e == name => get(&a.params, key(e)),
-        Some(e) if or.as_deref() == Some(e) => a
-            .ambiguous_with
-            .as_ref()
-            .and_then(|x| get(&x.other_parameters, key(e))),
+        Some(e) if or.as_deref() == Some(e) => amb.and_then(|x| get(&x.other_parameters, key(e))),
         _ => None,
     };
     // Every accepted drift family together: a shape outside the catalogue may be named as two.

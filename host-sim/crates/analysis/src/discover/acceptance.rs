@@ -210,18 +210,18 @@ pub(super) fn ambiguity(
     s: &Scored,
     rescored: &[Scored],
     scored: &[Scored],
-) -> Option<super::plausibility::Ambiguity> {
+) -> Vec<super::plausibility::Ambiguity> {
     use super::plausibility as pl;
     if !s.delta_bic.is_finite() || matches!(s.effect, Effect::Step { .. }) {
-        return None;
+        return Vec::new();
     }
     let mine = pl::fitted_shape(&cur.projected(&s.cols), &cur.r_w);
-    rescored
+    let mut found: Vec<pl::Ambiguity> = rescored
         .iter()
         .chain(scored.iter().skip(RESCORE))
         .filter(|c| c.effect.name() != s.effect.name() && c.delta_bic < 0.0)
         .filter(|c| (c.delta_bic - s.delta_bic).abs() < pl::AMBIGUOUS_DBIC)
-        .find_map(|c| {
+        .filter_map(|c| {
             let o = pl::overlap(&mine, &pl::fitted_shape(&cur.projected(&c.cols), &cur.r_w));
             (o.abs() >= pl::AMBIGUOUS_OVERLAP).then(|| {
                 let mut trial = cols.to_vec();
@@ -246,6 +246,13 @@ pub(super) fn ambiguity(
                 }
             })
         })
+        .collect();
+    found.sort_by(|a, b| {
+        (a.other_delta_bic - s.delta_bic)
+            .abs()
+            .total_cmp(&(b.other_delta_bic - s.delta_bic).abs())
+    });
+    found
 }
 
 /// A round's candidate and its validation scores (CV before/after, forward before/after).

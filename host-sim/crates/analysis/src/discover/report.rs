@@ -70,9 +70,9 @@ pub fn json(d: &Discovery) -> Value {
             if let Some(f) = a.effect.drift_family() {
                 o["drift_family"] = json!(f);
             }
-            // "ambiguous: A or B": the other cause, its parameters and what would separate them.
-            if let Some(amb) = &a.ambiguous_with {
-                o["ambiguous_with"] = json!(amb);
+            // "ambiguous: A or B": each other cause, its parameters and what would separate them.
+            if !a.ambiguous_with.is_empty() {
+                o["ambiguous_with"] = json!(a.ambiguous_with);
             }
             // The Preisach distribution of play widths the hysteresis column is made of.
             // The loop's area: the coefficient (the branch half-width) × the column's loop area.
@@ -294,7 +294,7 @@ pub fn text(d: &Discovery) -> String {
             100.0 * a.gain_out_of_sample(),
             100.0 * a.gain_forward()
         );
-        if let Some(amb) = &a.ambiguous_with {
+        for amb in &a.ambiguous_with {
             let ps: Vec<String> = amb
                 .other_parameters
                 .iter()

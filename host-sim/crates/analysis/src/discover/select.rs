@@ -88,8 +88,9 @@ pub struct Accepted {
     pub cv_before: CvScore,
     /// After.
     pub cv_after: CvScore,
-    /// Another cause of the same round that explains the data equally (`plausibility`).
-    pub ambiguous_with: Option<super::plausibility::Ambiguity>,
+    /// The other causes of the same round that explain the data equally (`plausibility`),
+    /// closest in ΔBIC first.
+    pub ambiguous_with: Vec<super::plausibility::Ambiguity>,
     /// Forward-chaining scores before/after (fit on the first part, predict the rest).
     pub forward_before: CvScore,
     /// After.
@@ -576,7 +577,7 @@ pub fn finish(
                 std_after: std(&raw1),
                 cv_before: before,
                 cv_after: after,
-                ambiguous_with: None,
+                ambiguous_with: Vec::new(),
                 forward_before: fwd_before,
                 forward_after: fwd_after,
                 full_rate: true,

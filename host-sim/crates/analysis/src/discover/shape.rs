@@ -304,7 +304,7 @@ mod tests {
             },
             params: Vec::new(),
             params_at_acceptance: Vec::new(),
-            ambiguous_with: None,
+            ambiguous_with: Vec::new(),
             delta_bic: -100.0,
             std_before: 1.0,
             std_after: 1.0,

@@ -88,7 +88,7 @@ pub fn effect_draws(d: &crate::discover::Discovery) -> EffectDraws {
                 kind: a.effect.name().to_owned(),
                 channel: a.effect.channel().map(str::to_owned),
                 params: named(&a.params),
-                alternative: a.ambiguous_with.as_ref().map(|amb| Alternative {
+                alternative: a.ambiguous_with.first().map(|amb| Alternative {
                     kind: amb.other.clone(),
                     params: named(&amb.other_parameters),
                 }),
