@@ -283,6 +283,15 @@ impl SecondOrderLag {
     }
 }
 
+/// A relay's thresholds (`lower_c`, `upper_c`) with its gap scaled by `scale` about its centre:
+/// how `thermal_hysteresis` widens or narrows (every play's half-width × `scale`, every relay's
+/// gap so), in the discovery's width search and in a twin member's drawn width alike.
+#[inline]
+pub fn relay_scaled(lower_c: f64, upper_c: f64, scale: f64) -> (f64, f64) {
+    let (centre, gap) = (0.5 * (lower_c + upper_c), 0.5 * (upper_c - lower_c) * scale);
+    (centre - gap, centre + gap)
+}
+
 /// A warm-up transient's shape `since_start_s` after the start: exp(−t/τ) (1 at the start).
 #[inline]
 pub fn warmup(since_start_s: f64, tau_s: f64) -> f64 {

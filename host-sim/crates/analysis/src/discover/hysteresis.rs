@@ -556,8 +556,8 @@ impl Preisach {
             }
         }
         for (r, w) in self.relays_c.iter().zip(&self.relay_weights) {
-            let (c, g) = (0.5 * (r[0] + r[1]), 0.5 * (r[1] - r[0]) * scale);
-            for (o, h) in out.iter_mut().zip(relay_branch(temp_c, c - g, c + g)) {
+            let (lower_c, upper_c) = crate::sim::catalogue::relay_scaled(r[0], r[1], scale);
+            for (o, h) in out.iter_mut().zip(relay_branch(temp_c, lower_c, upper_c)) {
                 *o += w * h / self.reach;
             }
         }

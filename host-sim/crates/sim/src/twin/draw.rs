@@ -126,10 +126,10 @@ impl HysteresisShape {
             .relays
             .iter()
             .map(|&[lower, upper, weight]| {
-                let (centre, gap) = (0.5 * (lower + upper), 0.5 * (upper - lower) * scale);
+                let (lower_c, upper_c) = crate::catalogue::relay_scaled(lower, upper, scale);
                 Relay {
-                    lower_c: centre - gap,
-                    upper_c: centre + gap,
+                    lower_c,
+                    upper_c,
                     half_width: half_width * weight,
                 }
             })
