@@ -545,8 +545,9 @@ fn a_switching_relay_loop_is_named_with_its_area_and_nothing_without_it() {
     // +25 %, nothing beside them, the other two named a thermal lag, one with the loop as its
     // equal alternative, one whose lag's shape check is poor; 6/6 once the lagged loop is also
     // kept where the loop without its lag is a finding on its own (docs/discovery-causes.md).
-    // Asserted: the goal, and that no other name is given as a finding.
-    assert!(ok >= 4, "relay loops named in {ok}/{RELAY_LOGS}");
+    // Asserted: one under the measured 6/6 (above the goal), and that no other name is given
+    // as a finding.
+    assert!(ok >= 5, "relay loops named in {ok}/{RELAY_LOGS}");
     assert_eq!(
         silent, 0,
         "a lag named for a loop without saying the name is not a finding"
