@@ -199,10 +199,12 @@ pub(super) fn implausible(
     }
 }
 
-/// Another candidate of the round that explains the data as well as the accepted `s`: a
-/// different cause whose ΔBIC is within `plausibility::AMBIGUOUS_DBIC` of it (and passes the
-/// margin) and whose fitted shape overlaps its own by at least `AMBIGUOUS_OVERLAP`, with its
-/// parameters fitted in `s`'s place and what would separate the two.
+/// The other candidates of the round that explain the data as well as the accepted `s`, closest
+/// in ΔBIC first: each a different cause whose ΔBIC is within `plausibility::AMBIGUOUS_DBIC` of
+/// it (and passes the margin) and whose fitted shape overlaps its own by at least
+/// `AMBIGUOUS_OVERLAP`, with its parameters fitted in `s`'s place and what would separate the
+/// two. All of them, not the first found: a second stage of the same lag must not hide a loop
+/// that ties with it.
 pub(super) fn ambiguity(
     cur: &Current,
     cols: &[Vec<f64>],
