@@ -279,25 +279,34 @@ pub fn catalogue_rate(u: &[f64], t: &[f64], seg_start: &[bool]) -> Vec<f64> {
 /// A catalogue transfer function (`RateOfChange`, `SecondOrderLag`) run over a channel,
 /// restarted at each segment, centred.
 fn transfer(u: &[f64], t: &[f64], seg_start: &[bool], tau_s: f64, rate: bool) -> Vec<f64> {
-    let mut r = RateOfChange::default();
-    let mut l = SecondOrderLag::default();
-    let out = u
-        .iter()
+    centred(if rate {
+        per_segment(u, t, seg_start, |r: &mut RateOfChange, t, u| r.step(t, u))
+    } else {
+        per_segment(u, t, seg_start, |l: &mut SecondOrderLag, t, u| {
+            l.step(t, u, tau_s)
+        })
+    })
+}
+
+/// A catalogue operator stepped over a channel one instant at a time (`step(state, t, u)`), a
+/// fresh one at each segment's start: the coupling's path is taken as settled after a gap.
+fn per_segment<S: Default>(
+    u: &[f64],
+    t: &[f64],
+    seg_start: &[bool],
+    mut step: impl FnMut(&mut S, f64, f64) -> f64,
+) -> Vec<f64> {
+    let mut state = S::default();
+    u.iter()
         .zip(t)
         .zip(seg_start)
         .map(|((&u, &t), &s)| {
             if s {
-                r = RateOfChange::default();
-                l = SecondOrderLag::default();
+                state = S::default();
             }
-            if rate {
-                r.step(t, u)
-            } else {
-                l.step(t, u, tau_s)
-            }
+            step(&mut state, t, u)
         })
-        .collect();
-    centred(out)
+        .collect()
 }
 
 /// The values of the channel a coupling names.
@@ -311,17 +320,9 @@ fn channel_values<'a>(ds: &'a Dataset, name: &str) -> Option<&'a [f64]> {
 /// The catalogue's first-order low-pass `τ dx/dt = u − x` ([`FirstOrderLag`], exact for the
 /// actual spacing) run over `u`, restarted at each segment with the current input.
 pub fn lag_filter(u: &[f64], t: &[f64], seg_start: &[bool], tau_s: f64) -> Vec<f64> {
-    let mut l = FirstOrderLag::default();
-    u.iter()
-        .zip(t)
-        .zip(seg_start)
-        .map(|((&u, &t), &s)| {
-            if s {
-                l = FirstOrderLag::default();
-            }
-            l.step(t, u, tau_s)
-        })
-        .collect()
+    per_segment(u, t, seg_start, |l: &mut FirstOrderLag, t, u| {
+        l.step(t, u, tau_s)
+    })
 }
 
 fn centred(v: Vec<f64>) -> Vec<f64> {
