@@ -78,8 +78,9 @@ type PreisachFit = (Preisach, f64, Vec<f64>, f64, usize, usize, bool, usize);
 /// non-negative weights by NNLS on the whitened residual (`hysteresis::fit_preisach`, relays
 /// that do not pay ln n pruned). Returns the distribution (its reach and loop area on the
 /// record), its characteristic width θ, its raw column at θ, the whitened RSS with it, the
-/// number of plays and relays with a weight, the dictionary's size M (plays + relays: what the
-/// search is charged for) and whether θ sits at an end of the dictionary's widths (the
+/// number of plays and relays with a weight and of relay thresholds moved off their levels
+/// (each charged ln n), the dictionary's size M (plays + relays: what the search is charged
+/// for) and whether θ sits at an end of the dictionary's widths (the
 /// distribution wants widths outside the range of plays and relay half-gaps).
 fn best_preisach(cur: &Current, with_lags: bool) -> Option<PreisachFit> {
     let ds = cur.ds;
@@ -88,7 +89,9 @@ fn best_preisach(cur: &Current, with_lags: bool) -> Option<PreisachFit> {
     if g.len() < 2 {
         return None;
     }
-    let relays = hysteresis::relay_dictionary(temp, 4.0 * g[0]);
+    let min_gap_c = 4.0 * g[0];
+    let relays = hysteresis::relay_dictionary(temp, min_gap_c);
+    let level_step_c = hysteresis::relay_levels(temp).map_or(0.0, |l| l.1);
     let raw: Vec<Vec<f64>> = g
         .iter()
         .map(|&r| hysteresis::branch(temp, r))
@@ -144,9 +147,9 @@ fn best_preisach(cur: &Current, with_lags: bool) -> Option<PreisachFit> {
         if plays.len() < 2 {
             continue;
         }
-        let mut cols = Vec::with_capacity(plays.len() + rel.len());
-        let ops = raw.iter().zip(&keep).filter(|(_, k)| **k).map(|(c, _)| c);
-        for c in ops {
+        // An operator's column as the fit judges it: through the lag, whitened, the current
+        // model projected out (`None` when the whitening fails).
+        let judged = |c: &[f64]| {
             let lagged;
             let c = if lag_s > 0.0 {
                 lagged = effects::lag_filter(c, &ds.t_s, &ds.segment_start, lag_s);
@@ -159,10 +162,50 @@ fn best_preisach(cur: &Current, with_lags: bool) -> Option<PreisachFit> {
                 return None;
             }
             super::baseline::orthogonalize(&cur.basis.q, &mut w);
-            cols.push(w);
+            Some(w)
+        };
+        let mut cols = Vec::with_capacity(plays.len() + rel.len());
+        let ops = raw.iter().zip(&keep).filter(|(_, k)| **k).map(|(c, _)| c);
+        for c in ops {
+            cols.push(judged(c)?);
         }
-        let Some((p, _, active)) = hysteresis::fit_preisach(&plays, &rel, &cols, &cur.r_w) else {
+        let Some((p, sign, active)) = hysteresis::fit_preisach(&plays, &rel, &cols, &cur.r_w)
+        else {
             continue;
+        };
+        // The active relays' thresholds refined inside their cells, the weights fitted again.
+        let (p, active) = if p.relays_c.is_empty() {
+            (p, active)
+        } else {
+            let mut ops: Vec<Vec<f64>> = p
+                .widths_c
+                .iter()
+                .filter_map(|w| plays.iter().position(|x| x == w))
+                .map(|i| cols[i].clone())
+                .collect();
+            let cells = hysteresis::RelayCells {
+                temp_c: temp,
+                step_c: level_step_c,
+                min_gap_c,
+            };
+            let Some(refined) = hysteresis::refine_relays(
+                &cells,
+                &ops,
+                &p.relays_c,
+                |r| judged(&hysteresis::relay_branch(temp, r[0], r[1])),
+                &cur.r_w,
+                sign,
+            ) else {
+                continue;
+            };
+            ops.extend(refined.cols);
+            let Some((p, _, active)) =
+                hysteresis::fit_preisach(&p.widths_c, &refined.relays_c, &ops, &cur.r_w)
+            else {
+                continue;
+            };
+            // A moved threshold is charged like a weight.
+            (p, active + refined.moved)
         };
         let p = p
             .on_record(temp)
