@@ -1013,8 +1013,15 @@ mod tests {
             relays_c: relays,
             cols,
             moved,
-        } = refine_relays(&cells, &[play.clone()], &[[-0.1, 0.2]], column, &y, 1.0)
-            .expect("refined");
+        } = refine_relays(
+            &cells,
+            std::slice::from_ref(&play),
+            &[[-0.1, 0.2]],
+            column,
+            &y,
+            1.0,
+        )
+        .expect("refined");
         assert_eq!(moved, 2, "both thresholds are charged");
         // Found within a sixteenth of the spacing (the smallest step), and the residual fell.
         assert!((relays[0][0] + 0.13).abs() <= 0.00625 + 1e-12, "{relays:?}");
