@@ -86,13 +86,8 @@ pub fn reading_noise_c(temp_c: &[f64]) -> f64 {
 /// that chatters on noise) to a quarter of the 1–99 % temperature range (a wider play hardly
 /// ever leaves its dead band). `None` when the temperature never moves by more than its noise.
 pub fn width_range_c(temp_c: &[f64]) -> Option<(f64, f64)> {
-    if temp_c.len() < 4 {
-        return None;
-    }
-    let mut s = temp_c.to_vec();
-    s.sort_by(f64::total_cmp);
-    let q = |p: f64| s[((s.len() - 1) as f64 * p).round() as usize];
-    let range = q(0.99) - q(0.01);
+    let (q01, q99) = range_1_99_c(temp_c)?;
+    let range = q99 - q01;
     let lo = (3.0 * reading_noise_c(temp_c)).max(1e-4 * range.max(1e-9));
     let hi = range / 4.0;
     (hi > 1.5 * lo).then_some((lo, hi))
@@ -279,14 +274,20 @@ pub fn relay_dictionary(temp_c: &[f64], min_gap_c: f64) -> Vec<[f64; 2]> {
 /// The lowest threshold level of the relay dictionary and the levels' spacing, °C (`None` for
 /// fewer than 4 rows).
 pub fn relay_levels(temp_c: &[f64]) -> Option<(f64, f64)> {
+    let (lo, hi) = range_1_99_c(temp_c)?;
+    Some((lo, (hi - lo) / (RELAY_LEVELS - 1) as f64))
+}
+
+/// The 1 % and 99 % quantiles of the temperature, °C (`None` for fewer than 4 rows): the range
+/// the hysteresis' plays and relays are sized on, robust to a few outliers.
+fn range_1_99_c(temp_c: &[f64]) -> Option<(f64, f64)> {
     if temp_c.len() < 4 {
         return None;
     }
     let mut s = temp_c.to_vec();
     s.sort_by(f64::total_cmp);
     let q = |p: f64| s[((s.len() - 1) as f64 * p).round() as usize];
-    let (lo, hi) = (q(0.01), q(0.99));
-    Some((lo, (hi - lo) / (RELAY_LEVELS - 1) as f64))
+    Some((q(0.01), q(0.99)))
 }
 
 fn identifiable(temp_c: &[f64], lower_c: f64, upper_c: f64) -> bool {
