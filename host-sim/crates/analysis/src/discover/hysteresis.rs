@@ -290,7 +290,7 @@ fn range_1_99_c(temp_c: &[f64]) -> Option<(f64, f64)> {
     Some((q(0.01), q(0.99)))
 }
 
-/// Whether the record switches the relay [`lower_c`, `upper_c`] at least
+/// Whether the record switches the relay of thresholds `lower_c` < `upper_c` at least
 /// [`RELAY_MIN_SWITCHES`] times each way (once is a step of the bias, not a loop).
 fn identifiable(temp_c: &[f64], lower_c: f64, upper_c: f64) -> bool {
     let (_, ups, downs) = relay(temp_c, lower_c, upper_c);
