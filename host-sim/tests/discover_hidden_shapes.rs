@@ -545,9 +545,9 @@ fn a_switching_relay_loop_is_named_with_its_area_and_nothing_without_it() {
     // +25 %, nothing beside them, the other two named a thermal lag, one with the loop as its
     // equal alternative, one whose lag's shape check is poor; 6/6 once the lagged loop is also
     // kept where the loop without its lag is a finding on its own; 6/6 with the relays'
-    // thresholds refined inside their grid cells, areas +8 … +23 % behind 8–16 min lags (12
-    // logs of another seed: 11/12, from 7/12), a lag or a step beside the loop in 3
-    // (docs/discovery-causes.md).
+    // thresholds refined inside their grid cells and the loop fitted again in each later
+    // round, areas −1 … +23 % behind 4–16 min lags (12 logs of another seed: 11/12, from
+    // 7/12), a lag and a step beside the loop on one log (docs/discovery-causes.md).
     // Asserted: one under the measured 6/6 (above the goal), and that no other name is given
     // as a finding.
     assert!(ok >= 5, "relay loops named in {ok}/{RELAY_LOGS}");

@@ -82,7 +82,7 @@ type PreisachFit = (Preisach, f64, Vec<f64>, f64, usize, usize, bool, usize);
 /// (each charged ln n), the dictionary's size M (plays + relays: what the search is charged
 /// for) and whether θ sits at an end of the dictionary's widths (the
 /// distribution wants widths outside the range of plays and relay half-gaps).
-fn best_preisach(cur: &Current, with_lags: bool) -> Option<PreisachFit> {
+pub(super) fn best_preisach(cur: &Current, with_lags: bool) -> Option<PreisachFit> {
     let ds = cur.ds;
     let temp = &ds.channel(ChannelKind::Temperature)?.values;
     let g = effects::grid(&Effect::ThermalHysteresis, ds);
