@@ -356,10 +356,7 @@ pub fn refine_relays(
         let (ata, aty, yy) = gram(cols, y);
         let b: Vec<f64> = aty.iter().map(|v| sign * v).collect();
         let w = nnls_gram(&ata, &b, &vec![true; cols.len()]);
-        let quad: f64 = (0..w.len())
-            .map(|i| w[i] * (0..w.len()).map(|j| ata[i][j] * w[j]).sum::<f64>())
-            .sum();
-        yy - 2.0 * w.iter().zip(&b).map(|(w, b)| w * b).sum::<f64>() + quad
+        gram_rss(&ata, &b, yy, &w)
     };
     let n = (y.len() as f64).max(2.0);
     let score = |rss: f64, moved: usize| n * rss.max(1e-300).ln() + moved as f64 * n.ln();
@@ -701,12 +698,7 @@ pub fn fit_preisach(
     let n = (y.len() as f64).max(2.0);
     let one_sign = |sign: f64| {
         let b: Vec<f64> = aty.iter().map(|v| sign * v).collect();
-        let rss = |w: &[f64]| {
-            let quad: f64 = (0..k)
-                .map(|i| w[i] * (0..k).map(|j| ata[i][j] * w[j]).sum::<f64>())
-                .sum();
-            (yy - 2.0 * w.iter().zip(&b).map(|(w, b)| w * b).sum::<f64>() + quad).max(1e-300)
-        };
+        let rss = |w: &[f64]| gram_rss(&ata, &b, yy, w);
         let mut allowed = vec![true; k];
         loop {
             let w = nnls_gram(&ata, &b, &allowed);
@@ -737,6 +729,16 @@ pub fn fit_preisach(
         .collect();
     let active = w.iter().filter(|v| **v > 0.0).count();
     Preisach::from_weights(widths_c, &w[..np], relays_c, &w[np..]).map(|p| (p, sign, active))
+}
+
+/// The residual sum of squares ‖y − Σ w_j·cols[j]‖² from the normal equations (`ata`, the
+/// right-hand side `b`, yᵀy `yy`) at weights `w`, at least 1e-300 (a logarithm is taken of it).
+fn gram_rss(ata: &[Vec<f64>], b: &[f64], yy: f64, w: &[f64]) -> f64 {
+    let k = w.len();
+    let quad: f64 = (0..k)
+        .map(|i| w[i] * (0..k).map(|j| ata[i][j] * w[j]).sum::<f64>())
+        .sum();
+    (yy - 2.0 * w.iter().zip(b).map(|(w, b)| w * b).sum::<f64>() + quad).max(1e-300)
 }
 
 /// ΔBIC difference under which `thermal_lag` and `thermal_hysteresis` are said to explain the
