@@ -15,6 +15,7 @@ mod synth;
 
 use accomp_host::discover::{self, Discovery};
 use accomp_host::sim::noise::AllanParams;
+use hidden::{branch_area, draw_relays, relay_series, Relay};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
@@ -357,81 +358,6 @@ fn hysteresis_branch_offsets_of_a_few_microg_are_found_in_a_14_day_cycling_log()
 /// 14-day hysteresis logs (≈ 5 s each in the dev profile).
 const HYSTERESIS_LOGS: usize = 8;
 
-/// A relay hysteron (the general Preisach model's elementary operator): +1 after the
-/// temperature rose to `upper_c`, −1 after it fell to `lower_c`, unchanged in between; the bias
-/// follows the relay's state through a critically damped second-order switching of time
-/// `tau_s` (two first-order stages of τ/2: a real switching element does not flip instantly),
-/// each relay with its own — so the shape is neither the detector's rate-independent loop nor
-/// its loop behind one first-order lag. Written here from the definition, not with the
-/// detector's operator.
-#[derive(Debug, Clone, Copy)]
-struct Relay {
-    lower_c: f64,
-    upper_c: f64,
-    size_g: f64,
-    tau_s: f64,
-}
-
-/// The relays' bias on the true temperature, g.
-fn relay_series(relays: &[Relay], temp: &[f64], dt_s: f64) -> Vec<f64> {
-    let mut out = vec![0.0; temp.len()];
-    for r in relays {
-        let mid = 0.5 * (r.lower_c + r.upper_c);
-        let mut state = if temp[0] >= mid { 1.0 } else { -1.0 };
-        let (mut x1, mut x2) = (state, state);
-        let a = if r.tau_s > 0.0 {
-            (-dt_s / (0.5 * r.tau_s)).exp()
-        } else {
-            0.0
-        };
-        for (o, &t) in out.iter_mut().zip(temp) {
-            if t >= r.upper_c {
-                state = 1.0;
-            } else if t <= r.lower_c {
-                state = -1.0;
-            }
-            x1 = a * x1 + (1.0 - a) * state;
-            x2 = a * x2 + (1.0 - a) * x1;
-            *o += r.size_g * x2;
-        }
-    }
-    out
-}
-
-/// The loop's area as the record shows it, g·°C: the temperature range (2–98 %) cut into 24
-/// bins, in each the mean of `s` on heating rows minus its mean on cooling rows (the direction
-/// from the temperature's change over ±14 min, turnovers and holds left out), times the bin's
-/// width, summed. A relay of size s and thresholds β < α switched instantly gives −2s(α − β).
-fn branch_area(s: &[f64], temp: &[f64]) -> f64 {
-    let n = temp.len();
-    let mut sorted = temp.to_vec();
-    sorted.sort_by(f64::total_cmp);
-    let q = |p: f64| sorted[((n - 1) as f64 * p).round() as usize];
-    let (lo, hi) = (q(0.02), q(0.98));
-    let bins = 24;
-    let w = (hi - lo) / bins as f64;
-    let mut acc = vec![[0.0f64; 4]; bins];
-    for i in 7..n.saturating_sub(7) {
-        let d = temp[i + 7] - temp[i - 7];
-        let b = ((temp[i] - lo) / w).floor();
-        if !(0.0..bins as f64).contains(&b) || d.abs() < 0.02 {
-            continue;
-        }
-        let a = &mut acc[b as usize];
-        if d > 0.0 {
-            a[0] += s[i];
-            a[1] += 1.0;
-        } else {
-            a[2] += s[i];
-            a[3] += 1.0;
-        }
-    }
-    acc.iter()
-        .filter(|a| a[1] >= 5.0 && a[3] >= 5.0)
-        .map(|a| (a[0] / a[1] - a[2] / a[3]) * w)
-        .sum()
-}
-
 #[test]
 fn a_switching_relay_loop_is_named_with_its_area_and_nothing_without_it() {
     // 14 days at 120 s on the ±0.5 °C programme of 2–6 h ramps, 1–3 relays of 1.5–4 µg each
@@ -445,31 +371,17 @@ fn a_switching_relay_loop_is_named_with_its_area_and_nothing_without_it() {
         let mut r = synth::rng(seed);
         let (n, dt) = (PROGRAMME_ROWS, PROGRAMME_DT_S);
         let (st, noise) = synth::programme_station(n, dt, &mut r);
-        let mut sorted = st.temp_true_c.clone();
-        sorted.sort_by(f64::total_cmp);
-        let centre = sorted[n / 2];
-        let sign = if r.random::<bool>() { 1.0 } else { -1.0 };
-        let relays: Vec<Relay> = (0..r.random_range(1..=3usize))
-            .map(|_| {
-                let gap = r.random_range(0.1..0.6);
-                let mid = r.random_range(-(0.42 - gap / 2.0)..(0.42 - gap / 2.0));
-                Relay {
-                    lower_c: centre + mid - gap / 2.0,
-                    upper_c: centre + mid + gap / 2.0,
-                    size_g: sign * r.random_range(1.5e-6..4.0e-6),
-                    tau_s: r.random_range(120.0..1200.0),
-                }
-            })
-            .collect();
+        let relays = draw_relays(&st.temp_true_c, 1.0e-6, &mut r);
         let extra = relay_series(&relays, &st.temp_true_c, dt);
         // The loop as the record shows it (switching times included), what
         // `preisach.record_loop_area` reports; and the relays' own loop switched at once
         // (printed beside `preisach.loop_area`, the fitted rate-independent loop's).
-        let truth = branch_area(&extra, &st.temp_true_c);
+        let truth = branch_area(&extra, &st.temp_true_c, dt);
         let instant: Vec<Relay> = relays.iter().map(|r| Relay { tau_s: 0.0, ..*r }).collect();
         let still = branch_area(
             &relay_series(&instant, &st.temp_true_c, dt),
             &st.temp_true_c,
+            dt,
         );
         // The null: the same station and noise draws, no loop.
         let mut r0 = r.clone();

@@ -174,13 +174,13 @@ fn accomp_simulate_of_the_written_scenario_reproduces_ensemble_member_k() {
     );
 }
 
-/// The second half of the record (25 000 points, 86 s): its selection refuses `tidal_gravity`
-/// (forward chaining: the twin's tide is wrong mostly in phase), so the twin takes the
-/// wave-group tide. The written twin must carry it: `accomp simulate` reproduces member k with
+/// The first half of the record (25 000 points, 86 s): its selection does not accept
+/// `tidal_gravity` (ΔBIC −23.4 in its last round, beside the refused settling), so the twin takes
+/// the wave-group tide. (On the second half the selection accepts it, judged block by block.) The written twin must carry it: `accomp simulate` reproduces member k with
 /// it, and the file without it gives members that differ by a tide.
 #[test]
 fn the_written_twin_carries_the_wave_group_tide_when_the_selection_refuses_tidal_gravity() {
-    let ds = part(0.5, 1.0);
+    let ds = part(0.0, 0.5);
     let mut s = simulate_dataset(&ds, None, 2, &select::Config::default()).expect("simulate");
     assert!(
         s.written_twin.is_some(),

@@ -361,6 +361,105 @@ pub fn draw_bouc_wen(rng: &mut ChaCha8Rng) -> (f64, f64, f64) {
     )
 }
 
+/// A relay hysteron (the general Preisach model's elementary operator): +1 after the
+/// temperature rose to `upper_c`, −1 after it fell to `lower_c`, unchanged in between; the bias
+/// follows the relay's state through a critically damped second-order switching of time
+/// `tau_s` (two first-order stages of τ/2: a real switching element does not flip instantly),
+/// each relay with its own — so the shape is neither the detector's rate-independent loop nor
+/// its loop behind one first-order lag. Written here from the definition, not with the
+/// detector's operator.
+#[derive(Debug, Clone, Copy)]
+pub struct Relay {
+    pub lower_c: f64,
+    pub upper_c: f64,
+    pub size_g: f64,
+    pub tau_s: f64,
+}
+
+/// 1–3 relays of one sign (one material) on the temperature `temp` (°C), each of 1.5–4 × `unit`,
+/// threshold gaps 0.1–0.6 °C, their midpoints within ±0.42 °C of the median temperature (inside
+/// a ±0.5 °C programme's range), switching times 2–20 min.
+pub fn draw_relays(temp: &[f64], unit: f64, r: &mut ChaCha8Rng) -> Vec<Relay> {
+    let mut sorted = temp.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let centre = sorted[temp.len() / 2];
+    let sign = if r.random::<bool>() { 1.0 } else { -1.0 };
+    (0..r.random_range(1..=3usize))
+        .map(|_| {
+            let gap = r.random_range(0.1..0.6);
+            let mid = r.random_range(-(0.42 - gap / 2.0)..(0.42 - gap / 2.0));
+            Relay {
+                lower_c: centre + mid - gap / 2.0,
+                upper_c: centre + mid + gap / 2.0,
+                size_g: sign * unit * r.random_range(1.5..4.0),
+                tau_s: r.random_range(120.0..1200.0),
+            }
+        })
+        .collect()
+}
+
+/// The relays' bias on the true temperature, g.
+pub fn relay_series(relays: &[Relay], temp: &[f64], dt_s: f64) -> Vec<f64> {
+    let mut out = vec![0.0; temp.len()];
+    for r in relays {
+        let mid = 0.5 * (r.lower_c + r.upper_c);
+        let mut state = if temp[0] >= mid { 1.0 } else { -1.0 };
+        let (mut x1, mut x2) = (state, state);
+        let a = if r.tau_s > 0.0 {
+            (-dt_s / (0.5 * r.tau_s)).exp()
+        } else {
+            0.0
+        };
+        for (o, &t) in out.iter_mut().zip(temp) {
+            if t >= r.upper_c {
+                state = 1.0;
+            } else if t <= r.lower_c {
+                state = -1.0;
+            }
+            x1 = a * x1 + (1.0 - a) * state;
+            x2 = a * x2 + (1.0 - a) * x1;
+            *o += r.size_g * x2;
+        }
+    }
+    out
+}
+
+/// The loop's area as the record shows it, g·°C: the temperature range (2–98 %) cut into 24
+/// bins, in each the mean of `s` on heating rows minus its mean on cooling rows (the direction
+/// from the temperature's change over ±14 min, turnovers and holds left out), times the bin's
+/// width, summed. A relay of size s and thresholds β < α switched instantly gives −2s(α − β).
+/// `dt_s` is the rows' spacing.
+pub fn branch_area(s: &[f64], temp: &[f64], dt_s: f64) -> f64 {
+    let n = temp.len();
+    let h = ((840.0 / dt_s).round() as usize).max(1);
+    let mut sorted = temp.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let q = |p: f64| sorted[((n - 1) as f64 * p).round() as usize];
+    let (lo, hi) = (q(0.02), q(0.98));
+    let bins = 24;
+    let w = (hi - lo) / bins as f64;
+    let mut acc = vec![[0.0f64; 4]; bins];
+    for i in h..n.saturating_sub(h) {
+        let d = temp[i + h] - temp[i - h];
+        let b = ((temp[i] - lo) / w).floor();
+        if !(0.0..bins as f64).contains(&b) || d.abs() < 0.02 {
+            continue;
+        }
+        let a = &mut acc[b as usize];
+        if d > 0.0 {
+            a[0] += s[i];
+            a[1] += 1.0;
+        } else {
+            a[2] += s[i];
+            a[3] += 1.0;
+        }
+    }
+    acc.iter()
+        .filter(|a| a[1] >= 5.0 && a[3] >= 5.0)
+        .map(|a| (a[0] / a[1] - a[2] / a[3]) * w)
+        .sum()
+}
+
 /// A log with the simulator's metadata and the given columns, as the board would record it.
 pub fn log_with(t_s: Vec<f64>, meta: &[(String, String)], columns: Vec<(&str, Vec<f64>)>) -> Log {
     let mut log = Log::with_time(t_s).expect("time");

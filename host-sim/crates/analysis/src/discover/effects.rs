@@ -123,6 +123,17 @@ impl Effect {
         }
     }
 
+    /// Whether the rest of a record judges the effect by its extrapolation: a drift family or a
+    /// step, whose difference from the baseline's linear drift is the level it predicts for
+    /// the rest (without it, the drift's slope takes the level change and is extrapolated).
+    /// Fitted on the first part, such an effect is constant or slow after the cut, and a
+    /// prediction that takes in each later reading would take that level in too: forward
+    /// chaining judges it by one forecast of the whole rest (`validation::forward_validate`).
+    /// Every other effect is judged block by block (`validation::forward_validate_blocked`).
+    pub fn judged_by_extrapolation(&self) -> bool {
+        self.drift_family().is_some() || matches!(self, Effect::Step { .. })
+    }
+
     /// Whether the effect can be accepted more than once (at other parameters).
     pub fn repeatable(&self) -> bool {
         self.kind().repeatable()

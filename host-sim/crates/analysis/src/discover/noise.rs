@@ -222,6 +222,7 @@ const TRANSITIONS_KEPT: usize = 4;
 /// likelihood, the whitening and the held-out prediction. Once the gain has converged for a
 /// repeated step length it is held (steady state) until the step length changes or a row is
 /// not observed.
+#[derive(Clone)]
 struct Riccati<'m> {
     model: &'m NoiseModel,
     k: usize,
@@ -1082,6 +1083,69 @@ pub fn held_out_prediction(
     }
 }
 
+/// Prediction errors of the rows after the `observed` (training) rows, block by block: the
+/// rows not observed are cut into blocks of `block_rows`, and each block is predicted from
+/// every row before it — the training rows and the earlier blocks, whose readings the filter
+/// then takes in — its predicted variance growing through the block, as in
+/// [`held_out_chi2`]. Returns the errors of all blocks.
+///
+/// Why not the whole rest from the training rows alone ([`held_out_prediction`]): with a random
+/// walk or flicker in the noise, the forecast's variance grows with the distance from the last
+/// training row, and on the far rows the forecast error is the noise's own wander since then,
+/// which a deterministic effect correlates with by chance. Those rows add to the score without
+/// judging the effect (measured on the real gravimeter residual: a relay loop of ΔBIC −451,
+/// injected, made the single-forecast score worse even with the injected column itself, 0.677 →
+/// 0.690, better at 4 of its 5 cuts). Predicting each block from the readings before it keeps
+/// every row's error at the block's horizon, as the blocked cross-validation does, while the
+/// effect's coefficients still come from the training part only.
+pub fn blocked_forward_prediction(
+    model: &NoiseModel,
+    t_s: &[f64],
+    observed: &[bool],
+    x: &[f64],
+    block_rows: usize,
+) -> HeldOut {
+    let block_rows = block_rows.max(1);
+    let mut ric = Riccati::new(model);
+    let mut state = vec![0.0; ric.k];
+    let mut prev_t: Option<f64> = None;
+    let (mut chi2, mut sum_sq, mut count) = (0.0, 0.0, 0usize);
+    // Rows of the current block still to come; at 0 the next unobserved row starts a block.
+    let mut left = 0usize;
+    let n = t_s.len().min(observed.len()).min(x.len());
+    for i in 0..n {
+        if !observed[i] && left == 0 {
+            // The block predicted from here without its readings.
+            let (mut r2, mut st2, mut pt2) = (ric.clone(), state.clone(), prev_t);
+            let end = (i + block_rows).min(n);
+            for j in (i..end).filter(|&j| !observed[j]) {
+                let dt = pt2.map_or(0.0, |pt| (t_s[j] - pt).max(0.0));
+                pt2 = Some(t_s[j]);
+                r2.step(dt, j, false);
+                let e = x[j] - predict_state(&mut st2, &r2.a);
+                chi2 += e * e / r2.s;
+                sum_sq += e * e;
+                count += 1;
+            }
+            left = end - i;
+        }
+        // Every row's reading is then taken in: the next block is predicted from it.
+        let dt = prev_t.map_or(0.0, |pt| (t_s[i] - pt).max(0.0));
+        prev_t = Some(t_s[i]);
+        ric.step(dt, i, true);
+        let e = x[i] - predict_state(&mut state, &ric.a);
+        for (st, h) in state.iter_mut().zip(&ric.ph) {
+            *st += h / ric.s * e;
+        }
+        left = left.saturating_sub(1);
+    }
+    HeldOut {
+        chi2,
+        sum_sq,
+        count,
+    }
+}
+
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
@@ -1319,6 +1383,59 @@ pub(crate) mod tests {
         // Row 2: (3 − 1)²/1, row 3: (7 − 1)²/2.
         assert_eq!(n, 2);
         assert!((chi2 - (4.0 + 18.0)).abs() < 1e-9, "{chi2}");
+    }
+
+    #[test]
+    fn each_forward_block_is_predicted_from_every_reading_before_it() {
+        // Pure random walk, white noise negligible: a row of a block is predicted by the last
+        // reading before the block (a training row or the earlier block's last), its variance
+        // q·(time since that reading).
+        let model = NoiseModel {
+            rw_per_s: 1.0,
+            ..NoiseModel::white(1e-20)
+        };
+        let t: Vec<f64> = (0..7).map(f64::from).collect();
+        let x = [0.0, 1.0, 3.0, 7.0, 2.0, 5.0, 4.0];
+        let training = [true, true, false, false, false, false, false];
+        let h = blocked_forward_prediction(&model, &t, &training, &x, 2);
+        // Block 2–3 from row 1 (1): (3 − 1)²/1 + (7 − 1)²/2; block 4–5 from row 3 (7):
+        // (2 − 7)²/1 + (5 − 7)²/2; block 6 from row 5 (5): (4 − 5)²/1.
+        assert_eq!(h.count, 5);
+        assert!(
+            (h.chi2 - (4.0 + 18.0 + 25.0 + 2.0 + 1.0)).abs() < 1e-9,
+            "{}",
+            h.chi2
+        );
+        assert!(
+            (h.sum_sq - (4.0 + 36.0 + 25.0 + 4.0 + 1.0)).abs() < 1e-9,
+            "{}",
+            h.sum_sq
+        );
+    }
+
+    #[test]
+    fn one_block_of_the_whole_rest_is_the_single_forecast_of_the_rest() {
+        // White + flicker + random walk on an irregular grid: with blocks longer than the rest,
+        // the block-by-block prediction is the one forecast of the rest from the training rows.
+        let model = NoiseModel::from_levels_from(1.0, 0.3, -0.5, 1e-5, 10.0, 10.0, 6e4);
+        let n = 300;
+        let t: Vec<f64> = (0..n).map(|i| 10.0 * i as f64 + (i % 3) as f64).collect();
+        let x = normals(n, 7);
+        let training: Vec<bool> = (0..n).map(|i| i < 180).collect();
+        let single = held_out_prediction(&model, &t, &training, &x);
+        let blocked = blocked_forward_prediction(&model, &t, &training, &x, n);
+        assert_eq!(blocked.count, single.count);
+        assert!(
+            (blocked.chi2 - single.chi2).abs() <= 1e-9 * single.chi2,
+            "{} vs {}",
+            blocked.chi2,
+            single.chi2
+        );
+        // Shorter blocks take the later readings in: the far rows are no longer predicted from
+        // row 179 alone, and the score changes.
+        let short = blocked_forward_prediction(&model, &t, &training, &x, 10);
+        assert_eq!(short.count, single.count);
+        assert!((short.chi2 - single.chi2).abs() > 1e-3 * single.chi2);
     }
 
     #[test]

@@ -5,7 +5,7 @@
 use super::baseline::{gls, raw_residual, Rows};
 use super::current_model::{fit_state, NoiseChoice};
 use super::import::Dataset;
-use super::noise::{held_out_prediction, HeldOut, NoiseModel};
+use super::noise::{blocked_forward_prediction, held_out_prediction, HeldOut, NoiseModel};
 use super::select::Config;
 
 /// Cross-validated errors of a model.
@@ -73,20 +73,80 @@ pub const FORWARD_SPLITS: [f64; 5] = [0.5, 0.6, 0.7, 0.8, 0.9];
 /// distance — and scored like [`cross_validate`]: raw residual RMS over the predicted rows and
 /// RMS of the normalised prediction errors.
 pub fn forward_validate(ds: &Dataset, cols: &[Vec<f64>], y: &[f64], noise: &NoiseModel) -> CvScore {
+    let splits = forward_residuals(ds, cols, y, noise);
+    score(
+        splits
+            .iter()
+            .map(|(train, r)| held_out_prediction(noise, &ds.t_s, train, r)),
+    )
+}
+
+/// For each cut of [`FORWARD_SPLITS`] with enough rows on both sides, the training rows and
+/// the residual of the model fitted on them (columns fixed).
+fn forward_residuals(
+    ds: &Dataset,
+    cols: &[Vec<f64>],
+    y: &[f64],
+    noise: &NoiseModel,
+) -> Vec<(Vec<bool>, Vec<f64>)> {
     let n = y.len();
     let t0 = ds.t_s.first().copied().unwrap_or(0.0);
     let span = ds.span_s();
-    score(FORWARD_SPLITS.iter().filter_map(|f| {
-        let cut = t0 + f * span;
-        let train: Vec<bool> = ds.t_s.iter().map(|&t| t < cut).collect();
-        let rows = Rows::with_noise(noise, &ds.t_s, Some(&train));
-        if rows.idx.len() < cols.len() + 2 || rows.idx.len() >= n {
-            return None;
-        }
-        let fit = gls(cols, y, 0.0, &rows);
-        let r = raw_residual(cols, &fit.beta, y);
-        Some(held_out_prediction(noise, &ds.t_s, &train, &r))
-    }))
+    FORWARD_SPLITS
+        .iter()
+        .filter_map(|f| {
+            let cut = t0 + f * span;
+            let train: Vec<bool> = ds.t_s.iter().map(|&t| t < cut).collect();
+            let rows = Rows::with_noise(noise, &ds.t_s, Some(&train));
+            if rows.idx.len() < cols.len() + 2 || rows.idx.len() >= n {
+                return None;
+            }
+            let fit = gls(cols, y, 0.0, &rows);
+            Some((train, raw_residual(cols, &fit.beta, y)))
+        })
+        .collect()
+}
+
+/// Forward chaining judged block by block: for each split of [`FORWARD_SPLITS`], the model
+/// (columns fixed) is fitted on the rows before it, and the rows after it are cut into the
+/// blocked cross-validation's blocks (`folds × blocks_per_fold` over the record), each predicted
+/// from every reading before it through the noise model ([`blocked_forward_prediction`]); scored
+/// like [`cross_validate`]. The effect's coefficients are out of sample (from the part before
+/// the cut), and every error is at the horizon of one block, not of the whole rest. The
+/// selection judges every effect but a drift or a step by it; [`forward_validate`]'s single
+/// forecast of the rest is what the report gives as the gain in predicting the rest.
+pub fn forward_validate_blocked(
+    ds: &Dataset,
+    cols: &[Vec<f64>],
+    y: &[f64],
+    noise: &NoiseModel,
+    cfg: &Config,
+) -> CvScore {
+    forward_validate_both(ds, cols, y, noise, cfg).1
+}
+
+/// [`forward_validate`] and [`forward_validate_blocked`] from one fit per split.
+pub fn forward_validate_both(
+    ds: &Dataset,
+    cols: &[Vec<f64>],
+    y: &[f64],
+    noise: &NoiseModel,
+    cfg: &Config,
+) -> (CvScore, CvScore) {
+    let block_rows = y.len().div_ceil((cfg.folds * cfg.blocks_per_fold).max(2));
+    let splits = forward_residuals(ds, cols, y, noise);
+    (
+        score(
+            splits
+                .iter()
+                .map(|(train, r)| held_out_prediction(noise, &ds.t_s, train, r)),
+        ),
+        score(
+            splits
+                .iter()
+                .map(|(train, r)| blocked_forward_prediction(noise, &ds.t_s, train, r, block_rows)),
+        ),
+    )
 }
 
 /// Whether any of `cols` still changes after the first forward cut (by more than 10⁻³ of its
