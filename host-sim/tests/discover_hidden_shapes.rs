@@ -15,7 +15,7 @@ mod synth;
 
 use accomp_host::discover::{self, Discovery};
 use accomp_host::sim::noise::AllanParams;
-use hidden::{branch_area, draw_relays, relay_series, Relay};
+use hidden::{branch_area, draw_relays, loop_figure, relay_series, Relay};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
@@ -389,22 +389,9 @@ fn a_switching_relay_loop_is_named_with_its_area_and_nothing_without_it() {
         let y0 = synth::output_g(&st, &noise, &vec![0.0; n], &mut r0);
         let (_, d) = hidden::discover_blind(&synth::log_of(&st, y));
         let (_, d0) = hidden::discover_blind(&synth::log_of(&st, y0));
-        let j = discover::report::json(&d);
-        let est = j["effects"]
-            .as_array()
-            .and_then(|v| v.iter().find(|e| e["name"] == "thermal_hysteresis"))
-            .and_then(|e| e["preisach"]["record_loop_area"].as_f64())
-            .unwrap_or(f64::NAN);
-        let still_est = j["effects"]
-            .as_array()
-            .and_then(|v| v.iter().find(|e| e["name"] == "thermal_hysteresis"))
-            .and_then(|e| e["preisach"]["loop_area"].as_f64())
-            .unwrap_or(f64::NAN);
-        let lag = j["effects"]
-            .as_array()
-            .and_then(|v| v.iter().find(|e| e["name"] == "thermal_hysteresis"))
-            .and_then(|e| e["preisach"]["lag_s"].as_f64())
-            .unwrap_or(f64::NAN);
+        let est = loop_figure(&d, "record_loop_area");
+        let still_est = loop_figure(&d, "loop_area");
+        let lag = loop_figure(&d, "lag_s");
         let names = hidden::accepted_names(&d);
         let named = names.iter().any(|n| n == "thermal_hysteresis");
         let hit = named && (est - truth).abs() <= 0.3 * truth.abs();

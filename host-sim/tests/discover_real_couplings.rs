@@ -42,7 +42,7 @@ use accomp::table::CalibrationTable;
 use accomp::units::{Celsius, Gs};
 use accomp_host::discover::{self as disc, Discovery};
 use accomp_host::log::Log;
-use hidden::{branch_area, draw_relays, relay_series};
+use hidden::{branch_area, draw_relays, loop_figure, relay_series};
 use rand::Rng;
 
 /// Four days at the record's one minute.
@@ -297,16 +297,6 @@ fn a_table_error_of_power_one_and_a_half_in_the_real_residual_is_corrected_by_th
     let c0 = d0.table_check.as_ref().expect("a calibration was given");
     eprintln!("table null: {}", disc::table_error::text_of(c0, "g"));
     assert!(c0.terms.is_empty(), "{:?}", c0.terms);
-}
-
-/// The accepted loop's figure `key` of its Preisach distribution in the JSON report (NaN when
-/// no loop is named).
-fn loop_figure(d: &Discovery, key: &str) -> f64 {
-    disc::report::json(d)["effects"]
-        .as_array()
-        .and_then(|v| v.iter().find(|e| e["name"] == "thermal_hysteresis"))
-        .and_then(|e| e["preisach"][key].as_f64())
-        .unwrap_or(f64::NAN)
 }
 
 /// Relay logs in the real residual.

@@ -376,6 +376,16 @@ pub struct Relay {
     pub tau_s: f64,
 }
 
+/// The accepted loop's figure `key` of its Preisach distribution in the JSON report (NaN when
+/// no loop is named).
+pub fn loop_figure(d: &Discovery, key: &str) -> f64 {
+    disc::report::json(d)["effects"]
+        .as_array()
+        .and_then(|v| v.iter().find(|e| e["name"] == "thermal_hysteresis"))
+        .and_then(|e| e["preisach"][key].as_f64())
+        .unwrap_or(f64::NAN)
+}
+
 /// 1–3 relays of one sign (one material) on the temperature `temp` (°C), each of 1.5–4 × `unit`,
 /// threshold gaps 0.1–0.6 °C, their midpoints within ±0.42 °C of the median temperature (inside
 /// a ±0.5 °C programme's range), switching times 2–20 min.

@@ -379,29 +379,24 @@ pub fn rounds(
                 );
                 continue;
             }
-            // The single forecast of the rest: the judge of an effect judged by its
-            // extrapolation, and what the accepted effect reports (`gain_forward`).
-            let single_after = || forward_validate(ds, &trial, target, &cur.noise.model);
-            let mut fwd_after = None;
             // What the rest of the record can judge (`Effect::judged_by_extrapolation`): a drift
             // family or a step by the forecast of the whole rest from the cut; every other
             // effect (a switching, a coupling on the ramps, a line) on the rest predicted block by
             // block (`forward_validate_blocked`), where the single forecast is on most rows the
             // noise's own wander since the cut, which an effect correlates with by chance
             // (measured on the real gravimeter residual: an injected relay loop of ΔBIC −451
-            // made the single forecast worse even with the injected column itself).
-            let (judged_before, judged_after) = if s.effect.judged_by_extrapolation() {
-                (fwd_before, *fwd_after.insert(single_after()))
+            // made the single forecast worse even with the injected column itself). The single
+            // forecast is also what the accepted effect reports (`gain_forward`).
+            let (fwd_after, judged_before, judged_after) = if s.effect.judged_by_extrapolation() {
+                let single = forward_validate(ds, &trial, target, &cur.noise.model);
+                (single, fwd_before, single)
             } else {
                 let (single, blocked) =
                     forward_validate_both(ds, &trial, target, &cur.noise.model, cfg);
-                fwd_after = Some(single);
-                (
-                    *blocked_before.get_or_insert_with(|| {
-                        forward_validate_blocked(ds, &cols, target, &cur.noise.model, cfg)
-                    }),
-                    blocked,
-                )
+                let before = *blocked_before.get_or_insert_with(|| {
+                    forward_validate_blocked(ds, &cols, target, &cur.noise.model, cfg)
+                });
+                (single, before, blocked)
             };
             // An effect with no support in any training part (a step after the last split)
             // leaves the forward score exactly unchanged: forward chaining cannot judge it.
@@ -439,7 +434,6 @@ pub fn rounds(
                 );
                 continue;
             }
-            let fwd_after = fwd_after.unwrap_or_else(single_after);
             if let Some(why) = confounded_with_drift(ds, &s.cols, fwd_before, fwd_after) {
                 refuse(
                     &mut refused,

@@ -122,7 +122,17 @@ pub fn forward_validate_blocked(
     noise: &NoiseModel,
     cfg: &Config,
 ) -> CvScore {
-    forward_validate_both(ds, cols, y, noise, cfg).1
+    let block_rows = forward_block_rows(y.len(), cfg);
+    score(
+        forward_residuals(ds, cols, y, noise)
+            .iter()
+            .map(|(train, r)| blocked_forward_prediction(noise, &ds.t_s, train, r, block_rows)),
+    )
+}
+
+/// The rows of a block of [`forward_validate_blocked`]: those of the blocked cross-validation's.
+fn forward_block_rows(n: usize, cfg: &Config) -> usize {
+    n.div_ceil((cfg.folds * cfg.blocks_per_fold).max(2))
 }
 
 /// [`forward_validate`] and [`forward_validate_blocked`] from one fit per split.
@@ -133,7 +143,7 @@ pub fn forward_validate_both(
     noise: &NoiseModel,
     cfg: &Config,
 ) -> (CvScore, CvScore) {
-    let block_rows = y.len().div_ceil((cfg.folds * cfg.blocks_per_fold).max(2));
+    let block_rows = forward_block_rows(y.len(), cfg);
     let splits = forward_residuals(ds, cols, y, noise);
     (
         score(
